@@ -1,0 +1,83 @@
+"""The one hardware interface every backend implements.
+
+A backend owns the robot's clock. ``run`` connects and then, once per robot cycle: updates
+``self.state`` in place from the robot, calls ``on_cycle()`` (where the controller writes
+``self.command`` and the state is published), then sends ``self.command`` to the robot.
+Everything happens on the event loop thread; ``on_cycle`` must not block.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from urdaemon.errors import BackendError
+from urdaemon.model import JointCommand, RobotState
+
+__all__ = ["IO_KINDS", "Backend", "BackendStatistics"]
+
+IO_KINDS = ("digital", "configurable", "tool", "analog")
+"""Output kinds a ``set_io`` request may name."""
+
+
+@dataclass(frozen=True, slots=True)
+class BackendStatistics:
+    """Counters of one backend since start."""
+
+    cycles: int
+    missed_cycles: int
+    late_cycles: int
+    max_lateness_s: float
+    reconnects: int
+
+
+class Backend(abc.ABC):
+    """Reads state and writes commands for one robot at the robot's rate."""
+
+    kind: str = ""
+
+    def __init__(self, name: str, joint_names: Sequence[str], rate_hz: float) -> None:
+        self.name = name
+        self.rate_hz = rate_hz
+        self.period = 1.0 / rate_hz
+        self.state = RobotState.zeros(tuple(joint_names))
+        self.command = JointCommand.idle(len(joint_names))
+        self._cycles = 0
+        self._missed = 0
+        self._late = 0
+        self._max_lateness = 0.0
+        self._reconnects = 0
+
+    @abc.abstractmethod
+    async def run(self, on_cycle: Callable[[], None]) -> None:
+        """Connect and run until cancelled, calling ``on_cycle`` once per robot cycle."""
+
+    async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
+        """Set one output: ``digital``/``configurable``/``tool`` (bool) or ``analog`` (0..1)."""
+        raise BackendError(f"{self.kind} backend has no IO")
+
+    async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
+        """Set the payload mass (kg) and centre of gravity (m, tool flange frame)."""
+        raise BackendError(f"{self.kind} backend has no payload")
+
+    async def set_speed_slider(self, fraction: float) -> None:
+        """Set the speed slider (0..1)."""
+        raise BackendError(f"{self.kind} backend has no speed slider")
+
+    def statistics(self) -> BackendStatistics:
+        """Counters since start."""
+        return BackendStatistics(self._cycles, self._missed, self._late, self._max_lateness, self._reconnects)
+
+    @staticmethod
+    def check_io(kind: str, pin: int, value: float | bool, sizes: dict[str, int]) -> None:
+        """Raise ``BackendError`` naming what is wrong with an IO request."""
+        if kind not in sizes:
+            raise BackendError(f"unknown IO kind {kind!r}; expected one of {', '.join(sizes)}")
+        if not 0 <= pin < sizes[kind]:
+            raise BackendError(f"{kind} output pin {pin} out of range 0..{sizes[kind] - 1}")
+        if kind == "analog":
+            if isinstance(value, bool) or not 0.0 <= float(value) <= 1.0:
+                raise BackendError(f"analog output value must be a number in 0..1, got {value!r}")
+        elif not isinstance(value, bool):
+            raise BackendError(f"{kind} output value must be true or false, got {value!r}")

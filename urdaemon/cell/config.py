@@ -1,0 +1,396 @@
+"""The cell file schema: frozen pydantic models that reject unknown keys.
+
+Nothing below the daemon sees YAML or dicts: ``load_cell`` turns a file into a ``Cell`` once.
+Relative paths in the file are resolved against the file's folder (validation context ``base_dir``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from urdaemon.model import UR_JOINTS
+from urdaemon.paths import resource_path
+
+__all__ = [
+    "DEFAULT_PORT_BASE",
+    "DEFAULT_PORT_STRIDE",
+    "Cell",
+    "CustomDescription",
+    "JointLimitOverride",
+    "MockOptions",
+    "MotionOptions",
+    "Pose",
+    "Ports",
+    "PublishOptions",
+    "Robot",
+    "ServoJoint",
+    "ServoOptions",
+    "ZenohOptions",
+    "ur_models",
+]
+
+NAME_PATTERN = r"^[a-z][a-z0-9_]{0,30}$"
+"""Robot names: a key chunk and a joint/link prefix (``alice`` → ``alice_`` and ``<cell>/alice/``)."""
+CELL_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,62}$"
+ENDPOINT_PATTERN = r"^(tcp|udp|tls|quic|ws|unixsock-stream|serial)/\S+$"
+DEFAULT_PORT_BASE = 50001
+"""UR's reverse port; the first robot gets 50001..50004 like UR's own driver."""
+DEFAULT_PORT_STRIDE = 10
+"""Each further robot's default ports are 10 higher, so defaults never clash."""
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+PortNumber = Annotated[int, Field(ge=1, le=65535)]
+
+
+def ur_models() -> tuple[str, ...]:
+    """The UR models whose data ships in ``resources/ur``."""
+    return tuple(sorted(p.stem for p in resource_path("ur").glob("ur*.yaml")))
+
+
+def _resolve_file(value: str, info: ValidationInfo) -> str:
+    base = (info.context or {}).get("base_dir")
+    path = Path(value).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = Path(base) / path
+    if not path.is_file():
+        raise ValueError(f"file not found: {path}")
+    return str(path.resolve())
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class ZenohOptions(_Frozen):
+    """How the daemon joins the Zenoh network."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ("tcp/127.0.0.1:7447",)
+    connect: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ()
+    multicast_scouting: bool = False
+
+    @model_validator(mode="after")
+    def _client_needs_connect(self) -> ZenohOptions:
+        if self.mode == "client" and not self.connect:
+            raise ValueError("mode 'client' needs at least one connect endpoint")
+        return self
+
+
+class PublishOptions(_Frozen):
+    """Rates of what the daemon publishes."""
+
+    joint_states_decimation: Annotated[int, Field(ge=1, le=1000)] = 1
+    """Publish joint states and TCP pose every Nth robot cycle."""
+    tf_rate_hz: Annotated[float, Field(gt=0, le=500)] = 50.0
+    status_rate_hz: Annotated[float, Field(gt=0, le=100)] = 2.0
+    """Status is published on every change and at least at this rate."""
+    io_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
+    """IO is published on every change and at least at this rate."""
+
+
+class Ports(_Frozen):
+    """Host ports the robot's control program connects back to."""
+
+    reverse: PortNumber
+    script_sender: PortNumber
+    trajectory: PortNumber
+    script_command: PortNumber
+
+    @classmethod
+    def block(cls, base: int) -> Ports:
+        """Four consecutive ports starting at ``base``."""
+        return cls(reverse=base, script_sender=base + 1, trajectory=base + 2, script_command=base + 3)
+
+    def as_dict(self) -> dict[str, int]:
+        """Port role → number."""
+        return {
+            "reverse": self.reverse,
+            "script_sender": self.script_sender,
+            "trajectory": self.trajectory,
+            "script_command": self.script_command,
+        }
+
+    @model_validator(mode="after")
+    def _distinct(self) -> Ports:
+        seen: dict[int, str] = {}
+        for role, port in self.as_dict().items():
+            if port in seen:
+                raise ValueError(f"{role} port {port} is also the {seen[port]} port")
+            seen[port] = role
+        return self
+
+
+class Pose(_Frozen):
+    """Where the robot's base_link sits relative to its parent link."""
+
+    parent: Annotated[str, Field(pattern=r"^[A-Za-z0-9_]+$")] = "world"
+    xyz: Vec3 = (0.0, 0.0, 0.0)
+    """Translation in metres."""
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+    """Roll, pitch, yaw in radians (URDF convention)."""
+
+
+class JointLimitOverride(_Frozen):
+    """Tighter (or, knowingly, other) limits for one joint; unset fields keep the model's value."""
+
+    min_position: Finite | None = None
+    max_position: Finite | None = None
+    max_velocity: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    max_acceleration: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    max_jerk: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+
+    @model_validator(mode="after")
+    def _ordered(self) -> JointLimitOverride:
+        if (
+            self.min_position is not None
+            and self.max_position is not None
+            and self.min_position >= self.max_position
+        ):
+            raise ValueError(f"min_position {self.min_position} must be below max_position {self.max_position}")
+        return self
+
+
+class MotionOptions(_Frozen):
+    """Defaults for goal tolerances and the streaming deadman."""
+
+    path_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.2
+    """Largest allowed |desired − measured| per joint while a goal runs (rad)."""
+    goal_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.01
+    """Largest allowed |goal − measured| per joint at the end (rad)."""
+    goal_time_tolerance: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 1.0
+    """Seconds allowed after the planned end to come within goal tolerance."""
+    stream_timeout: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = 0.2
+    """Deadman: a stream with no new command for this long is brought to a smooth stop (s)."""
+    feedback_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
+
+
+class MockOptions(_Frozen):
+    """Options of the ``mock`` backend."""
+
+    initial_positions: tuple[Finite, ...] | dict[str, Finite] | None = None
+    """Start pose: a list in joint order, or joint name (without prefix) → value."""
+    speed_scaling: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = 1.0
+    """The runtime speed scaling the mock reports (multiplied with the speed slider)."""
+    rate_hz: Annotated[float, Field(gt=0, le=1000)] | None = None
+    """Cycle rate; default: the model's controller rate (500 Hz e-Series, 125 Hz CB3)."""
+
+
+class ServoJoint(_Frozen):
+    """One joint of a servo arm mapped to a PCA9685 channel."""
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_]+$")]
+    """Joint name in the robot's description, without the robot prefix."""
+    channel: Annotated[int, Field(ge=0, le=15)]
+    pulse_min_us: Annotated[float, Field(gt=0, lt=20000, allow_inf_nan=False)] = 500.0
+    pulse_max_us: Annotated[float, Field(gt=0, lt=20000, allow_inf_nan=False)] = 2500.0
+    angle_min: Finite = -math.pi / 2
+    """Joint angle (rad) that maps to ``pulse_min_us`` (before offset and direction)."""
+    angle_max: Finite = math.pi / 2
+    """Joint angle (rad) that maps to ``pulse_max_us``."""
+    offset: Finite = 0.0
+    """Added to the joint angle before mapping (rad): the servo's zero vs the joint's zero."""
+    direction: Literal[1, -1] = 1
+
+    @model_validator(mode="after")
+    def _ranges(self) -> ServoJoint:
+        if self.pulse_min_us >= self.pulse_max_us:
+            raise ValueError(f"pulse_min_us {self.pulse_min_us} must be below pulse_max_us {self.pulse_max_us}")
+        if self.angle_min >= self.angle_max:
+            raise ValueError(f"angle_min {self.angle_min} must be below angle_max {self.angle_max}")
+        return self
+
+
+class ServoOptions(_Frozen):
+    """Options of the ``servo`` backend (a PCA9685 board, no feedback)."""
+
+    pwm_frequency_hz: Annotated[float, Field(ge=24, le=1526)] = 50.0
+    """PCA9685 output frequency; the datasheet's range is 24..1526 Hz."""
+    rate_hz: Annotated[float, Field(gt=0, le=500)] = 50.0
+    """Control cycle rate: how often commands are computed and published."""
+    joints: tuple[ServoJoint, ...]
+    initial_positions: dict[str, Finite] | None = None
+
+    @model_validator(mode="after")
+    def _unique(self) -> ServoOptions:
+        if not self.joints:
+            raise ValueError("'joints' must list at least one servo joint")
+        names = [j.name for j in self.joints]
+        channels = [j.channel for j in self.joints]
+        for label, values in (("joint name", names), ("channel", channels)):
+            dupes = sorted({str(v) for v in values if values.count(v) > 1})
+            if dupes:
+                raise ValueError(f"duplicate {label}: {', '.join(dupes)}")
+        return self
+
+
+class CustomDescription(_Frozen):
+    """A robot described by its own xacro macro, called as ``<xacro:MACRO prefix parent><origin/>``."""
+
+    xacro: str
+    """Path of the xacro file that defines the macro (relative to the cell file)."""
+    macro: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+    base_link: str = "base_link"
+    tool_link: str = "tool0"
+    default_max_acceleration: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 5.0
+    default_max_jerk: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 50.0
+
+    @field_validator("xacro")
+    @classmethod
+    def _exists(cls, value: str, info: ValidationInfo) -> str:
+        return _resolve_file(value, info)
+
+
+class Robot(_Frozen):
+    """One robot of the cell."""
+
+    name: Annotated[str, Field(pattern=NAME_PATTERN)]
+    model: str
+    """A UR model whose data ships (ur3 … ur30), or ``custom`` with a ``description``."""
+    backend: Literal["mock", "servo", "ur"]
+    address: str | None = None
+    """The robot controller's address (required by the ``ur`` backend)."""
+    ports: Ports
+    """Host ports; when left out, the cell assigns a block of four no other robot uses."""
+    headless: bool = True
+    calibration: str | None = None
+    """Kinematics calibration file (relative to the cell file)."""
+    joint_limits: dict[str, JointLimitOverride] = Field(default_factory=dict)
+    """Joint name without prefix → limit overrides."""
+    pose: Pose = Pose()
+    description: CustomDescription | None = None
+    motion: MotionOptions = MotionOptions()
+    mock: MockOptions | None = None
+    servo: ServoOptions | None = None
+
+    @property
+    def prefix(self) -> str:
+        """Joint and link name prefix."""
+        return f"{self.name}_"
+
+    @property
+    def is_ur(self) -> bool:
+        """True for UR models (not a custom description)."""
+        return self.model != "custom"
+
+    @field_validator("calibration")
+    @classmethod
+    def _calibration_exists(cls, value: str | None, info: ValidationInfo) -> str | None:
+        return None if value is None else _resolve_file(value, info)
+
+    @field_validator("model")
+    @classmethod
+    def _known_model(cls, value: str) -> str:
+        known = ur_models()
+        if value != "custom" and value not in known:
+            raise ValueError(f"unknown model {value!r}; known: {', '.join(known)}, or 'custom'")
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Robot:
+        if self.model == "custom":
+            if self.description is None:
+                raise ValueError("model 'custom' needs a 'description' (xacro file and macro)")
+            if self.calibration is not None:
+                raise ValueError("'calibration' applies to UR models only")
+        elif self.description is not None:
+            raise ValueError(f"'description' is for model 'custom'; {self.model} is described by urdaemon")
+        if self.is_ur:
+            unknown = sorted(set(self.joint_limits) - set(UR_JOINTS))
+            if unknown:
+                raise ValueError(f"joint_limits: unknown joint(s) {', '.join(unknown)}; UR joints: {', '.join(UR_JOINTS)}")
+        if self.backend == "servo" and self.servo is None:
+            raise ValueError("backend 'servo' needs a 'servo' section")
+        if self.backend != "servo" and self.servo is not None:
+            raise ValueError(f"'servo' section given but backend is {self.backend!r}")
+        if self.backend != "mock" and self.mock is not None:
+            raise ValueError(f"'mock' section given but backend is {self.backend!r}")
+        if self.backend == "ur":
+            if self.address is None:
+                raise ValueError("backend 'ur' needs the robot's 'address'")
+            if not self.is_ur:
+                raise ValueError("backend 'ur' needs a UR model")
+        if self.mock is not None and isinstance(self.mock.initial_positions, dict) and self.is_ur:
+            unknown = sorted(set(self.mock.initial_positions) - set(UR_JOINTS))
+            if unknown:
+                raise ValueError(f"mock.initial_positions: unknown joint(s) {', '.join(unknown)}")
+        if self.mock is not None and isinstance(self.mock.initial_positions, tuple) and self.is_ur:
+            if len(self.mock.initial_positions) != len(UR_JOINTS):
+                raise ValueError(
+                    f"mock.initial_positions has {len(self.mock.initial_positions)} values for 6 joints"
+                )
+        return self
+
+
+class Cell(_Frozen):
+    """A whole work cell: its name, the Zenoh settings and the robots."""
+
+    cell: Annotated[str, Field(pattern=CELL_NAME_PATTERN)]
+    """Cell name: the first chunk of every key (``<cell>/<robot>/...``)."""
+    zenoh: ZenohOptions = ZenohOptions()
+    publish: PublishOptions = PublishOptions()
+    robots: tuple[Robot, ...]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _assign_default_ports(cls, data: Any) -> Any:
+        """Give robots without ``ports`` the lowest block of four ports no robot uses explicitly."""
+        if not isinstance(data, dict) or not isinstance(data.get("robots"), list | tuple):
+            return data
+        robots = list(data["robots"])
+        taken: set[int] = set()
+        for robot in robots:
+            ports = robot.get("ports") if isinstance(robot, dict) else None
+            if isinstance(ports, dict):
+                taken.update(p for p in ports.values() if isinstance(p, int))
+        base = DEFAULT_PORT_BASE
+        for i, robot in enumerate(robots):
+            if isinstance(robot, dict) and robot.get("ports") is None:
+                while taken & set(range(base, base + 4)):
+                    base += DEFAULT_PORT_STRIDE
+                robots[i] = {**robot, "ports": Ports.block(base).as_dict()}
+                taken.update(range(base, base + 4))
+                base += DEFAULT_PORT_STRIDE
+        return {**data, "robots": robots}
+
+    @model_validator(mode="after")
+    def _unique(self) -> Cell:
+        if not self.robots:
+            raise ValueError("'robots' must list at least one robot")
+        names = [r.name for r in self.robots]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"duplicate robot name(s): {', '.join(dupes)}")
+        owner: dict[int, str] = {}
+        for robot in self.robots:
+            for role, port in robot.ports.as_dict().items():
+                if port in owner:
+                    raise ValueError(f"robot {robot.name!r} {role} port {port} clashes with {owner[port]}")
+                owner[port] = f"robot {robot.name!r} {role} port"
+        links = {f"{r.prefix}base_link" for r in self.robots} | {"world"}
+        for robot in self.robots:
+            parent = robot.pose.parent
+            if parent != "world" and not any(parent.startswith(r.prefix) for r in self.robots):
+                raise ValueError(f"robot {robot.name!r} pose.parent {parent!r} is neither 'world' nor a robot link")
+            if parent in links and parent == f"{robot.prefix}base_link":
+                raise ValueError(f"robot {robot.name!r} cannot be its own parent")
+        return self
+
+    def robot(self, name: str) -> Robot:
+        """The robot called ``name``."""
+        for robot in self.robots:
+            if robot.name == name:
+                return robot
+        raise KeyError(name)

@@ -1,0 +1,191 @@
+"""The ``urdaemon`` command: serve, check, urdf, echo, move.
+
+Exit codes: 0 success; 1 a command failed (goal aborted, no answer); 2 bad input (config, arguments).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import math
+import signal
+import sys
+from collections.abc import Sequence
+
+from urdaemon import __version__
+from urdaemon.errors import ConfigError, DescriptionError, GoalRejected, UrDaemonError
+
+__all__ = ["main"]
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="urdaemon", description="Drive a cell of Universal Robots arms over Zenoh.")
+    parser.add_argument("--version", action="version", version=f"urdaemon {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    serve = sub.add_parser("serve", help="run the daemon for a cell file")
+    serve.add_argument("--config", required=True, help="cell file (YAML)")
+    serve.add_argument(
+        "--listen", action="append", help="Zenoh listen endpoint, overrides the cell file (repeatable)"
+    )
+
+    check = sub.add_parser("check", help="validate a cell file and print a summary")
+    check.add_argument("--config", required=True)
+
+    urdf = sub.add_parser("urdf", help="print the cell URDF")
+    urdf.add_argument("--config", required=True)
+
+    echo = sub.add_parser("echo", help="print samples of a key expression as JSON lines")
+    echo.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
+    echo.add_argument("--count", type=int, default=0, help="stop after N samples (0: until Ctrl-C)")
+    echo.add_argument("--timeout", type=float, default=0.0, help="give up after S seconds without a sample")
+    _connect_arg(echo)
+
+    move = sub.add_parser("move", help="move a robot to joint positions and wait for the result")
+    move.add_argument("robot")
+    move.add_argument("--joints", required=True, help="comma-separated joint positions (rad), controller order")
+    move.add_argument("--duration", type=float, default=None, help="seconds (default: time-optimal)")
+    move.add_argument("--cell", default=None, help="cell name (default: found from the robot's liveliness token)")
+    move.add_argument("--velocity-scale", type=float, default=1.0)
+    _connect_arg(move)
+    return parser
+
+
+def _connect_arg(parser: argparse.ArgumentParser) -> None:
+    from urdaemon.client import DEFAULT_ENDPOINT
+
+    parser.add_argument("--connect", default=DEFAULT_ENDPOINT, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        if args.command == "check":
+            return _check(args.config)
+        if args.command == "urdf":
+            return _urdf(args.config)
+        if args.command == "serve":
+            return _serve(args.config, args.listen)
+        if args.command == "echo":
+            return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
+        if args.command == "move":
+            return asyncio.run(_move(args))
+    except (ConfigError, DescriptionError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        return EXIT_OK
+    return EXIT_BAD_INPUT
+
+
+def _check(path: str) -> int:
+    from urdaemon.cell import load_cell, summarize
+    from urdaemon.daemon import describe_cell
+
+    try:
+        cell = load_cell(path)
+        description = describe_cell(cell)
+    except ConfigError as err:
+        print(f"{len(err.errors)} error(s):", file=sys.stderr)
+        for line in err.errors:
+            print(f"  {line}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(summarize(cell))
+    for name, limits in description.limits.items():
+        print(f"  {name}: {limits.dof} joints: {', '.join(limits.names)}")
+    print("ok")
+    return EXIT_OK
+
+
+def _urdf(path: str) -> int:
+    from urdaemon.cell import load_cell
+    from urdaemon.description import build_cell_urdf
+
+    sys.stdout.write(build_cell_urdf(load_cell(path)))
+    return EXIT_OK
+
+
+def _serve(path: str, listen: list[str] | None) -> int:
+    from urdaemon.cell import load_cell
+    from urdaemon.daemon import Daemon
+
+    cell = load_cell(path)
+    daemon = Daemon(cell, listen=tuple(listen) if listen else None)
+
+    async def run() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await daemon.run(stop)
+
+    try:
+        asyncio.run(run())
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
+    from urdaemon.client import Client
+
+    async with await Client.connect(endpoint) as client:
+        sub = client.subscribe(key)
+        received = 0
+        while count <= 0 or received < count:
+            try:
+                sample_key, payload = await sub.get(timeout if timeout > 0 else None)
+            except UrDaemonError as err:
+                print(f"error: {err}", file=sys.stderr)
+                return EXIT_FAILED
+            try:
+                value: object = json.loads(payload)
+            except (UnicodeDecodeError, json.JSONDecodeError):
+                value = payload.decode(errors="replace")
+            print(json.dumps({"key": sample_key, "value": value}), flush=True)
+            received += 1
+    return EXIT_OK
+
+
+async def _move(args: argparse.Namespace) -> int:
+    from urdaemon.client import Client
+
+    try:
+        joints = [float(v) for v in args.joints.split(",")]
+    except ValueError:
+        print(f"error: --joints must be comma-separated numbers, got {args.joints!r}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if not all(math.isfinite(v) for v in joints):
+        print("error: --joints must be finite numbers", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    async with await Client.connect(args.connect) as client:
+        try:
+            robot = await client.robot(args.robot, cell=args.cell)
+            goal = await robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)
+        except GoalRejected as err:
+            print(f"rejected: {err.reason}", file=sys.stderr)
+            return EXIT_FAILED
+        except UrDaemonError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return EXIT_FAILED
+        print(f"goal {goal.goal_id} accepted, planned {goal.duration:.2f} s", file=sys.stderr)
+        async for feedback in goal.feedback():
+            print(f"\r  {100.0 * float(feedback['progress']):5.1f} %", end="", file=sys.stderr, flush=True)
+        result = await goal.result()
+        print(file=sys.stderr)
+        print(json.dumps(result))
+        return EXIT_OK if result.get("status") == "succeeded" else EXIT_FAILED

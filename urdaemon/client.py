@@ -1,0 +1,359 @@
+"""The asyncio Python API for programs that talk to a running urdaemon over Zenoh.
+
+::
+
+    async with await Client.connect("tcp/127.0.0.1:7447") as client:
+        alice = await client.robot("alice")
+        goal = await alice.move([0, -1.57, 1.57, -1.57, -1.57, 0], duration=3.0)
+        async for feedback in goal.feedback():
+            print(feedback["progress"])
+        result = await goal.result()
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import AsyncIterator, Sequence
+from typing import Any
+
+import zenoh
+
+from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
+from urdaemon.publish.codec import SCHEMA_VERSION
+from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.publish.node import zenoh_config
+
+__all__ = ["DEFAULT_ENDPOINT", "Client", "GoalHandle", "RobotClient", "Subscription"]
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+QUERY_TIMEOUT_S = 5.0
+RESULT_POLL_S = 0.5
+"""While waiting for a result, ask the daemon for it this often (covers a missed publication)."""
+
+
+def _encode(body: dict[str, Any]) -> bytes:
+    return json.dumps({"v": SCHEMA_VERSION, **body}, separators=(",", ":")).encode()
+
+
+class Subscription:
+    """Samples of a key expression, delivered to the loop; iterate with ``async for``."""
+
+    def __init__(self, session: Any, key_expr: str, loop: asyncio.AbstractEventLoop, maxsize: int = 1000) -> None:
+        self.key_expr = key_expr
+        self._queue: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize)
+        self._loop = loop
+        self.dropped = 0
+        self._sub = session.declare_subscriber(key_expr, self._on_sample)
+
+    def _on_sample(self, sample: Any) -> None:
+        item = (str(sample.key_expr), sample.payload.to_bytes())
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self._put, item)
+
+    def _put(self, item: tuple[str, bytes]) -> None:
+        try:
+            self._queue.put_nowait(item)
+        except asyncio.QueueFull:
+            self.dropped += 1
+
+    async def get(self, timeout: float | None = None) -> tuple[str, bytes]:
+        """The next (key, payload); raises ``UrTimeoutError`` after ``timeout`` seconds."""
+        try:
+            return await asyncio.wait_for(self._queue.get(), timeout)
+        except TimeoutError as err:
+            raise UrTimeoutError(f"no sample on {self.key_expr} within {timeout} s") from err
+
+    async def get_json(self, timeout: float | None = None) -> dict[str, Any]:
+        """The next sample decoded as JSON."""
+        _, payload = await self.get(timeout)
+        data: dict[str, Any] = json.loads(payload)
+        return data
+
+    def __aiter__(self) -> AsyncIterator[tuple[str, bytes]]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[tuple[str, bytes]]:
+        while True:
+            yield await self._queue.get()
+
+    def close(self) -> None:
+        """Stop receiving."""
+        with contextlib.suppress(Exception):
+            self._sub.undeclare()
+
+
+class Client:
+    """A Zenoh session connected to a urdaemon cell."""
+
+    def __init__(self, session: Any, loop: asyncio.AbstractEventLoop) -> None:
+        self.session = session
+        self._loop = loop
+        self._subscriptions: list[Subscription] = []
+
+    @classmethod
+    async def connect(cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0) -> Client:
+        """Open a Zenoh session connected to ``endpoint`` (no multicast scouting)."""
+        loop = asyncio.get_running_loop()
+        conf = zenoh_config("peer", [], [endpoint])
+        conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
+        try:
+            session = await loop.run_in_executor(None, zenoh.open, conf)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot connect to {endpoint}: {err}") from err
+        return cls(session, loop)
+
+    async def __aenter__(self) -> Client:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Undeclare subscriptions and close the session."""
+        for sub in self._subscriptions:
+            sub.close()
+        await self._loop.run_in_executor(None, self.session.close)
+
+    def subscribe(self, key_expr: str, maxsize: int = 1000) -> Subscription:
+        """Subscribe to ``key_expr`` (closed with the client)."""
+        sub = Subscription(self.session, key_expr, self._loop, maxsize)
+        self._subscriptions.append(sub)
+        return sub
+
+    async def query(self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> list[bytes]:
+        """Ask a queryable; every reply's payload."""
+        payload = None if body is None else _encode(body)
+
+        def ask() -> list[bytes]:
+            replies = self.session.get(key, payload=payload, timeout=timeout)
+            return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
+
+        return await self._loop.run_in_executor(None, ask)
+
+    async def request(self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any]:
+        """Ask a queryable that must answer once; raises ``UrTimeoutError`` when nobody answers."""
+        replies = await self.query(key, body, timeout=timeout)
+        if not replies:
+            raise UrTimeoutError(f"no answer on {key} within {timeout} s (is the daemon running?)")
+        data: dict[str, Any] = json.loads(replies[0])
+        return data
+
+    async def robots(self, *, timeout: float = 2.0) -> list[tuple[str, str]]:
+        """(cell, robot) of every robot served, from their liveliness tokens."""
+
+        def ask() -> list[str]:
+            return [str(r.ok.key_expr) for r in self.session.liveliness().get("*/*/alive", timeout=timeout) if r.ok]
+
+        keys = await self._loop.run_in_executor(None, ask)
+        found = []
+        for key in keys:
+            parts = key.split("/")
+            if len(parts) == 3:
+                found.append((parts[0], parts[1]))
+        return sorted(found)
+
+    async def robot(self, name: str, *, cell: str | None = None, timeout: float = 5.0) -> RobotClient:
+        """A handle on robot ``name``; finds its cell from the liveliness tokens unless given."""
+        if cell is None:
+            deadline = self._loop.time() + timeout
+            while True:
+                cells = sorted({c for c, r in await self.robots() if r == name})
+                if len(cells) == 1:
+                    cell = cells[0]
+                    break
+                if len(cells) > 1:
+                    raise UrDaemonError(f"robot {name!r} is served in several cells ({', '.join(cells)}); name one")
+                if self._loop.time() > deadline:
+                    raise UrTimeoutError(f"no robot {name!r} found within {timeout} s")
+                await asyncio.sleep(0.1)
+        return RobotClient(self, RobotKeys(cell, name))
+
+    async def robot_description(self, cell: str, *, timeout: float = QUERY_TIMEOUT_S) -> str:
+        """The cell URDF."""
+        replies = await self.query(CellKeys(cell).robot_description, timeout=timeout)
+        if not replies:
+            raise UrTimeoutError(f"no robot_description from cell {cell!r}")
+        return replies[0].decode()
+
+
+class GoalHandle:
+    """An accepted goal: its feedback and its one result."""
+
+    def __init__(self, robot: RobotClient, goal_id: str, duration: float) -> None:
+        self.robot = robot
+        self.goal_id = goal_id
+        self.duration = duration
+        self._feedback: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._result: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
+
+    def _deliver(self, kind: str, data: dict[str, Any]) -> None:
+        if kind == "result":
+            if not self._result.done():
+                self._result.set_result(data)
+        else:
+            self._feedback.put_nowait(data)
+
+    async def feedback(self) -> AsyncIterator[dict[str, Any]]:
+        """Feedback messages until the result arrives."""
+        while not self._result.done():
+            getter = asyncio.ensure_future(self._feedback.get())
+            done, _ = await asyncio.wait({getter, self._result}, return_when=asyncio.FIRST_COMPLETED)
+            if getter in done:
+                yield getter.result()
+            else:
+                getter.cancel()
+        while not self._feedback.empty():
+            yield self._feedback.get_nowait()
+
+    async def result(self, timeout: float | None = None) -> dict[str, Any]:
+        """Wait for the result (asking the daemon too, in case a publication was missed)."""
+        loop = asyncio.get_running_loop()
+        deadline = None if timeout is None else loop.time() + timeout
+        while not self._result.done():
+            wait = RESULT_POLL_S if deadline is None else min(RESULT_POLL_S, deadline - loop.time())
+            if wait <= 0:
+                raise UrTimeoutError(f"goal {self.goal_id}: no result within {timeout} s")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(asyncio.shield(self._result), wait)
+            if not self._result.done():
+                replies = await self.robot.client.query(self.robot.keys.goal_result(self.goal_id), timeout=1.0)
+                if replies:
+                    self._deliver("result", json.loads(replies[0]))
+        return self._result.result()
+
+
+class RobotClient:
+    """Commands and state of one robot."""
+
+    def __init__(self, client: Client, keys: RobotKeys) -> None:
+        self.client = client
+        self.keys = keys
+        self._goals: dict[str, GoalHandle] = {}
+        self._early: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+        self._goal_sub: Subscription | None = None
+        self._pump: asyncio.Task[None] | None = None
+
+    @property
+    def name(self) -> str:
+        """The robot's name."""
+        return self.keys.robot
+
+    def joint_states(self, maxsize: int = 1000) -> Subscription:
+        """Subscribe to joint states."""
+        return self.client.subscribe(self.keys.joint_states, maxsize)
+
+    async def status(self, timeout: float = 5.0) -> dict[str, Any]:
+        """The next status message."""
+        sub = self.client.subscribe(self.keys.status, 10)
+        try:
+            return await sub.get_json(timeout)
+        finally:
+            sub.close()
+
+    async def send_trajectory(
+        self,
+        points: Sequence[dict[str, Any]],
+        *,
+        joint_names: Sequence[str] | None = None,
+        tolerances: dict[str, Any] | None = None,
+        preempt: bool = False,
+    ) -> GoalHandle:
+        """Send a trajectory goal; raises ``GoalRejected`` with the daemon's reason."""
+        body: dict[str, Any] = {"points": list(points), "preempt": preempt}
+        if joint_names is not None:
+            body["joint_names"] = list(joint_names)
+        if tolerances is not None:
+            body["tolerances"] = tolerances
+        return await self._send_goal(self.keys.goal_trajectory, body)
+
+    async def move(
+        self,
+        positions: Sequence[float],
+        *,
+        duration: float | None = None,
+        joint_names: Sequence[str] | None = None,
+        velocity_scale: float = 1.0,
+        acceleration_scale: float = 1.0,
+        preempt: bool = False,
+    ) -> GoalHandle:
+        """Send a point-to-point move goal; raises ``GoalRejected`` with the daemon's reason."""
+        body: dict[str, Any] = {
+            "positions": list(positions),
+            "velocity_scale": velocity_scale,
+            "acceleration_scale": acceleration_scale,
+            "preempt": preempt,
+        }
+        if duration is not None:
+            body["duration"] = duration
+        if joint_names is not None:
+            body["joint_names"] = list(joint_names)
+        return await self._send_goal(self.keys.goal_move, body)
+
+    async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
+        """Cancel a goal (default: the active one)."""
+        return await self.client.request(self.keys.goal_cancel, {} if goal_id is None else {"goal_id": goal_id})
+
+    async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
+        """Set an output; the reply says ok or the reason."""
+        return await self.client.request(self.keys.service("set_io"), {"kind": kind, "pin": pin, "value": value})
+
+    async def set_payload(self, mass: float, cog: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
+        """Set the payload."""
+        return await self.client.request(self.keys.service("set_payload"), {"mass": mass, "cog": list(cog)})
+
+    async def set_speed_slider(self, fraction: float) -> dict[str, Any]:
+        """Set the speed slider (0..1)."""
+        return await self.client.request(self.keys.service("set_speed_slider"), {"fraction": fraction})
+
+    async def stop(self) -> dict[str, Any]:
+        """Stop whatever moves the robot."""
+        return await self.client.request(self.keys.service("stop"), {})
+
+    def stream_positions(self, positions: Sequence[float], velocities: Sequence[float] | None = None) -> None:
+        """Publish one streaming position command (repeat faster than the deadman timeout)."""
+        body: dict[str, Any] = {"positions": list(positions)}
+        if velocities is not None:
+            body["velocities"] = list(velocities)
+        self.client.session.put(self.keys.command_joint_position, _encode(body))
+
+    def stream_velocities(self, velocities: Sequence[float]) -> None:
+        """Publish one streaming velocity command (repeat faster than the deadman timeout)."""
+        self.client.session.put(self.keys.command_joint_velocity, _encode({"velocities": list(velocities)}))
+
+    async def _send_goal(self, key: str, body: dict[str, Any]) -> GoalHandle:
+        self._ensure_goal_subscription()
+        reply = await self.client.request(key, body)
+        if not reply.get("accepted"):
+            raise GoalRejected(str(reply.get("reason", "rejected without a reason")))
+        handle = GoalHandle(self, str(reply["goal_id"]), float(reply.get("duration", 0.0)))
+        self._goals[handle.goal_id] = handle
+        for kind, data in self._early.pop(handle.goal_id, []):
+            handle._deliver(kind, data)
+        return handle
+
+    def _ensure_goal_subscription(self) -> None:
+        if self._goal_sub is None:
+            self._goal_sub = self.client.subscribe(f"{self.keys.base}/goal/*/*", maxsize=10000)
+            self._pump = asyncio.get_running_loop().create_task(self._pump_goals(self._goal_sub))
+
+    async def _pump_goals(self, sub: Subscription) -> None:
+        async for key, payload in sub:
+            parts = key.split("/")
+            if len(parts) < 2 or parts[-1] not in ("feedback", "result"):
+                continue
+            goal_id, kind = parts[-2], parts[-1]
+            try:
+                data = json.loads(payload)
+            except json.JSONDecodeError:
+                continue
+            handle = self._goals.get(goal_id)
+            if handle is not None:
+                handle._deliver(kind, data)
+            else:
+                early = self._early.setdefault(goal_id, [])
+                if len(early) < 100:
+                    early.append((kind, data))
+                if len(self._early) > 100:
+                    self._early.pop(next(iter(self._early)))

@@ -1,0 +1,172 @@
+"""The daemon: build every robot of a cell once, run them in one TaskGroup, stop cleanly."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.backends.mock import MockBackend
+from urdaemon.backends.servo import ServoBackend
+from urdaemon.cell.config import Cell, Robot
+from urdaemon.control import MotionController
+from urdaemon.description import (
+    DhKinematics,
+    KinematicTree,
+    build_cell_urdf,
+    joint_limits_for,
+    load_urdf,
+    robot_dh,
+)
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.errors import ConfigError, UrDaemonError
+from urdaemon.model import JointLimits
+from urdaemon.publish import codec
+from urdaemon.publish.keys import CellKeys
+from urdaemon.publish.node import ZenohNode
+from urdaemon.robot import RobotRuntime
+
+__all__ = ["CellDescription", "Daemon", "describe_cell"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CellDescription:
+    """The cell's URDF and what the daemon derives from it once at start-up."""
+
+    urdf: str
+    tree: KinematicTree
+    limits: dict[str, JointLimits]
+
+
+def describe_cell(cell: Cell) -> CellDescription:
+    """Build the cell URDF and every robot's joint limits."""
+    urdf_text = build_cell_urdf(cell)
+    urdf = load_urdf(urdf_text)
+    limits = {robot.name: joint_limits_for(robot, urdf) for robot in cell.robots}
+    return CellDescription(urdf=urdf_text, tree=KinematicTree.from_urdf(urdf), limits=limits)
+
+
+def _initial_positions(robot: Robot, limits: JointLimits) -> list[float] | None:
+    given: Any = None
+    if robot.mock is not None:
+        given = robot.mock.initial_positions
+    elif robot.servo is not None:
+        given = robot.servo.initial_positions
+    if given is None:
+        return None
+    if isinstance(given, dict):
+        by_name = {robot.prefix + k: v for k, v in given.items()}
+        unknown = sorted(set(by_name) - set(limits.names))
+        if unknown:
+            raise ConfigError(f"robot {robot.name!r}: initial_positions name unknown joint(s) {', '.join(unknown)}")
+        return [float(by_name.get(name, 0.0)) for name in limits.names]
+    if len(given) != limits.dof:
+        raise ConfigError(f"robot {robot.name!r}: initial_positions has {len(given)} values for {limits.dof} joints")
+    return [float(v) for v in given]
+
+
+def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell: str) -> Backend:
+    """The backend a robot's config asks for."""
+    initial = _initial_positions(robot, limits)
+    if robot.backend == "mock":
+        options = robot.mock
+        rate = options.rate_hz if options and options.rate_hz else None
+        if rate is None:
+            rate = float(load_ur_model(robot.model).control_rate_hz) if robot.is_ur else 100.0
+        return MockBackend(
+            robot.name,
+            limits.names,
+            rate,
+            initial_positions=initial,
+            speed_scaling=options.speed_scaling if options else 1.0,
+        )
+    if robot.backend == "servo":
+        assert robot.servo is not None
+        publisher = node.publisher(CellKeys(cell).robot(robot.name).servo_command) if node else None
+        return ServoBackend(
+            robot.name,
+            limits.names,
+            robot.prefix,
+            robot.servo,
+            initial_positions=initial,
+            publish=(lambda payload: publisher.put(payload)) if publisher is not None else None,
+        )
+    raise ConfigError(f"robot {robot.name!r}: backend {robot.backend!r} is not available in this version")
+
+
+class Daemon:
+    """Serves one cell over Zenoh until ``stop`` is set."""
+
+    def __init__(self, cell: Cell, *, listen: tuple[str, ...] | None = None) -> None:
+        self.cell = cell
+        self.keys = CellKeys(cell.cell)
+        self._listen = listen
+        self.description = describe_cell(cell)
+        self.runtimes: list[RobotRuntime] = []
+        self.node: ZenohNode | None = None
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
+        loop = asyncio.get_running_loop()
+        self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen)
+        try:
+            self._build(node)
+            node.queryable(self.keys.robot_description, self._on_description)
+            tf_pub = node.publisher(self.keys.tf)
+            log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
+            async with asyncio.TaskGroup() as group:
+                tasks = [group.create_task(rt.run()) for rt in self.runtimes]
+                tasks.append(group.create_task(self._publish_tf(tf_pub)))
+                await stop.wait()
+                for task in tasks:
+                    task.cancel()
+        finally:
+            node.close()
+            log.info("cell %r stopped", self.cell.cell)
+
+    def _build(self, node: ZenohNode) -> None:
+        for robot in self.cell.robots:
+            limits = self.description.limits[robot.name]
+            backend = make_backend(robot, limits, node, self.cell.cell)
+            motion = robot.motion
+            controller = MotionController(
+                limits,
+                period=backend.period,
+                path_tolerance=motion.path_tolerance,
+                goal_tolerance=motion.goal_tolerance,
+                goal_time_tolerance=motion.goal_time_tolerance,
+                stream_timeout=motion.stream_timeout,
+                feedback_period=1.0 / motion.feedback_rate_hz,
+            )
+            kinematics = DhKinematics(robot_dh(robot)) if robot.is_ur else None
+            runtime = RobotRuntime(
+                self.cell.cell, robot, backend, controller, node, self.cell.publish, kinematics=kinematics
+            )
+            runtime.declare()
+            self.runtimes.append(runtime)
+
+    def _on_description(self, query: Any) -> None:
+        try:
+            query.reply(self.keys.robot_description, self.description.urdf.encode())
+        finally:
+            query.drop()
+
+    async def _publish_tf(self, publisher: Any) -> None:
+        period = 1.0 / self.cell.publish.tf_rate_hz
+        tree = self.description.tree
+        while True:
+            await asyncio.sleep(period)
+            positions: dict[str, float] = {}
+            for runtime in self.runtimes:
+                state = runtime.state
+                positions.update(zip(state.joint_names, state.positions, strict=True))
+            try:
+                links = {name: list(pose) for name, pose in tree.link_poses(positions)}
+            except UrDaemonError as err:
+                log.error("tf: %s", err)
+                continue
+            publisher.put(codec.encode({"frame": "world", "links": links}))

@@ -1,0 +1,209 @@
+"""Shared value types: robot/safety modes, lifecycle, joint limits, the per-robot state and command.
+
+``RobotState`` and ``JointCommand`` are deliberately mutable and reused every cycle: the backend
+fills one ``RobotState`` in place at the robot's rate and the controller writes one ``JointCommand``
+in place, so the 500 Hz path allocates as little as possible. Everything else is frozen.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+__all__ = [
+    "UR_JOINTS",
+    "CommandMode",
+    "JointCommand",
+    "JointLimits",
+    "Lifecycle",
+    "RobotMode",
+    "RobotState",
+    "SafetyMode",
+]
+
+UR_JOINTS: tuple[str, ...] = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+"""The six joint names of every UR arm, without the robot prefix."""
+
+
+class RobotMode(enum.IntEnum):
+    """UR robot mode (primary interface int8, RTDE INT32); ur-protocols.md §6.1."""
+
+    NO_CONTROLLER = -1
+    DISCONNECTED = 0
+    CONFIRM_SAFETY = 1
+    BOOTING = 2
+    POWER_OFF = 3
+    POWER_ON = 4
+    IDLE = 5
+    BACKDRIVE = 6
+    RUNNING = 7
+    UPDATING_FIRMWARE = 8
+
+
+class SafetyMode(enum.IntEnum):
+    """UR safety mode (primary uint8, RTDE INT32); ur-protocols.md §6.1."""
+
+    NORMAL = 1
+    REDUCED = 2
+    PROTECTIVE_STOP = 3
+    RECOVERY = 4
+    SAFEGUARD_STOP = 5
+    SYSTEM_EMERGENCY_STOP = 6
+    ROBOT_EMERGENCY_STOP = 7
+    VIOLATION = 8
+    FAULT = 9
+    VALIDATE_JOINT_ID = 10
+    UNDEFINED_SAFETY_MODE = 11
+    AUTOMATIC_MODE_SAFEGUARD_STOP = 12
+    SYSTEM_THREE_POSITION_ENABLING_STOP = 13
+    TP_THREE_POSITION_ENABLING_STOP = 14
+    IMMI_EMERGENCY_STOP = 15
+    IMMI_SAFEGUARD_STOP = 16
+    PROFISAFE_WAITING_FOR_PARAMETERS = 17
+    PROFISAFE_AUTOMATIC_MODE_SAFEGUARD_STOP = 18
+    PROFISAFE_SAFEGUARD_STOP = 19
+    PROFISAFE_EMERGENCY_STOP = 20
+    SAFETY_API_SAFEGUARD_STOP = 22
+
+
+class Lifecycle(enum.StrEnum):
+    """The daemon's own per-robot lifecycle state, published in the status."""
+
+    DISCONNECTED = "disconnected"
+    CONNECTING = "connecting"
+    IDLE = "idle"
+    RUNNING = "running"
+    PAUSED = "paused"
+    PROTECTIVE_STOP = "protective_stop"
+    EMERGENCY_STOP = "emergency_stop"
+    RECOVERING = "recovering"
+
+
+class CommandMode(enum.IntEnum):
+    """What the backend should do with a ``JointCommand`` this cycle."""
+
+    IDLE = 0
+    """Hold still; send nothing that moves the robot (a keepalive on real hardware)."""
+    POSITION = 1
+    """Go to ``positions`` this cycle (servoj on a UR); ``velocities`` is the feed-forward velocity."""
+    VELOCITY = 2
+    """Move at ``velocities`` (speedj on a UR); ``positions`` is ignored."""
+
+
+@dataclass(frozen=True, slots=True)
+class JointLimits:
+    """Per-joint limits in joint order; positions in rad (or m), rates per second."""
+
+    names: tuple[str, ...]
+    min_position: tuple[float, ...]
+    max_position: tuple[float, ...]
+    max_velocity: tuple[float, ...]
+    max_acceleration: tuple[float, ...]
+    max_jerk: tuple[float, ...]
+    max_effort: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.names)
+        for label in ("min_position", "max_position", "max_velocity", "max_acceleration", "max_jerk"):
+            values = getattr(self, label)
+            if len(values) != n:
+                raise ValueError(f"JointLimits.{label} has {len(values)} values for {n} joints")
+            if not all(math.isfinite(v) or (label.endswith("position") and math.isinf(v)) for v in values):
+                raise ValueError(f"JointLimits.{label} must be finite: {values}")
+        for label in ("max_velocity", "max_acceleration", "max_jerk"):
+            if any(v <= 0.0 for v in getattr(self, label)):
+                raise ValueError(f"JointLimits.{label} must be positive: {getattr(self, label)}")
+        for i, (lo, hi) in enumerate(zip(self.min_position, self.max_position, strict=True)):
+            if lo >= hi:
+                raise ValueError(f"JointLimits for {self.names[i]}: min_position {lo} >= max_position {hi}")
+
+    @property
+    def dof(self) -> int:
+        """Number of joints."""
+        return len(self.names)
+
+
+@dataclass(slots=True)
+class RobotState:
+    """The latest measured state of one robot, filled in place by its backend every cycle."""
+
+    joint_names: tuple[str, ...]
+    positions: list[float]
+    velocities: list[float]
+    efforts: list[float]
+    controller_time: float = 0.0
+    """Controller clock in seconds (RTDE ``timestamp``; the mock's own cycle clock)."""
+    host_time_ns: int = 0
+    """``time.time_ns()`` when this state arrived on the host."""
+    monotonic_ns: int = 0
+    """``time.monotonic_ns()`` when this state arrived on the host."""
+    cycle: int = 0
+    """Cycles received since the backend (re)connected."""
+    lifecycle: Lifecycle = Lifecycle.DISCONNECTED
+    lifecycle_reason: str = ""
+    robot_mode: RobotMode = RobotMode.DISCONNECTED
+    safety_mode: SafetyMode = SafetyMode.NORMAL
+    speed_slider: float = 1.0
+    """The speed slider fraction (0..1)."""
+    speed_scaling: float = 1.0
+    """The effective scaling of trajectory time (slider × runtime scaling, 0..1)."""
+    program_running: bool = False
+    digital_out: list[bool] = field(default_factory=lambda: [False] * 8)
+    configurable_out: list[bool] = field(default_factory=lambda: [False] * 8)
+    tool_out: list[bool] = field(default_factory=lambda: [False] * 2)
+    analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    digital_in: list[bool] = field(default_factory=lambda: [False] * 8)
+    configurable_in: list[bool] = field(default_factory=lambda: [False] * 8)
+    tool_in: list[bool] = field(default_factory=lambda: [False] * 2)
+    analog_in: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    tool_voltage: int = 0
+    payload_mass: float = 0.0
+    payload_cog: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @classmethod
+    def zeros(cls, joint_names: tuple[str, ...]) -> RobotState:
+        """A state at all-zero joint values for the given joints."""
+        n = len(joint_names)
+        return cls(joint_names=joint_names, positions=[0.0] * n, velocities=[0.0] * n, efforts=[0.0] * n)
+
+    @property
+    def ready_for_motion(self) -> bool:
+        """True when the robot accepts motion commands (running, normal/reduced safety, program on)."""
+        return (
+            self.lifecycle is Lifecycle.RUNNING
+            and self.program_running
+            and self.safety_mode in (SafetyMode.NORMAL, SafetyMode.REDUCED)
+        )
+
+    def not_ready_reason(self) -> str:
+        """Why ``ready_for_motion`` is false (empty when it is true)."""
+        if self.lifecycle is not Lifecycle.RUNNING:
+            reason = f"robot is {self.lifecycle.value}"
+            return f"{reason}: {self.lifecycle_reason}" if self.lifecycle_reason else reason
+        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+            return f"robot safety mode is {self.safety_mode.name}"
+        if not self.program_running:
+            return "control program is not running"
+        return ""
+
+
+@dataclass(slots=True)
+class JointCommand:
+    """The command the controller leaves for the backend each cycle (reused in place)."""
+
+    mode: CommandMode
+    positions: list[float]
+    velocities: list[float]
+
+    @classmethod
+    def idle(cls, dof: int) -> JointCommand:
+        """An IDLE command for ``dof`` joints."""
+        return cls(mode=CommandMode.IDLE, positions=[0.0] * dof, velocities=[0.0] * dof)

@@ -1,0 +1,369 @@
+"""The one message encoding: UTF-8 JSON objects carrying ``"v": 1`` (docs/messages.md).
+
+Decoders take what a client sent and return typed values or raise ``MessageError`` naming the
+field and the problem. Range checks against a robot (limits, joint names, NaN) belong to the
+controller, which rejects with its own reasons; here only the shape and types are checked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from urdaemon.control.goals import GoalFeedback, GoalResult, TrajectoryPoint
+from urdaemon.errors import MessageError
+from urdaemon.model import RobotState
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "JointStateEncoder",
+    "MoveGoalMessage",
+    "StreamMessage",
+    "ToleranceMessage",
+    "TrajectoryGoalMessage",
+    "decode_cancel",
+    "decode_message",
+    "decode_move_goal",
+    "decode_set_io",
+    "decode_set_payload",
+    "decode_speed_slider",
+    "decode_stream_position",
+    "decode_stream_velocity",
+    "decode_trajectory_goal",
+    "encode",
+    "encode_feedback",
+    "encode_result",
+]
+
+SCHEMA_VERSION = 1
+MAX_MESSAGE_BYTES = 4 * 1024 * 1024
+"""Largest client message accepted (a 10 000-point 6-joint trajectory is about 1.5 MB)."""
+MAX_TRAJECTORY_POINTS = 100_000
+
+
+@dataclass(frozen=True, slots=True)
+class ToleranceMessage:
+    """Tolerances as sent: a number for every joint, or one per joint in the goal's joint order."""
+
+    path: float | tuple[float, ...] | None = None
+    goal: float | tuple[float, ...] | None = None
+    goal_time: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TrajectoryGoalMessage:
+    """A decoded trajectory goal."""
+
+    joint_names: tuple[str, ...] | None
+    points: tuple[TrajectoryPoint, ...]
+    tolerances: ToleranceMessage
+    preempt: bool
+
+
+@dataclass(frozen=True, slots=True)
+class MoveGoalMessage:
+    """A decoded point-to-point move goal."""
+
+    joint_names: tuple[str, ...] | None
+    positions: tuple[float, ...]
+    duration: float | None
+    velocity_scale: float
+    acceleration_scale: float
+    tolerances: ToleranceMessage
+    preempt: bool
+
+
+@dataclass(frozen=True, slots=True)
+class StreamMessage:
+    """A decoded streaming command."""
+
+    joint_names: tuple[str, ...] | None
+    positions: tuple[float, ...] | None
+    velocities: tuple[float, ...] | None
+
+
+def encode(message: dict[str, Any]) -> bytes:
+    """Encode a message dict, adding the schema version."""
+    return json.dumps({"v": SCHEMA_VERSION, **message}, separators=(",", ":"), allow_nan=False).encode()
+
+
+def decode_message(payload: bytes | bytearray | memoryview | None, what: str) -> dict[str, Any]:
+    """Parse a client message into a dict, checking size, JSON syntax, object shape and version."""
+    if payload is None or len(payload) == 0:
+        raise MessageError(f"{what}: empty message; expected a JSON object")
+    if len(payload) > MAX_MESSAGE_BYTES:
+        raise MessageError(f"{what}: message of {len(payload)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    try:
+        data = json.loads(bytes(payload))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+        raise MessageError(f"{what}: not valid JSON: {err}") from err
+    if not isinstance(data, dict):
+        raise MessageError(f"{what}: expected a JSON object, got {type(data).__name__}")
+    version = data.get("v", SCHEMA_VERSION)
+    if version != SCHEMA_VERSION:
+        raise MessageError(f"{what}: unsupported schema version {version!r}; this daemon speaks {SCHEMA_VERSION}")
+    return data
+
+
+def _allowed(data: dict[str, Any], what: str, keys: set[str]) -> None:
+    unknown = sorted(set(data) - keys - {"v"})
+    if unknown:
+        raise MessageError(f"{what}: unknown field(s) {', '.join(unknown)}")
+
+
+def _number(value: Any, field: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise MessageError(f"{field}: expected a number, got {json.dumps(value)[:40]}")
+    return float(value)
+
+
+def _numbers(value: Any, field: str) -> tuple[float, ...]:
+    if not isinstance(value, list):
+        raise MessageError(f"{field}: expected a list of numbers, got {type(value).__name__}")
+    return tuple(_number(v, f"{field}[{i}]") for i, v in enumerate(value))
+
+
+def _names(value: Any, field: str) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise MessageError(f"{field}: expected a list of joint name strings")
+    return tuple(value)
+
+
+def _optional_number(data: dict[str, Any], key: str, what: str) -> float | None:
+    value = data.get(key)
+    return None if value is None else _number(value, f"{what}.{key}")
+
+
+def _bool(data: dict[str, Any], key: str, what: str, default: bool = False) -> bool:
+    value = data.get(key, default)
+    if not isinstance(value, bool):
+        raise MessageError(f"{what}.{key}: expected true or false")
+    return value
+
+
+def _tolerances(value: Any, what: str) -> ToleranceMessage:
+    if value is None:
+        return ToleranceMessage()
+    if not isinstance(value, dict):
+        raise MessageError(f"{what}.tolerances: expected an object with path, goal, goal_time")
+    _allowed(value, f"{what}.tolerances", {"path", "goal", "goal_time"})
+    parsed: dict[str, float | tuple[float, ...] | None] = {}
+    for key in ("path", "goal"):
+        item = value.get(key)
+        field = f"{what}.tolerances.{key}"
+        parsed[key] = None if item is None else _numbers(item, field) if isinstance(item, list) else _number(item, field)
+    goal_time = value.get("goal_time")
+    return ToleranceMessage(
+        path=parsed["path"],
+        goal=parsed["goal"],
+        goal_time=None if goal_time is None else _number(goal_time, f"{what}.tolerances.goal_time"),
+    )
+
+
+def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
+    """Decode a trajectory goal: joint_names, points[{positions, velocities?, accelerations?, time_from_start}]."""
+    what = "trajectory goal"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"joint_names", "points", "tolerances", "preempt"})
+    raw_points = data.get("points")
+    if not isinstance(raw_points, list):
+        raise MessageError(f"{what}.points: expected a list of points")
+    if len(raw_points) > MAX_TRAJECTORY_POINTS:
+        raise MessageError(f"{what}.points: {len(raw_points)} points exceed {MAX_TRAJECTORY_POINTS}")
+    points = []
+    for i, raw in enumerate(raw_points):
+        field = f"{what}.points[{i}]"
+        if not isinstance(raw, dict):
+            raise MessageError(f"{field}: expected an object")
+        _allowed(raw, field, {"positions", "velocities", "accelerations", "time_from_start"})
+        if "positions" not in raw:
+            raise MessageError(f"{field}.positions: missing")
+        if "time_from_start" not in raw:
+            raise MessageError(f"{field}.time_from_start: missing")
+        velocities = raw.get("velocities")
+        accelerations = raw.get("accelerations")
+        points.append(
+            TrajectoryPoint(
+                positions=_numbers(raw["positions"], f"{field}.positions"),
+                time_from_start=_number(raw["time_from_start"], f"{field}.time_from_start"),
+                velocities=None if velocities is None else _numbers(velocities, f"{field}.velocities"),
+                accelerations=None if accelerations is None else _numbers(accelerations, f"{field}.accelerations"),
+            )
+        )
+    return TrajectoryGoalMessage(
+        joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
+        points=tuple(points),
+        tolerances=_tolerances(data.get("tolerances"), what),
+        preempt=_bool(data, "preempt", what),
+    )
+
+
+def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
+    """Decode a move goal: positions, joint_names?, duration?, velocity_scale?, acceleration_scale?."""
+    what = "move goal"
+    data = decode_message(payload, what)
+    _allowed(
+        data,
+        what,
+        {"joint_names", "positions", "duration", "velocity_scale", "acceleration_scale", "tolerances", "preempt"},
+    )
+    if "positions" not in data:
+        raise MessageError(f"{what}.positions: missing")
+    velocity_scale = _optional_number(data, "velocity_scale", what)
+    acceleration_scale = _optional_number(data, "acceleration_scale", what)
+    return MoveGoalMessage(
+        joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
+        positions=_numbers(data["positions"], f"{what}.positions"),
+        duration=_optional_number(data, "duration", what),
+        velocity_scale=1.0 if velocity_scale is None else velocity_scale,
+        acceleration_scale=1.0 if acceleration_scale is None else acceleration_scale,
+        tolerances=_tolerances(data.get("tolerances"), what),
+        preempt=_bool(data, "preempt", what),
+    )
+
+
+def decode_cancel(payload: bytes | None) -> str | None:
+    """Decode a cancel request: the goal id, or None (or an empty payload) for the active goal."""
+    if payload is None or len(payload) == 0:
+        return None
+    what = "cancel"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"goal_id"})
+    goal_id = data.get("goal_id")
+    if goal_id is not None and not isinstance(goal_id, str):
+        raise MessageError(f"{what}.goal_id: expected a string")
+    return goal_id
+
+
+def decode_stream_position(payload: bytes | None) -> StreamMessage:
+    """Decode a streaming joint position command: positions, velocities?, joint_names?."""
+    what = "joint_position command"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"joint_names", "positions", "velocities"})
+    if "positions" not in data:
+        raise MessageError(f"{what}.positions: missing")
+    velocities = data.get("velocities")
+    return StreamMessage(
+        joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
+        positions=_numbers(data["positions"], f"{what}.positions"),
+        velocities=None if velocities is None else _numbers(velocities, f"{what}.velocities"),
+    )
+
+
+def decode_stream_velocity(payload: bytes | None) -> StreamMessage:
+    """Decode a streaming joint velocity command: velocities, joint_names?."""
+    what = "joint_velocity command"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"joint_names", "velocities"})
+    if "velocities" not in data:
+        raise MessageError(f"{what}.velocities: missing")
+    return StreamMessage(
+        joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
+        positions=None,
+        velocities=_numbers(data["velocities"], f"{what}.velocities"),
+    )
+
+
+def decode_set_io(payload: bytes | None) -> tuple[str, int, float | bool]:
+    """Decode a set_io request: kind, pin, value."""
+    what = "set_io"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"kind", "pin", "value"})
+    kind, pin, value = data.get("kind"), data.get("pin"), data.get("value")
+    if not isinstance(kind, str):
+        raise MessageError(f"{what}.kind: expected one of digital, configurable, tool, analog")
+    if isinstance(pin, bool) or not isinstance(pin, int):
+        raise MessageError(f"{what}.pin: expected an integer")
+    if isinstance(value, bool):
+        return kind, pin, value
+    return kind, pin, _number(value, f"{what}.value")
+
+
+def decode_set_payload(payload: bytes | None) -> tuple[float, tuple[float, float, float]]:
+    """Decode a set_payload request: mass (kg), cog [x, y, z] (m)."""
+    what = "set_payload"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"mass", "cog"})
+    mass = _number(data.get("mass"), f"{what}.mass")
+    if not math.isfinite(mass) or mass < 0:
+        raise MessageError(f"{what}.mass: must be a finite number ≥ 0, got {mass}")
+    cog = _numbers(data.get("cog", [0.0, 0.0, 0.0]), f"{what}.cog")
+    if len(cog) != 3 or not all(math.isfinite(c) for c in cog):
+        raise MessageError(f"{what}.cog: expected three finite numbers")
+    return mass, (cog[0], cog[1], cog[2])
+
+
+def decode_speed_slider(payload: bytes | None) -> float:
+    """Decode a set_speed_slider request: fraction in [0, 1]."""
+    what = "set_speed_slider"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"fraction"})
+    fraction = _number(data.get("fraction"), f"{what}.fraction")
+    if not 0.0 <= fraction <= 1.0:
+        raise MessageError(f"{what}.fraction: must be within 0..1, got {fraction}")
+    return fraction
+
+
+def encode_feedback(robot: str, feedback: GoalFeedback) -> bytes:
+    """Encode goal feedback."""
+    return encode(
+        {
+            "robot": robot,
+            "goal_id": feedback.goal_id,
+            "time_from_start": feedback.time_from_start,
+            "duration": feedback.duration,
+            "progress": feedback.progress,
+            "desired": list(feedback.desired),
+            "actual": list(feedback.actual),
+            "error": list(feedback.error),
+        }
+    )
+
+
+def encode_result(robot: str, result: GoalResult) -> bytes:
+    """Encode a goal result."""
+    return encode(
+        {
+            "robot": robot,
+            "goal_id": result.goal_id,
+            "status": result.status.value,
+            "reason": result.reason,
+            "final_positions": list(result.final_positions),
+            "final_error": list(result.final_error),
+            "duration": result.duration,
+        }
+    )
+
+
+def _floats(values: Sequence[float]) -> str:
+    # repr gives the shortest round-tripping text; JSON has no NaN/inf, so map them to null
+    return ",".join([repr(v) if v == v and v not in (math.inf, -math.inf) else "null" for v in values])
+
+
+class JointStateEncoder:
+    """Encodes a robot's joint state as JSON fast enough for 500 Hz (no dicts, one f-string)."""
+
+    def __init__(self, robot: str, joint_names: Sequence[str]) -> None:
+        names = json.dumps(list(joint_names))
+        self._head = f'{{"v":{SCHEMA_VERSION},"robot":{json.dumps(robot)},"names":{names},'
+
+    def encode(self, state: RobotState) -> bytes:
+        """The joint_states message for ``state``."""
+        return (
+            f'{self._head}"controller_time":{state.controller_time!r},"host_time_ns":{state.host_time_ns},'
+            f'"cycle":{state.cycle},"position":[{_floats(state.positions)}],'
+            f'"velocity":[{_floats(state.velocities)}],"effort":[{_floats(state.efforts)}]}}'
+        ).encode()
+
+    def encode_pose(self, state: RobotState, frame: str, child: str, pose: Sequence[float]) -> bytes:
+        """The tcp_pose message: position and quaternion (x, y, z, w) of ``child`` in ``frame``."""
+        return (
+            f'{{"v":{SCHEMA_VERSION},"frame":"{frame}","child":"{child}",'
+            f'"controller_time":{state.controller_time!r},"host_time_ns":{state.host_time_ns},'
+            f'"position":[{_floats(pose[:3])}],"orientation":[{_floats(pose[3:7])}]}}'
+        ).encode()

@@ -1,0 +1,118 @@
+"""Key expressions: everything of a robot lives under ``<cell>/<robot>/``; see docs/keys.md."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["CellKeys", "RobotKeys"]
+
+
+@dataclass(frozen=True, slots=True)
+class CellKeys:
+    """Keys of the cell as a whole."""
+
+    cell: str
+
+    @property
+    def tf(self) -> str:
+        """Every link pose of the cell in the ``world`` frame."""
+        return f"{self.cell}/tf"
+
+    @property
+    def robot_description(self) -> str:
+        """The cell URDF (queryable)."""
+        return f"{self.cell}/robot_description"
+
+    def robot(self, name: str) -> RobotKeys:
+        """The keys of one robot."""
+        return RobotKeys(self.cell, name)
+
+
+@dataclass(frozen=True, slots=True)
+class RobotKeys:
+    """Keys of one robot."""
+
+    cell: str
+    robot: str
+
+    @property
+    def base(self) -> str:
+        """``<cell>/<robot>``."""
+        return f"{self.cell}/{self.robot}"
+
+    @property
+    def joint_states(self) -> str:
+        """Joint positions, velocities and efforts at the robot rate."""
+        return f"{self.base}/joint_states"
+
+    @property
+    def tcp_pose(self) -> str:
+        """tool0 pose in the robot's base frame at the robot rate."""
+        return f"{self.base}/tcp_pose"
+
+    @property
+    def status(self) -> str:
+        """Backend, lifecycle, modes, speed scaling; on change and periodically."""
+        return f"{self.base}/status"
+
+    @property
+    def io(self) -> str:
+        """Digital/analog inputs and outputs, tool voltage, payload."""
+        return f"{self.base}/io"
+
+    @property
+    def alive(self) -> str:
+        """Liveliness token, present while the daemon serves the robot."""
+        return f"{self.base}/alive"
+
+    @property
+    def events(self) -> str:
+        """Rejected streaming commands and other notices."""
+        return f"{self.base}/events"
+
+    @property
+    def servo_command(self) -> str:
+        """PCA9685 channel values of a servo robot."""
+        return f"{self.base}/servo_command"
+
+    @property
+    def goal_trajectory(self) -> str:
+        """Queryable: send a joint trajectory goal."""
+        return f"{self.base}/goal/trajectory"
+
+    @property
+    def goal_move(self) -> str:
+        """Queryable: send a point-to-point move goal."""
+        return f"{self.base}/goal/move"
+
+    @property
+    def goal_cancel(self) -> str:
+        """Queryable: cancel a goal."""
+        return f"{self.base}/goal/cancel"
+
+    def goal_feedback(self, goal_id: str) -> str:
+        """Feedback of one goal while it runs."""
+        return f"{self.base}/goal/{goal_id}/feedback"
+
+    def goal_result(self, goal_id: str) -> str:
+        """The one result of a goal (published, and answered to queries afterwards)."""
+        return f"{self.base}/goal/{goal_id}/result"
+
+    @property
+    def goal_results(self) -> str:
+        """Every goal's result (wildcard)."""
+        return f"{self.base}/goal/*/result"
+
+    @property
+    def command_joint_position(self) -> str:
+        """Streaming joint position commands (deadman)."""
+        return f"{self.base}/command/joint_position"
+
+    @property
+    def command_joint_velocity(self) -> str:
+        """Streaming joint velocity commands (deadman)."""
+        return f"{self.base}/command/joint_velocity"
+
+    def service(self, name: str) -> str:
+        """Queryable service ``name`` (set_io, set_payload, set_speed_slider, stop)."""
+        return f"{self.base}/service/{name}"

@@ -1,0 +1,111 @@
+"""The daemon's Zenoh session: publishers, queryables and subscribers whose handlers run on the loop.
+
+Zenoh calls back on its own threads; every callback here only copies what it needs and hands it
+to the event loop with ``call_soon_threadsafe`` (ecosystem.md §1.4), so all daemon logic runs on
+one thread and never races.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from urdaemon.cell.config import ZenohOptions
+from urdaemon.errors import UrDaemonError
+
+__all__ = ["ZenohNode", "zenoh_config"]
+
+log = logging.getLogger(__name__)
+
+
+def zenoh_config(
+    mode: str, listen: tuple[str, ...] | list[str], connect: tuple[str, ...] | list[str], *, multicast: bool = False
+) -> Any:
+    """A ``zenoh.Config`` with explicit endpoints and multicast scouting as given."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
+    return conf
+
+
+class ZenohNode:
+    """One Zenoh session owned by the daemon; every declared entity is undeclared on ``close``."""
+
+    def __init__(self, options: ZenohOptions, loop: asyncio.AbstractEventLoop, *, listen: tuple[str, ...] | None = None) -> None:
+        self._loop = loop
+        endpoints = options.listen if listen is None else listen
+        try:
+            self.session = zenoh.open(
+                zenoh_config(options.mode, endpoints, options.connect, multicast=options.multicast_scouting)
+            )
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
+        self._entities: list[Any] = []
+        self._closed = False
+
+    def publisher(self, key: str, *, realtime: bool = False) -> Any:
+        """Declare a publisher; ``realtime`` for state streams (drop when congested, express, top priority)."""
+        if realtime:
+            pub = self.session.declare_publisher(
+                key,
+                congestion_control=zenoh.CongestionControl.DROP,
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+        else:
+            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._entities.append(pub)
+        return pub
+
+    def put(self, key: str, payload: bytes) -> None:
+        """Publish once on ``key`` (reliable)."""
+        if not self._closed:
+            self.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def queryable(self, key: str, handler: Callable[[Any], None]) -> None:
+        """Declare a queryable whose ``handler(query)`` runs on the loop; it must reply."""
+
+        def on_query(query: Any) -> None:
+            self._to_loop(handler, query)
+
+        self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
+
+    def subscriber(self, key: str, handler: Callable[[str, bytes], None]) -> None:
+        """Declare a subscriber whose ``handler(key, payload)`` runs on the loop."""
+
+        def on_sample(sample: Any) -> None:
+            self._to_loop(handler, str(sample.key_expr), sample.payload.to_bytes())
+
+        self._entities.append(self.session.declare_subscriber(key, on_sample))
+
+    def liveliness_token(self, key: str) -> None:
+        """Declare a liveliness token held until ``close``."""
+        self._entities.append(self.session.liveliness().declare_token(key))
+
+    def close(self) -> None:
+        """Undeclare everything and close the session."""
+        if self._closed:
+            return
+        self._closed = True
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except Exception as err:  # a session already half closed must not stop the shutdown
+                log.debug("undeclare failed: %s", err)
+        self._entities.clear()
+        self.session.close()
+
+    def _to_loop(self, handler: Callable[..., None], *args: Any) -> None:
+        if self._closed:
+            return
+        try:
+            self._loop.call_soon_threadsafe(handler, *args)
+        except RuntimeError:  # the loop closed while Zenoh was delivering
+            pass

@@ -1,0 +1,465 @@
+"""One robot served by the daemon: backend + motion controller + its Zenoh keys, supervised.
+
+The backend clocks ``_on_cycle`` (the robot is the clock). That path only ticks the controller,
+encodes the joint state and TCP pose and publishes them; everything else (goals, services,
+status, IO) happens on requests or on slow timers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import secrets
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.cell.config import PublishOptions, Robot
+from urdaemon.control import (
+    GoalFeedback,
+    GoalResult,
+    MotionController,
+    Tolerances,
+)
+from urdaemon.description.kinematics import DhKinematics
+from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
+from urdaemon.model import RobotState
+from urdaemon.publish import codec
+from urdaemon.publish.codec import ToleranceMessage
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import ZenohNode
+
+__all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
+
+RESTART_BACKOFF_S = (0.1, 0.5, 1.0, 2.0, 5.0)
+"""Delays before restarting a failed backend; the last one repeats."""
+KEPT_RESULTS = 256
+"""Finished goal results kept to answer late queries."""
+
+
+class _RobotLog(logging.LoggerAdapter[logging.Logger]):
+    def process(self, msg: Any, kwargs: Any) -> tuple[Any, Any]:
+        return f"[{self.extra['robot'] if self.extra else '?'}] {msg}", kwargs
+
+
+class RobotRuntime:
+    """Serves one robot until cancelled; restarts its backend after failures without touching others."""
+
+    def __init__(
+        self,
+        cell: str,
+        robot: Robot,
+        backend: Backend,
+        controller: MotionController,
+        node: ZenohNode,
+        publish: PublishOptions,
+        *,
+        kinematics: DhKinematics | None = None,
+    ) -> None:
+        self.robot = robot
+        self.backend = backend
+        self.controller = controller
+        self.node = node
+        self.keys = RobotKeys(cell, robot.name)
+        self.log = _RobotLog(logging.getLogger("urdaemon.robot"), {"robot": robot.name})
+        self._kinematics = kinematics
+        self._decimation = publish.joint_states_decimation
+        self._status_period = 1.0 / publish.status_rate_hz
+        self._io_period = 1.0 / publish.io_rate_hz
+        self._encoder = codec.JointStateEncoder(robot.name, backend.state.joint_names)
+        self._results: OrderedDict[str, bytes] = OrderedDict()
+        self._goal_ids = itertools.count(1)
+        self._goal_salt = secrets.token_hex(2)
+        self._status_signature: tuple[Any, ...] = ()
+        self._io_signature: tuple[Any, ...] = ()
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._restarts = 0
+        self._stream_rejections = 0
+        self._frame = f"{robot.prefix}base"
+        self._child = f"{robot.prefix}tool0"
+        self._pub_joints: Any = None
+        self._pub_pose: Any = None
+        self._pub_status: Any = None
+        self._pub_io: Any = None
+        self._pub_events: Any = None
+
+    # ---- lifecycle -----------------------------------------------------------------------------
+
+    def declare(self) -> None:
+        """Declare this robot's publishers, queryables, subscribers and liveliness token."""
+        node, keys = self.node, self.keys
+        self._pub_joints = node.publisher(keys.joint_states, realtime=True)
+        self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if self._kinematics else None
+        self._pub_status = node.publisher(keys.status)
+        self._pub_io = node.publisher(keys.io)
+        self._pub_events = node.publisher(keys.events)
+        node.queryable(keys.goal_trajectory, self._on_trajectory_goal)
+        node.queryable(keys.goal_move, self._on_move_goal)
+        node.queryable(keys.goal_cancel, self._on_cancel)
+        node.queryable(keys.goal_results, self._on_result_query)
+        node.queryable(keys.service("set_io"), self._on_set_io)
+        node.queryable(keys.service("set_payload"), self._on_set_payload)
+        node.queryable(keys.service("set_speed_slider"), self._on_set_speed_slider)
+        node.queryable(keys.service("stop"), self._on_stop)
+        node.subscriber(keys.command_joint_position, self._on_stream_position)
+        node.subscriber(keys.command_joint_velocity, self._on_stream_velocity)
+        node.liveliness_token(keys.alive)
+
+    async def run(self) -> None:
+        """Run the backend, restarting it with backoff after any failure; also the status/IO timers."""
+        async with asyncio.TaskGroup() as group:
+            group.create_task(self._periodic_status())
+            group.create_task(self._supervise())
+
+    async def _supervise(self) -> None:
+        for attempt in itertools.count():
+            try:
+                await self.backend.run(self._on_cycle)
+                reason = "backend stopped"
+            except asyncio.CancelledError:
+                self._end_motion("daemon shutting down")
+                raise
+            except Exception as err:  # any failure of one robot is contained here
+                reason = f"backend failed: {type(err).__name__}: {err}"
+                self.log.error("%s", reason, exc_info=not isinstance(err, UrDaemonError))
+            self._restarts += 1
+            self._end_motion(reason)
+            delay = RESTART_BACKOFF_S[min(attempt, len(RESTART_BACKOFF_S) - 1)]
+            self.log.info("restarting backend in %.1f s", delay)
+            await asyncio.sleep(delay)
+
+    def _end_motion(self, reason: str) -> None:
+        self.controller.stop(reason, time.monotonic())
+        state = self.backend.state
+        state.program_running = False
+        self._publish_events()
+        self._publish_status(force=True)
+
+    # ---- the cycle (hot path) --------------------------------------------------------------------
+
+    def _on_cycle(self) -> None:
+        backend = self.backend
+        state = backend.state
+        self.controller.tick(state, backend.command, state.monotonic_ns * 1e-9)
+        if state.cycle % self._decimation == 0:
+            self._pub_joints.put(self._encoder.encode(state))
+            if self._kinematics is not None:
+                pose = self._kinematics.tool_pose(state.positions)
+                self._pub_pose.put(self._encoder.encode_pose(state, self._frame, self._child, pose))
+        if self.controller.has_events:
+            self._publish_events()
+        signature = (
+            state.lifecycle,
+            state.robot_mode,
+            state.safety_mode,
+            state.speed_scaling,
+            state.program_running,
+            self.controller.active_goal_id,
+        )
+        if signature != self._status_signature:
+            self._publish_status(force=True)
+
+    def _publish_events(self) -> None:
+        for event in self.controller.drain_events():
+            if isinstance(event, GoalFeedback):
+                self.node.put(self.keys.goal_feedback(event.goal_id), codec.encode_feedback(self.robot.name, event))
+            else:
+                self._publish_result(event)
+
+    def _publish_result(self, result: GoalResult) -> None:
+        payload = codec.encode_result(self.robot.name, result)
+        self._results[result.goal_id] = payload
+        while len(self._results) > KEPT_RESULTS:
+            self._results.popitem(last=False)
+        self.node.put(self.keys.goal_result(result.goal_id), payload)
+        log = self.log.info if result.status.value == "succeeded" else self.log.warning
+        log("goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else "")
+
+    # ---- status and IO ------------------------------------------------------------------------------
+
+    def status_message(self) -> dict[str, Any]:
+        """The status message body."""
+        state = self.backend.state
+        stats = self.backend.statistics()
+        return {
+            "robot": self.robot.name,
+            "backend": self.backend.kind,
+            "model": self.robot.model,
+            "lifecycle": state.lifecycle.value,
+            "reason": state.lifecycle_reason,
+            "robot_mode": state.robot_mode.name,
+            "safety_mode": state.safety_mode.name,
+            "speed_slider": state.speed_slider,
+            "speed_scaling": state.speed_scaling,
+            "program_running": state.program_running,
+            "ready": state.ready_for_motion,
+            "active_goal": self.controller.active_goal_id,
+            "rate_hz": self.backend.rate_hz,
+            "cycles": stats.cycles,
+            "missed_cycles": stats.missed_cycles,
+            "late_cycles": stats.late_cycles,
+            "restarts": self._restarts,
+            "rejected_stream_commands": self._stream_rejections,
+        }
+
+    def io_message(self) -> dict[str, Any]:
+        """The IO message body."""
+        s = self.backend.state
+        return {
+            "robot": self.robot.name,
+            "digital_out": list(s.digital_out),
+            "configurable_out": list(s.configurable_out),
+            "tool_out": list(s.tool_out),
+            "analog_out": list(s.analog_out),
+            "digital_in": list(s.digital_in),
+            "configurable_in": list(s.configurable_in),
+            "tool_in": list(s.tool_in),
+            "analog_in": list(s.analog_in),
+            "tool_voltage": s.tool_voltage,
+            "payload": {"mass": s.payload_mass, "cog": list(s.payload_cog)},
+        }
+
+    def _publish_status(self, *, force: bool = False) -> None:
+        state = self.backend.state
+        self._status_signature = (
+            state.lifecycle,
+            state.robot_mode,
+            state.safety_mode,
+            state.speed_scaling,
+            state.program_running,
+            self.controller.active_goal_id,
+        )
+        if self._pub_status is not None:
+            self._pub_status.put(codec.encode(self.status_message()))
+
+    def _publish_io(self) -> None:
+        message = self.io_message()
+        self._io_signature = tuple(str(v) for v in message.values())
+        if self._pub_io is not None:
+            self._pub_io.put(codec.encode(message))
+
+    async def _periodic_status(self) -> None:
+        last_status = last_io = 0.0
+        while True:
+            await asyncio.sleep(min(self._status_period, self._io_period))
+            now = time.monotonic()
+            if now - last_status >= self._status_period:
+                self._publish_status()
+                last_status = now
+            io_signature = tuple(str(v) for v in self.io_message().values())
+            if io_signature != self._io_signature or now - last_io >= 1.0:
+                self._publish_io()
+                last_io = now
+
+    # ---- goals --------------------------------------------------------------------------------------
+
+    def _new_goal_id(self) -> str:
+        return f"{self.robot.name}-{self._goal_salt}-{next(self._goal_ids)}"
+
+    def _joint_names(self, names: Sequence[str] | None) -> tuple[str, ...]:
+        """Client joint names → controller names; names may leave out the robot prefix."""
+        own = self.controller.joint_names
+        if names is None:
+            return own
+        known = set(own)
+        prefix = self.robot.prefix
+        return tuple(n if n in known or f"{prefix}{n}" not in known else f"{prefix}{n}" for n in names)
+
+    def _tolerances(self, message: ToleranceMessage, names: tuple[str, ...]) -> Tolerances | None:
+        if message.path is None and message.goal is None and message.goal_time is None:
+            return None
+        own = self.controller.joint_names
+
+        def per_joint(value: float | tuple[float, ...] | None, label: str) -> tuple[float, ...] | None:
+            if value is None:
+                return None
+            if isinstance(value, float):
+                return (value,) * len(own)
+            if len(value) != len(names):
+                raise GoalRejected(f"tolerances.{label} has {len(value)} values for {len(names)} joints")
+            by_name = dict(zip(names, value, strict=True))
+            missing = [n for n in own if n not in by_name]
+            if missing:
+                raise GoalRejected(f"tolerances.{label}: no value for joint(s) {', '.join(missing)}")
+            return tuple(by_name[n] for n in own)
+
+        return Tolerances(
+            path=per_joint(message.path, "path"),
+            goal=per_joint(message.goal, "goal"),
+            goal_time=message.goal_time,
+        )
+
+    def _on_trajectory_goal(self, query: Any) -> None:
+        try:
+            goal = codec.decode_trajectory_goal(_payload(query))
+            names = self._joint_names(goal.joint_names)
+            goal_id = self._new_goal_id()
+            duration = self.controller.accept_trajectory(
+                goal_id,
+                names,
+                goal.points,
+                self.backend.state,
+                time.monotonic(),
+                tolerances=self._tolerances(goal.tolerances, names),
+                preempt=goal.preempt,
+            )
+        except (MessageError, GoalRejected) as err:
+            self._reject_goal(query, "trajectory", err)
+            return
+        self._accept_goal(query, "trajectory", goal_id, duration)
+
+    def _on_move_goal(self, query: Any) -> None:
+        try:
+            goal = codec.decode_move_goal(_payload(query))
+            names = self._joint_names(goal.joint_names)
+            goal_id = self._new_goal_id()
+            duration = self.controller.accept_move(
+                goal_id,
+                names,
+                goal.positions,
+                self.backend.state,
+                time.monotonic(),
+                duration=goal.duration,
+                velocity_scale=goal.velocity_scale,
+                acceleration_scale=goal.acceleration_scale,
+                tolerances=self._tolerances(goal.tolerances, names),
+                preempt=goal.preempt,
+            )
+        except (MessageError, GoalRejected) as err:
+            self._reject_goal(query, "move", err)
+            return
+        self._accept_goal(query, "move", goal_id, duration)
+
+    def _accept_goal(self, query: Any, kind: str, goal_id: str, duration: float) -> None:
+        self.log.info("%s goal %s accepted (%.3f s)", kind, goal_id, duration)
+        _reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration})
+        self._publish_events()  # a preempted goal's result goes out before the new goal's feedback
+        self._publish_status(force=True)
+
+    def _reject_goal(self, query: Any, kind: str, err: UrDaemonError) -> None:
+        reason = err.reason if isinstance(err, GoalRejected) else str(err)
+        self.log.warning("%s goal rejected: %s", kind, reason)
+        _reply(query, {"accepted": False, "reason": reason})
+
+    def _on_cancel(self, query: Any) -> None:
+        try:
+            goal_id = codec.decode_cancel(_payload(query))
+        except MessageError as err:
+            _reply(query, {"canceled": False, "reason": str(err)})
+            return
+        target = goal_id if goal_id is not None else self.controller.active_goal_id
+        canceled = self.controller.cancel(goal_id)
+        body: dict[str, Any] = {"canceled": canceled, "goal_id": target}
+        if not canceled:
+            body["reason"] = "no active goal" if target is None else f"goal {target} is not active"
+        _reply(query, body)
+        self._publish_events()
+
+    def _on_result_query(self, query: Any) -> None:
+        key = str(query.key_expr)
+        parts = key.split("/")
+        goal_id = parts[-2] if len(parts) >= 2 else ""
+        payload = self._results.get(goal_id)
+        if payload is not None:
+            query.reply(self.keys.goal_result(goal_id), payload)
+        query.drop()
+
+    # ---- streaming -------------------------------------------------------------------------------------
+
+    def _on_stream_position(self, key: str, payload: bytes) -> None:
+        state = self.backend.state
+        try:
+            message = codec.decode_stream_position(payload)
+            assert message.positions is not None
+            self.controller.stream_positions(
+                self._joint_names(message.joint_names), message.positions, message.velocities, state, time.monotonic()
+            )
+        except (MessageError, GoalRejected) as err:
+            self._reject_stream(key, err)
+
+    def _on_stream_velocity(self, key: str, payload: bytes) -> None:
+        state = self.backend.state
+        try:
+            message = codec.decode_stream_velocity(payload)
+            assert message.velocities is not None
+            self.controller.stream_velocities(
+                self._joint_names(message.joint_names), message.velocities, state, time.monotonic()
+            )
+        except (MessageError, GoalRejected) as err:
+            self._reject_stream(key, err)
+
+    def _reject_stream(self, key: str, err: UrDaemonError) -> None:
+        self._stream_rejections += 1
+        reason = err.reason if isinstance(err, GoalRejected) else str(err)
+        if self._stream_rejections <= 10 or self._stream_rejections % 100 == 0:
+            self.log.warning("streaming command on %s rejected (%d so far): %s", key, self._stream_rejections, reason)
+        if self._pub_events is not None:
+            self._pub_events.put(codec.encode({"robot": self.robot.name, "kind": "command_rejected", "key": key, "reason": reason}))
+
+    # ---- services ----------------------------------------------------------------------------------------
+
+    def _on_set_io(self, query: Any) -> None:
+        self._service(query, "set_io", self._set_io(_payload(query)))
+
+    def _on_set_payload(self, query: Any) -> None:
+        self._service(query, "set_payload", self._set_payload(_payload(query)))
+
+    def _on_set_speed_slider(self, query: Any) -> None:
+        self._service(query, "set_speed_slider", self._set_speed_slider(_payload(query)))
+
+    def _on_stop(self, query: Any) -> None:
+        self.controller.stop("stop requested", time.monotonic())
+        self._publish_events()
+        _reply(query, {"ok": True})
+
+    async def _set_io(self, payload: bytes | None) -> None:
+        kind, pin, value = codec.decode_set_io(payload)
+        await self.backend.set_io(kind, pin, value)
+        self._publish_io()
+
+    async def _set_payload(self, payload: bytes | None) -> None:
+        mass, cog = codec.decode_set_payload(payload)
+        await self.backend.set_payload(mass, cog)
+        self._publish_io()
+
+    async def _set_speed_slider(self, payload: bytes | None) -> None:
+        fraction = codec.decode_speed_slider(payload)
+        await self.backend.set_speed_slider(fraction)
+
+    def _service(self, query: Any, name: str, work: Any) -> None:
+        async def serve() -> None:
+            try:
+                await work
+            except (MessageError, BackendError) as err:
+                self.log.warning("%s refused: %s", name, err)
+                _reply(query, {"ok": False, "reason": str(err)})
+            except Exception as err:  # a backend bug must still answer the client
+                self.log.exception("%s failed", name)
+                _reply(query, {"ok": False, "reason": f"{type(err).__name__}: {err}"})
+            else:
+                _reply(query, {"ok": True})
+
+        task = asyncio.get_running_loop().create_task(serve())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    @property
+    def state(self) -> RobotState:
+        """The robot's latest state."""
+        return self.backend.state
+
+
+def _payload(query: Any) -> bytes | None:
+    payload = query.payload
+    return None if payload is None else bytes(payload.to_bytes())
+
+
+def _reply(query: Any, body: dict[str, Any]) -> None:
+    with contextlib.suppress(Exception):  # the querier may have timed out and gone
+        query.reply(query.key_expr, codec.encode(body))
+    with contextlib.suppress(Exception):
+        query.drop()
