@@ -25,7 +25,9 @@ EXIT_BAD_INPUT = 2
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="urdaemon", description="Drive a cell of Universal Robots arms over Zenoh.")
+    parser = argparse.ArgumentParser(
+        prog="urdaemon", description="Drive a cell of Universal Robots arms over Zenoh."
+    )
     parser.add_argument("--version", action="version", version=f"urdaemon {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -50,9 +52,13 @@ def _parser() -> argparse.ArgumentParser:
 
     move = sub.add_parser("move", help="move a robot to joint positions and wait for the result")
     move.add_argument("robot")
-    move.add_argument("--joints", required=True, help="comma-separated joint positions (rad), controller order")
+    move.add_argument(
+        "--joints", required=True, help="comma-separated joint positions (rad), controller order"
+    )
     move.add_argument("--duration", type=float, default=None, help="seconds (default: time-optimal)")
-    move.add_argument("--cell", default=None, help="cell name (default: found from the robot's liveliness token)")
+    move.add_argument(
+        "--cell", default=None, help="cell name (default: found from the robot's liveliness token)"
+    )
     move.add_argument("--velocity-scale", type=float, default=1.0)
     _connect_arg(move)
     return parser
@@ -61,7 +67,9 @@ def _parser() -> argparse.ArgumentParser:
 def _connect_arg(parser: argparse.ArgumentParser) -> None:
     from urdaemon.client import DEFAULT_ENDPOINT
 
-    parser.add_argument("--connect", default=DEFAULT_ENDPOINT, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})")
+    parser.add_argument(
+        "--connect", default=DEFAULT_ENDPOINT, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -93,11 +101,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _check(path: str) -> int:
     from urdaemon.cell import load_cell, summarize
-    from urdaemon.daemon import describe_cell
+    from urdaemon.daemon import describe_cell, make_backend
 
     try:
         cell = load_cell(path)
         description = describe_cell(cell)
+        for robot in cell.robots:  # what `serve` would refuse, `check` refuses too
+            make_backend(robot, description.limits[robot.name], None, cell.cell)
     except ConfigError as err:
         print(f"{len(err.errors)} error(s):", file=sys.stderr)
         for line in err.errors:

@@ -40,7 +40,9 @@ def _encode(body: dict[str, Any]) -> bytes:
 class Subscription:
     """Samples of a key expression, delivered to the loop; iterate with ``async for``."""
 
-    def __init__(self, session: Any, key_expr: str, loop: asyncio.AbstractEventLoop, maxsize: int = 1000) -> None:
+    def __init__(
+        self, session: Any, key_expr: str, loop: asyncio.AbstractEventLoop, maxsize: int = 1000
+    ) -> None:
         self.key_expr = key_expr
         self._queue: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize)
         self._loop = loop
@@ -122,7 +124,9 @@ class Client:
         self._subscriptions.append(sub)
         return sub
 
-    async def query(self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> list[bytes]:
+    async def query(
+        self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S
+    ) -> list[bytes]:
         """Ask a queryable; every reply's payload."""
         payload = None if body is None else _encode(body)
 
@@ -132,7 +136,9 @@ class Client:
 
         return await self._loop.run_in_executor(None, ask)
 
-    async def request(self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any]:
+    async def request(
+        self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S
+    ) -> dict[str, Any]:
         """Ask a queryable that must answer once; raises ``UrTimeoutError`` when nobody answers."""
         replies = await self.query(key, body, timeout=timeout)
         if not replies:
@@ -144,7 +150,11 @@ class Client:
         """(cell, robot) of every robot served, from their liveliness tokens."""
 
         def ask() -> list[str]:
-            return [str(r.ok.key_expr) for r in self.session.liveliness().get("*/*/alive", timeout=timeout) if r.ok]
+            return [
+                str(r.ok.key_expr)
+                for r in self.session.liveliness().get("*/*/alive", timeout=timeout)
+                if r.ok
+            ]
 
         keys = await self._loop.run_in_executor(None, ask)
         found = []
@@ -164,7 +174,9 @@ class Client:
                     cell = cells[0]
                     break
                 if len(cells) > 1:
-                    raise UrDaemonError(f"robot {name!r} is served in several cells ({', '.join(cells)}); name one")
+                    raise UrDaemonError(
+                        f"robot {name!r} is served in several cells ({', '.join(cells)}); name one"
+                    )
                 if self._loop.time() > deadline:
                     raise UrTimeoutError(f"no robot {name!r} found within {timeout} s")
                 await asyncio.sleep(0.1)
@@ -218,7 +230,9 @@ class GoalHandle:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(asyncio.shield(self._result), wait)
             if not self._result.done():
-                replies = await self.robot.client.query(self.robot.keys.goal_result(self.goal_id), timeout=1.0)
+                replies = await self.robot.client.query(
+                    self.robot.keys.goal_result(self.goal_id), timeout=1.0
+                )
                 if replies:
                     self._deliver("result", json.loads(replies[0]))
         return self._result.result()
@@ -293,11 +307,15 @@ class RobotClient:
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
         """Cancel a goal (default: the active one)."""
-        return await self.client.request(self.keys.goal_cancel, {} if goal_id is None else {"goal_id": goal_id})
+        return await self.client.request(
+            self.keys.goal_cancel, {} if goal_id is None else {"goal_id": goal_id}
+        )
 
     async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
         """Set an output; the reply says ok or the reason."""
-        return await self.client.request(self.keys.service("set_io"), {"kind": kind, "pin": pin, "value": value})
+        return await self.client.request(
+            self.keys.service("set_io"), {"kind": kind, "pin": pin, "value": value}
+        )
 
     async def set_payload(self, mass: float, cog: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
         """Set the payload."""

@@ -62,10 +62,14 @@ def _initial_positions(robot: Robot, limits: JointLimits) -> list[float] | None:
         by_name = {robot.prefix + k: v for k, v in given.items()}
         unknown = sorted(set(by_name) - set(limits.names))
         if unknown:
-            raise ConfigError(f"robot {robot.name!r}: initial_positions name unknown joint(s) {', '.join(unknown)}")
+            raise ConfigError(
+                f"robot {robot.name!r}: initial_positions name unknown joint(s) {', '.join(unknown)}"
+            )
         return [float(by_name.get(name, 0.0)) for name in limits.names]
     if len(given) != limits.dof:
-        raise ConfigError(f"robot {robot.name!r}: initial_positions has {len(given)} values for {limits.dof} joints")
+        raise ConfigError(
+            f"robot {robot.name!r}: initial_positions has {len(given)} values for {limits.dof} joints"
+        )
     return [float(v) for v in given]
 
 

@@ -166,7 +166,9 @@ class RobotRuntime:
     def _publish_events(self) -> None:
         for event in self.controller.drain_events():
             if isinstance(event, GoalFeedback):
-                self.node.put(self.keys.goal_feedback(event.goal_id), codec.encode_feedback(self.robot.name, event))
+                self.node.put(
+                    self.keys.goal_feedback(event.goal_id), codec.encode_feedback(self.robot.name, event)
+                )
             else:
                 self._publish_result(event)
 
@@ -177,7 +179,9 @@ class RobotRuntime:
             self._results.popitem(last=False)
         self.node.put(self.keys.goal_result(result.goal_id), payload)
         log = self.log.info if result.status.value == "succeeded" else self.log.warning
-        log("goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else "")
+        log(
+            "goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else ""
+        )
 
     # ---- status and IO ------------------------------------------------------------------------------
 
@@ -376,7 +380,11 @@ class RobotRuntime:
             message = codec.decode_stream_position(payload)
             assert message.positions is not None
             self.controller.stream_positions(
-                self._joint_names(message.joint_names), message.positions, message.velocities, state, time.monotonic()
+                self._joint_names(message.joint_names),
+                message.positions,
+                message.velocities,
+                state,
+                time.monotonic(),
             )
         except (MessageError, GoalRejected) as err:
             self._reject_stream(key, err)
@@ -396,9 +404,15 @@ class RobotRuntime:
         self._stream_rejections += 1
         reason = err.reason if isinstance(err, GoalRejected) else str(err)
         if self._stream_rejections <= 10 or self._stream_rejections % 100 == 0:
-            self.log.warning("streaming command on %s rejected (%d so far): %s", key, self._stream_rejections, reason)
+            self.log.warning(
+                "streaming command on %s rejected (%d so far): %s", key, self._stream_rejections, reason
+            )
         if self._pub_events is not None:
-            self._pub_events.put(codec.encode({"robot": self.robot.name, "kind": "command_rejected", "key": key, "reason": reason}))
+            self._pub_events.put(
+                codec.encode(
+                    {"robot": self.robot.name, "kind": "command_rejected", "key": key, "reason": reason}
+                )
+            )
 
     # ---- services ----------------------------------------------------------------------------------------
 

@@ -77,7 +77,11 @@ class Backend(abc.ABC):
         if not 0 <= pin < sizes[kind]:
             raise BackendError(f"{kind} output pin {pin} out of range 0..{sizes[kind] - 1}")
         if kind == "analog":
-            if isinstance(value, bool) or not 0.0 <= float(value) <= 1.0:
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not 0.0 <= float(value) <= 1.0
+            ):
                 raise BackendError(f"analog output value must be a number in 0..1, got {value!r}")
         elif not isinstance(value, bool):
             raise BackendError(f"{kind} output value must be true or false, got {value!r}")

@@ -7,11 +7,13 @@ healthy running robot, acknowledges IO and payload commands and reflects them in
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 
 from urdaemon.backends.base import Backend
 from urdaemon.backends.clock import PeriodicClock
+from urdaemon.errors import BackendError, ConfigError
 from urdaemon.model import CommandMode, Lifecycle, RobotMode, SafetyMode
 
 __all__ = ["MOCK_IO_SIZES", "MockBackend"]
@@ -35,6 +37,11 @@ class MockBackend(Backend):
     ) -> None:
         super().__init__(name, joint_names, rate_hz)
         if initial_positions is not None:
+            if len(initial_positions) != len(joint_names):
+                raise ConfigError(
+                    f"robot {name!r}: initial_positions has {len(initial_positions)} values "
+                    f"for {len(joint_names)} joints"
+                )
             self.state.positions[:] = [float(v) for v in initial_positions]
         self.command.positions[:] = self.state.positions
         self.runtime_scaling = speed_scaling
@@ -96,9 +103,15 @@ class MockBackend(Backend):
 
     async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
         """Store the payload in the state."""
+        if not (math.isfinite(mass) and mass >= 0.0):
+            raise BackendError(f"payload mass must be a finite number ≥ 0 kg, got {mass!r}")
+        if len(cog) != 3 or not all(math.isfinite(c) for c in cog):
+            raise BackendError(f"payload cog must be three finite numbers, got {cog!r}")
         self.state.payload_mass = float(mass)
         self.state.payload_cog = (float(cog[0]), float(cog[1]), float(cog[2]))
 
     async def set_speed_slider(self, fraction: float) -> None:
         """Store the slider; the reported speed scaling follows from the next cycle on."""
+        if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+            raise BackendError(f"speed slider must be within 0..1, got {fraction!r}")
         self.state.speed_slider = float(fraction)

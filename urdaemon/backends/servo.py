@@ -9,6 +9,7 @@ follows the command (fake execution), because the servos report nothing back.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Sequence
 
 from urdaemon.backends.mock import MockBackend
@@ -59,7 +60,10 @@ class ServoMapping:
         """Recompute ``channels`` (PCA9685 off-counts, 0 for unused channels) from joint positions."""
         channels, scale = self.channels, self._counts_per_us
         for k, (joint, channel, *_rest) in enumerate(self._joints):
-            count = round(self.pulse_us(k, positions[joint]) * scale)
+            position = positions[joint]
+            if not math.isfinite(position):
+                continue  # keep the last count: a servo must never be sent garbage
+            count = round(self.pulse_us(k, position) * scale)
             channels[channel] = min(max(count, 0), PCA9685_RESOLUTION - 1)
         return channels
 
@@ -82,7 +86,9 @@ class ServoBackend(MockBackend):
         super().__init__(name, joint_names, options.rate_hz, initial_positions=initial_positions)
         self.mapping = ServoMapping(tuple(joint_names), prefix, options)
         self._publish = publish
-        self._head = f'{{"v":1,"robot":{json.dumps(name)},"pwm_frequency_hz":{options.pwm_frequency_hz!r},"channels":['
+        self._head = (
+            f'{{"v":1,"robot":{json.dumps(name)},"pwm_frequency_hz":{options.pwm_frequency_hz!r},"channels":['
+        )
 
     def step(self) -> None:
         """Mirror the command into state, then publish the channel values of the new positions."""

@@ -7,7 +7,6 @@ Relative paths in the file are resolved against the file's folder (validation co
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -31,8 +30,8 @@ __all__ = [
     "JointLimitOverride",
     "MockOptions",
     "MotionOptions",
-    "Pose",
     "Ports",
+    "Pose",
     "PublishOptions",
     "Robot",
     "ServoJoint",
@@ -52,7 +51,7 @@ DEFAULT_PORT_STRIDE = 10
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
-PortNumber = Annotated[int, Field(ge=1, le=65535)]
+PortNumber = Annotated[int, Field(ge=1, le=65535, strict=True)]
 
 
 def ur_models() -> tuple[str, ...]:
@@ -159,7 +158,9 @@ class JointLimitOverride(_Frozen):
             and self.max_position is not None
             and self.min_position >= self.max_position
         ):
-            raise ValueError(f"min_position {self.min_position} must be below max_position {self.max_position}")
+            raise ValueError(
+                f"min_position {self.min_position} must be below max_position {self.max_position}"
+            )
         return self
 
 
@@ -207,7 +208,9 @@ class ServoJoint(_Frozen):
     @model_validator(mode="after")
     def _ranges(self) -> ServoJoint:
         if self.pulse_min_us >= self.pulse_max_us:
-            raise ValueError(f"pulse_min_us {self.pulse_min_us} must be below pulse_max_us {self.pulse_max_us}")
+            raise ValueError(
+                f"pulse_min_us {self.pulse_min_us} must be below pulse_max_us {self.pulse_max_us}"
+            )
         if self.angle_min >= self.angle_max:
             raise ValueError(f"angle_min {self.angle_min} must be below angle_max {self.angle_max}")
         return self
@@ -228,9 +231,9 @@ class ServoOptions(_Frozen):
         if not self.joints:
             raise ValueError("'joints' must list at least one servo joint")
         names = [j.name for j in self.joints]
-        channels = [j.channel for j in self.joints]
+        channels = [str(j.channel) for j in self.joints]
         for label, values in (("joint name", names), ("channel", channels)):
-            dupes = sorted({str(v) for v in values if values.count(v) > 1})
+            dupes = sorted({v for v in values if values.count(v) > 1})
             if dupes:
                 raise ValueError(f"duplicate {label}: {', '.join(dupes)}")
         return self
@@ -310,7 +313,9 @@ class Robot(_Frozen):
         if self.is_ur:
             unknown = sorted(set(self.joint_limits) - set(UR_JOINTS))
             if unknown:
-                raise ValueError(f"joint_limits: unknown joint(s) {', '.join(unknown)}; UR joints: {', '.join(UR_JOINTS)}")
+                raise ValueError(
+                    f"joint_limits: unknown joint(s) {', '.join(unknown)}; UR joints: {', '.join(UR_JOINTS)}"
+                )
         if self.backend == "servo" and self.servo is None:
             raise ValueError("backend 'servo' needs a 'servo' section")
         if self.backend != "servo" and self.servo is not None:
@@ -326,11 +331,15 @@ class Robot(_Frozen):
             unknown = sorted(set(self.mock.initial_positions) - set(UR_JOINTS))
             if unknown:
                 raise ValueError(f"mock.initial_positions: unknown joint(s) {', '.join(unknown)}")
-        if self.mock is not None and isinstance(self.mock.initial_positions, tuple) and self.is_ur:
-            if len(self.mock.initial_positions) != len(UR_JOINTS):
-                raise ValueError(
-                    f"mock.initial_positions has {len(self.mock.initial_positions)} values for 6 joints"
-                )
+        if (
+            self.mock is not None
+            and isinstance(self.mock.initial_positions, tuple)
+            and self.is_ur
+            and len(self.mock.initial_positions) != len(UR_JOINTS)
+        ):
+            raise ValueError(
+                f"mock.initial_positions has {len(self.mock.initial_positions)} values for 6 joints"
+            )
         return self
 
 
@@ -367,25 +376,46 @@ class Cell(_Frozen):
 
     @model_validator(mode="after")
     def _unique(self) -> Cell:
+        # Messages start with their own key path: a whole-cell validator has no location of its own.
         if not self.robots:
-            raise ValueError("'robots' must list at least one robot")
-        names = [r.name for r in self.robots]
-        dupes = sorted({n for n in names if names.count(n) > 1})
-        if dupes:
-            raise ValueError(f"duplicate robot name(s): {', '.join(dupes)}")
+            raise ValueError("robots: must list at least one robot")
+        where = {r.name: f"robots[{i}] ({r.name})" for i, r in enumerate(self.robots)}
+        seen: set[str] = set()
+        for i, robot in enumerate(self.robots):
+            if robot.name in seen:
+                raise ValueError(f"robots[{i}] ({robot.name}).name: duplicate robot name {robot.name!r}")
+            seen.add(robot.name)
         owner: dict[int, str] = {}
         for robot in self.robots:
             for role, port in robot.ports.as_dict().items():
                 if port in owner:
-                    raise ValueError(f"robot {robot.name!r} {role} port {port} clashes with {owner[port]}")
+                    raise ValueError(
+                        f"{where[robot.name]}.ports.{role}: robot {robot.name!r} {role} port {port} "
+                        f"clashes with {owner[port]}"
+                    )
                 owner[port] = f"robot {robot.name!r} {role} port"
-        links = {f"{r.prefix}base_link" for r in self.robots} | {"world"}
+        mounted_on: dict[str, str] = {}
         for robot in self.robots:
             parent = robot.pose.parent
-            if parent != "world" and not any(parent.startswith(r.prefix) for r in self.robots):
-                raise ValueError(f"robot {robot.name!r} pose.parent {parent!r} is neither 'world' nor a robot link")
-            if parent in links and parent == f"{robot.prefix}base_link":
-                raise ValueError(f"robot {robot.name!r} cannot be its own parent")
+            if parent == "world":
+                continue
+            carriers = [r for r in self.robots if parent.startswith(r.prefix)]
+            if not carriers:
+                raise ValueError(
+                    f"{where[robot.name]}.pose.parent: {parent!r} is neither 'world' "
+                    "nor a link of a robot of this cell"
+                )
+            mounted_on[robot.name] = max(carriers, key=lambda r: len(r.prefix)).name
+        for robot in self.robots:
+            chain = [robot.name]
+            while chain[-1] in mounted_on:
+                chain.append(mounted_on[chain[-1]])
+                if chain[-1] == robot.name:
+                    raise ValueError(
+                        f"{where[robot.name]}.pose.parent: mounting makes a loop: {' → '.join(chain)}"
+                    )
+                if len(chain) > len(self.robots) + 1:
+                    break
         return self
 
     def robot(self, name: str) -> Robot:

@@ -1,4 +1,4 @@
-"""Read a cell file: YAML → validated, frozen ``Cell``, or a ``ConfigError`` naming file, key path and reason."""
+"""Read a cell file: YAML → validated, frozen ``Cell``, or a ``ConfigError`` naming file, key and reason."""
 
 from __future__ import annotations
 
@@ -21,25 +21,51 @@ def load_cell(path: str | Path) -> Cell:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise ConfigError(f"{path}: cannot read: {err.strerror or err}") from err
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {err.start}): {err.reason}") from err
     return parse_cell(text, source=str(path), base_dir=path.resolve().parent)
 
 
 def parse_cell(text: str, *, source: str = "<string>", base_dir: Path | None = None) -> Cell:
     """Validate cell-file text; relative paths inside resolve against ``base_dir``."""
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: safe
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
         problem = getattr(err, "problem", None) or str(err)
         raise ConfigError(f"{source}{where}: not valid YAML: {problem}") from err
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: the cell file must be a mapping with 'cell' and 'robots', got {type(data).__name__}")
+        raise ConfigError(
+            f"{source}: the cell file must be a mapping with 'cell' and 'robots', got {type(data).__name__}"
+        )
     try:
         return Cell.model_validate(data, context={"base_dir": base_dir})
     except ValidationError as err:
-        messages = [f"{source}: {format_location(e['loc'], data)}: {_reason(e)}" for e in err.errors()]
+        messages = [_message(source, e, data) for e in err.errors()]
         raise ConfigError("\n".join(messages), errors=messages) from err
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe loader that refuses a key given twice in one mapping (plain YAML keeps the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _message(source: str, error: Any, data: Any) -> str:
+    reason = _reason(error)
+    if not error["loc"] and reason.startswith(("robots", "cell", "zenoh", "publish")):
+        return f"{source}: {reason}"  # a whole-cell check that names its own key path
+    return f"{source}: {format_location(error['loc'], data)}: {reason}"
 
 
 def format_location(loc: tuple[int | str, ...], data: Any) -> str:
@@ -62,9 +88,12 @@ def format_location(loc: tuple[int | str, ...], data: Any) -> str:
                 parts.append(label)
             continue
         # pydantic adds the union member or validator name as an extra path element; drop those
-        if isinstance(node, dict) and item not in node and parts:
-            if item.startswith(("function-", "tuple[", "dict[", "list[", "float", "int", "str")):
-                continue
+        if (
+            not (isinstance(node, dict) and item in node)
+            and parts
+            and item.startswith(("function-", "tuple[", "dict[", "list[", "float", "int", "str"))
+        ):
+            continue
         parts.append(str(item))
         node = node.get(item) if isinstance(node, dict) else None
     return ".".join(parts) if parts else "(top level)"
@@ -76,14 +105,19 @@ def _reason(error: Any) -> str:
     if kind == "extra_forbidden":
         return "unknown key (not part of the cell file format)"
     if kind == "missing":
+        loc = error.get("loc", ())
+        if loc and isinstance(loc[-1], int):
+            return f"too few values: item {loc[-1]} is missing"
         return "required key is missing"
     return msg.removeprefix("Value error, ")
 
 
 def summarize(cell: Cell) -> str:
     """A human summary of a valid cell."""
-    lines = [f"cell {cell.cell!r}: {len(cell.robots)} robot(s); zenoh {cell.zenoh.mode} "
-             f"listen={list(cell.zenoh.listen)} connect={list(cell.zenoh.connect)}"]
+    lines = [
+        f"cell {cell.cell!r}: {len(cell.robots)} robot(s); zenoh {cell.zenoh.mode} "
+        f"listen={list(cell.zenoh.listen)} connect={list(cell.zenoh.connect)}"
+    ]
     for r in cell.robots:
         ports = r.ports.as_dict()
         port_text = "/".join(str(p) for p in ports.values())

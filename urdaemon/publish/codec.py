@@ -86,8 +86,22 @@ class StreamMessage:
 
 
 def encode(message: dict[str, Any]) -> bytes:
-    """Encode a message dict, adding the schema version."""
-    return json.dumps({"v": SCHEMA_VERSION, **message}, separators=(",", ":"), allow_nan=False).encode()
+    """Encode a message dict, adding the schema version; NaN and infinities become null."""
+    body = {"v": SCHEMA_VERSION, **message}
+    try:
+        return json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
+    except ValueError:  # a non-finite float somewhere: JSON has no such numbers
+        return json.dumps(_finite_or_null(body), separators=(",", ":"), allow_nan=False).encode()
+
+
+def _finite_or_null(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    return value
 
 
 def decode_message(payload: bytes | bytearray | memoryview | None, what: str) -> dict[str, Any]:
@@ -98,13 +112,15 @@ def decode_message(payload: bytes | bytearray | memoryview | None, what: str) ->
         raise MessageError(f"{what}: message of {len(payload)} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
         data = json.loads(bytes(payload))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+    except (ValueError, RecursionError) as err:  # JSONDecodeError, UnicodeDecodeError, huge integers
         raise MessageError(f"{what}: not valid JSON: {err}") from err
     if not isinstance(data, dict):
         raise MessageError(f"{what}: expected a JSON object, got {type(data).__name__}")
     version = data.get("v", SCHEMA_VERSION)
-    if version != SCHEMA_VERSION:
-        raise MessageError(f"{what}: unsupported schema version {version!r}; this daemon speaks {SCHEMA_VERSION}")
+    if isinstance(version, bool) or version != SCHEMA_VERSION:
+        raise MessageError(
+            f"{what}: unsupported schema version {version!r}; this daemon speaks {SCHEMA_VERSION}"
+        )
     return data
 
 
@@ -117,7 +133,10 @@ def _allowed(data: dict[str, Any], what: str, keys: set[str]) -> None:
 def _number(value: Any, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise MessageError(f"{field}: expected a number, got {json.dumps(value)[:40]}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError as err:
+        raise MessageError(f"{field}: number out of range") from err
 
 
 def _numbers(value: Any, field: str) -> tuple[float, ...]:
@@ -156,7 +175,13 @@ def _tolerances(value: Any, what: str) -> ToleranceMessage:
     for key in ("path", "goal"):
         item = value.get(key)
         field = f"{what}.tolerances.{key}"
-        parsed[key] = None if item is None else _numbers(item, field) if isinstance(item, list) else _number(item, field)
+        parsed[key] = (
+            None
+            if item is None
+            else _numbers(item, field)
+            if isinstance(item, list)
+            else _number(item, field)
+        )
     goal_time = value.get("goal_time")
     return ToleranceMessage(
         path=parsed["path"],
@@ -166,7 +191,7 @@ def _tolerances(value: Any, what: str) -> ToleranceMessage:
 
 
 def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
-    """Decode a trajectory goal: joint_names, points[{positions, velocities?, accelerations?, time_from_start}]."""
+    """Decode a trajectory goal: points [{positions, velocities?, accelerations?, time_from_start}]."""
     what = "trajectory goal"
     data = decode_message(payload, what)
     _allowed(data, what, {"joint_names", "points", "tolerances", "preempt"})
@@ -192,7 +217,9 @@ def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
                 positions=_numbers(raw["positions"], f"{field}.positions"),
                 time_from_start=_number(raw["time_from_start"], f"{field}.time_from_start"),
                 velocities=None if velocities is None else _numbers(velocities, f"{field}.velocities"),
-                accelerations=None if accelerations is None else _numbers(accelerations, f"{field}.accelerations"),
+                accelerations=None
+                if accelerations is None
+                else _numbers(accelerations, f"{field}.accelerations"),
             )
         )
     return TrajectoryGoalMessage(
@@ -210,7 +237,15 @@ def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
     _allowed(
         data,
         what,
-        {"joint_names", "positions", "duration", "velocity_scale", "acceleration_scale", "tolerances", "preempt"},
+        {
+            "joint_names",
+            "positions",
+            "duration",
+            "velocity_scale",
+            "acceleration_scale",
+            "tolerances",
+            "preempt",
+        },
     )
     if "positions" not in data:
         raise MessageError(f"{what}.positions: missing")
@@ -363,7 +398,7 @@ class JointStateEncoder:
     def encode_pose(self, state: RobotState, frame: str, child: str, pose: Sequence[float]) -> bytes:
         """The tcp_pose message: position and quaternion (x, y, z, w) of ``child`` in ``frame``."""
         return (
-            f'{{"v":{SCHEMA_VERSION},"frame":"{frame}","child":"{child}",'
+            f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},'
             f'"controller_time":{state.controller_time!r},"host_time_ns":{state.host_time_ns},'
             f'"position":[{_floats(pose[:3])}],"orientation":[{_floats(pose[3:7])}]}}'
         ).encode()

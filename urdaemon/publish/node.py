@@ -8,6 +8,7 @@ one thread and never races.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 from collections.abc import Callable
@@ -24,7 +25,11 @@ log = logging.getLogger(__name__)
 
 
 def zenoh_config(
-    mode: str, listen: tuple[str, ...] | list[str], connect: tuple[str, ...] | list[str], *, multicast: bool = False
+    mode: str,
+    listen: tuple[str, ...] | list[str],
+    connect: tuple[str, ...] | list[str],
+    *,
+    multicast: bool = False,
 ) -> Any:
     """A ``zenoh.Config`` with explicit endpoints and multicast scouting as given."""
     conf = zenoh.Config()
@@ -38,11 +43,13 @@ def zenoh_config(
 class ZenohNode:
     """One Zenoh session owned by the daemon; every declared entity is undeclared on ``close``."""
 
-    def __init__(self, options: ZenohOptions, loop: asyncio.AbstractEventLoop, *, listen: tuple[str, ...] | None = None) -> None:
+    def __init__(
+        self, options: ZenohOptions, loop: asyncio.AbstractEventLoop, *, listen: tuple[str, ...] | None = None
+    ) -> None:
         self._loop = loop
         endpoints = options.listen if listen is None else listen
         try:
-            self.session = zenoh.open(
+            self.session: Any = zenoh.open(
                 zenoh_config(options.mode, endpoints, options.connect, multicast=options.multicast_scouting)
             )
         except zenoh.ZError as err:
@@ -51,7 +58,7 @@ class ZenohNode:
         self._closed = False
 
     def publisher(self, key: str, *, realtime: bool = False) -> Any:
-        """Declare a publisher; ``realtime`` for state streams (drop when congested, express, top priority)."""
+        """Declare a publisher; ``realtime`` for state streams (drop if congested, express, top priority)."""
         if realtime:
             pub = self.session.declare_publisher(
                 key,
@@ -105,7 +112,5 @@ class ZenohNode:
     def _to_loop(self, handler: Callable[..., None], *args: Any) -> None:
         if self._closed:
             return
-        try:
+        with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh was delivering
             self._loop.call_soon_threadsafe(handler, *args)
-        except RuntimeError:  # the loop closed while Zenoh was delivering
-            pass

@@ -1,0 +1,340 @@
+"""The servo backend: joint angle → pulse width → PCA9685 count, published as 16 channel values each cycle."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from urdaemon.backends import ServoBackend, ServoMapping
+from urdaemon.backends.servo import PCA9685_CHANNELS, PCA9685_RESOLUTION
+from urdaemon.cell import load_cell
+from urdaemon.cell.config import ServoJoint, ServoOptions
+from urdaemon.errors import BackendError, ConfigError
+from urdaemon.model import CommandMode
+
+SERVO = Path(__file__).resolve().parents[2] / "configs" / "servo_arm.yaml"
+
+
+def options(*joints: ServoJoint, freq: float = 50.0, rate: float = 50.0) -> ServoOptions:
+    return ServoOptions(pwm_frequency_hz=freq, rate_hz=rate, joints=joints)
+
+
+def joint(name: str = "j", channel: int = 0, **kw: Any) -> ServoJoint:
+    return ServoJoint(name=name, channel=channel, **kw)
+
+
+def counts(pulse_us: float, freq: float = 50.0) -> int:
+    """The PCA9685 off-count for a pulse, as the datasheet defines it."""
+    return min(max(round(pulse_us * freq * PCA9685_RESOLUTION / 1e6), 0), PCA9685_RESOLUTION - 1)
+
+
+# --- ServoMapping.pulse_us ---
+
+
+def test_pulse_at_angle_min_mid_and_max() -> None:
+    mapping = ServoMapping(
+        ("p_j",), "p_", options(joint(angle_min=-1.0, angle_max=1.0, pulse_min_us=1000, pulse_max_us=2000))
+    )
+    assert mapping.pulse_us(0, -1.0) == 1000.0
+    assert mapping.pulse_us(0, 0.0) == 1500.0
+    assert mapping.pulse_us(0, 1.0) == 2000.0
+    assert mapping.pulse_us(0, 0.5) == 1750.0
+
+
+def test_default_joint_maps_half_pi_span_to_500_2500() -> None:
+    mapping = ServoMapping(("p_j",), "p_", options(joint()))
+    assert mapping.pulse_us(0, -math.pi / 2) == pytest.approx(500.0)
+    assert mapping.pulse_us(0, 0.0) == pytest.approx(1500.0)
+    assert mapping.pulse_us(0, math.pi / 2) == pytest.approx(2500.0)
+
+
+def test_direction_minus_one_mirrors_the_mapping() -> None:
+    mapping = ServoMapping(
+        ("p_j",),
+        "p_",
+        options(joint(angle_min=-1.0, angle_max=1.0, pulse_min_us=1000, pulse_max_us=2000, direction=-1)),
+    )
+    assert mapping.pulse_us(0, -1.0) == 2000.0
+    assert mapping.pulse_us(0, 1.0) == 1000.0
+    assert mapping.pulse_us(0, 0.0) == 1500.0
+    assert mapping.pulse_us(0, 0.5) == 1250.0
+
+
+def test_offset_is_added_to_the_angle() -> None:
+    mapping = ServoMapping(
+        ("p_j",),
+        "p_",
+        options(joint(angle_min=-1.0, angle_max=1.0, pulse_min_us=1000, pulse_max_us=2000, offset=0.5)),
+    )
+    assert mapping.pulse_us(0, 0.0) == 1750.0
+    assert mapping.pulse_us(0, -1.5) == 1000.0
+    assert mapping.pulse_us(0, 0.5) == 2000.0
+
+
+def test_offset_with_direction_minus_one() -> None:
+    mapping = ServoMapping(
+        ("p_j",),
+        "p_",
+        options(
+            joint(
+                angle_min=-1.0, angle_max=1.0, pulse_min_us=1000, pulse_max_us=2000, offset=0.5, direction=-1
+            )
+        ),
+    )
+    # servo angle = direction × position + offset
+    assert mapping.pulse_us(0, 0.0) == 1750.0
+    assert mapping.pulse_us(0, 0.5) == 1500.0
+    assert mapping.pulse_us(0, 1.5) == 1000.0
+
+
+@pytest.mark.parametrize(
+    ("position", "pulse"),
+    [
+        (-5.0, 1000.0),
+        (-1.0001, 1000.0),
+        (1.0001, 2000.0),
+        (5.0, 2000.0),
+        (math.inf, 2000.0),
+        (-math.inf, 1000.0),
+    ],
+)
+def test_pulse_is_clamped_to_the_range(position: float, pulse: float) -> None:
+    mapping = ServoMapping(
+        ("p_j",), "p_", options(joint(angle_min=-1.0, angle_max=1.0, pulse_min_us=1000, pulse_max_us=2000))
+    )
+    assert mapping.pulse_us(0, position) == pulse
+
+
+# --- ServoMapping.update: counts ---
+
+
+@pytest.mark.parametrize(
+    ("freq", "pulse", "expected"),
+    [
+        (50.0, 1500.0, 307),  # 1500 µs × 50 Hz × 4096 / 1e6 = 307.2
+        (50.0, 500.0, 102),  # 102.4
+        (50.0, 2500.0, 512),
+        (60.0, 1000.0, 246),  # 245.76
+        (200.0, 2500.0, 2048),
+        (400.0, 2500.0, 4095),  # 4096 would not fit in 12 bits: clamped
+        (1526.0, 2500.0, 4095),
+    ],
+)
+def test_counts_follow_the_datasheet_formula(freq: float, pulse: float, expected: int) -> None:
+    mapping = ServoMapping(
+        ("p_j",),
+        "p_",
+        options(joint(pulse_min_us=pulse - 100, pulse_max_us=pulse, angle_min=-1, angle_max=1), freq=freq),
+    )
+    channels = mapping.update([1.0])
+    assert channels[0] == expected == counts(pulse, freq)
+
+
+def test_update_fills_the_configured_channels_and_leaves_the_rest_zero() -> None:
+    mapping = ServoMapping(
+        ("p_a", "p_b", "p_c"),
+        "p_",
+        options(
+            joint("b", 15, angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000),
+            joint("a", 4, angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000),
+        ),
+    )
+    channels = mapping.update([1.0, -1.0, 123.0])  # a = 1.0 (max), b = -1.0 (min), c is not a servo
+    assert len(channels) == PCA9685_CHANNELS
+    assert channels[4] == counts(2000.0)
+    assert channels[15] == counts(1000.0)
+    assert [c for i, c in enumerate(channels) if i not in (4, 15)] == [0] * 14
+    assert all(type(c) is int for c in channels)
+    assert mapping.channels is channels
+
+
+def test_update_recomputes_in_place() -> None:
+    mapping = ServoMapping(
+        ("p_j",), "p_", options(joint(angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000))
+    )
+    first = mapping.update([-1.0])
+    assert first[0] == counts(1000.0)
+    second = mapping.update([1.0])
+    assert second is first
+    assert second[0] == counts(2000.0)
+
+
+def test_unknown_servo_joint_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="servo joints not in the robot description: p_elbow, p_zz"):
+        ServoMapping(("p_a",), "p_", options(joint("a", 0), joint("zz", 1), joint("elbow", 2)))
+
+
+def test_servo_joint_needs_the_prefix() -> None:
+    with pytest.raises(ConfigError, match="p_a"):
+        ServoMapping(("a",), "p_", options(joint("a", 0)))
+
+
+def test_description_joints_without_servo_are_allowed() -> None:
+    mapping = ServoMapping(("p_a", "p_b"), "p_", options(joint("b", 3)))
+    assert mapping.update([0.0, 0.0])[3] == counts(1500.0)
+
+
+@st.composite
+def servo_joints(draw: st.DrawFn) -> ServoJoint:
+    angle_min = draw(st.floats(min_value=-4.0, max_value=3.9))
+    angle_max = draw(st.floats(min_value=angle_min + 0.01, max_value=4.0))
+    pulse_min = draw(st.floats(min_value=1.0, max_value=19000.0))
+    pulse_max = draw(st.floats(min_value=pulse_min + 1.0, max_value=19999.0))
+    return ServoJoint(
+        name="j",
+        channel=draw(st.integers(min_value=0, max_value=15)),
+        pulse_min_us=pulse_min,
+        pulse_max_us=pulse_max,
+        angle_min=angle_min,
+        angle_max=angle_max,
+        offset=draw(st.floats(min_value=-1.0, max_value=1.0)),
+        direction=draw(st.sampled_from([1, -1])),
+    )
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    servo=servo_joints(),
+    freq=st.floats(min_value=24.0, max_value=1526.0),
+    a=st.floats(min_value=-10.0, max_value=10.0),
+    b=st.floats(min_value=-10.0, max_value=10.0),
+)
+def test_mapping_properties(servo: ServoJoint, freq: float, a: float, b: float) -> None:
+    mapping = ServoMapping(("p_j",), "p_", options(servo, freq=freq))
+    pa, pb = mapping.pulse_us(0, a), mapping.pulse_us(0, b)
+    for pulse in (pa, pb):
+        assert servo.pulse_min_us - 1e-9 <= pulse <= servo.pulse_max_us + 1e-9
+    lo, hi = (pa, pb) if a <= b else (pb, pa)
+    if servo.direction == 1:
+        assert lo <= hi + 1e-9
+    else:
+        assert lo >= hi - 1e-9
+    channels = list(mapping.update([a]))
+    assert channels[servo.channel] == counts(pa, freq)
+    assert 0 <= channels[servo.channel] <= PCA9685_RESOLUTION - 1
+    assert sum(1 for i, c in enumerate(channels) if i != servo.channel and c != 0) == 0
+
+
+def test_nan_position_does_not_crash_the_mapping() -> None:
+    mapping = ServoMapping(("p_j",), "p_", options(joint()))
+    channels = mapping.update([math.nan])
+    assert 0 <= channels[0] <= PCA9685_RESOLUTION - 1
+
+
+# --- ServoBackend ---
+
+
+def servo_arm() -> tuple[ServoBackend, list[bytes]]:
+    cell = load_cell(SERVO)
+    robot = cell.robots[0]
+    assert robot.servo is not None
+    names = tuple(f"{robot.prefix}{j.name}" for j in robot.servo.joints)
+    published: list[bytes] = []
+    backend = ServoBackend(robot.name, names, robot.prefix, robot.servo, publish=published.append)
+    return backend, published
+
+
+def test_servo_backend_takes_its_rate_from_the_options() -> None:
+    backend, _ = servo_arm()
+    assert backend.kind == "servo"
+    assert backend.rate_hz == 50.0
+    assert backend.period == 0.02
+
+
+def test_servo_backend_publishes_16_ints_each_step() -> None:
+    backend, published = servo_arm()
+    assert published == []
+    backend.command.mode = CommandMode.POSITION
+    backend.command.positions[:] = [0.0, 0.0, 0.0, 0.0]
+    backend.step()
+    assert len(published) == 1
+    message = json.loads(published[0])
+    assert list(message) == ["v", "robot", "pwm_frequency_hz", "channels"]
+    assert message["v"] == 1
+    assert message["robot"] == "arm"
+    assert message["pwm_frequency_hz"] == 50.0
+    channels = message["channels"]
+    assert len(channels) == 16
+    assert all(type(c) is int and 0 <= c <= 4095 for c in channels)
+    # base_yaw, shoulder, elbow at their mid pulse; wrist has offset 0.1 rad
+    assert channels[0] == counts(1500.0)
+    assert channels[1] == counts(1500.0)
+    assert channels[2] == counts(1500.0)
+    assert channels[3] == counts(1500.0 + 0.1 / 3.1416 * 2000.0)
+    assert channels[4:] == [0] * 12
+    backend.step()
+    assert len(published) == 2
+
+
+def test_servo_backend_maps_the_mirrored_position() -> None:
+    backend, published = servo_arm()
+    backend.command.mode = CommandMode.POSITION
+    backend.command.positions[:] = [1.5708, 1.5708, -2.0, -1.5708]
+    backend.step()
+    assert backend.state.positions == [1.5708, 1.5708, -2.0, -1.5708]
+    channels = json.loads(published[-1])["channels"]
+    assert channels[0] == counts(2500.0)  # base_yaw at angle_max
+    assert channels[1] == counts(500.0)  # shoulder, direction -1
+    assert channels[2] == counts(600.0)  # elbow at its angle_min
+    assert channels[3] == counts(500.0 + 0.1 / 3.1416 * 2000.0)  # wrist: -1.5708 + 0.1 offset
+    assert channels[:4] == backend.mapping.channels[:4]
+
+
+def test_servo_backend_velocity_mode_is_integrated_then_mapped() -> None:
+    backend, published = servo_arm()
+    backend.command.mode = CommandMode.VELOCITY
+    backend.command.velocities[:] = [1.0, 0.0, 0.0, 0.0]
+    for _ in range(10):
+        backend.step()
+    assert backend.state.positions[0] == pytest.approx(0.2)
+    assert json.loads(published[-1])["channels"][0] == counts(
+        1500.0 + backend.state.positions[0] / 3.1416 * 2000.0
+    )
+
+
+def test_servo_backend_without_publisher_still_steps() -> None:
+    cell = load_cell(SERVO)
+    robot = cell.robots[0]
+    assert robot.servo is not None
+    names = tuple(f"{robot.prefix}{j.name}" for j in robot.servo.joints)
+    backend = ServoBackend("arm", names, robot.prefix, robot.servo, initial_positions=[0.5, 0.0, 0.0, 0.0])
+    backend.step()
+    assert backend.state.cycle == 1
+    assert backend.state.positions == [0.5, 0.0, 0.0, 0.0]
+    assert backend.mapping.channels[0] == counts(1500.0 + 0.5 / 3.1416 * 2000.0)
+
+
+def test_servo_backend_refuses_unknown_servo_joint() -> None:
+    cell = load_cell(SERVO)
+    robot = cell.robots[0]
+    assert robot.servo is not None
+    with pytest.raises(ConfigError, match="arm_wrist"):
+        ServoBackend("arm", ("arm_base_yaw", "arm_shoulder", "arm_elbow"), robot.prefix, robot.servo)
+
+
+async def test_servo_backend_has_no_io_or_payload() -> None:
+    backend, _ = servo_arm()
+    with pytest.raises(BackendError, match="servo backend has no IO outputs"):
+        await backend.set_io("digital", 0, True)
+    with pytest.raises(BackendError, match="servo backend has no payload setting"):
+        await backend.set_payload(1.0, (0.0, 0.0, 0.0))
+
+
+async def test_servo_backend_speed_slider() -> None:
+    backend, _ = servo_arm()
+    await backend.set_speed_slider(0.5)
+    backend.step()
+    assert backend.state.speed_scaling == 0.5
+
+
+def test_servo_backend_robot_name_is_json_escaped() -> None:
+    published: list[bytes] = []
+    backend = ServoBackend('a"b', ("p_j",), "p_", options(joint()), publish=published.append)
+    backend.step()
+    assert json.loads(published[0])["robot"] == 'a"b'

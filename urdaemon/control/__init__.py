@@ -1,0 +1,30 @@
+"""Pure motion control: jerk-limited planning (ruckig) and the per-robot motion controller."""
+
+from __future__ import annotations
+
+from urdaemon.control.controller import ControllerStatistics, MotionController
+from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
+from urdaemon.control.limits import (
+    check_finite,
+    check_positions_within,
+    check_velocities_within,
+    reorder,
+)
+from urdaemon.control.trajectory import PlannedTrajectory, plan_move, plan_trajectory
+
+__all__ = [
+    "ControllerStatistics",
+    "GoalFeedback",
+    "GoalResult",
+    "GoalStatus",
+    "MotionController",
+    "PlannedTrajectory",
+    "Tolerances",
+    "TrajectoryPoint",
+    "check_finite",
+    "check_positions_within",
+    "check_velocities_within",
+    "plan_move",
+    "plan_trajectory",
+    "reorder",
+]

@@ -1,0 +1,412 @@
+"""Jerk-limited offline planning with ruckig: multi-point trajectories and point-to-point moves.
+
+Ruckig's community build cannot plan through intermediate waypoints, so a trajectory is a chain of
+state-to-state segments, each stretched to the client's timing with ``minimum_duration``. The community
+build also ignores position limits, so every segment's position extrema are recomputed and checked here.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections.abc import Sequence
+from typing import Any
+
+from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
+
+from urdaemon.control.goals import TrajectoryPoint
+from urdaemon.control.limits import (
+    check_accelerations_within,
+    check_finite,
+    check_positions_within,
+    check_scale,
+    check_velocities_within,
+)
+from urdaemon.errors import GoalRejected
+from urdaemon.model import JointLimits
+
+__all__ = [
+    "TIMING_SLACK",
+    "WAYPOINT_VELOCITY_FRACTION",
+    "PlannedTrajectory",
+    "plan_move",
+    "plan_trajectory",
+    "position_extrema",
+]
+
+TIMING_SLACK = 1e-3
+"""A segment may take this much longer (s) than the client's timing before the goal is rejected."""
+
+WAYPOINT_VELOCITY_FRACTION = 0.9
+"""Chosen waypoint velocities stay within this fraction of max_velocity, leaving room to correct."""
+
+_EXTREMA_EPS = 1e-9
+
+
+class PlannedTrajectory:
+    """A planned jerk-limited trajectory: a chain of ruckig segments sampled by trajectory time."""
+
+    __slots__ = ("_count", "_index", "_starts", "_trajs", "duration", "final_positions", "final_velocities")
+
+    def __init__(self, segments: Sequence[Any], starts: Sequence[float]) -> None:
+        if not segments or len(segments) != len(starts):
+            raise ValueError("PlannedTrajectory needs one start time per segment, at least one segment")
+        self._trajs: list[Any] = list(segments)
+        self._starts: list[float] = list(starts)
+        self._count = len(self._trajs)
+        self._index = 0
+        last = self._trajs[-1]
+        self.duration: float = self._starts[-1] + float(last.duration)
+        """Total trajectory time in seconds."""
+        end_p, end_v, _ = last.at_time(float(last.duration))
+        self.final_positions: tuple[float, ...] = tuple(end_p)
+        self.final_velocities: tuple[float, ...] = tuple(end_v)
+
+    @property
+    def segment_count(self) -> int:
+        """Number of ruckig segments (one per trajectory point)."""
+        return self._count
+
+    def sample(self, t: float, pos_out: list[float], vel_out: list[float], acc_out: list[float]) -> None:
+        """Write the state at trajectory time ``t`` (clamped to [0, duration]) into the given lists."""
+        if t <= 0.0:
+            t = 0.0
+        elif t >= self.duration:
+            t = self.duration
+        starts = self._starts
+        i = self._index
+        if t < starts[i]:
+            # Time went backwards (rare): search instead of walking.
+            i = bisect_right(starts, t) - 1
+            if i < 0:
+                i = 0
+        last = self._count - 1
+        while i < last and t >= starts[i + 1]:
+            i += 1
+        self._index = i
+        p, v, a = self._trajs[i].at_time(t - starts[i])
+        pos_out[:] = p
+        vel_out[:] = v
+        acc_out[:] = a
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def _new_input(limits: JointLimits, velocity_scale: float = 1.0, acceleration_scale: float = 1.0) -> Any:
+    inp = InputParameter(limits.dof)
+    inp.max_velocity = [v * velocity_scale for v in limits.max_velocity]
+    inp.max_acceleration = [a * acceleration_scale for a in limits.max_acceleration]
+    inp.max_jerk = list(limits.max_jerk)
+    inp.synchronization = Synchronization.Time
+    return inp
+
+
+def _check_start(
+    limits: JointLimits, start_pos: Sequence[float], start_vel: Sequence[float], start_acc: Sequence[float]
+) -> None:
+    n = limits.dof
+    for label, values in (
+        ("start position", start_pos),
+        ("start velocity", start_vel),
+        ("start acceleration", start_acc),
+    ):
+        if len(values) != n:
+            raise GoalRejected(f"{label} has {len(values)} values for {n} joints")
+        check_finite(label, values, limits.names)
+
+
+RETRY_LIMIT_SCALES = (1.0 - 1e-9, 1.0 - 1e-6)
+"""ruckig 0.19.4 throws on some exactly-degenerate inputs (e.g. a rest-to-rest move of exactly
+2·a³/j², where the profile just touches max acceleration: −1.4 → −1.5 rad at a = 5, j = 50).
+Retrying with limits tightened by these factors solves them and stays within the limits."""
+
+
+def run_robustly(call: Any, inp: Any) -> Any:
+    """Run ``call()`` (ruckig calculate or update on ``inp``); if it throws, retry with tighter limits."""
+    try:
+        return call()
+    except RuckigError as first:
+        limits = (list(inp.max_velocity), list(inp.max_acceleration), list(inp.max_jerk))
+        try:
+            for scale in RETRY_LIMIT_SCALES:
+                inp.max_velocity = [v * scale for v in limits[0]]
+                inp.max_acceleration = [a * scale for a in limits[1]]
+                inp.max_jerk = [j * scale for j in limits[2]]
+                try:
+                    return call()
+                except RuckigError:
+                    continue
+        finally:
+            inp.max_velocity, inp.max_acceleration, inp.max_jerk = limits
+        raise first
+
+
+def _calculate(otg: Any, inp: Any, what: str) -> Any:
+    """Run the offline solver; ruckig's own refusals become GoalRejected naming ``what``."""
+    traj = Trajectory(inp.degrees_of_freedom)
+    try:
+        result = run_robustly(lambda: otg.calculate(inp, traj), inp)
+    except RuckigError as exc:
+        # ruckig appends its whole input to the message; the first line is the reason
+        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else "error"
+        raise GoalRejected(f"{what}: ruckig could not plan it: {first_line}") from exc
+    if result not in (Result.Working, Result.Finished):
+        raise GoalRejected(f"{what}: ruckig could not plan it ({result.name})")
+    return traj
+
+
+def _phase_extrema(
+    lo: float,
+    hi: float,
+    t: Sequence[float],
+    j: Sequence[float],
+    a: Sequence[float],
+    v: Sequence[float],
+    p: Sequence[float],
+) -> tuple[float, float]:
+    """Widen [lo, hi] by the positions of piecewise-cubic phases, including where velocity crosses 0."""
+    for k, dur in enumerate(t):
+        # Entries of unused (zero-length) phases may hold stale values, so they are skipped.
+        if dur <= 0.0:
+            continue
+        p0 = p[k]
+        v0 = v[k]
+        a0 = a[k]
+        jk = j[k]
+        p_end = p0 + dur * (v0 + dur * (0.5 * a0 + dur * jk / 6.0))
+        lo = min(lo, p0, p_end)
+        hi = max(hi, p0, p_end)
+        roots: tuple[float, ...]
+        if jk != 0.0:
+            disc = a0 * a0 - 2.0 * jk * v0
+            if disc < 0.0:
+                continue
+            sq = math.sqrt(disc)
+            roots = ((-a0 + sq) / jk, (-a0 - sq) / jk)
+        elif a0 != 0.0:
+            roots = (-v0 / a0,)
+        else:
+            continue
+        for tau in roots:
+            if 0.0 < tau < dur:
+                x = p0 + tau * (v0 + tau * (0.5 * a0 + tau * jk / 6.0))
+                lo = min(lo, x)
+                hi = max(hi, x)
+    return lo, hi
+
+
+def position_extrema(traj: Any) -> list[tuple[float, float]]:
+    """Per-joint (min, max) position of a ruckig trajectory, computed from its phase profiles."""
+    # ruckig 0.19's own ``position_extrema`` misses an extremum inside a constant-acceleration phase
+    # (a stop that reverses), so it is recomputed from every phase's jerk, acceleration and velocity.
+    out: list[tuple[float, float]] = []
+    for prof in traj.profiles[0]:
+        pp = prof.p
+        lo = min(pp[0], pp[-1])
+        hi = max(pp[0], pp[-1])
+        brake = prof.brake
+        if brake.duration > 0.0:
+            lo, hi = _phase_extrema(lo, hi, brake.t, brake.j, brake.a, brake.v, brake.p)
+        lo, hi = _phase_extrema(lo, hi, prof.t, prof.j, prof.a, prof.v, pp)
+        out.append((lo, hi))
+    return out
+
+
+def _check_extrema(limits: JointLimits, traj: Any, start: Sequence[float], what: str) -> None:
+    # A start already outside a limit may only move back in, so the bound relaxes to the start value.
+    for i, (ext_min, ext_max) in enumerate(position_extrema(traj)):
+        lo = min(limits.min_position[i], start[i]) - _EXTREMA_EPS
+        hi = max(limits.max_position[i], start[i]) + _EXTREMA_EPS
+        if ext_max > hi:
+            raise GoalRejected(
+                f"{what}: {limits.names[i]} overshoots to {_fmt(ext_max)}, beyond its limit "
+                f"{_fmt(limits.max_position[i])}"
+            )
+        if ext_min < lo:
+            raise GoalRejected(
+                f"{what}: {limits.names[i]} overshoots to {_fmt(ext_min)}, beyond its limit "
+                f"{_fmt(limits.min_position[i])}"
+            )
+
+
+def _waypoint_velocities(
+    limits: JointLimits, start_pos: Sequence[float], points: Sequence[TrajectoryPoint]
+) -> list[tuple[float, ...]]:
+    """Velocities at each point: the client's, else a monotone-preserving estimate, 0 at the last."""
+    n = limits.dof
+    out: list[tuple[float, ...]] = []
+    last = len(points) - 1
+    for k, pt in enumerate(points):
+        if pt.velocities is not None:
+            out.append(tuple(pt.velocities))
+            continue
+        if k == last:
+            out.append((0.0,) * n)
+            continue
+        prev_pos = start_pos if k == 0 else points[k - 1].positions
+        prev_t = 0.0 if k == 0 else points[k - 1].time_from_start
+        nxt = points[k + 1]
+        dt_in = pt.time_from_start - prev_t
+        dt_out = nxt.time_from_start - pt.time_from_start
+        vel: list[float] = []
+        for i in range(n):
+            s_in = (pt.positions[i] - prev_pos[i]) / dt_in
+            s_out = (nxt.positions[i] - pt.positions[i]) / dt_out
+            if s_in * s_out <= 0.0:
+                # A turning point (or a flat side): stopping there cannot overshoot it.
+                vel.append(0.0)
+                continue
+            # Harmonic mean: leans toward the slower side, so a short slow segment is not overshot.
+            v = 2.0 * s_in * s_out / (s_in + s_out)
+            cap = WAYPOINT_VELOCITY_FRACTION * limits.max_velocity[i]
+            vel.append(max(-cap, min(cap, v)))
+        out.append(tuple(vel))
+    return out
+
+
+def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> None:
+    n = limits.dof
+    if not points:
+        raise GoalRejected("the trajectory has no points")
+    prev_t = 0.0
+    for k, pt in enumerate(points):
+        what = f"point {k}"
+        if len(pt.positions) != n:
+            raise GoalRejected(f"{what}: positions has {len(pt.positions)} values for {n} joints")
+        check_finite(f"{what} positions", pt.positions, limits.names)
+        if not math.isfinite(pt.time_from_start):
+            raise GoalRejected(f"{what}: time_from_start is {pt.time_from_start}, not a finite number")
+        if k == 0 and pt.time_from_start <= 0.0:
+            raise GoalRejected(
+                f"{what}: time_from_start must be > 0 (time from the goal's start), got {pt.time_from_start}"
+            )
+        if k > 0 and pt.time_from_start <= prev_t:
+            raise GoalRejected(
+                f"{what}: time_from_start {_fmt(pt.time_from_start)} s is not after point {k - 1}'s "
+                f"{_fmt(prev_t)} s; times must strictly increase"
+            )
+        prev_t = pt.time_from_start
+        check_positions_within(limits, pt.positions, what)
+        if pt.velocities is not None:
+            if len(pt.velocities) != n:
+                raise GoalRejected(f"{what}: velocities has {len(pt.velocities)} values for {n} joints")
+            check_finite(f"{what} velocities", pt.velocities, limits.names)
+            check_velocities_within(limits, pt.velocities, what)
+        if pt.accelerations is not None:
+            if len(pt.accelerations) != n:
+                raise GoalRejected(f"{what}: accelerations has {len(pt.accelerations)} values for {n} joints")
+            check_finite(f"{what} accelerations", pt.accelerations, limits.names)
+            check_accelerations_within(limits, pt.accelerations, what)
+
+
+def plan_trajectory(
+    start_pos: Sequence[float],
+    start_vel: Sequence[float],
+    start_acc: Sequence[float],
+    points: Sequence[TrajectoryPoint],
+    limits: JointLimits,
+) -> PlannedTrajectory:
+    """Plan through ``points`` (controller joint order) meeting each time_from_start; GoalRejected if not."""
+    _check_start(limits, start_pos, start_vel, start_acc)
+    _validate_points(limits, points)
+    n = limits.dof
+    velocities = _waypoint_velocities(limits, start_pos, points)
+    otg = Ruckig(n)
+    inp = _new_input(limits)
+    zeros = [0.0] * n
+    cur_p, cur_v, cur_a = list(start_pos), _snap(start_vel, zeros), _snap(start_acc, zeros)
+    elapsed = 0.0
+    segments: list[Any] = []
+    starts: list[float] = []
+    for k, pt in enumerate(points):
+        what = f"point {k}"
+        # Aim at the absolute time, so a segment accepted within the slack does not shift the rest.
+        requested = pt.time_from_start - elapsed
+        inp.current_position = cur_p
+        inp.current_velocity = cur_v
+        inp.current_acceleration = cur_a
+        inp.target_position = list(pt.positions)
+        inp.target_velocity = list(velocities[k])
+        inp.target_acceleration = list(pt.accelerations) if pt.accelerations is not None else zeros
+        inp.minimum_duration = max(requested, 0.0)
+        traj = _calculate(otg, inp, what)
+        if traj.duration > requested + TIMING_SLACK:
+            inp.minimum_duration = None
+            fastest = _calculate(otg, inp, what).duration
+            if fastest > requested:
+                raise GoalRejected(
+                    f"{what}: reaching it needs at least {_fmt(fastest)} s but time_from_start allows "
+                    f"{_fmt(requested)} s"
+                )
+            raise GoalRejected(
+                f"{what}: reaching it in exactly {_fmt(requested)} s is not feasible with its boundary "
+                f"velocities (the fastest is {_fmt(fastest)} s, the next feasible above is "
+                f"{_fmt(traj.duration)} s)"
+            )
+        _check_extrema(limits, traj, cur_p, what)
+        segments.append(traj)
+        starts.append(elapsed)
+        elapsed += traj.duration
+        p, v, a = traj.at_time(traj.duration)
+        # ruckig ends within float noise of the target; snapping to the exact target keeps that noise
+        # (e.g. a 1e-17 velocity) out of the next segment's input, where ruckig can fail on it
+        cur_p = _snap(p, pt.positions)
+        cur_v = _snap(v, velocities[k])
+        cur_a = _snap(a, pt.accelerations if pt.accelerations is not None else zeros)
+    return PlannedTrajectory(segments, starts)
+
+
+SNAP_TOLERANCE = 1e-9
+"""Differences below this (rad, rad/s, rad/s²) between a segment's end and its target are float noise."""
+
+
+def _snap(values: Sequence[float], targets: Sequence[float]) -> list[float]:
+    return [t if abs(v - t) < SNAP_TOLERANCE else v for v, t in zip(values, targets, strict=True)]
+
+
+def plan_move(
+    start_pos: Sequence[float],
+    start_vel: Sequence[float],
+    start_acc: Sequence[float],
+    target: Sequence[float],
+    limits: JointLimits,
+    *,
+    duration: float | None = None,
+    velocity_scale: float = 1.0,
+    acceleration_scale: float = 1.0,
+) -> PlannedTrajectory:
+    """Point-to-point move ending at rest: time-optimal, or exactly ``duration`` s if that is feasible."""
+    # The scales shrink max_velocity and max_acceleration; jerk stays at its limit.
+    check_scale("velocity_scale", velocity_scale)
+    check_scale("acceleration_scale", acceleration_scale)
+    if duration is not None and not (math.isfinite(duration) and duration > 0.0):
+        raise GoalRejected(f"duration must be a finite number > 0, got {duration}")
+    n = limits.dof
+    _check_start(limits, start_pos, start_vel, start_acc)
+    if len(target) != n:
+        raise GoalRejected(f"target has {len(target)} values for {n} joints")
+    check_finite("target", target, limits.names)
+    check_positions_within(limits, target, "target")
+    otg = Ruckig(n)
+    inp = _new_input(limits, velocity_scale, acceleration_scale)
+    zeros = [0.0] * n
+    inp.current_position = list(start_pos)
+    inp.current_velocity = _snap(start_vel, zeros)
+    inp.current_acceleration = _snap(start_acc, zeros)
+    inp.target_position = list(target)
+    if duration is not None:
+        inp.minimum_duration = duration
+    traj = _calculate(otg, inp, "move")
+    if duration is not None and traj.duration > duration + TIMING_SLACK:
+        inp.minimum_duration = None
+        fastest = _calculate(otg, inp, "move").duration
+        if fastest > duration:
+            raise GoalRejected(f"move needs at least {_fmt(fastest)} s but duration is {_fmt(duration)} s")
+        raise GoalRejected(
+            f"move: exactly {_fmt(duration)} s is not feasible from the current velocity (the fastest is "
+            f"{_fmt(fastest)} s, the next feasible above is {_fmt(traj.duration)} s)"
+        )
+    _check_extrema(limits, traj, start_pos, "move")
+    return PlannedTrajectory([traj], [0.0])

@@ -1,0 +1,46 @@
+"""The robot-description layer: UR model data, calibration, the cell URDF, and fast kinematics."""
+
+from __future__ import annotations
+
+from urdaemon.description.build import build_cell_urdf, robot_joint_names, ur_params
+from urdaemon.description.calibration import (
+    Calibration,
+    Origin,
+    UrChain,
+    joint_origins,
+    load_calibration,
+    robot_dh,
+)
+from urdaemon.description.kinematics import DhKinematics, KinematicTree, TreeJoint
+from urdaemon.description.urdf import joint_limits_for, load_urdf
+from urdaemon.description.urmodels import (
+    DhParameters,
+    LinkInertial,
+    UrJoint,
+    UrModel,
+    load_ur_model,
+    load_ur_model_file,
+)
+
+__all__ = [
+    "Calibration",
+    "DhKinematics",
+    "DhParameters",
+    "KinematicTree",
+    "LinkInertial",
+    "Origin",
+    "TreeJoint",
+    "UrChain",
+    "UrJoint",
+    "UrModel",
+    "build_cell_urdf",
+    "joint_limits_for",
+    "joint_origins",
+    "load_calibration",
+    "load_ur_model",
+    "load_ur_model_file",
+    "load_urdf",
+    "robot_dh",
+    "robot_joint_names",
+    "ur_params",
+]

@@ -1,0 +1,93 @@
+"""Read a cell URDF (yourdfpy, no meshes) and derive a robot's joint limits from it."""
+
+from __future__ import annotations
+
+import io
+import math
+
+import yourdfpy
+
+from urdaemon.cell.config import Robot
+from urdaemon.description.build import robot_joint_names
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.errors import DescriptionError
+from urdaemon.model import JointLimits
+
+__all__ = ["joint_limits_for", "load_urdf"]
+
+
+def load_urdf(text: str) -> yourdfpy.URDF:
+    """Parse URDF text into a yourdfpy model with its scene graph, loading no meshes."""
+    try:
+        return yourdfpy.URDF.load(
+            io.StringIO(text),
+            build_scene_graph=True,
+            load_meshes=False,
+            build_collision_scene_graph=False,
+            load_collision_meshes=False,
+        )
+    except Exception as err:  # yourdfpy raises whatever lxml, networkx or its parser raise
+        raise DescriptionError(f"cannot read the URDF: {type(err).__name__}: {err}") from err
+
+
+def joint_limits_for(robot: Robot, urdf: yourdfpy.URDF) -> JointLimits:
+    """The robot's limits: position, velocity, effort from the URDF; rates from the model; then overrides."""
+    names = robot_joint_names(robot, urdf)
+    lower: list[float] = []
+    upper: list[float] = []
+    velocity: list[float] = []
+    acceleration: list[float] = []
+    jerk: list[float] = []
+    effort: list[float] = []
+    model = load_ur_model(robot.model) if robot.is_ur else None
+    for name in names:
+        short = name[len(robot.prefix) :]
+        joint = urdf.joint_map[name]
+        limit = joint.limit
+        lo: float | None
+        hi: float | None
+        if joint.type == "continuous":
+            lo, hi = -math.inf, math.inf
+        else:
+            lo = None if limit is None else limit.lower
+            hi = None if limit is None else limit.upper
+        vel = None if limit is None else limit.velocity
+        if model is not None:
+            acc, jrk = model.joint(short).max_acceleration, model.joint(short).max_jerk
+        else:
+            assert robot.description is not None  # the cell schema guarantees it for model 'custom'
+            acc, jrk = robot.description.default_max_acceleration, robot.description.default_max_jerk
+        override = robot.joint_limits.get(short)
+        if override is not None:
+            lo = lo if override.min_position is None else override.min_position
+            hi = hi if override.max_position is None else override.max_position
+            vel = vel if override.max_velocity is None else override.max_velocity
+            acc = acc if override.max_acceleration is None else override.max_acceleration
+            jrk = jrk if override.max_jerk is None else override.max_jerk
+        if lo is None or hi is None:
+            raise DescriptionError(
+                f"robot {robot.name!r}: joint {name!r} has no <limit lower upper> in the URDF"
+            )
+        if vel is None or not 0.0 < vel < math.inf:
+            raise DescriptionError(
+                f"robot {robot.name!r}: joint {name!r} has no positive <limit velocity>; "
+                f"set it in the description or as joint_limits.{short}.max_velocity"
+            )
+        lower.append(float(lo))
+        upper.append(float(hi))
+        velocity.append(float(vel))
+        acceleration.append(acc)
+        jerk.append(jrk)
+        effort.append(0.0 if limit is None or limit.effort is None else float(limit.effort))
+    try:
+        return JointLimits(
+            names=names,
+            min_position=tuple(lower),
+            max_position=tuple(upper),
+            max_velocity=tuple(velocity),
+            max_acceleration=tuple(acceleration),
+            max_jerk=tuple(jerk),
+            max_effort=tuple(effort),
+        )
+    except ValueError as err:
+        raise DescriptionError(f"robot {robot.name!r}: {err}") from err
