@@ -25,6 +25,7 @@ from urdaemon.control import (
     MotionController,
     Tolerances,
 )
+from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.model import RobotState
@@ -39,6 +40,8 @@ RESTART_BACKOFF_S = (0.1, 0.5, 1.0, 2.0, 5.0)
 """Delays before restarting a failed backend; the last one repeats."""
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries."""
+PLANNING_SLICE_S = 0.0005
+"""Longest stretch of trajectory planning between two turns of the event loop (a cycle is 2 ms)."""
 
 
 class _RobotLog(logging.LoggerAdapter[logging.Logger]):
@@ -298,23 +301,37 @@ class RobotRuntime:
         )
 
     def _on_trajectory_goal(self, query: Any) -> None:
+        state = self.backend.state
         try:
             goal = codec.decode_trajectory_goal(_payload(query))
             names = self._joint_names(goal.joint_names)
-            goal_id = self._new_goal_id()
-            duration = self.controller.accept_trajectory(
-                goal_id,
-                names,
-                goal.points,
-                self.backend.state,
-                time.monotonic(),
-                tolerances=self._tolerances(goal.tolerances, names),
-                preempt=goal.preempt,
-            )
+            tolerances = self._tolerances(goal.tolerances, names)
+            self.controller.check_can_start(state, time.monotonic(), goal.preempt)
+            planner = self.controller.prepare_trajectory(names, goal.points, state)
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
-        self._accept_goal(query, "trajectory", goal_id, duration)
+
+        async def plan_then_start() -> None:
+            try:
+                await _plan_tail(planner)
+                goal_id = self._new_goal_id()
+                duration = self.controller.accept_trajectory(
+                    goal_id,
+                    names,
+                    goal.points,
+                    self.backend.state,
+                    time.monotonic(),
+                    tolerances=tolerances,
+                    preempt=goal.preempt,
+                    planner=planner,
+                )
+            except GoalRejected as err:
+                self._reject_goal(query, "trajectory", err)
+                return
+            self._accept_goal(query, "trajectory", goal_id, duration)
+
+        self._spawn(plan_then_start())
 
     def _on_move_goal(self, query: Any) -> None:
         try:
@@ -457,7 +474,10 @@ class RobotRuntime:
             else:
                 _reply(query, {"ok": True})
 
-        task = asyncio.get_running_loop().create_task(serve())
+        self._spawn(serve())
+
+    def _spawn(self, work: Any) -> None:
+        task = asyncio.get_running_loop().create_task(work)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
@@ -465,6 +485,18 @@ class RobotRuntime:
     def state(self) -> RobotState:
         """The robot's latest state."""
         return self.backend.state
+
+
+async def _plan_tail(planner: TrajectoryPlanner) -> None:
+    """Plan a trajectory's tail in slices of PLANNING_SLICE_S, letting every robot's cycle run between."""
+    for _ in range(len(planner.points)):
+        deadline = time.perf_counter() + PLANNING_SLICE_S
+        while planner.plan_next():
+            if time.perf_counter() > deadline:
+                break
+        else:
+            return
+        await asyncio.sleep(0)
 
 
 def _payload(query: Any) -> bytes | None:

@@ -371,3 +371,75 @@ def test_degenerate_rest_to_rest_move_that_trips_ruckig_is_planned() -> None:
         plan.sample(k * 0.002, pos, vel, acc)
         assert abs(vel[0]) <= 3.141592653589793
         assert abs(acc[0]) <= 5.0 + 1e-9
+
+
+def _dense_points(n: int) -> list[TrajectoryPoint]:
+    """A smooth 6-joint sine trajectory with velocities and accelerations, 50 ms apart."""
+    w, amp, dt = 0.5, 0.3, 0.05
+    return [
+        TrajectoryPoint(
+            positions=tuple(amp * math.sin(w * t + j) - amp * math.sin(j) for j in range(6)),
+            velocities=tuple(amp * w * math.cos(w * t + j) for j in range(6)),
+            accelerations=tuple(-amp * w * w * math.sin(w * t + j) for j in range(6)),
+            time_from_start=t,
+        )
+        for t in (dt * (k + 1) for k in range(n))
+    ]
+
+
+def test_stepwise_planning_equals_one_shot_planning() -> None:
+    from urdaemon.control.trajectory import TrajectoryPlanner
+
+    points = _dense_points(40)
+    start_v = [0.3 * 0.5 * math.cos(j) for j in range(6)]
+    start_a = [0.0] * 6
+    whole = plan_trajectory([0.0] * 6, start_v, start_a, points, UR10E_LIMITS)
+    planner = TrajectoryPlanner(points, UR10E_LIMITS, [0.0] * 6)
+    steps = 0
+    for _ in range(len(points) + 1):
+        steps += 1
+        if not planner.plan_next():
+            break
+    assert planner.tail_done
+    assert steps == len(points) - 1, "one plan_next per tail segment"
+    assert planner.plan_next() is False
+    stepped = planner.finish([0.0] * 6, start_v, start_a)
+    assert stepped.duration == pytest.approx(whole.duration, abs=1e-12)
+    assert stepped.segment_count == whole.segment_count == len(points)
+    for k in range(1001):
+        t = whole.duration * k / 1000
+        for a, b in zip(_sample(stepped, t), _sample(whole, t), strict=True):
+            assert a == pytest.approx(b, abs=1e-9)
+
+
+def test_a_prepared_tail_joins_a_start_that_moved_while_it_was_planned() -> None:
+    from urdaemon.control.trajectory import TrajectoryPlanner
+
+    # the first point one second out, so that segment 0 has time to absorb a different start
+    points = [
+        TrajectoryPoint(pt.positions, pt.time_from_start + 1.0, pt.velocities, pt.accelerations)
+        for pt in _dense_points(20)
+    ]
+    planner = TrajectoryPlanner(points, UR10E_LIMITS, [0.0] * 6)
+    for _ in range(len(points)):
+        if not planner.plan_next():
+            break
+    # the robot drifted a little (a preempted motion went on) before the goal was committed
+    start = [0.001 * (j + 1) for j in range(6)]
+    plan = planner.finish(start, [0.01] * 6, [0.0] * 6)
+    assert _sample(plan, 0.0)[0] == pytest.approx(start, abs=1e-12)
+    for k, pt in enumerate(points):
+        position = _sample(plan, pt.time_from_start)[0]
+        assert position == pytest.approx(list(pt.positions), abs=1e-9), f"point {k}"
+
+
+def test_infeasible_tail_segment_is_rejected_while_planning_the_tail() -> None:
+    from urdaemon.control.trajectory import TrajectoryPlanner
+
+    points = [
+        TrajectoryPoint(positions=(0.1, 0.0, 0.0), time_from_start=1.0),
+        TrajectoryPoint(positions=(0.9, 0.0, 0.0), time_from_start=1.05),
+    ]
+    planner = TrajectoryPlanner(points, THREE_LIMITS, [0.0] * 3)
+    with pytest.raises(GoalRejected, match="point 1: reaching it needs at least"):
+        planner.plan_next()

@@ -261,3 +261,30 @@ async def test_servo_arm_publishes_pca9685_channels_that_follow_the_command() ->
 
 
 ROOT_CONFIGS = __import__("pathlib").Path(__file__).resolve().parents[2] / "configs"
+
+
+async def test_a_dense_trajectory_is_planned_in_slices_and_succeeds_while_bob_moves(
+    cell: tuple[Daemon, Client],
+) -> None:
+    import math
+
+    daemon, client = cell
+    alice, bob = await client.robot("alice"), await client.robot("bob")
+    home = daemon.runtimes[0].backend.state.positions[:]
+    w, amp, dt = 1.0, 0.2, 0.01
+    points = [
+        {
+            "positions": [home[j] + amp * math.sin(w * t) for j in range(6)],
+            "velocities": [amp * w * math.cos(w * t)] * 6,
+            "accelerations": [-amp * w * w * math.sin(w * t)] * 6,
+            "time_from_start": 0.5 + t,
+        }
+        for t in (dt * k for k in range(300))
+    ]
+    points.append({"positions": points[-1]["positions"], "time_from_start": 0.5 + 300 * dt + 1.0})
+    bob_goal = await bob.move([0.4, *HOME[1:]], duration=2.0)
+    goal = await alice.send_trajectory(points)
+    assert goal.duration == pytest.approx(points[-1]["time_from_start"], abs=0.01)
+    result = await goal.result(timeout=30)
+    assert result["status"] == "succeeded", result
+    assert (await bob_goal.result(timeout=30))["status"] == "succeeded"

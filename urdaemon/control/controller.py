@@ -51,8 +51,8 @@ from urdaemon.control.limits import (
 )
 from urdaemon.control.trajectory import (
     PlannedTrajectory,
+    TrajectoryPlanner,
     plan_move,
-    plan_trajectory,
     position_extrema,
     run_robustly,
 )
@@ -261,19 +261,10 @@ class MotionController:
 
     # ------------------------------------------------------------------ goals
 
-    def accept_trajectory(
-        self,
-        goal_id: str,
-        joint_names: Sequence[str],
-        points: Sequence[TrajectoryPoint],
-        state: RobotState,
-        now: float,
-        *,
-        tolerances: Tolerances | None = None,
-        preempt: bool = False,
-    ) -> float:
-        """Plan and start a trajectory goal; returns its planned duration, raises GoalRejected."""
-        self._check_can_start(goal_id, state, now, preempt)
+    def prepare_trajectory(
+        self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint], state: RobotState
+    ) -> TrajectoryPlanner:
+        """Validate a trajectory; its planner can plan the tail (``plan_next()``) before accepting."""
         perm = self._permutation(joint_names)
         if not points:
             raise GoalRejected("the trajectory has no points")
@@ -294,11 +285,39 @@ class MotionController:
             )
             for k, pt in enumerate(points)
         ]
+        seed_p, _, _ = self._goal_seed(state)
+        return TrajectoryPlanner(mapped, self.limits, seed_p)
+
+    def accept_trajectory(
+        self,
+        goal_id: str,
+        joint_names: Sequence[str],
+        points: Sequence[TrajectoryPoint],
+        state: RobotState,
+        now: float,
+        *,
+        tolerances: Tolerances | None = None,
+        preempt: bool = False,
+        planner: TrajectoryPlanner | None = None,
+    ) -> float:
+        """Plan and start a trajectory goal; returns its planned duration, raises GoalRejected.
+
+        ``planner`` (from ``prepare_trajectory`` for the same points) may carry an already planned tail.
+        """
+        self._check_can_start(goal_id, state, now, preempt)
+        if planner is None:
+            planner = self.prepare_trajectory(joint_names, points, state)
+        elif planner.limits is not self.limits:
+            raise ValueError("the planner was prepared by another controller")
         path_tol, goal_tol, goal_time = self._resolve_tolerances(tolerances)
         seed_p, seed_v, seed_a = self._goal_seed(state)
-        plan = plan_trajectory(seed_p, seed_v, seed_a, mapped, self.limits)
+        plan = planner.finish(seed_p, seed_v, seed_a)
         self._start_goal(goal_id, plan, path_tol, goal_tol, goal_time, seed_p, seed_v, seed_a, state)
         return plan.duration
+
+    def check_can_start(self, state: RobotState, now: float, preempt: bool) -> None:
+        """Raise GoalRejected if a goal could not start now (not ready, busy); nothing changes."""
+        self._check_can_start("", state, now, preempt)
 
     def accept_move(
         self,

@@ -29,6 +29,7 @@ __all__ = [
     "TIMING_SLACK",
     "WAYPOINT_VELOCITY_FRACTION",
     "PlannedTrajectory",
+    "TrajectoryPlanner",
     "plan_move",
     "plan_trajectory",
     "position_extrema",
@@ -301,40 +302,81 @@ def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> 
             check_accelerations_within(limits, pt.accelerations, what)
 
 
-def plan_trajectory(
-    start_pos: Sequence[float],
-    start_vel: Sequence[float],
-    start_acc: Sequence[float],
-    points: Sequence[TrajectoryPoint],
-    limits: JointLimits,
-) -> PlannedTrajectory:
-    """Plan through ``points`` (controller joint order) meeting each time_from_start; GoalRejected if not."""
-    _check_start(limits, start_pos, start_vel, start_acc)
-    _validate_points(limits, points)
-    n = limits.dof
-    velocities = _waypoint_velocities(limits, start_pos, points)
-    otg = Ruckig(n)
-    inp = _new_input(limits)
-    zeros = [0.0] * n
-    cur_p, cur_v, cur_a = list(start_pos), _snap(start_vel, zeros), _snap(start_acc, zeros)
-    elapsed = 0.0
-    segments: list[Any] = []
-    starts: list[float] = []
-    for k, pt in enumerate(points):
+class TrajectoryPlanner:
+    """Plans a multi-point trajectory in steps, so a long one never stalls the caller's loop.
+
+    Segment k ≥ 1 starts exactly at point k−1's target state (position, chosen velocity,
+    acceleration), so the whole tail can be planned ahead, one ``plan_next()`` at a time, before
+    the robot's live state is known; ``finish(start)`` then plans only segment 0 from it.
+    """
+
+    def __init__(
+        self, points: Sequence[TrajectoryPoint], limits: JointLimits, start_pos: Sequence[float]
+    ) -> None:
+        _validate_points(limits, points)
+        self.limits = limits
+        self.points = tuple(points)
+        self._velocities = _waypoint_velocities(limits, start_pos, self.points)
+        zeros = (0.0,) * limits.dof
+        self._accelerations = [
+            pt.accelerations if pt.accelerations is not None else zeros for pt in self.points
+        ]
+        self._otg = Ruckig(limits.dof)
+        self._inp = _new_input(limits)
+        self._tail: list[Any] = []
+        self._elapsed = self.points[0].time_from_start  # the tail aims at absolute times from point 0's
+
+    @property
+    def tail_done(self) -> bool:
+        """True when every segment after the first is planned."""
+        return len(self._tail) == len(self.points) - 1
+
+    def plan_next(self) -> bool:
+        """Plan the next tail segment; True while more remain. Raises GoalRejected."""
+        if self.tail_done:
+            return False
+        k = len(self._tail) + 1
+        prev = self.points[k - 1]
+        traj = self._segment(
+            k, prev.positions, self._velocities[k - 1], self._accelerations[k - 1], self._elapsed
+        )
+        self._tail.append(traj)
+        self._elapsed += traj.duration
+        return not self.tail_done
+
+    def finish(
+        self, start_pos: Sequence[float], start_vel: Sequence[float], start_acc: Sequence[float]
+    ) -> PlannedTrajectory:
+        """Plan what is left and segment 0 from the given start state; the whole plan."""
+        _check_start(self.limits, start_pos, start_vel, start_acc)
+        while self.plan_next():
+            pass
+        zeros = [0.0] * self.limits.dof
+        first = self._segment(0, start_pos, _snap(start_vel, zeros), _snap(start_acc, zeros), 0.0)
+        segments = [first, *self._tail]
+        starts = [0.0]
+        for traj in segments[:-1]:
+            starts.append(starts[-1] + traj.duration)
+        return PlannedTrajectory(segments, starts)
+
+    def _segment(
+        self, k: int, pos: Sequence[float], vel: Sequence[float], acc: Sequence[float], elapsed: float
+    ) -> Any:
         what = f"point {k}"
-        # Aim at the absolute time, so a segment accepted within the slack does not shift the rest.
+        pt = self.points[k]
+        inp = self._inp
         requested = pt.time_from_start - elapsed
-        inp.current_position = cur_p
-        inp.current_velocity = cur_v
-        inp.current_acceleration = cur_a
+        inp.current_position = list(pos)
+        inp.current_velocity = list(vel)
+        inp.current_acceleration = list(acc)
         inp.target_position = list(pt.positions)
-        inp.target_velocity = list(velocities[k])
-        inp.target_acceleration = list(pt.accelerations) if pt.accelerations is not None else zeros
+        inp.target_velocity = list(self._velocities[k])
+        inp.target_acceleration = list(self._accelerations[k])
         inp.minimum_duration = max(requested, 0.0)
-        traj = _calculate(otg, inp, what)
+        traj = _calculate(self._otg, inp, what)
         if traj.duration > requested + TIMING_SLACK:
             inp.minimum_duration = None
-            fastest = _calculate(otg, inp, what).duration
+            fastest = _calculate(self._otg, inp, what).duration
             if fastest > requested:
                 raise GoalRejected(
                     f"{what}: reaching it needs at least {_fmt(fastest)} s but time_from_start allows "
@@ -345,17 +387,20 @@ def plan_trajectory(
                 f"velocities (the fastest is {_fmt(fastest)} s, the next feasible above is "
                 f"{_fmt(traj.duration)} s)"
             )
-        _check_extrema(limits, traj, cur_p, what)
-        segments.append(traj)
-        starts.append(elapsed)
-        elapsed += traj.duration
-        p, v, a = traj.at_time(traj.duration)
-        # ruckig ends within float noise of the target; snapping to the exact target keeps that noise
-        # (e.g. a 1e-17 velocity) out of the next segment's input, where ruckig can fail on it
-        cur_p = _snap(p, pt.positions)
-        cur_v = _snap(v, velocities[k])
-        cur_a = _snap(a, pt.accelerations if pt.accelerations is not None else zeros)
-    return PlannedTrajectory(segments, starts)
+        _check_extrema(self.limits, traj, pos, what)
+        return traj
+
+
+def plan_trajectory(
+    start_pos: Sequence[float],
+    start_vel: Sequence[float],
+    start_acc: Sequence[float],
+    points: Sequence[TrajectoryPoint],
+    limits: JointLimits,
+) -> PlannedTrajectory:
+    """Plan through ``points`` (controller joint order) meeting each time_from_start; GoalRejected if not."""
+    _check_start(limits, start_pos, start_vel, start_acc)
+    return TrajectoryPlanner(points, limits, start_pos).finish(start_pos, start_vel, start_acc)
 
 
 SNAP_TOLERANCE = 1e-9
