@@ -369,6 +369,8 @@ class RobotClient:
             handle = self._goals.get(goal_id)
             if handle is not None:
                 handle._deliver(kind, data)
+                if kind == "result":  # the handle keeps its result; the robot need not track it further
+                    del self._goals[goal_id]
             else:
                 early = self._early.setdefault(goal_id, [])
                 if len(early) < 100:
