@@ -113,6 +113,11 @@ class Daemon:
         self.runtimes: list[RobotRuntime] = []
         self.node: ZenohNode | None = None
 
+    @property
+    def listen_endpoints(self) -> tuple[str, ...]:
+        """Where the daemon accepts Zenoh sessions (the override, else the cell file's)."""
+        return self._listen if self._listen is not None else self.cell.zenoh.listen
+
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
