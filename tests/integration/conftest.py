@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
@@ -60,16 +60,3 @@ async def cell() -> AsyncIterator[tuple[Daemon, Client]]:
     """alice (UR10e, 500 Hz) and bob (UR5, CB3 at 125 Hz) on the mock backend."""
     async with running_daemon(TWO_MOCKS) as pair:
         yield pair
-
-
-async def wait_until(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    """Poll ``condition`` on the loop (every 10 ms) until true; fail after ``timeout`` seconds."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    for _ in range(int(timeout / 0.01) + 2):
-        if condition():
-            return
-        if loop.time() > deadline:
-            break
-        await asyncio.sleep(0.01)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 import yourdfpy
 
-from tests.integration.conftest import running_daemon, wait_until
+from tests.integration.conftest import running_daemon
 from urdaemon.backends.mock import MockBackend
 from urdaemon.client import Client, RobotClient
 from urdaemon.daemon import Daemon
@@ -130,7 +130,12 @@ async def test_position_stream_moves_the_robot_and_the_deadman_stops_it(cell: tu
         for _ in range(5):
             await states.get(timeout=5.0)
     # no more commands: within stream_timeout (0.1 s) plus a braking time the robot must be at rest
-    await wait_until(lambda: all(v == 0.0 for v in state.velocities), 3.0, "the deadman stop")
+    for _ in range(1500):  # 3 s of joint states at 500 Hz
+        sample = await states.get_json(timeout=5.0)
+        if all(v == 0.0 for v in sample["velocity"]):
+            break
+    else:
+        raise AssertionError("the deadman did not stop the robot within 3 s")
     assert target[0] < state.positions[0] < moving_target[0], "stopped smoothly on the way, not at the target"
     status = await alice.status()
     assert status["active_goal"] is None
