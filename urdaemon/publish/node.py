@@ -58,7 +58,12 @@ class ZenohNode:
         self._closed = False
 
     def publisher(self, key: str, *, realtime: bool = False) -> Any:
-        """Declare a publisher; ``realtime`` for state streams (drop if congested, express, top priority)."""
+        """Declare a publisher; ``realtime`` for state streams (express, top priority).
+
+        Every publisher drops a sample rather than block when the network is congested: a stalled
+        subscriber must never stall the event loop, which clocks every robot. What must not be lost
+        (goal results) can also be asked for with a query.
+        """
         if realtime:
             pub = self.session.declare_publisher(
                 key,
@@ -67,14 +72,14 @@ class ZenohNode:
                 express=True,
             )
         else:
-            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP)
         self._entities.append(pub)
         return pub
 
     def put(self, key: str, payload: bytes) -> None:
-        """Publish once on ``key`` (reliable)."""
+        """Publish once on ``key`` (dropped rather than blocking when congested)."""
         if not self._closed:
-            self.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+            self.session.put(key, payload, congestion_control=zenoh.CongestionControl.DROP)
 
     def queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable whose ``handler(query)`` runs on the loop; it must reply."""
