@@ -140,7 +140,7 @@ class RobotRuntime:
         state = self.backend.state
         state.program_running = False
         self._publish_events()
-        self._publish_status(force=True)
+        self._publish_status()
 
     # ---- the cycle (hot path) --------------------------------------------------------------------
 
@@ -155,16 +155,8 @@ class RobotRuntime:
                 self._pub_pose.put(self._encoder.encode_pose(state, self._frame, self._child, pose))
         if self.controller.has_events:
             self._publish_events()
-        signature = (
-            state.lifecycle,
-            state.robot_mode,
-            state.safety_mode,
-            state.speed_scaling,
-            state.program_running,
-            self.controller.active_goal_id,
-        )
-        if signature != self._status_signature:
-            self._publish_status(force=True)
+        if self._status_key() != self._status_signature:
+            self._publish_status()
 
     def _publish_events(self) -> None:
         for event in self.controller.drain_events():
@@ -230,9 +222,10 @@ class RobotRuntime:
             "payload": {"mass": s.payload_mass, "cog": list(s.payload_cog)},
         }
 
-    def _publish_status(self, *, force: bool = False) -> None:
+    def _status_key(self) -> tuple[Any, ...]:
+        """What, when it changes, makes the status go out at once."""
         state = self.backend.state
-        self._status_signature = (
+        return (
             state.lifecycle,
             state.robot_mode,
             state.safety_mode,
@@ -240,6 +233,9 @@ class RobotRuntime:
             state.program_running,
             self.controller.active_goal_id,
         )
+
+    def _publish_status(self) -> None:
+        self._status_signature = self._status_key()
         if self._pub_status is not None:
             self._pub_status.put(codec.encode(self.status_message()))
 
@@ -359,7 +355,7 @@ class RobotRuntime:
         self.log.info("%s goal %s accepted (%.3f s)", kind, goal_id, duration)
         _reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration})
         self._publish_events()  # a preempted goal's result goes out before the new goal's feedback
-        self._publish_status(force=True)
+        self._publish_status()
 
     def _reject_goal(self, query: Any, kind: str, err: UrDaemonError) -> None:
         reason = err.reason if isinstance(err, GoalRejected) else str(err)
