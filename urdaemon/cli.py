@@ -74,7 +74,7 @@ def _connect_arg(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
-    args = _parser().parse_args(argv)
+    args = _parser().parse_args(_join_option_values(sys.argv[1:] if argv is None else list(argv)))
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
@@ -97,6 +97,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return EXIT_OK
     return EXIT_BAD_INPUT
+
+
+def _join_option_values(argv: list[str]) -> list[str]:
+    """``--joints -0.5,1`` → ``--joints=-0.5,1``: argparse would read a leading '-' as an option."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--joints" and i + 1 < len(argv):
+            out.append(f"--joints={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+def _bad_endpoint(endpoint: str) -> str | None:
+    """Why ``endpoint`` is not a Zenoh endpoint (None when it looks like one)."""
+    import re
+
+    from urdaemon.cell.config import ENDPOINT_PATTERN
+
+    if not re.match(ENDPOINT_PATTERN, endpoint):
+        return f"--connect {endpoint!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"
+    return None
 
 
 def _check(path: str) -> int:
@@ -151,9 +176,24 @@ def _serve(path: str, listen: list[str] | None) -> int:
 
 
 async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
+    import zenoh
+
     from urdaemon.client import Client
 
-    async with await Client.connect(endpoint) as client:
+    problem = _bad_endpoint(endpoint)
+    try:
+        zenoh.KeyExpr(key)
+    except zenoh.ZError as err:
+        problem = f"{key!r} is not a valid key expression: {err}"
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        client = await Client.connect(endpoint)
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    async with client:
         sub = client.subscribe(key)
         received = 0
         while count <= 0 or received < count:
@@ -182,7 +222,16 @@ async def _move(args: argparse.Namespace) -> int:
     if not all(math.isfinite(v) for v in joints):
         print("error: --joints must be finite numbers", file=sys.stderr)
         return EXIT_BAD_INPUT
-    async with await Client.connect(args.connect) as client:
+    problem = _bad_endpoint(args.connect)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        client = await Client.connect(args.connect)
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    async with client:
         try:
             robot = await client.robot(args.robot, cell=args.cell)
             goal = await robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)

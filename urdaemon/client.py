@@ -98,9 +98,9 @@ class Client:
     async def connect(cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0) -> Client:
         """Open a Zenoh session connected to ``endpoint`` (no multicast scouting)."""
         loop = asyncio.get_running_loop()
-        conf = zenoh_config("peer", [], [endpoint])
-        conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
         try:
+            conf = zenoh_config("peer", [], [endpoint])
+            conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
             session = await loop.run_in_executor(None, zenoh.open, conf)
         except zenoh.ZError as err:
             raise UrDaemonError(f"cannot connect to {endpoint}: {err}") from err
@@ -120,7 +120,10 @@ class Client:
 
     def subscribe(self, key_expr: str, maxsize: int = 1000) -> Subscription:
         """Subscribe to ``key_expr`` (closed with the client)."""
-        sub = Subscription(self.session, key_expr, self._loop, maxsize)
+        try:
+            sub = Subscription(self.session, key_expr, self._loop, maxsize)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot subscribe to {key_expr!r}: {err}") from err
         self._subscriptions.append(sub)
         return sub
 

@@ -307,6 +307,10 @@ class RobotRuntime:
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
+        except Exception as err:  # a bug must still answer the client, once
+            self.log.exception("trajectory goal failed")
+            _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
+            return
 
         async def plan_then_start() -> None:
             try:
@@ -324,6 +328,10 @@ class RobotRuntime:
                 )
             except GoalRejected as err:
                 self._reject_goal(query, "trajectory", err)
+                return
+            except Exception as err:  # a bug must still answer the client, once
+                self.log.exception("trajectory goal failed")
+                _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
                 return
             self._accept_goal(query, "trajectory", goal_id, duration)
 
@@ -348,6 +356,10 @@ class RobotRuntime:
             )
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "move", err)
+            return
+        except Exception as err:  # a bug must still answer the client, once
+            self.log.exception("move goal failed")
+            _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
             return
         self._accept_goal(query, "move", goal_id, duration)
 
@@ -401,6 +413,9 @@ class RobotRuntime:
             )
         except (MessageError, GoalRejected) as err:
             self._reject_stream(key, err)
+        except Exception as err:  # a bug must not kill the subscriber; the client hears of it
+            self.log.exception("streaming command failed")
+            self._reject_stream(key, GoalRejected(f"internal error: {type(err).__name__}: {err}"))
 
     def _on_stream_velocity(self, key: str, payload: bytes) -> None:
         state = self.backend.state
@@ -412,6 +427,9 @@ class RobotRuntime:
             )
         except (MessageError, GoalRejected) as err:
             self._reject_stream(key, err)
+        except Exception as err:  # a bug must not kill the subscriber; the client hears of it
+            self.log.exception("streaming command failed")
+            self._reject_stream(key, GoalRejected(f"internal error: {type(err).__name__}: {err}"))
 
     def _reject_stream(self, key: str, err: UrDaemonError) -> None:
         self._stream_rejections += 1

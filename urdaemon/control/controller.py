@@ -33,7 +33,6 @@ from ruckig import (
     OutputParameter,
     Result,
     Ruckig,
-    RuckigError,
     Synchronization,
 )
 
@@ -50,6 +49,7 @@ from urdaemon.control.limits import (
     stopping_distance,
 )
 from urdaemon.control.trajectory import (
+    RUCKIG_ERRORS,
     PlannedTrajectory,
     TrajectoryPlanner,
     plan_move,
@@ -569,7 +569,7 @@ class MotionController:
             if out.new_calculation and self._brake_overshooting_joints(out):
                 # Same start state, now with those joints braking instead of following the target.
                 result = run_robustly(lambda: self._otg.update(inp, out), inp)
-        except RuckigError:
+        except RUCKIG_ERRORS:
             result = None
         if result != _WORKING and result != _FINISHED:
             self._go_idle()
@@ -800,7 +800,7 @@ class MotionController:
         """One online ruckig cycle from the setpoint; None when ruckig failed."""
         try:
             result = run_robustly(lambda: self._otg.update(self._inp, self._out), self._inp)
-        except RuckigError:
+        except RUCKIG_ERRORS:
             return None
         if result != _WORKING and result != _FINISHED:
             return None

@@ -26,6 +26,7 @@ from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
 __all__ = [
+    "MAX_GOAL_TIME_S",
     "TIMING_SLACK",
     "WAYPOINT_VELOCITY_FRACTION",
     "PlannedTrajectory",
@@ -37,6 +38,9 @@ __all__ = [
 
 TIMING_SLACK = 1e-3
 """A segment may take this much longer (s) than the client's timing before the goal is rejected."""
+
+MAX_GOAL_TIME_S = 7200.0
+"""Longest goal accepted (s); ruckig's time range ends near 7 600 s."""
 
 WAYPOINT_VELOCITY_FRACTION = 0.9
 """Chosen waypoint velocities stay within this fraction of max_velocity, leaving room to correct."""
@@ -124,11 +128,16 @@ RETRY_LIMIT_SCALES = (1.0 - 1e-9, 1.0 - 1e-6)
 Retrying with limits tightened by these factors solves them and stays within the limits."""
 
 
+RUCKIG_ERRORS = (RuckigError, ValueError)
+"""What a ruckig call may throw: its own error, or ValueError when the binding meets a result code it
+does not know (e.g. −101, a trajectory longer than ruckig's time range, about 7 600 s)."""
+
+
 def run_robustly(call: Any, inp: Any) -> Any:
     """Run ``call()`` (ruckig calculate or update on ``inp``); if it throws, retry with tighter limits."""
     try:
         return call()
-    except RuckigError as first:
+    except RUCKIG_ERRORS as first:
         limits = (list(inp.max_velocity), list(inp.max_acceleration), list(inp.max_jerk))
         try:
             for scale in RETRY_LIMIT_SCALES:
@@ -137,7 +146,7 @@ def run_robustly(call: Any, inp: Any) -> Any:
                 inp.max_jerk = [j * scale for j in limits[2]]
                 try:
                     return call()
-                except RuckigError:
+                except RUCKIG_ERRORS:
                     continue
         finally:
             inp.max_velocity, inp.max_acceleration, inp.max_jerk = limits
@@ -149,7 +158,7 @@ def _calculate(otg: Any, inp: Any, what: str) -> Any:
     traj = Trajectory(inp.degrees_of_freedom)
     try:
         result = run_robustly(lambda: otg.calculate(inp, traj), inp)
-    except RuckigError as exc:
+    except RUCKIG_ERRORS as exc:
         # ruckig appends its whole input to the message; the first line is the reason
         first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else "error"
         raise GoalRejected(f"{what}: ruckig could not plan it: {first_line}") from exc
@@ -279,6 +288,11 @@ def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> 
         check_finite(f"{what} positions", pt.positions, limits.names)
         if not math.isfinite(pt.time_from_start):
             raise GoalRejected(f"{what}: time_from_start is {pt.time_from_start}, not a finite number")
+        if pt.time_from_start > MAX_GOAL_TIME_S:
+            raise GoalRejected(
+                f"{what}: time_from_start {_fmt(pt.time_from_start)} s exceeds the longest goal, "
+                f"{_fmt(MAX_GOAL_TIME_S)} s"
+            )
         if k == 0 and pt.time_from_start <= 0.0:
             raise GoalRejected(
                 f"{what}: time_from_start must be > 0 (time from the goal's start), got {pt.time_from_start}"
@@ -428,6 +442,8 @@ def plan_move(
     check_scale("acceleration_scale", acceleration_scale)
     if duration is not None and not (math.isfinite(duration) and duration > 0.0):
         raise GoalRejected(f"duration must be a finite number > 0, got {duration}")
+    if duration is not None and duration > MAX_GOAL_TIME_S:
+        raise GoalRejected(f"duration {_fmt(duration)} s exceeds the longest goal, {_fmt(MAX_GOAL_TIME_S)} s")
     n = limits.dof
     _check_start(limits, start_pos, start_vel, start_acc)
     if len(target) != n:
