@@ -28,7 +28,7 @@ from urdaemon.control import (
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
-from urdaemon.model import RobotState
+from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.codec import ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
@@ -38,6 +38,8 @@ __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
 
 RESTART_BACKOFF_S = (0.1, 0.5, 1.0, 2.0, 5.0)
 """Delays before restarting a failed backend; the last one repeats."""
+HEALTHY_RUN_S = 30.0
+"""A backend that ran this long before failing restarts with the first, shortest delay again."""
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries."""
 PLANNING_SLICE_S = 0.0005
@@ -119,7 +121,9 @@ class RobotRuntime:
             group.create_task(self._supervise())
 
     async def _supervise(self) -> None:
-        for attempt in itertools.count():
+        attempt = 0
+        while True:
+            started = time.monotonic()
             try:
                 await self.backend.run(self._on_cycle)
                 reason = "backend stopped"
@@ -131,7 +135,14 @@ class RobotRuntime:
                 self.log.error("%s", reason, exc_info=not isinstance(err, UrDaemonError))
             self._restarts += 1
             self._end_motion(reason)
+            state = self.backend.state
+            state.lifecycle = Lifecycle.DISCONNECTED
+            state.lifecycle_reason = reason
+            self._publish_status()
+            if time.monotonic() - started >= HEALTHY_RUN_S:
+                attempt = 0  # a long healthy run earns a fresh, short backoff
             delay = RESTART_BACKOFF_S[min(attempt, len(RESTART_BACKOFF_S) - 1)]
+            attempt += 1
             self.log.info("restarting backend in %.1f s", delay)
             await asyncio.sleep(delay)
 

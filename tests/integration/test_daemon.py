@@ -221,6 +221,7 @@ async def test_a_failing_backend_aborts_its_goal_restarts_and_the_other_robot_ne
             raise OSError("simulated link loss")
         original_step()
 
+    statuses = client.subscribe(alice.keys.status, 1000)
     backend.step = failing_step  # type: ignore[method-assign]
     bob_goal = await bob.move([0.3, *HOME[1:]], duration=1.5)
     alice_goal = await alice.move([0.5, *HOME[1:]], duration=2.0)
@@ -229,7 +230,16 @@ async def test_a_failing_backend_aborts_its_goal_restarts_and_the_other_robot_ne
     assert "simulated link loss" in result["reason"]
     assert (await bob_goal.result(timeout=10))["status"] == "succeeded"
     assert bob_rt.status_message()["restarts"] == 0
-    status = await _next_matching(client, alice.keys.status, lambda s: s["restarts"] >= 1 and s["ready"])
+    seen = []
+    for _ in range(200):
+        status = await statuses.get_json(timeout=5.0)
+        seen.append(status["lifecycle"])
+        if status["lifecycle"] == "disconnected":
+            assert "simulated link loss" in status["reason"]
+            assert status["ready"] is False
+        if status["restarts"] >= 1 and status["ready"]:
+            break
+    assert "disconnected" in seen, seen
     assert status["lifecycle"] == "running"
     retry = await alice.move(HOME, duration=1.0)
     assert (await retry.result(timeout=10))["status"] == "succeeded"
