@@ -1,0 +1,24 @@
+"""UR's network protocols as sans-IO codecs: bytes in, events out; no asyncio, no sockets, no clock.
+
+Every protocol module follows one shape (h11/aioquic style):
+
+* a ``<Name>Connection(side, ...)`` object per TCP connection, for either party (``Side.DAEMON``
+  or ``Side.ROBOT``: the fake controller uses the robot side of the same codecs);
+* ``receive_data(data) -> list[Event]``: feed any chunk of received bytes (a whole message, a part
+  of one, or several); returns the events completed so far. Bad bytes raise
+  ``RemoteProtocolError`` (never anything else) and move the connection to an error state in
+  which every later call raises too;
+* ``send(message) -> None`` queues a message; ``data_to_send() -> bytes`` returns and clears what
+  is queued, so the pump has a single write path. Sending what the protocol forbids raises
+  ``LocalProtocolError``;
+* events and messages are frozen, slotted dataclasses named for what happened;
+* wire layouts are drawn in each codec's docstring; every limit is a named constant with its unit.
+
+The reference for every format is ``shared/docs/ur-protocols.md`` (section numbers are cited).
+"""
+
+from __future__ import annotations
+
+from urdaemon.protocols._buffer import ReceiveBuffer, Side
+
+__all__ = ["ReceiveBuffer", "Side"]
