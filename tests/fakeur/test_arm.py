@@ -1,0 +1,142 @@
+"""The fake controller's simulated arm: modes, refusals, motion within limits, safety stops."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, FakeArm, RuntimeState
+from urdaemon.model import RobotMode, SafetyMode
+
+DT = 0.002
+
+
+def _arm(powered: bool = False) -> FakeArm:
+    model = load_ur_model("ur10e")
+    return FakeArm(model, model.dh, powered=powered)
+
+
+def _run(arm: FakeArm, seconds: float) -> None:
+    for _ in range(round(seconds / DT)):
+        arm.step(DT)
+
+
+def test_power_on_boots_to_idle_and_brake_release_to_running() -> None:
+    arm = _arm()
+    assert arm.robot_mode is RobotMode.POWER_OFF
+    assert arm.brake_release() == "robot is POWER_OFF, not IDLE"
+    assert arm.power_on() is None
+    assert arm.robot_mode is RobotMode.BOOTING
+    _run(arm, BOOT_TIME_S + 0.01)
+    assert arm.robot_mode is RobotMode.IDLE
+    assert arm.brake_release() is None
+    _run(arm, BRAKE_RELEASE_TIME_S + 0.01)
+    assert arm.robot_mode is RobotMode.RUNNING
+    assert arm.robot_status_bits & 1 == 1
+    arm.power_off()
+    assert arm.robot_mode is RobotMode.POWER_OFF
+    assert arm.robot_status_bits == 0
+
+
+def test_program_cannot_start_unless_running() -> None:
+    arm = _arm()
+    assert arm.start_program() == "robot is POWER_OFF, not RUNNING"
+    arm = _arm(powered=True)
+    assert arm.start_program() is None
+    assert arm.runtime_state is RuntimeState.PLAYING
+    assert arm.program_running
+    assert arm.robot_status_bits == 0b11
+
+
+def test_servoj_tracks_the_target_within_the_velocity_limits() -> None:
+    arm = _arm(powered=True)
+    start = list(arm.q)
+    target = [start[0] + 1.0, *start[1:]]
+    peak = 0.0
+    for _ in range(2000):
+        arm.servoj(target)
+        arm.step(DT)
+        peak = max(peak, abs(arm.qd[0]))
+        assert abs(arm.qd[0]) <= arm.max_velocity[0] + 1e-12
+        if abs(arm.q[0] - target[0]) < 1e-12:
+            break
+    assert arm.q[0] == pytest.approx(target[0], abs=1e-12)
+    assert peak == pytest.approx(arm.max_velocity[0])
+
+
+def test_speedj_ramps_at_the_given_acceleration_and_stop_decelerates() -> None:
+    arm = _arm(powered=True)
+    arm.speedj([0.5, 0, 0, 0, 0, 0], acceleration=2.0)
+    _run(arm, 0.1)
+    assert arm.qd[0] == pytest.approx(0.2, abs=1e-9)
+    _run(arm, 0.5)
+    assert arm.qd[0] == pytest.approx(0.5)
+    arm.stop(1.0)
+    _run(arm, 0.25)
+    assert arm.qd[0] == pytest.approx(0.25, abs=1e-9)
+    _run(arm, 0.3)
+    assert arm.qd[0] == 0.0
+
+
+def test_no_motion_while_not_running() -> None:
+    arm = _arm()
+    before = list(arm.q)
+    arm.servoj([v + 0.5 for v in before])
+    arm.speedj([1.0] * 6)
+    _run(arm, 0.2)
+    assert arm.q == before
+
+
+def test_protective_stop_stops_motion_pauses_the_program_and_needs_an_unlock() -> None:
+    arm = _arm(powered=True)
+    arm.start_program()
+    arm.speedj([1.0, 0, 0, 0, 0, 0])
+    _run(arm, 0.2)
+    arm.protective_stop()
+    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    assert arm.runtime_state is RuntimeState.PAUSED
+    assert arm.unlock_protective_stop() == "robot still moving"
+    _run(arm, 0.3)
+    assert arm.qd == [0.0] * 6
+    arm.speedj([1.0] * 6)
+    _run(arm, 0.1)
+    assert arm.qd == [0.0] * 6, "no motion during a protective stop"
+    assert arm.safety_status_bits == 1 << 2
+    assert arm.unlock_protective_stop() is None
+    assert arm.safety_mode is SafetyMode.NORMAL
+    assert arm.unlock_protective_stop() == "safety mode is NORMAL, not PROTECTIVE_STOP"
+
+
+def test_leaving_the_joint_limits_triggers_a_protective_stop() -> None:
+    arm = _arm(powered=True)
+    arm.q[2] = arm.max_position[2] - 0.001
+    arm.speedj([0, 0, 1.0, 0, 0, 0])
+    _run(arm, 0.1)
+    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    assert arm.q[2] <= arm.max_position[2]
+
+
+def test_emergency_stop_powers_off_and_power_on_is_refused_until_released() -> None:
+    arm = _arm(powered=True)
+    arm.start_program()
+    arm.emergency_stop()
+    assert arm.robot_mode is RobotMode.POWER_OFF
+    assert arm.runtime_state is RuntimeState.STOPPED
+    assert arm.power_on() == "emergency stop active"
+    arm.release_emergency_stop()
+    assert arm.safety_mode is SafetyMode.NORMAL
+    assert arm.power_on() is None
+
+
+def test_tcp_pose_is_the_dh_forward_kinematics_as_a_rotation_vector() -> None:
+    arm = _arm(powered=True)
+    arm.q = [0.0] * 6
+    x, y, z, rx, ry, rz = arm.tcp_pose()
+    dh = arm.dh
+    # at zero angles the UR tool sits at x = a2 + a3, y = -(d4 + d6)... (standard UR DH layout)
+    assert x == pytest.approx(dh.a[1] + dh.a[2], abs=1e-9)
+    assert y == pytest.approx(-(dh.d[3] + dh.d[5]), abs=1e-9)
+    assert z == pytest.approx(dh.d[0] - dh.d[4], abs=1e-9)
+    assert math.sqrt(rx * rx + ry * ry + rz * rz) == pytest.approx(math.pi / 2, abs=1e-9)

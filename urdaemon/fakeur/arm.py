@@ -1,0 +1,384 @@
+"""The fake controller's robot: power and brakes, safety stops, speed slider, joint motion, IO.
+
+Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller cycle; every
+command is a method that returns a refusal reason (or None) the way the real controller would
+refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
+(servoj target, speedj velocity, a spline/move segment driven by the program executor, or a stop
+with a given deceleration), always within the model's joint velocity limits; a command outside the
+joint position limits triggers a protective stop as on a real arm.
+
+State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
+POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
+Power off from anywhere → POWER_OFF. A protective stop keeps the mode but stops motion until
+unlocked; an emergency stop powers the arm off until released.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from urdaemon.description.kinematics import DhKinematics
+from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.model import RobotMode, SafetyMode
+
+__all__ = [
+    "BOOT_TIME_S",
+    "BRAKE_RELEASE_TIME_S",
+    "PROTECTIVE_STOP_DECELERATION",
+    "FakeArm",
+    "IoState",
+    "MotionMode",
+    "RuntimeState",
+]
+
+BOOT_TIME_S = 0.5
+"""Simulated time from 'power on' until the arm is IDLE (a real arm takes several seconds)."""
+BRAKE_RELEASE_TIME_S = 0.3
+"""Simulated time from 'brake release' until RUNNING (brakes audibly release over ~1 s on a real arm)."""
+PROTECTIVE_STOP_DECELERATION = 10.0
+"""Joint deceleration (rad/s²) of the category-2 stop that a protective stop performs."""
+EMERGENCY_STOP_DECELERATION = 20.0
+"""Joint deceleration (rad/s²) of an emergency stop before power is cut."""
+SPEEDJ_DEFAULT_ACCELERATION = 40.0
+"""rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
+
+
+class RuntimeState(enum.IntEnum):
+    """RTDE ``runtime_state`` (ur-protocols.md §1.9)."""
+
+    STOPPING = 0
+    STOPPED = 1
+    PLAYING = 2
+    PAUSING = 3
+    PAUSED = 4
+    RESUMING = 5
+
+
+class MotionMode(enum.Enum):
+    """What drives the joints this cycle."""
+
+    HOLD = "hold"
+    SERVO = "servo"
+    SPEED = "speed"
+    STOP = "stop"
+
+
+@dataclass
+class IoState:
+    """Controller IO as RTDE reports it."""
+
+    digital_out: int = 0
+    """Standard digital outputs 0–7 (bits 0–7) and configurable 0–7 (bits 8–15), tool 0–1 (bits 16–17)."""
+    digital_in: int = 0
+    analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    analog_out_types: int = 0
+    """Bit 2: output 0 is voltage, bit 3: output 1 (RTDE ``analog_io_types``)."""
+    analog_in: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    tool_analog_in: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    tool_voltage: int = 0
+    registers_int: dict[int, int] = field(default_factory=dict)
+    registers_double: dict[int, float] = field(default_factory=dict)
+    registers_bit: dict[int, bool] = field(default_factory=dict)
+
+
+class FakeArm:
+    """One simulated UR arm."""
+
+    def __init__(
+        self,
+        model: UrModel,
+        dh: DhParameters,
+        *,
+        initial_positions: Sequence[float] | None = None,
+        powered: bool = False,
+    ) -> None:
+        self.model = model
+        self.dh = dh
+        self.kinematics = DhKinematics(dh)
+        self.q = (
+            list(initial_positions)
+            if initial_positions is not None
+            else [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
+        )
+        self.qd = [0.0] * 6
+        self.qdd = [0.0] * 6
+        self.current = [0.0] * 6
+        self.max_velocity = [j.max_velocity for j in model.joints]
+        self.min_position = [
+            j.min_position if j.min_position is not None else -math.inf for j in model.joints
+        ]
+        self.max_position = [j.max_position if j.max_position is not None else math.inf for j in model.joints]
+        self.timestamp = 0.0
+        """Controller time since boot (s), RTDE ``timestamp``."""
+        self.robot_mode = RobotMode.POWER_OFF
+        self.safety_mode = SafetyMode.NORMAL
+        self.runtime_state = RuntimeState.STOPPED
+        self.speed_slider = 1.0
+        """RTDE ``target_speed_fraction``."""
+        self.speed_scaling = 1.0
+        """RTDE ``speed_scaling``: the controller's own scaling (1 unless stopping or paused)."""
+        self.io = IoState()
+        self.payload_mass = 0.0
+        self.payload_cog = [0.0, 0.0, 0.0]
+        self.payload_inertia = [0.0] * 6
+        self.tcp_offset = [0.0] * 6
+        self.gravity = [0.0, 0.0, 9.82]
+        self.force_mode = False
+        self.freedrive = False
+        self.remote_control = True
+        self._transition_at: float | None = None
+        self._mode = MotionMode.HOLD
+        self._servo_target: list[float] | None = None
+        self._speed_target = [0.0] * 6
+        self._acceleration = SPEEDJ_DEFAULT_ACCELERATION
+        if powered:
+            self.robot_mode = RobotMode.RUNNING
+
+    # ---- power, brakes, safety -----------------------------------------------------------------
+
+    def power_on(self) -> str | None:
+        """Start powering on; a reason if refused."""
+        if self.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
+            return "emergency stop active"
+        if self.robot_mode is RobotMode.POWER_OFF:
+            self.robot_mode = RobotMode.BOOTING
+            self._transition_at = self.timestamp + BOOT_TIME_S
+        return None
+
+    def power_off(self) -> None:
+        """Cut arm power (brakes engage, program stops)."""
+        self._halt_motion()
+        self.robot_mode = RobotMode.POWER_OFF
+        self._transition_at = None
+        self.stop_program()
+
+    def brake_release(self) -> str | None:
+        """Release the brakes; refused unless powered (IDLE)."""
+        if self.robot_mode is RobotMode.RUNNING:
+            return None
+        if self.robot_mode is not RobotMode.IDLE:
+            return f"robot is {self.robot_mode.name}, not IDLE"
+        if self.safety_mode is not SafetyMode.NORMAL:
+            return f"safety mode is {self.safety_mode.name}"
+        self.robot_mode = RobotMode.POWER_ON  # releasing
+        self._transition_at = self.timestamp + BRAKE_RELEASE_TIME_S
+        return None
+
+    def protective_stop(self) -> None:
+        """Trigger a protective stop: motion decelerates to rest, the program pauses."""
+        if self.safety_mode is SafetyMode.NORMAL or self.safety_mode is SafetyMode.REDUCED:
+            self.safety_mode = SafetyMode.PROTECTIVE_STOP
+            self.stop(PROTECTIVE_STOP_DECELERATION)
+            if self.runtime_state is RuntimeState.PLAYING:
+                self.runtime_state = RuntimeState.PAUSED
+
+    def unlock_protective_stop(self) -> str | None:
+        """Clear a protective stop; a reason if there is none to clear or it is too early."""
+        if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
+            return f"safety mode is {self.safety_mode.name}, not PROTECTIVE_STOP"
+        if any(abs(v) > 1e-9 for v in self.qd):
+            return "robot still moving"
+        self.safety_mode = SafetyMode.NORMAL
+        return None
+
+    def emergency_stop(self) -> None:
+        """Press the emergency stop: stop, power off, program stopped."""
+        self.safety_mode = SafetyMode.ROBOT_EMERGENCY_STOP
+        self.stop(EMERGENCY_STOP_DECELERATION)
+        self.stop_program()
+        self.robot_mode = RobotMode.POWER_OFF
+        self._transition_at = None
+
+    def release_emergency_stop(self) -> None:
+        """Release the emergency stop button; the arm stays powered off."""
+        if self.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
+            self.safety_mode = SafetyMode.NORMAL
+
+    @property
+    def can_move(self) -> bool:
+        """True when motion commands are executed (brakes released, no safety stop)."""
+        return self.robot_mode is RobotMode.RUNNING and self.safety_mode in (
+            SafetyMode.NORMAL,
+            SafetyMode.REDUCED,
+        )
+
+    # ---- program state (driven by the program executor and the dashboard) ------------------------
+
+    def start_program(self) -> str | None:
+        """The program starts playing; a reason if it cannot."""
+        if self.robot_mode is not RobotMode.RUNNING:
+            return f"robot is {self.robot_mode.name}, not RUNNING"
+        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+            return f"safety mode is {self.safety_mode.name}"
+        self.runtime_state = RuntimeState.PLAYING
+        return None
+
+    def pause_program(self) -> None:
+        """Pause the program (motion stops)."""
+        if self.runtime_state is RuntimeState.PLAYING:
+            self.stop(PROTECTIVE_STOP_DECELERATION)
+            self.runtime_state = RuntimeState.PAUSED
+
+    def resume_program(self) -> str | None:
+        """Resume a paused program."""
+        if self.runtime_state is not RuntimeState.PAUSED:
+            return "no paused program"
+        return self.start_program()
+
+    def stop_program(self) -> None:
+        """Stop the program (motion stops)."""
+        if self.runtime_state is not RuntimeState.STOPPED:
+            self.stop(PROTECTIVE_STOP_DECELERATION)
+            self.runtime_state = RuntimeState.STOPPED
+
+    @property
+    def program_running(self) -> bool:
+        """RTDE robot_status_bits bit 1."""
+        return self.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING)
+
+    # ---- motion commands -------------------------------------------------------------------------
+
+    def servoj(self, target: Sequence[float]) -> None:
+        """Track joint position ``target`` (reached as fast as the velocity limits allow)."""
+        if not self.can_move:
+            return
+        self._mode = MotionMode.SERVO
+        self._servo_target = [float(v) for v in target]
+
+    def speedj(self, velocities: Sequence[float], acceleration: float = SPEEDJ_DEFAULT_ACCELERATION) -> None:
+        """Accelerate toward joint ``velocities`` (rad/s) at ``acceleration`` (rad/s²)."""
+        if not self.can_move:
+            return
+        self._mode = MotionMode.SPEED
+        self._speed_target = [float(v) for v in velocities]
+        self._acceleration = max(float(acceleration), 1e-6)
+
+    def stop(self, deceleration: float) -> None:
+        """stopj(a): decelerate every joint to rest at ``deceleration`` (rad/s²)."""
+        self._mode = MotionMode.STOP
+        self._speed_target = [0.0] * 6
+        self._acceleration = max(float(deceleration), 1e-6)
+        self._servo_target = None
+
+    def hold(self) -> None:
+        """Stand still (no motion thread)."""
+        self.stop(PROTECTIVE_STOP_DECELERATION)
+
+    def _halt_motion(self) -> None:
+        self._mode = MotionMode.HOLD
+        self._servo_target = None
+        self.qd = [0.0] * 6
+        self.qdd = [0.0] * 6
+
+    # ---- simulation ------------------------------------------------------------------------------
+
+    def step(self, dt: float) -> None:
+        """Advance one controller cycle of ``dt`` seconds."""
+        self.timestamp += dt
+        self._advance_transitions()
+        if self.robot_mode is not RobotMode.RUNNING and self._mode is not MotionMode.STOP:
+            self._halt_motion()
+        if (
+            self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED)
+            and self._mode is not MotionMode.STOP
+        ):
+            self.stop(PROTECTIVE_STOP_DECELERATION)
+        self.speed_scaling = 1.0 if self.runtime_state is RuntimeState.PLAYING else 0.0
+        mode = self._mode
+        if mode is MotionMode.SERVO and self._servo_target is not None:
+            self._step_servo(dt, self._servo_target)
+        elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
+            self._step_speed(dt, self._speed_target, self._acceleration)
+            if mode is MotionMode.STOP and not any(self.qd):
+                self._mode = MotionMode.HOLD
+        else:
+            self.qd = [0.0] * 6
+            self.qdd = [0.0] * 6
+        self._check_limits()
+
+    def _advance_transitions(self) -> None:
+        if self._transition_at is None or self.timestamp < self._transition_at:
+            return
+        self._transition_at = None
+        if self.robot_mode is RobotMode.BOOTING:
+            self.robot_mode = RobotMode.IDLE
+        elif self.robot_mode is RobotMode.POWER_ON:
+            self.robot_mode = RobotMode.RUNNING
+
+    def _step_servo(self, dt: float, target: list[float]) -> None:
+        q, qd, vmax = self.q, self.qd, self.max_velocity
+        for i in range(6):
+            want = (target[i] - q[i]) / dt
+            limit = vmax[i]
+            v = limit if want > limit else -limit if want < -limit else want
+            self.qdd[i] = (v - qd[i]) / dt
+            qd[i] = v
+            q[i] += v * dt
+
+    def _step_speed(self, dt: float, target: list[float], acceleration: float) -> None:
+        q, qd, vmax = self.q, self.qd, self.max_velocity
+        dv_max = acceleration * dt
+        for i in range(6):
+            want = max(-vmax[i], min(vmax[i], target[i]))
+            dv = max(-dv_max, min(dv_max, want - qd[i]))
+            new_v = qd[i] + dv
+            if abs(new_v) < 1e-12:
+                new_v = 0.0
+            self.qdd[i] = dv / dt
+            q[i] += 0.5 * (qd[i] + new_v) * dt
+            qd[i] = new_v
+
+    def _check_limits(self) -> None:
+        for i in range(6):
+            if not self.min_position[i] <= self.q[i] <= self.max_position[i]:
+                self.q[i] = min(max(self.q[i], self.min_position[i]), self.max_position[i])
+                self.protective_stop()
+                return
+
+    # ---- derived values ----------------------------------------------------------------------------
+
+    def tcp_pose(self) -> tuple[float, float, float, float, float, float]:
+        """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector."""
+        x, y, z, qx, qy, qz, qw = self.kinematics.tool_pose(self.q)
+        return (x, y, z, *_rotation_vector(qx, qy, qz, qw))
+
+    @property
+    def robot_status_bits(self) -> int:
+        """RTDE ``robot_status_bits``: bit 0 power on, bit 1 program running."""
+        powered = self.robot_mode in (
+            RobotMode.IDLE,
+            RobotMode.RUNNING,
+            RobotMode.POWER_ON,
+            RobotMode.BACKDRIVE,
+        )
+        return int(powered) | (int(self.program_running) << 1)
+
+    @property
+    def safety_status_bits(self) -> int:
+        """RTDE ``safety_status_bits`` (ur-protocols.md §1.9)."""
+        mode = self.safety_mode
+        bits = 0
+        if mode is SafetyMode.NORMAL:
+            bits |= 1
+        if mode is SafetyMode.REDUCED:
+            bits |= 1 << 1
+        if mode is SafetyMode.PROTECTIVE_STOP:
+            bits |= 1 << 2
+        if mode is SafetyMode.SYSTEM_EMERGENCY_STOP:
+            bits |= (1 << 5) | (1 << 7)
+        if mode is SafetyMode.ROBOT_EMERGENCY_STOP:
+            bits |= (1 << 6) | (1 << 7)
+        return bits
+
+
+def _rotation_vector(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
+    """Axis-angle (rotation vector) of a unit quaternion."""
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+    if norm < 1e-12:
+        return (0.0, 0.0, 0.0)
+    angle = 2.0 * math.atan2(norm, qw)
+    scale = angle / norm
+    return (qx * scale, qy * scale, qz * scale)
