@@ -222,6 +222,12 @@ async def _move(args: argparse.Namespace) -> int:
     if not all(math.isfinite(v) for v in joints):
         print("error: --joints must be finite numbers", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        print(f"error: --duration must be a number of seconds > 0, got {args.duration}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if not (math.isfinite(args.velocity_scale) and 0 < args.velocity_scale <= 1):
+        print(f"error: --velocity-scale must be within (0, 1], got {args.velocity_scale}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     problem = _bad_endpoint(args.connect)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
@@ -242,9 +248,14 @@ async def _move(args: argparse.Namespace) -> int:
             print(f"error: {err}", file=sys.stderr)
             return EXIT_FAILED
         print(f"goal {goal.goal_id} accepted, planned {goal.duration:.2f} s", file=sys.stderr)
-        async for feedback in goal.feedback():
-            print(f"\r  {100.0 * float(feedback['progress']):5.1f} %", end="", file=sys.stderr, flush=True)
-        result = await goal.result()
+        try:
+            async for feedback in goal.feedback():
+                progress = 100.0 * float(feedback["progress"])
+                print(f"\r  {progress:5.1f} %", end="", file=sys.stderr, flush=True)
+            result = await goal.result()
+        except UrDaemonError as err:
+            print(f"\nerror: {err}", file=sys.stderr)
+            return EXIT_FAILED
         print(file=sys.stderr)
         print(json.dumps(result))
         return EXIT_OK if result.get("status") == "succeeded" else EXIT_FAILED

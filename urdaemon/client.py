@@ -15,12 +15,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any
 
 import zenoh
 
-from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
+from urdaemon.errors import ConnectionLostError, GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish.codec import SCHEMA_VERSION
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
@@ -93,6 +93,8 @@ class Client:
         self.session = session
         self._loop = loop
         self._subscriptions: list[Subscription] = []
+        self._tasks: list[asyncio.Task[None]] = []
+        self._closers: list[Callable[[], object]] = []
 
     @classmethod
     async def connect(cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0) -> Client:
@@ -113,10 +115,24 @@ class Client:
         await self.close()
 
     async def close(self) -> None:
-        """Undeclare subscriptions and close the session."""
+        """Stop background tasks, undeclare subscriptions and close the session."""
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        for closer in self._closers:
+            with contextlib.suppress(Exception):
+                closer()
         for sub in self._subscriptions:
             sub.close()
         await self._loop.run_in_executor(None, self.session.close)
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        """Close ``sub`` and forget it."""
+        sub.close()
+        with contextlib.suppress(ValueError):
+            self._subscriptions.remove(sub)
 
     def subscribe(self, key_expr: str, maxsize: int = 1000) -> Subscription:
         """Subscribe to ``key_expr`` (closed with the client)."""
@@ -196,11 +212,14 @@ class Client:
 class GoalHandle:
     """An accepted goal: its feedback and its one result."""
 
+    MAX_QUEUED_FEEDBACK = 1000
+    """Feedback kept for a reader that falls behind; older messages are dropped first."""
+
     def __init__(self, robot: RobotClient, goal_id: str, duration: float) -> None:
         self.robot = robot
         self.goal_id = goal_id
         self.duration = duration
-        self._feedback: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._feedback: asyncio.Queue[dict[str, Any]] = asyncio.Queue(self.MAX_QUEUED_FEEDBACK)
         self._result: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
 
     def _deliver(self, kind: str, data: dict[str, Any]) -> None:
@@ -208,22 +227,39 @@ class GoalHandle:
             if not self._result.done():
                 self._result.set_result(data)
         else:
+            if self._feedback.full():
+                self._feedback.get_nowait()
             self._feedback.put_nowait(data)
 
+    def _fail(self, error: Exception) -> None:
+        if not self._result.done():
+            self._result.set_exception(error)
+
     async def feedback(self) -> AsyncIterator[dict[str, Any]]:
-        """Feedback messages until the result arrives."""
+        """Feedback messages until the goal has ended; raises what ``result()`` would if it ended unknown."""
         while not self._result.done():
             getter = asyncio.ensure_future(self._feedback.get())
-            done, _ = await asyncio.wait({getter, self._result}, return_when=asyncio.FIRST_COMPLETED)
+            done, _ = await asyncio.wait(
+                {getter, self._result}, timeout=RESULT_POLL_S, return_when=asyncio.FIRST_COMPLETED
+            )
             if getter in done:
                 yield getter.result()
-            else:
-                getter.cancel()
+                continue
+            getter.cancel()
+            if not done:  # nothing for a while: the result may have been published while we missed it
+                await self._poll_result()
         while not self._feedback.empty():
             yield self._feedback.get_nowait()
+        error = self._result.exception()
+        if error is not None:  # the goal's end is unknown (e.g. the daemon died): say so, do not just stop
+            raise error
 
     async def result(self, timeout: float | None = None) -> dict[str, Any]:
-        """Wait for the result (asking the daemon too, in case a publication was missed)."""
+        """Wait for the result (asking the daemon too, in case a publication was missed).
+
+        Raises ``ConnectionLostError`` when the daemon stops serving the robot before the goal ended,
+        ``UrTimeoutError`` after ``timeout`` seconds.
+        """
         loop = asyncio.get_running_loop()
         deadline = None if timeout is None else loop.time() + timeout
         while not self._result.done():
@@ -233,12 +269,31 @@ class GoalHandle:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(asyncio.shield(self._result), wait)
             if not self._result.done():
-                replies = await self.robot.client.query(
-                    self.robot.keys.goal_result(self.goal_id), timeout=1.0
-                )
-                if replies:
-                    self._deliver("result", json.loads(replies[0]))
+                await self._poll_result()
         return self._result.result()
+
+    async def _poll_result(self) -> None:
+        try:
+            replies = await self.robot.client.query(self.robot.keys.goal_result(self.goal_id), timeout=1.0)
+        except UrDaemonError:
+            return
+        for payload in replies:
+            data = _result_message(payload, self.goal_id)
+            if data is not None:
+                self._deliver("result", data)
+                self.robot._forget(self.goal_id)
+                return
+
+
+def _result_message(payload: bytes, goal_id: str) -> dict[str, Any] | None:
+    """``payload`` decoded if it is a message of goal ``goal_id``, else None (garbage is ignored)."""
+    try:
+        data = json.loads(payload)
+    except ValueError:
+        return None
+    if isinstance(data, dict) and data.get("goal_id") == goal_id:
+        return data
+    return None
 
 
 class RobotClient:
@@ -251,6 +306,7 @@ class RobotClient:
         self._early: dict[str, list[tuple[str, dict[str, Any]]]] = {}
         self._goal_sub: Subscription | None = None
         self._pump: asyncio.Task[None] | None = None
+        self._alive_sub: Any = None
 
     @property
     def name(self) -> str:
@@ -267,7 +323,7 @@ class RobotClient:
         try:
             return await sub.get_json(timeout)
         finally:
-            sub.close()
+            self.client.unsubscribe(sub)
 
     async def send_trajectory(
         self,
@@ -358,6 +414,29 @@ class RobotClient:
         if self._goal_sub is None:
             self._goal_sub = self.client.subscribe(f"{self.keys.base}/goal/*/*", maxsize=10000)
             self._pump = asyncio.get_running_loop().create_task(self._pump_goals(self._goal_sub))
+            self.client._tasks.append(self._pump)
+            self._watch_liveliness()
+
+    def _forget(self, goal_id: str) -> None:
+        self._goals.pop(goal_id, None)
+
+    def _watch_liveliness(self) -> None:
+        """Fail every waiting goal when the daemon stops serving this robot (its token disappears)."""
+        loop = asyncio.get_running_loop()
+
+        def on_token(sample: Any) -> None:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                with contextlib.suppress(RuntimeError):
+                    loop.call_soon_threadsafe(self._on_lost)
+
+        self._alive_sub = self.client.session.liveliness().declare_subscriber(self.keys.alive, on_token)
+        self.client._closers.append(self._alive_sub.undeclare)
+
+    def _on_lost(self) -> None:
+        error = ConnectionLostError(f"the daemon stopped serving robot {self.name!r}")
+        for handle in list(self._goals.values()):
+            handle._fail(error)
+        self._goals.clear()
 
     async def _pump_goals(self, sub: Subscription) -> None:
         async for key, payload in sub:
@@ -365,15 +444,14 @@ class RobotClient:
             if len(parts) < 2 or parts[-1] not in ("feedback", "result"):
                 continue
             goal_id, kind = parts[-2], parts[-1]
-            try:
-                data = json.loads(payload)
-            except json.JSONDecodeError:
+            data = _result_message(payload, goal_id)
+            if data is None:  # not JSON, not an object, or about another goal: someone else's garbage
                 continue
             handle = self._goals.get(goal_id)
             if handle is not None:
                 handle._deliver(kind, data)
                 if kind == "result":  # the handle keeps its result; the robot need not track it further
-                    del self._goals[goal_id]
+                    self._forget(goal_id)
             else:
                 early = self._early.setdefault(goal_id, [])
                 if len(early) < 100:

@@ -65,12 +65,24 @@ def _initial_positions(robot: Robot, limits: JointLimits) -> list[float] | None:
             raise ConfigError(
                 f"robot {robot.name!r}: initial_positions name unknown joint(s) {', '.join(unknown)}"
             )
-        return [float(by_name.get(name, 0.0)) for name in limits.names]
+        return _within_limits(robot, limits, [float(by_name.get(name, 0.0)) for name in limits.names])
     if len(given) != limits.dof:
         raise ConfigError(
             f"robot {robot.name!r}: initial_positions has {len(given)} values for {limits.dof} joints"
         )
-    return [float(v) for v in given]
+    return _within_limits(robot, limits, [float(v) for v in given])
+
+
+def _within_limits(robot: Robot, limits: JointLimits, positions: list[float]) -> list[float]:
+    for name, value, lo, hi in zip(
+        limits.names, positions, limits.min_position, limits.max_position, strict=True
+    ):
+        if not lo <= value <= hi:
+            raise ConfigError(
+                f"robot {robot.name!r}: initial position of {name} is {value}, "
+                f"outside its limits [{lo}, {hi}]"
+            )
+    return positions
 
 
 def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell: str) -> Backend:
@@ -167,15 +179,18 @@ class Daemon:
     async def _publish_tf(self, publisher: Any) -> None:
         period = 1.0 / self.cell.publish.tf_rate_hz
         tree = self.description.tree
+        last_error = ""
         while True:
             await asyncio.sleep(period)
             positions: dict[str, float] = {}
-            for runtime in self.runtimes:
-                state = runtime.state
-                positions.update(zip(state.joint_names, state.positions, strict=True))
             try:
+                for runtime in self.runtimes:
+                    state = runtime.state
+                    positions.update(zip(state.joint_names, state.positions, strict=True))
                 links = {name: list(pose) for name, pose in tree.link_poses(positions)}
-            except UrDaemonError as err:
-                log.error("tf: %s", err)
-                continue
-            publisher.put(codec.encode({"frame": "world", "links": links}))
+                publisher.put(codec.encode({"frame": "world", "links": links}))
+            except Exception as err:  # tf must never take the robots down with it; say so once per cause
+                text = f"{type(err).__name__}: {err}"
+                if text != last_error:
+                    log.error("tf not published: %s", text, exc_info=not isinstance(err, UrDaemonError))
+                    last_error = text

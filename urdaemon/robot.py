@@ -82,6 +82,7 @@ class RobotRuntime:
         self._status_signature: tuple[Any, ...] = ()
         self._io_signature: tuple[Any, ...] = ()
         self._tasks: set[asyncio.Task[None]] = set()
+        self._planning: str | None = None
         self._restarts = 0
         self._stream_rejections = 0
         self._frame = f"{robot.prefix}base"
@@ -116,9 +117,17 @@ class RobotRuntime:
 
     async def run(self) -> None:
         """Run the backend, restarting it with backoff after any failure; also the status/IO timers."""
-        async with asyncio.TaskGroup() as group:
-            group.create_task(self._periodic_status())
-            group.create_task(self._supervise())
+        try:
+            async with asyncio.TaskGroup() as group:
+                group.create_task(self._periodic_status())
+                group.create_task(self._supervise())
+        finally:
+            # requests still in progress answer "shutting down" before the session closes
+            pending = list(self._tasks)
+            for task in pending:
+                task.cancel()
+            if pending:
+                await asyncio.gather(*pending, return_exceptions=True)
 
     async def _supervise(self) -> None:
         attempt = 0
@@ -147,7 +156,7 @@ class RobotRuntime:
             await asyncio.sleep(delay)
 
     def _end_motion(self, reason: str) -> None:
-        self.controller.stop(reason, time.monotonic())
+        self.controller.abort(reason)
         state = self.backend.state
         state.program_running = False
         self._publish_events()
@@ -238,9 +247,11 @@ class RobotRuntime:
         state = self.backend.state
         return (
             state.lifecycle,
+            state.lifecycle_reason,
             state.robot_mode,
             state.safety_mode,
-            state.speed_scaling,
+            # a real controller's scaling moves continuously: only a change of a percent is news
+            round(state.speed_scaling, 2),
             state.program_running,
             self.controller.active_goal_id,
         )
@@ -261,13 +272,16 @@ class RobotRuntime:
         while True:
             await asyncio.sleep(min(self._status_period, self._io_period))
             now = time.monotonic()
-            if now - last_status >= self._status_period:
-                self._publish_status()
-                last_status = now
-            io_signature = tuple(str(v) for v in self.io_message().values())
-            if io_signature != self._io_signature or now - last_io >= 1.0:
-                self._publish_io()
-                last_io = now
+            try:
+                if now - last_status >= self._status_period:
+                    self._publish_status()
+                    last_status = now
+                io_signature = tuple(str(v) for v in self.io_message().values())
+                if io_signature != self._io_signature or now - last_io >= 1.0:
+                    self._publish_io()
+                    last_io = now
+            except Exception:  # a publishing error must not end this robot's (or the cell's) tasks
+                self.log.exception("publishing status/IO failed")
 
     # ---- goals --------------------------------------------------------------------------------------
 
@@ -313,6 +327,8 @@ class RobotRuntime:
             goal = codec.decode_trajectory_goal(_payload(query))
             names = self._joint_names(goal.joint_names)
             tolerances = self._tolerances(goal.tolerances, names)
+            if self._planning is not None:
+                raise GoalRejected(f"busy: still planning trajectory {self._planning}")
             self.controller.check_can_start(state, time.monotonic(), goal.preempt)
             planner = self.controller.prepare_trajectory(names, goal.points, state)
         except (MessageError, GoalRejected) as err:
@@ -322,6 +338,9 @@ class RobotRuntime:
             self.log.exception("trajectory goal failed")
             _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
             return
+
+        label = f"of {len(goal.points)} points"
+        self._planning = label
 
         async def plan_then_start() -> None:
             try:
@@ -340,10 +359,15 @@ class RobotRuntime:
             except GoalRejected as err:
                 self._reject_goal(query, "trajectory", err)
                 return
+            except asyncio.CancelledError:
+                _reply(query, {"accepted": False, "reason": "daemon shutting down"})
+                raise
             except Exception as err:  # a bug must still answer the client, once
                 self.log.exception("trajectory goal failed")
                 _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
                 return
+            finally:
+                self._planning = None
             self._accept_goal(query, "trajectory", goal_id, duration)
 
         self._spawn(plan_then_start())
@@ -490,6 +514,9 @@ class RobotRuntime:
         async def serve() -> None:
             try:
                 await work
+            except asyncio.CancelledError:
+                _reply(query, {"ok": False, "reason": "daemon shutting down"})
+                raise
             except (MessageError, BackendError) as err:
                 self.log.warning("%s refused: %s", name, err)
                 _reply(query, {"ok": False, "reason": str(err)})

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from urdaemon.backends import ServoBackend, ServoMapping
@@ -122,8 +122,8 @@ def test_pulse_is_clamped_to_the_range(position: float, pulse: float) -> None:
         (50.0, 2500.0, 512),
         (60.0, 1000.0, 246),  # 245.76
         (200.0, 2500.0, 2048),
-        (400.0, 2500.0, 4095),  # 4096 would not fit in 12 bits: clamped
-        (1526.0, 2500.0, 4095),
+        (399.0, 2500.0, 4086),  # 4085.76: just inside the 2506 µs period
+        (1526.0, 600.0, 3750),  # 3750.3
     ],
 )
 def test_counts_follow_the_datasheet_formula(freq: float, pulse: float, expected: int) -> None:
@@ -138,14 +138,14 @@ def test_counts_follow_the_datasheet_formula(freq: float, pulse: float, expected
 
 def test_update_fills_the_configured_channels_and_leaves_the_rest_zero() -> None:
     mapping = ServoMapping(
-        ("p_a", "p_b", "p_c"),
+        ("p_a", "p_b"),
         "p_",
         options(
             joint("b", 15, angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000),
             joint("a", 4, angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000),
         ),
     )
-    channels = mapping.update([1.0, -1.0, 123.0])  # a = 1.0 (max), b = -1.0 (min), c is not a servo
+    channels = mapping.update([1.0, -1.0])  # a = 1.0 (max), b = -1.0 (min)
     assert len(channels) == PCA9685_CHANNELS
     assert channels[4] == counts(2000.0)
     assert channels[15] == counts(1000.0)
@@ -175,9 +175,15 @@ def test_servo_joint_needs_the_prefix() -> None:
         ServoMapping(("a",), "p_", options(joint("a", 0)))
 
 
-def test_description_joints_without_servo_are_allowed() -> None:
-    mapping = ServoMapping(("p_a", "p_b"), "p_", options(joint("b", 3)))
-    assert mapping.update([0.0, 0.0])[3] == counts(1500.0)
+def test_description_joints_without_a_servo_channel_are_refused() -> None:
+    with pytest.raises(ConfigError, match="joints of the description without a servo channel: p_a"):
+        ServoMapping(("p_a", "p_b"), "p_", options(joint("b", 3)))
+
+
+@pytest.mark.parametrize(("freq", "pulse"), [(400.0, 2500.0), (1526.0, 2500.0), (1000.0, 1000.0)])
+def test_a_pulse_longer_than_the_pwm_period_is_refused(freq: float, pulse: float) -> None:
+    with pytest.raises(ConfigError, match=f"pulse_max_us {pulse} does not fit the PWM period"):
+        ServoMapping(("p_j",), "p_", options(joint(pulse_min_us=pulse - 100, pulse_max_us=pulse), freq=freq))
 
 
 @st.composite
@@ -206,6 +212,7 @@ def servo_joints(draw: st.DrawFn) -> ServoJoint:
     b=st.floats(min_value=-10.0, max_value=10.0),
 )
 def test_mapping_properties(servo: ServoJoint, freq: float, a: float, b: float) -> None:
+    assume(servo.pulse_max_us < 1e6 / freq)
     mapping = ServoMapping(("p_j",), "p_", options(servo, freq=freq))
     pa, pb = mapping.pulse_us(0, a), mapping.pulse_us(0, b)
     for pulse in (pa, pb):

@@ -460,3 +460,49 @@ def test_constructor_validates_parameters() -> None:
     with pytest.raises(ValueError, match="goal_time_tolerance must be >= 0"):
         MotionController(THREE_LIMITS, period=PERIOD, goal_time_tolerance=-1.0)
     assert MotionController(THREE_LIMITS, period=PERIOD).joint_names == NAMES3
+
+
+def test_abort_ends_the_goal_at_once_goes_idle_and_the_next_motion_starts_from_the_measured_pose() -> None:
+    sim = SimRobot.create(THREE_LIMITS)
+    sim.controller.accept_move("g1", THREE_LIMITS.names, [0.8, 0.0, 0.0], sim.state, sim.now, duration=2.0)
+    for _ in range(300):
+        sim.step()
+    assert sim.state.velocities[0] != 0.0
+    sim.controller.abort("backend failed: link lost")
+    sim.events.extend(sim.controller.drain_events())
+    (result,) = sim.results()
+    assert result.status is GoalStatus.ABORTED
+    assert result.reason == "backend failed: link lost"
+    assert sim.controller.mode == "idle"
+    # the robot was moved elsewhere while the link was down; no ramp from the old setpoint follows
+    sim.state.positions[:] = [0.1, 0.2, 0.0]
+    sim.state.velocities[:] = [0.0, 0.0, 0.0]
+    sim.step()
+    mode, positions, _ = sim.commands[-1]
+    assert mode is CommandMode.IDLE
+    assert list(positions) == pytest.approx([0.1, 0.2, 0.0])
+    sim.controller.accept_move("g2", THREE_LIMITS.names, [0.2, 0.2, 0.0], sim.state, sim.now, duration=1.0)
+    sim.step()
+    _, first, _ = sim.commands[-1]
+    assert first[0] == pytest.approx(0.1, abs=1e-3), "the new goal starts at the measured pose"
+
+
+def test_a_preempt_that_could_not_continue_the_motion_at_low_speed_scaling_is_refused() -> None:
+    sim = SimRobot.create(THREE_LIMITS)
+    sim.state.speed_scaling = 0.1
+    for _ in range(200):
+        sim.controller.stream_velocities(THREE_LIMITS.names, [1.0, 0.0, 0.0], sim.state, sim.now)
+        sim.step()
+    assert sim.state.velocities[0] == pytest.approx(1.0)
+    with pytest.raises(GoalRejected, match=r"cannot take over the current motion at speed scaling 0\.1"):
+        sim.controller.accept_move(
+            "g", THREE_LIMITS.names, [0.5, 0.0, 0.0], sim.state, sim.now, duration=3.0, preempt=True
+        )
+    sim.state.speed_scaling = 1.0
+    duration = sim.controller.accept_move(
+        "g", THREE_LIMITS.names, [0.9, 0.0, 0.0], sim.state, sim.now, duration=3.0, preempt=True
+    )
+    assert duration == pytest.approx(3.0)
+    before = sim.state.velocities[0]
+    sim.step()
+    assert sim.state.velocities[0] == pytest.approx(before, abs=5.0 * 0.002 * 1.05), "no velocity jump"

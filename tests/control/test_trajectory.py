@@ -83,6 +83,7 @@ def test_given_waypoint_velocities_and_accelerations_are_met() -> None:
     points = [
         TrajectoryPoint((0.4, 0.0, 0.0), 1.0, velocities=(0.5, 0.2, -0.1), accelerations=(0.0, 0.5, 0.0)),
         TrajectoryPoint((0.8, 0.4, -0.2), 2.0, velocities=(0.3, 0.0, 0.0)),
+        TrajectoryPoint((0.9, 0.4, -0.2), 3.0),
     ]
     plan = plan_trajectory(Z3, Z3, Z3, points, THREE_LIMITS)
     _, vel, acc = _sample(plan, 1.0)
@@ -90,7 +91,20 @@ def test_given_waypoint_velocities_and_accelerations_are_met() -> None:
     assert acc == pytest.approx([0.0, 0.5, 0.0], abs=1e-9)
     _, vel, _ = _sample(plan, 2.0)
     assert vel == pytest.approx([0.3, 0.0, 0.0], abs=1e-9)
-    assert plan.final_velocities == pytest.approx((0.3, 0.0, 0.0), abs=1e-9)
+    assert plan.final_velocities == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+
+
+@pytest.mark.parametrize("field", ["velocities", "accelerations"])
+def test_a_trajectory_that_does_not_end_at_rest_is_rejected(field: str) -> None:
+    moving = (0.3, 0.0, 0.0)
+    last = (
+        TrajectoryPoint((0.8, 0.0, 0.0), 2.0, velocities=moving)
+        if field == "velocities"
+        else TrajectoryPoint((0.8, 0.0, 0.0), 2.0, accelerations=moving)
+    )
+    points = [TrajectoryPoint((0.4, 0.0, 0.0), 1.0), last]
+    with pytest.raises(GoalRejected, match=f"point 1: the last point's {field} must be zero"):
+        plan_trajectory(Z3, Z3, Z3, points, THREE_LIMITS)
 
 
 def test_starts_from_a_moving_state() -> None:
@@ -374,17 +388,18 @@ def test_degenerate_rest_to_rest_move_that_trips_ruckig_is_planned() -> None:
 
 
 def _dense_points(n: int) -> list[TrajectoryPoint]:
-    """A smooth 6-joint sine trajectory with velocities and accelerations, 50 ms apart."""
+    """A smooth 6-joint sine trajectory with velocities and accelerations, 50 ms apart, ending at rest."""
     w, amp, dt = 0.5, 0.3, 0.05
-    return [
+    points = [
         TrajectoryPoint(
             positions=tuple(amp * math.sin(w * t + j) - amp * math.sin(j) for j in range(6)),
             velocities=tuple(amp * w * math.cos(w * t + j) for j in range(6)),
             accelerations=tuple(-amp * w * w * math.sin(w * t + j) for j in range(6)),
             time_from_start=t,
         )
-        for t in (dt * (k + 1) for k in range(n))
+        for t in (dt * (k + 1) for k in range(n - 1))
     ]
+    return [*points, TrajectoryPoint(points[-1].positions, points[-1].time_from_start + 1.0)]
 
 
 def test_stepwise_planning_equals_one_shot_planning() -> None:

@@ -31,6 +31,16 @@ class ServoMapping:
         unknown = sorted(set(by_name) - set(joint_names))
         if unknown:
             raise ConfigError(f"servo joints not in the robot description: {', '.join(unknown)}")
+        unmapped = [name for name in joint_names if name not in by_name]
+        if unmapped:
+            raise ConfigError(f"joints of the description without a servo channel: {', '.join(unmapped)}")
+        period_us = 1e6 / options.pwm_frequency_hz
+        for j in options.joints:
+            if j.pulse_max_us >= period_us:
+                raise ConfigError(
+                    f"servo joint {j.name}: pulse_max_us {j.pulse_max_us} does not fit the PWM period of "
+                    f"{period_us:.0f} µs at {options.pwm_frequency_hz} Hz"
+                )
         self.frequency = options.pwm_frequency_hz
         # (joint index, channel, angle_min, angle span, pulse_min, pulse span, offset, direction)
         self._joints = [

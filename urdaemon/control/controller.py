@@ -22,6 +22,7 @@ Policies (documented contracts):
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -199,6 +200,8 @@ class MotionController:
         self._otg: Any = Ruckig(n, period)
         self._inp: Any = InputParameter(n)
         self._out: Any = OutputParameter(n)
+        # bound once: the online update runs every tick and must not build a closure each time
+        self._update = functools.partial(self._otg.update, self._inp, self._out)
         self._inp.max_velocity = list(limits.max_velocity)
         self._inp.max_acceleration = list(limits.max_acceleration)
         self._inp.max_jerk = list(limits.max_jerk)
@@ -370,6 +373,16 @@ class MotionController:
             self._enter_stopping()
         # Commands of a stopped stream must not keep it "active" for busy checks.
         self._last_stream_now = -math.inf
+
+    def abort(self, reason: str) -> None:
+        """End whatever runs at once and go idle, forgetting the setpoint (the robot is gone or stopped).
+
+        An executing goal ends ABORTED with ``reason``. No stop ramp is commanded: after a link loss or
+        a restart the robot is not following our setpoint, so the next motion seeds from the measured pose.
+        """
+        if self._goal is not None:
+            self._finish_goal(GoalStatus.ABORTED, reason, self._meas)
+        self._go_idle()
 
     # ------------------------------------------------------------------ streams
 
@@ -565,10 +578,10 @@ class MotionController:
         out = self._out
         self._brake_coasting_joints()
         try:
-            result = run_robustly(lambda: self._otg.update(inp, out), inp)
+            result = run_robustly(self._update, inp)
             if out.new_calculation and self._brake_overshooting_joints(out):
                 # Same start state, now with those joints braking instead of following the target.
-                result = run_robustly(lambda: self._otg.update(inp, out), inp)
+                result = run_robustly(self._update, inp)
         except RUCKIG_ERRORS:
             result = None
         if result != _WORKING and result != _FINISHED:
@@ -702,10 +715,17 @@ class MotionController:
             return list(self._pos), list(self._pvel), list(self._pacc)
         if mode is _Mode.IDLE:
             return list(state.positions), [0.0] * self._n, [0.0] * self._n
-        # A stream or stop runs in real time; the goal will run at speed_scaling, so rescale.
+        # A stream or stop runs in real time; the goal will run at speed_scaling, so rescale. If the
+        # rescaled state is beyond the limits the goal could not continue the motion without a jump.
         s = max(state.speed_scaling, _MIN_SEED_SCALING)
-        vel = [max(-vm, min(vm, v / s)) for v, vm in zip(self._vel, self._vmax, strict=True)]
-        acc = [max(-am, min(am, a / (s * s))) for a, am in zip(self._acc, self._amax, strict=True)]
+        vel = [v / s for v in self._vel]
+        acc = [a / (s * s) for a in self._acc]
+        for i in range(self._n):
+            if abs(vel[i]) > self._vmax[i] * (1.0 + 1e-9) or abs(acc[i]) > self._amax[i] * (1.0 + 1e-9):
+                raise GoalRejected(
+                    f"cannot take over the current motion at speed scaling {state.speed_scaling:.3g}: "
+                    f"{self.joint_names[i]} moves too fast to continue at that time scale; stop first"
+                )
         return list(self._pos), vel, acc
 
     def _start_goal(
@@ -799,7 +819,7 @@ class MotionController:
     def _online_step(self) -> Any:
         """One online ruckig cycle from the setpoint; None when ruckig failed."""
         try:
-            result = run_robustly(lambda: self._otg.update(self._inp, self._out), self._inp)
+            result = run_robustly(self._update, self._inp)
         except RUCKIG_ERRORS:
             return None
         if result != _WORKING and result != _FINISHED:

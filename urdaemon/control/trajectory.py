@@ -314,6 +314,14 @@ def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> 
                 raise GoalRejected(f"{what}: accelerations has {len(pt.accelerations)} values for {n} joints")
             check_finite(f"{what} accelerations", pt.accelerations, limits.names)
             check_accelerations_within(limits, pt.accelerations, what)
+    last = points[-1]
+    # A goal ends at rest: a final velocity would need an unplanned stop after the goal, which could
+    # leave the joint limits and which a lagging robot would execute as stop-and-go.
+    for label, values in (("velocities", last.velocities), ("accelerations", last.accelerations)):
+        if values is not None and any(v != 0.0 for v in values if math.isfinite(v)):
+            raise GoalRejected(
+                f"point {len(points) - 1}: the last point's {label} must be zero (a trajectory ends at rest)"
+            )
 
 
 class TrajectoryPlanner:

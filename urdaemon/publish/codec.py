@@ -1,4 +1,4 @@
-"""The one message encoding: UTF-8 JSON objects carrying ``"v": 1`` (docs/messages.md).
+"""The one message encoding: UTF-8 JSON objects carrying ``"v": 1`` (docs/keys.md).
 
 Decoders take what a client sent and return typed values or raise ``MessageError`` naming the
 field and the problem. Range checks against a robot (limits, joint names, NaN) belong to the
@@ -39,10 +39,11 @@ __all__ = [
 ]
 
 SCHEMA_VERSION = 1
-MAX_MESSAGE_BYTES = 4 * 1024 * 1024
-"""Largest client message accepted (a 10 000-point 6-joint trajectory is about 1.5 MB)."""
-MAX_TRAJECTORY_POINTS = 20_000
-"""Planning costs about 50 µs a point, done in slices between cycles: 20 000 points plan in about 1 s."""
+MAX_MESSAGE_BYTES = 2 * 1024 * 1024
+"""Largest client message accepted (5 000 points with positions, velocities and accelerations: ~1.9 MB)."""
+MAX_TRAJECTORY_POINTS = 5_000
+"""Planning is sliced between cycles, but decoding and checking a goal (~25 µs a point) is not yet:
+5 000 points keep that one-off stall near 0.1 s (docs/keys.md)."""
 
 
 @dataclass(frozen=True, slots=True)
