@@ -38,6 +38,30 @@ def _parser() -> argparse.ArgumentParser:
         "--listen", action="append", help="Zenoh listen endpoint, overrides the cell file (repeatable)"
     )
 
+    fake = sub.add_parser(
+        "fake-robot", help="serve fake UR controllers (RTDE, primary, dashboard) on loopback"
+    )
+    source = fake.add_mutually_exclusive_group(required=True)
+    source.add_argument("--model", help="UR model of one fake robot, e.g. ur10e")
+    source.add_argument(
+        "--config", help="cell file: one fake for every robot with backend 'ur', at its address"
+    )
+    fake.add_argument("--address", default="127.0.0.5", help="address of the one fake (default 127.0.0.5)")
+    fake.add_argument("--controller-version", default="5.15.0", help="e.g. 5.15.0 (e-Series) or 3.15.7 (CB3)")
+    fake.add_argument("--calibration", help="calibration file: the fake reports these DH parameters")
+    fake.add_argument("--powered", action="store_true", help="start powered on with brakes released")
+    fake.add_argument(
+        "--urcap", metavar="HOST:PORT", help="External Control URCap mode: play fetches the script from here"
+    )
+    fake.add_argument(
+        "--refuse", action="append", default=[], metavar="SERVICE", help="refuse connections to a service"
+    )
+    fake.add_argument(
+        "--split", action="append", default=[], metavar="SERVICE", help="split every write of a service"
+    )
+    fake.add_argument("--delay", type=float, default=0.0, help="delay every write by S seconds")
+    fake.add_argument("--late-start", type=float, default=0.0, help="start listening only after S seconds")
+
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)
 
@@ -87,6 +111,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _urdf(args.config)
         if args.command == "serve":
             return _serve(args.config, args.listen)
+        if args.command == "fake-robot":
+            return _fake_robot(args)
         if args.command == "echo":
             return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
         if args.command == "move":
@@ -122,6 +148,12 @@ def _bad_endpoint(endpoint: str) -> str | None:
     if not re.match(ENDPOINT_PATTERN, endpoint):
         return f"--connect {endpoint!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"
     return None
+
+
+def _fake_robot(args: argparse.Namespace) -> int:
+    from urdaemon.fakeur.cli import run_fakes
+
+    return run_fakes(args)
 
 
 def _check(path: str) -> int:

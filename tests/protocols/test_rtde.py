@@ -1109,3 +1109,13 @@ def test_fuzz_well_framed_packages_with_random_payloads(
 ) -> None:
     """Valid framing gets past the header checks, so every payload decoder meets random bytes."""
     feed_chunks(CONNECTIONS[which](), b"".join(frame(kind, payload) for kind, payload in packages), cuts)
+
+
+def test_a_trailing_comma_in_a_setup_request_adds_no_name() -> None:
+    """ur_rtde ends its name list with a comma; real controllers read it as no extra name."""
+    robot = RtdeConnection(Side.ROBOT)
+    names = b"timestamp,actual_q,"
+    package = struct.pack(">HB", 3 + 8 + len(names), ord("O")) + struct.pack(">d", 500.0) + names
+    (event,) = robot.receive_data(package)
+    assert isinstance(event, SetupOutputsRequested)
+    assert event.names == ("timestamp", "actual_q")

@@ -1195,9 +1195,14 @@ class RtdeConnection:
                 f"{kind.name} names take {end - start} bytes, the limit is {MAX_RECIPE_NAMES_BYTES}"
             )
         try:
-            return tuple(str(buf[start:end], "ascii").split(","))
+            names = str(buf[start:end], "ascii").split(",")
         except UnicodeDecodeError:
             raise self._bad(f"{kind.name} names are not ASCII") from None
+        # ur_rtde ends its list with a comma and works against real controllers: a trailing comma
+        # adds no name there, so it adds none here either
+        if len(names) > 1 and names[-1] == "":
+            names.pop()
+        return tuple(names)
 
     def _on_version_request(self, buf: _Buf, start: int, end: int) -> ProtocolVersionRequested:
         kind = PackageType.REQUEST_PROTOCOL_VERSION

@@ -1,0 +1,214 @@
+"""Independent check: SDU's ur_rtde (a C++ client written by others) works against the fake controller.
+
+These tests must not be weakened to pass: when they fail, the fake is wrong. The fake runs as
+``urdaemon fake-robot`` in its own process, as users run it: ur_rtde's calls hold the GIL while they
+block on the network, so a fake in the test's own process could never answer them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from tests.helpers import drain_in_background
+from urdaemon.model import RobotMode
+from urdaemon.protocols import primary as prim
+from urdaemon.protocols import reverse, rtde
+from urdaemon.protocols._buffer import Side
+
+rtde_receive = pytest.importorskip("rtde_receive")
+rtde_io = pytest.importorskip("rtde_io")
+dashboard_client = pytest.importorskip("dashboard_client")
+
+pytestmark = pytest.mark.timeout(120)
+
+ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(60))
+
+
+def _start_fake(*flags: str) -> tuple[subprocess.Popen[str], str]:
+    address = next(ADDRESSES)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "urdaemon", "fake-robot", "--model", "ur10e", "--address", address, *flags],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    assert proc.stderr is not None
+    lines: list[str] = []
+    for _ in range(100):
+        line = proc.stderr.readline()
+        if not line:
+            raise AssertionError(f"fake-robot exited ({proc.poll()}): {''.join(lines)}")
+        lines.append(line)
+        if "serving 1 fake robot(s)" in line:
+            drain_in_background(proc, [])
+            return proc, address
+    raise AssertionError(f"fake-robot did not start: {''.join(lines)}")
+
+
+@pytest.fixture
+def powered_fake() -> Iterator[str]:
+    proc, address = _start_fake("--powered")
+    yield address
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+@pytest.fixture
+def unpowered_fake() -> Iterator[str]:
+    proc, address = _start_fake()
+    yield address
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+async def _rtde_sample(address: str) -> dict[str, object]:
+    """One output sample read with our own codec (a second, independent reader of the fake)."""
+    reader, writer = await asyncio.open_connection(address, 30004)
+    conn = rtde.RtdeConnection(Side.DAEMON)
+    names = ("timestamp", "actual_q", "actual_digital_output_bits", "target_speed_fraction", "robot_mode")
+    pending: list[object] = []
+
+    async def next_event() -> object:
+        while not pending:
+            data = await asyncio.wait_for(reader.read(65536), 5.0)
+            assert data, "the fake closed the RTDE connection"
+            pending.extend(conn.receive_data(data))
+        return pending.pop(0)
+
+    try:
+        for request in (rtde.RequestProtocolVersion(2), rtde.SetupOutputs(125.0, names), rtde.Start()):
+            conn.send(request)
+            writer.write(conn.data_to_send())
+            await next_event()
+        for _ in range(100):
+            event = await next_event()
+            if isinstance(event, rtde.DataPackage):
+                return dict(zip(names, event.values, strict=True))
+        raise AssertionError("no data package")
+    finally:
+        writer.close()
+
+
+def _poll(condition: Callable[[], bool], seconds: float) -> None:
+    """Ask ``condition`` every 10 ms until true or ``seconds`` passed (the caller asserts afterwards)."""
+    deadline = time.monotonic() + seconds
+    for _ in range(int(seconds / 0.01) + 1):
+        if condition() or time.monotonic() > deadline:
+            return
+        time.sleep(0.01)
+
+
+def test_rtde_receive_reads_joint_positions_and_modes_at_500_hz(powered_fake: str) -> None:
+    receiver = rtde_receive.RTDEReceiveInterface(powered_fake, 500.0)
+    try:
+        assert receiver.isConnected()
+        ours = asyncio.run(_rtde_sample(powered_fake))
+        assert receiver.getActualQ() == pytest.approx(ours["actual_q"], abs=1e-6)
+        assert receiver.getRobotMode() == int(RobotMode.RUNNING)
+        assert receiver.getSafetyMode() == 1
+        first = receiver.getTimestamp()
+        stamps = {first}
+        for _ in range(2000):  # read as fast as we can for a while: every 2 ms step must show up
+            stamps.add(receiver.getTimestamp())
+            if max(stamps) - first >= 0.2:
+                break
+        steps = sorted({round(b - a, 6) for a, b in itertools.pairwise(sorted(stamps))})
+        assert steps[0] == pytest.approx(0.002), f"the fake's RTDE runs at 500 Hz, saw steps {steps[:5]}"
+    finally:
+        receiver.disconnect()
+
+
+async def _move_the_fake(address: str, seconds: float) -> None:
+    """Play the daemon: send a headless program, serve its reverse socket, stream SPEEDJ on joint 0."""
+    accepted: asyncio.Queue[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = asyncio.Queue()
+
+    async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await accepted.put((reader, writer))
+
+    servers = [await asyncio.start_server(on_connect, "127.0.0.1", 0) for _ in range(3)]
+    ports = [s.sockets[0].getsockname()[1] for s in servers]
+    program = "\n".join(
+        [
+            f'socket_open("127.0.0.1", {ports[0]}, "trajectory_socket")',
+            f'socket_open("127.0.0.1", {ports[1]}, "script_command_socket")',
+            f'socket_open("127.0.0.1", {ports[2]}, "reverse_socket")',
+            'textmsg("urdaemon test program")',
+        ]
+    )
+    _, pwriter = await asyncio.open_connection(address, 30001)
+    pconn = prim.PrimaryConnection(Side.DAEMON)
+    pconn.send(prim.Script(prim.headless_program(program)))
+    pwriter.write(pconn.data_to_send())
+    links = [await asyncio.wait_for(accepted.get(), 10.0) for _ in range(3)]
+    rev_writer = links[-1][1]
+    conn = reverse.ReverseConnection(Side.DAEMON)
+    for _ in range(int(seconds / 0.008)):
+        conn.send(reverse.SpeedJ((0.5, 0.0, 0.0, 0.0, 0.0, 0.0), 0.1))
+        rev_writer.write(conn.data_to_send())
+        await asyncio.sleep(0.008)  # a client streaming at 125 Hz
+    conn.send(reverse.Stopped())
+    rev_writer.write(conn.data_to_send())
+    await rev_writer.drain()
+    for _, writer in links:
+        writer.close()
+    pwriter.close()
+    for server in servers:
+        server.close()
+
+
+def test_rtde_receive_sees_the_fake_move(powered_fake: str) -> None:
+    receiver = rtde_receive.RTDEReceiveInterface(powered_fake, 500.0)
+    try:
+        start = receiver.getActualQ()[0]
+        asyncio.run(_move_the_fake(powered_fake, 0.6))
+        moved = receiver.getActualQ()[0]
+        assert moved > start + 0.1, f"ur_rtde saw joint 0 go from {start} to {moved}"
+        assert receiver.getActualQ()[1:] == pytest.approx([-1.57, 1.57, -1.57, -1.57, 0.0], abs=1e-6)
+    finally:
+        receiver.disconnect()
+
+
+def test_rtde_io_sets_a_digital_output_that_the_fake_reports(powered_fake: str) -> None:
+    io = rtde_io.RTDEIOInterface(powered_fake)
+    receiver = rtde_receive.RTDEReceiveInterface(powered_fake, 500.0)
+    try:
+        assert io.setStandardDigitalOut(5, True)
+        assert io.setSpeedSlider(0.25)
+        for _ in range(50):
+            sample = asyncio.run(_rtde_sample(powered_fake))
+            if sample["actual_digital_output_bits"] == 1 << 5 and sample["target_speed_fraction"] == 0.25:
+                break
+        assert sample["actual_digital_output_bits"] == 1 << 5, "our own RTDE reader sees the output"
+        assert sample["target_speed_fraction"] == pytest.approx(0.25)
+        assert receiver.getDigitalOutState(5)
+        assert not receiver.getDigitalOutState(4)
+    finally:
+        io.disconnect()
+        receiver.disconnect()
+
+
+def test_dashboard_client_powers_on_releases_brakes_and_reads_the_robot_mode(unpowered_fake: str) -> None:
+    client = dashboard_client.DashboardClient(unpowered_fake)
+    client.connect()
+    try:
+        assert client.isConnected()
+        assert "POWER_OFF" in client.robotmode()
+        client.powerOn()
+        _poll(lambda: "IDLE" in client.robotmode(), 5.0)  # the fake boots in 0.5 s; a dashboard can only poll
+        assert "IDLE" in client.robotmode()
+        client.brakeRelease()
+        _poll(lambda: "RUNNING" in client.robotmode(), 5.0)
+        assert "RUNNING" in client.robotmode()
+        assert "5.15" in client.polyscopeVersion()
+        assert asyncio.run(_rtde_sample(unpowered_fake))["robot_mode"] == int(RobotMode.RUNNING)
+    finally:
+        client.disconnect()

@@ -1,0 +1,116 @@
+"""``urdaemon fake-robot``: build fake controllers from the command line or a cell file and serve them."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+
+from urdaemon.cell import load_cell
+from urdaemon.description.calibration import load_calibration, robot_dh
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.errors import ConfigError
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.faults import SERVICES, FaultInjector
+
+__all__ = ["build_fakes", "parse_version", "run_fakes"]
+
+DAEMON_HOST = "127.0.0.1"
+"""Where a fake in URCap mode finds the daemon's script sender when built from a cell file."""
+
+
+def parse_version(text: str) -> tuple[int, int, int, int]:
+    """``5.15.0`` → (5, 15, 0, 0); ConfigError when it is not 2–4 dot-separated numbers."""
+    parts = text.split(".")
+    if not 2 <= len(parts) <= 4 or not all(p.isdigit() for p in parts):
+        raise ConfigError(f"--controller-version {text!r}: expected numbers like 5.15.0")
+    numbers = [int(p) for p in parts] + [0] * (4 - len(parts))
+    return (numbers[0], numbers[1], numbers[2], numbers[3])
+
+
+def _faults(args: argparse.Namespace) -> FaultInjector:
+    for service in [*args.refuse, *args.split]:
+        if service not in (*SERVICES, "*"):
+            raise ConfigError(f"unknown service {service!r}; one of {', '.join(SERVICES)} or *")
+    delay = {"*": args.delay} if args.delay > 0 else {}
+    return FaultInjector(refused=set(args.refuse), split=set(args.split), delay_s=delay)
+
+
+def build_fakes(args: argparse.Namespace) -> list[FakeController]:
+    """The fakes the arguments describe."""
+    version = parse_version(args.controller_version)
+    if args.config:
+        cell = load_cell(args.config)
+        fakes = []
+        for robot in cell.robots:
+            if robot.backend != "ur" or robot.address is None:
+                continue
+            urcap = None if robot.headless else (DAEMON_HOST, robot.ports.script_sender)
+            fakes.append(
+                FakeController(
+                    robot.model,
+                    address=robot.address,
+                    controller_version=version,
+                    dh=robot_dh(robot),
+                    powered=args.powered,
+                    urcap=urcap,
+                    faults=_faults(args),
+                )
+            )
+        if not fakes:
+            raise ConfigError(f"{args.config}: no robot with backend 'ur' and an address")
+        return fakes
+    model = load_ur_model(args.model)
+    dh = load_calibration(args.calibration, model).dh if args.calibration else None
+    urcap = None
+    if args.urcap:
+        host, _, port = args.urcap.rpartition(":")
+        if not host or not port.isdigit():
+            raise ConfigError(f"--urcap {args.urcap!r}: expected HOST:PORT")
+        urcap = (host, int(port))
+    return [
+        FakeController(
+            model,
+            address=args.address,
+            controller_version=version,
+            dh=dh,
+            powered=args.powered,
+            urcap=urcap,
+            faults=_faults(args),
+        )
+    ]
+
+
+def run_fakes(args: argparse.Namespace) -> int:
+    """Serve the fakes until Ctrl-C or SIGTERM; exit code."""
+    fakes = build_fakes(args)
+
+    async def serve() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        if args.late_start > 0:
+            try:
+                await asyncio.wait_for(stop.wait(), args.late_start)
+                return
+            except TimeoutError:
+                pass
+        started: list[FakeController] = []
+        try:
+            for fake in fakes:
+                await fake.start()
+                started.append(fake)
+            print(f"serving {len(fakes)} fake robot(s)", file=sys.stderr, flush=True)
+            await stop.wait()
+        finally:
+            for fake in started:
+                await fake.close()
+
+    try:
+        asyncio.run(serve())
+    except OSError as err:
+        print(f"error: cannot listen: {err}", file=sys.stderr)
+        return 1
+    return 0
