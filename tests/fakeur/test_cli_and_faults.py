@@ -1,0 +1,136 @@
+"""`urdaemon fake-robot` from a cell file and with a calibration; the fault injector's byte mangling."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.helpers import drain_in_background, wait_for_line
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.faults import FaultInjector
+from urdaemon.protocols import dashboard as dash
+from urdaemon.protocols import primary as prim
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.kinematics_hash import kinematics_hash
+
+pytestmark = pytest.mark.timeout(90)
+
+
+async def _first(conn: object, address: str, port: int, kind: type) -> object:
+    reader, writer = await asyncio.open_connection(address, port)
+    try:
+        for _ in range(50):
+            data = await asyncio.wait_for(reader.read(65536), 5.0)
+            assert data
+            for event in conn.receive_data(data):  # type: ignore[attr-defined]
+                if isinstance(event, kind):
+                    return event
+        raise AssertionError(f"no {kind.__name__}")
+    finally:
+        writer.close()
+
+
+async def _serve(args: list[str], expect: str) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "urdaemon", "fake-robot", *args],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    await wait_for_line(proc, expect, timeout=30.0)
+    drain_in_background(proc, [])
+    return proc
+
+
+async def test_fake_robot_from_a_cell_file_serves_every_ur_robot_at_its_address(tmp_path: Path) -> None:
+    cell = {
+        "cell": "fakecell",
+        "robots": [
+            {"name": "alice", "model": "ur10e", "backend": "ur", "address": "127.0.0.91"},
+            {"name": "bob", "model": "ur3e", "backend": "ur", "address": "127.0.0.92"},
+            {"name": "carol", "model": "ur5e", "backend": "mock"},
+        ],
+    }
+    path = tmp_path / "cell.yaml"
+    path.write_text(yaml.safe_dump(cell))
+    proc = await _serve(["--config", str(path)], "serving 2 fake robot(s)")
+    try:
+        for address, model in (("127.0.0.91", "UR10"), ("127.0.0.92", "UR3")):
+            conn = dash.DashboardConnection(Side.DAEMON)
+            reader, writer = await asyncio.open_connection(address, 29999)
+            banner = await asyncio.wait_for(reader.readline(), 5.0)
+            assert banner.startswith(b"Connected: Universal Robots Dashboard Server")
+            conn.receive_data(banner)
+            conn.send(dash.GetRobotModel())
+            writer.write(conn.data_to_send())
+            (reply,) = conn.receive_data(await asyncio.wait_for(reader.readline(), 5.0))
+            assert isinstance(reply, dash.RobotModelReply)
+            assert reply.model == model
+            writer.close()
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=10) == 0
+
+
+async def test_fake_robot_with_a_calibration_reports_its_kinematics(tmp_path: Path) -> None:
+    model = load_ur_model("ur5e")
+    delta = {
+        "theta": [0.0, 1e-3, -2e-3, 0.0, 0.0, 0.0],
+        "a": [0.0, 2e-4, 0.0, 0.0, 0.0, 0.0],
+        "d": [1e-4, 0.0, 0.0, 0.0, 0.0, 0.0],
+        "alpha": [0.0] * 6,
+    }
+    path = tmp_path / "calibration.yaml"
+    path.write_text(yaml.safe_dump({"model": "ur5e", "dh_delta": delta}))
+    proc = await _serve(
+        ["--model", "ur5e", "--address", "127.0.0.93", "--calibration", str(path)], "serving 1 fake robot(s)"
+    )
+    try:
+        state = await _first(prim.PrimaryConnection(Side.DAEMON), "127.0.0.93", 30001, prim.RobotState)
+        assert isinstance(state, prim.RobotState)
+        kin = state.get(prim.KinematicsInfo)
+        assert kin is not None
+        expected = kinematics_hash(
+            [t + x for t, x in zip(model.dh.theta, delta["theta"], strict=True)],
+            [a + x for a, x in zip(model.dh.a, delta["a"], strict=True)],
+            [d + x for d, x in zip(model.dh.d, delta["d"], strict=True)],
+            [a + x for a, x in zip(model.dh.alpha, delta["alpha"], strict=True)],
+        )
+        assert kin.kinematics_hash() == expected != model.kinematics_hash
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_fake_robot_refuses_bad_arguments() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "urdaemon", "fake-robot", "--model", "ur10e", "--controller-version", "five"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert "--controller-version 'five'" in done.stderr
+
+
+def test_split_pieces_join_to_the_data_and_garble_flips_exactly_one_byte() -> None:
+    faults = FaultInjector(split={"rtde"}, garble={"primary": 1}, delay_s={"dashboard": 0.05}, seed=3)
+    data = bytes(range(200))
+    split = faults.mangle("rtde", data)
+    assert len(split.pieces) > 1
+    assert b"".join(split.pieces) == data
+    garbled = faults.mangle("primary", data).pieces[0]
+    assert sum(a != b for a, b in zip(garbled, data, strict=True)) == 1
+    assert faults.mangle("primary", data).pieces == (data,), "only the next write was garbled"
+    assert faults.mangle("dashboard", data).delay_s == 0.05
+    assert faults.mangle("secondary", data) == faults.mangle("secondary", data)
+    everything = FaultInjector(refused={"*"})
+    assert everything.is_refused("rtde")
+    assert everything.is_refused("dashboard")
