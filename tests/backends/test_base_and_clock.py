@@ -250,3 +250,29 @@ async def test_clock_never_sleeps_a_negative_delay(fake: tuple[FakeTime, FakeAsy
         await clock.wait()
     assert all(d >= 0.0 for d in aio.delays)
     assert len(aio.delays) == 5
+
+
+async def test_thread_clock_ticks_on_the_loop_and_stops() -> None:
+    import asyncio
+    import threading
+
+    from urdaemon.backends.clock import ThreadClock
+
+    loop = asyncio.get_running_loop()
+    ten = asyncio.Event()
+    ticks: list[int] = []
+
+    def tick() -> None:
+        ticks.append(threading.get_ident())
+        if len(ticks) == 10:
+            ten.set()
+
+    clock = ThreadClock(0.002, tick, loop)
+    clock.start()
+    await asyncio.wait_for(ten.wait(), 5.0)
+    clock.stop()
+    seen = len(ticks)
+    for _ in range(3):  # let any tick already handed to the loop run
+        await asyncio.sleep(0)
+    assert set(ticks) == {threading.get_ident()}, "ticks run on the loop's thread"
+    assert len(ticks) <= seen + 1, "no ticks after stop"

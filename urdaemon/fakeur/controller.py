@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from urdaemon.backends.clock import PeriodicClock
+from urdaemon.backends.clock import ThreadClock
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
 from urdaemon.errors import ProtocolError
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
@@ -195,31 +195,36 @@ class FakeController:
     # ---- the clock -----------------------------------------------------------------------------------
 
     async def _run_clock(self) -> None:
-        clock = PeriodicClock(self.step_time)
+        clock = ThreadClock(self.step_time, self._tick, asyncio.get_running_loop())
         clock.start()
+        try:
+            await asyncio.Event().wait()  # until cancelled by close()
+        finally:
+            clock.stop()
+
+    def _tick(self) -> None:
+        """One controller cycle: program, arm, then whatever streams are due."""
         arm, dt = self.arm, self.step_time
-        while True:
-            await clock.wait()
-            runner = self._runner
-            if runner is not None:
-                runner.step(dt)
-            arm.step(dt)
-            self.cycles += 1
-            now = arm.timestamp
-            if now < self.faults.stalled_until:
-                continue
-            for client in self._rtde_clients:
-                if client.streaming and now + 1e-9 >= client.next_due:
-                    client.next_due += client.period
-                    if client.next_due < now:  # fell behind (a stall): resume on the grid, no burst
-                        client.next_due = now + client.period
-                    self._send_rtde(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
-            if now + 1e-9 >= self._next_state:
-                self._next_state = now + STATE_PERIOD_S
-                if self._state_clients:
-                    state = self._robot_state()
-                    for conn, writer, service in self._state_clients:
-                        self._send_primary(conn, writer, service, state)
+        runner = self._runner
+        if runner is not None:
+            runner.step(dt)
+        arm.step(dt)
+        self.cycles += 1
+        now = arm.timestamp
+        if now < self.faults.stalled_until:
+            return
+        for client in self._rtde_clients:
+            if client.streaming and now + 1e-9 >= client.next_due:
+                client.next_due += client.period
+                if client.next_due < now:  # fell behind (a stall): resume on the grid, no burst
+                    client.next_due = now + client.period
+                self._send_rtde(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
+        if now + 1e-9 >= self._next_state:
+            self._next_state = now + STATE_PERIOD_S
+            if self._state_clients:
+                state = self._robot_state()
+                for conn, writer, service in self._state_clients:
+                    self._send_primary(conn, writer, service, state)
 
     # ---- connection plumbing -------------------------------------------------------------------------
 
