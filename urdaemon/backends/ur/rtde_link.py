@@ -1,0 +1,328 @@
+"""The daemon's RTDE link: handshake, then every output package clocks one robot cycle.
+
+An ``asyncio.Protocol`` around the sans-IO ``RtdeConnection``: during the handshake each request
+waits on a future for its reply; once streaming, ``data_received`` decodes each DATA_PACKAGE and
+calls ``on_package(values)`` synchronously, in the same turn of the loop (the robot is the clock).
+``StateMapper`` copies a package's values into ``RobotState`` through indices computed once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
+
+from urdaemon.errors import ConnectionLostError, ProtocolError, RemoteProtocolError, UrTimeoutError
+from urdaemon.model import Lifecycle, RobotMode, RobotState, SafetyMode
+from urdaemon.paths import resource_path
+from urdaemon.protocols import rtde
+from urdaemon.protocols._buffer import Side
+
+__all__ = [
+    "RTDE_PORT",
+    "RTDE_REPLY_TIMEOUT_S",
+    "RtdeLink",
+    "StateMapper",
+    "input_recipe",
+    "output_recipe",
+]
+
+_R = TypeVar("_R")
+
+RTDE_PORT = 30004
+RTDE_REPLY_TIMEOUT_S = 5.0
+"""How long a handshake request may wait for its reply (urcl waits up to 5 s for PAUSE)."""
+RUNTIME_PAUSED = 4
+RUNTIME_RESUMING = 5
+
+
+def output_recipe() -> tuple[str, ...]:
+    """The standard driver output recipe shipped in resources/rtde."""
+    return tuple(resource_path("rtde", "output_recipe.txt").read_text().split())
+
+
+def input_recipe() -> tuple[str, ...]:
+    """The standard driver input recipe shipped in resources/rtde."""
+    return tuple(resource_path("rtde", "input_recipe.txt").read_text().split())
+
+
+class RtdeLink(asyncio.Protocol):
+    """One RTDE connection of the daemon to a controller."""
+
+    def __init__(self, on_package: Callable[[tuple[Any, ...]], None]) -> None:
+        self.conn = rtde.RtdeConnection(Side.DAEMON)
+        self.on_package = on_package
+        self.transport: asyncio.Transport | None = None
+        self.controller_version: rtde.ControllerVersion | None = None
+        self.frequency = 0.0
+        self.closed: asyncio.Future[Exception | None] = asyncio.get_running_loop().create_future()
+        self._waiter: asyncio.Future[Any] | None = None
+        self._waiting_for: tuple[type[Any], ...] = ()
+        self._streaming = False
+        self.packages = 0
+        self.text_messages: list[rtde.TextMessage] = []
+
+    # ---- connection ------------------------------------------------------------------------------
+
+    @classmethod
+    async def connect(
+        cls,
+        host: str,
+        on_package: Callable[[tuple[Any, ...]], None],
+        *,
+        port: int = RTDE_PORT,
+        timeout: float = 5.0,
+    ) -> RtdeLink:
+        """Open the TCP connection (TCP_NODELAY)."""
+        loop = asyncio.get_running_loop()
+        try:
+            _, link = await asyncio.wait_for(
+                loop.create_connection(lambda: cls(on_package), host, port), timeout
+            )
+        except TimeoutError as err:
+            raise UrTimeoutError(f"rtde: no connection to {host}:{port} within {timeout} s") from err
+        except OSError as err:
+            raise ConnectionLostError(
+                f"rtde: cannot connect to {host}:{port}: {err.strerror or err}"
+            ) from err
+        return link
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        error = ConnectionLostError(
+            f"rtde: connection lost: {exc}" if exc else "rtde: connection closed by the robot"
+        )
+        self._fail(error)
+
+    def close(self) -> None:
+        """Close the connection."""
+        if self.transport is not None:
+            self.transport.close()
+
+    # ---- handshake ----------------------------------------------------------------------------------
+
+    async def handshake(
+        self,
+        outputs: Sequence[str],
+        inputs: Sequence[str] | None,
+        *,
+        frequency: float | None = None,
+    ) -> rtde.OutputsConfigured:
+        """Negotiate v2 (v1 if refused), learn the version, set up outputs (and inputs); not started yet."""
+        reply = await self._request(rtde.RequestProtocolVersion(2), rtde.ProtocolVersionReply)
+        if not reply.accepted:
+            reply = await self._request(rtde.RequestProtocolVersion(1), rtde.ProtocolVersionReply)
+            if not reply.accepted:
+                raise RemoteProtocolError("rtde: the controller accepts neither protocol version 2 nor 1")
+        self.controller_version = await self._request(rtde.GetControllerVersion(), rtde.ControllerVersion)
+        top = rtde.max_frequency(self.controller_version.major)
+        self.frequency = top if frequency is None else min(frequency, top)
+        configured = await self._request(
+            rtde.SetupOutputs(self.frequency, tuple(outputs)), rtde.OutputsConfigured
+        )
+        if configured.not_found:
+            raise RemoteProtocolError(
+                f"rtde: the controller does not know output(s) {', '.join(configured.not_found)}"
+            )
+        if inputs:
+            setup = await self._request(rtde.SetupInputs(tuple(inputs)), rtde.InputsConfigured)
+            if setup.not_found:
+                raise RemoteProtocolError(
+                    f"rtde: the controller does not know input(s) {', '.join(setup.not_found)}"
+                )
+            if setup.in_use:
+                raise RemoteProtocolError(
+                    f"rtde: input(s) owned by another client: {', '.join(setup.in_use)}"
+                )
+        return configured
+
+    async def start(self) -> None:
+        """Start the output stream; from now on every package goes to ``on_package``."""
+        self._streaming = True
+        reply = await self._request(rtde.Start(), rtde.StartReply)
+        if not reply.accepted:
+            self._streaming = False
+            raise RemoteProtocolError("rtde: the controller refused to start the output stream")
+
+    def send_inputs(self, values: Sequence[Any]) -> None:
+        """Send one input package (every field of the input recipe, in order)."""
+        self.conn.send(rtde.InputData(tuple(values)))
+        self._flush()
+
+    async def _request(self, message: Any, reply: type[_R]) -> _R:
+        loop = asyncio.get_running_loop()
+        if self.closed.done():
+            raise self.closed.result() or ConnectionLostError("rtde: closed")
+        self._waiter = loop.create_future()
+        self._waiting_for = (reply,)
+        self.conn.send(message)
+        self._flush()
+        try:
+            answer = await asyncio.wait_for(asyncio.shield(self._waiter), RTDE_REPLY_TIMEOUT_S)
+        except TimeoutError as err:
+            raise UrTimeoutError(
+                f"rtde: no reply to {type(message).__name__} within {RTDE_REPLY_TIMEOUT_S} s"
+            ) from err
+        finally:
+            self._waiter = None
+        assert isinstance(answer, reply)
+        return answer
+
+    # ---- receiving ------------------------------------------------------------------------------------
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            events = self.conn.receive_data(data)
+        except ProtocolError as err:
+            self._fail(err)
+            self.close()
+            return
+        for event in events:
+            if isinstance(event, rtde.DataPackage):
+                self.packages += 1
+                if self._streaming:
+                    self.on_package(event.values)
+                if (
+                    self._waiter is not None
+                    and not self._waiter.done()
+                    and rtde.StartReply in self._waiting_for
+                ):
+                    # a data package before the START reply counts as started (urcl does the same)
+                    self._waiter.set_result(rtde.StartReply(True))
+            elif isinstance(event, rtde.TextMessage):
+                self.text_messages = [*self.text_messages[-19:], event]
+            elif (
+                self._waiter is not None and not self._waiter.done() and isinstance(event, self._waiting_for)
+            ):
+                self._waiter.set_result(event)
+
+    def _flush(self) -> None:
+        data = self.conn.data_to_send()
+        if data and self.transport is not None and not self.transport.is_closing():
+            self.transport.write(data)
+
+    def _fail(self, error: Exception) -> None:
+        if not self.closed.done():
+            self.closed.set_result(error)
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_exception(error)
+
+
+class StateMapper:
+    """Copies the standard output recipe's values into a ``RobotState`` (indices computed once)."""
+
+    def __init__(self, names: Sequence[str]) -> None:
+        index = {name: i for i, name in enumerate(names)}
+
+        def at(name: str) -> int:
+            return index.get(name, -1)
+
+        self._timestamp = at("timestamp")
+        self._q = at("actual_q")
+        self._qd = at("actual_qd")
+        self._current = at("actual_current")
+        self._scaling = at("speed_scaling")
+        self._slider = at("target_speed_fraction")
+        self._runtime = at("runtime_state")
+        self._robot_mode = at("robot_mode")
+        self._safety_mode = at("safety_mode")
+        self._status_bits = at("robot_status_bits")
+        self._din = at("actual_digital_input_bits")
+        self._dout = at("actual_digital_output_bits")
+        self._ain = (at("standard_analog_input0"), at("standard_analog_input1"))
+        self._aout = (at("standard_analog_output0"), at("standard_analog_output1"))
+        self._tool_voltage = at("tool_output_voltage")
+        self._payload = at("payload")
+        self._payload_cog = at("payload_cog")
+        if min(self._timestamp, self._q, self._qd) < 0:
+            raise ValueError("the output recipe needs timestamp, actual_q and actual_qd")
+        self.runtime_state = 0
+
+    def apply(self, values: Sequence[Any], state: RobotState) -> None:
+        """Write one package's values into ``state`` (in place; also the host receive times)."""
+        state.controller_time = values[self._timestamp]
+        state.positions[:] = values[self._q]
+        state.velocities[:] = values[self._qd]
+        if self._current >= 0:
+            state.efforts[:] = values[self._current]
+        state.host_time_ns = time.time_ns()
+        state.monotonic_ns = time.monotonic_ns()
+        state.cycle += 1
+        slider = values[self._slider] if self._slider >= 0 else 1.0
+        scaling = values[self._scaling] if self._scaling >= 0 else 1.0
+        runtime = values[self._runtime] if self._runtime >= 0 else 2
+        self.runtime_state = runtime
+        state.speed_slider = slider
+        # ur-protocols.md §6.2: slider × controller scaling; nothing moves while resuming
+        state.speed_scaling = 0.0 if runtime == RUNTIME_RESUMING else slider * scaling
+        if self._robot_mode >= 0:
+            state.robot_mode = _robot_mode(values[self._robot_mode])
+        if self._safety_mode >= 0:
+            state.safety_mode = _safety_mode(values[self._safety_mode])
+        if self._status_bits >= 0:
+            state.program_running = bool(values[self._status_bits] & 0b10)
+        if self._dout >= 0:
+            bits = values[self._dout]
+            state.digital_out[:] = [bool(bits >> i & 1) for i in range(8)]
+            state.configurable_out[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
+            state.tool_out[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+        if self._din >= 0:
+            bits = values[self._din]
+            state.digital_in[:] = [bool(bits >> i & 1) for i in range(8)]
+            state.configurable_in[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
+            state.tool_in[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+        if self._aout[0] >= 0:
+            state.analog_out[:] = [values[self._aout[0]], values[self._aout[1]]]
+        if self._ain[0] >= 0:
+            state.analog_in[:] = [values[self._ain[0]], values[self._ain[1]]]
+        if self._tool_voltage >= 0:
+            state.tool_voltage = int(values[self._tool_voltage])
+        if self._payload >= 0:
+            state.payload_mass = values[self._payload]
+        if self._payload_cog >= 0:
+            cog = values[self._payload_cog]
+            state.payload_cog = (cog[0], cog[1], cog[2])
+        state.lifecycle = _lifecycle(state, runtime)
+
+
+def _robot_mode(value: int) -> RobotMode:
+    try:
+        return RobotMode(value)
+    except ValueError:
+        return RobotMode.DISCONNECTED
+
+
+def _safety_mode(value: int) -> SafetyMode:
+    try:
+        return SafetyMode(value)
+    except ValueError:
+        return SafetyMode.UNDEFINED_SAFETY_MODE
+
+
+def _lifecycle(state: RobotState, runtime: int) -> Lifecycle:
+    """The daemon's lifecycle state from what RTDE reports."""
+    safety = state.safety_mode
+    if safety in (
+        SafetyMode.ROBOT_EMERGENCY_STOP,
+        SafetyMode.SYSTEM_EMERGENCY_STOP,
+        SafetyMode.IMMI_EMERGENCY_STOP,
+        SafetyMode.PROFISAFE_EMERGENCY_STOP,
+    ):
+        return Lifecycle.EMERGENCY_STOP
+    if safety not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+        return Lifecycle.PROTECTIVE_STOP
+    if state.robot_mode is not RobotMode.RUNNING:
+        return Lifecycle.IDLE
+    if runtime == RUNTIME_PAUSED:
+        return Lifecycle.PAUSED
+    return Lifecycle.RUNNING
