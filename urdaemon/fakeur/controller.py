@@ -457,7 +457,12 @@ class FakeController:
         self._stop_runner()
         self.program_name = name
         runner = ProgramRunner(
-            self.arm, text, step_time=self.step_time, name=name, on_event=self._program_event
+            self.arm,
+            text,
+            step_time=self.step_time,
+            name=name,
+            on_event=self._program_event,
+            local_address=self.address,  # a real robot's connections come from its own address
         )
         self._runner = runner
         self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))
@@ -496,7 +501,9 @@ class FakeController:
             return
         host, port = self.urcap
         try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), 5.0)
+            reader, writer = await asyncio.wait_for(
+                asyncio.open_connection(host, port, local_addr=(self.address, 0)), 5.0
+            )
         except (OSError, TimeoutError) as err:
             self._broadcast(
                 prim.TextMessage(

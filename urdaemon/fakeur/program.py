@@ -579,8 +579,11 @@ class ProgramRunner:
         step_time: float,
         name: str = "externalControl",
         on_event: Callable[[str, str], None] | None = None,
+        local_address: str | None = None,
     ) -> None:
         self.arm = arm
+        self.local_address = local_address
+        """The robot's own address: its connections come from there, as a real robot's do."""
         self.program_text = program_text
         self.step_time = step_time
         self.name = name
@@ -697,13 +700,15 @@ class ProgramRunner:
             self._emit(EVENT_TEXT, f"Successfully connected to {name}")
         return None
 
-    @staticmethod
-    async def _open_with_retry(endpoint: Endpoint) -> _Link | None:
+    async def _open_with_retry(self, endpoint: Endpoint) -> _Link | None:
         """socket_open with the script's retries (§5.2); None when every attempt failed."""
+        local = (self.local_address, 0) if self.local_address else None
         for _ in range(CONNECT_ATTEMPTS):
             try:
                 async with asyncio.timeout(CONNECT_TIMEOUT_S):
-                    reader, writer = await asyncio.open_connection(endpoint.host, endpoint.port)
+                    reader, writer = await asyncio.open_connection(
+                        endpoint.host, endpoint.port, local_addr=local
+                    )
             except (OSError, TimeoutError):
                 await asyncio.sleep(CONNECT_RETRY_DELAY_S)  # the script sleeps after every failure
                 continue
