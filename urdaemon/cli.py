@@ -85,6 +85,16 @@ def _parser() -> argparse.ArgumentParser:
     )
     move.add_argument("--velocity-scale", type=float, default=1.0)
     _connect_arg(move)
+
+    calibration = sub.add_parser(
+        "calibration", help="read a UR controller's kinematics calibration into a calibration file"
+    )
+    calibration.add_argument("--address", required=True, help="the controller's address")
+    calibration.add_argument("--output", required=True, help="calibration file to write (YAML)")
+    calibration.add_argument("--port", type=int, default=30001, help="primary interface port (default 30001)")
+    calibration.add_argument(
+        "--timeout", type=float, default=10.0, help="give up after S seconds (default 10)"
+    )
     return parser
 
 
@@ -117,6 +127,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
         if args.command == "move":
             return asyncio.run(_move(args))
+        if args.command == "calibration":
+            return _calibration(args)
     except (ConfigError, DescriptionError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -291,3 +303,37 @@ async def _move(args: argparse.Namespace) -> int:
         print(file=sys.stderr)
         print(json.dumps(result))
         return EXIT_OK if result.get("status") == "succeeded" else EXIT_FAILED
+
+
+def _calibration(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from urdaemon.calibration_tool import calibration_yaml, read_calibration
+
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        print(f"error: --timeout must be a number of seconds > 0, got {args.timeout}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if not 0 < args.port < 65536:
+        print(f"error: --port must be within 1..65535, got {args.port}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    output = Path(args.output)
+    if not output.parent.is_dir():
+        print(
+            f"error: --output {args.output}: directory {str(output.parent)!r} does not exist", file=sys.stderr
+        )
+        return EXIT_BAD_INPUT
+    if output.is_dir():
+        print(f"error: --output {args.output} is a directory", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        reading = asyncio.run(read_calibration(args.address, args.port, args.timeout))
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    try:
+        output.write_text(calibration_yaml(reading, f"{args.address}:{args.port}"), encoding="utf-8")
+    except OSError as err:
+        print(f"error: cannot write {args.output}: {err.strerror or err}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"wrote {args.output} (hash {reading.kinematics.kinematics_hash()})", file=sys.stderr)
+    return EXIT_OK
