@@ -20,9 +20,11 @@ from urdaemon.description import (
     load_urdf,
     robot_dh,
 )
+from urdaemon.description.calibration import load_calibration
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.model import JointLimits
+from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
@@ -111,7 +113,23 @@ def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell
             initial_positions=initial,
             publish=(lambda payload: publisher.put(payload)) if publisher is not None else None,
         )
+    if robot.backend == "ur":
+        from urdaemon.backends.ur.backend import UrBackend
+
+        return UrBackend(robot, limits.names, expected_hash=_expected_hash(robot))
     raise ConfigError(f"robot {robot.name!r}: backend {robot.backend!r} is not available in this version")
+
+
+def _expected_hash(robot: Robot) -> str:
+    """The kinematics hash the robot should report: its calibration file's, else its model's nominal one."""
+    model = load_ur_model(robot.model)
+    if robot.calibration is not None:
+        calibration = load_calibration(robot.calibration, model)
+        if calibration.hash is not None:
+            return calibration.hash
+        dh = calibration.dh
+        return kinematics_hash(dh.theta, dh.a, dh.d, dh.alpha)
+    return model.kinematics_hash
 
 
 class Daemon:
@@ -146,6 +164,11 @@ class Daemon:
                 for task in tasks:
                     task.cancel()
         finally:
+            for runtime in self.runtimes:
+                try:
+                    await runtime.backend.close()
+                except Exception:  # one backend failing to close must not keep the others open
+                    log.exception("closing %s failed", runtime.robot.name)
             node.close()
             log.info("cell %r stopped", self.cell.cell)
 

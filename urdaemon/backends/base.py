@@ -65,6 +65,10 @@ class Backend(abc.ABC):
         """Set the speed slider (0..1)."""
         raise BackendError(f"{self.kind} backend has no speed slider")
 
+    async def close(self) -> None:
+        """Release what outlives one ``run`` (listening sockets); the daemon is stopping."""
+        return  # nothing by default: mock and servo hold nothing between runs
+
     def statistics(self) -> BackendStatistics:
         """Counters since start."""
         return BackendStatistics(self._cycles, self._missed, self._late, self._max_lateness, self._reconnects)

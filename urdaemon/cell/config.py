@@ -36,6 +36,7 @@ __all__ = [
     "Robot",
     "ServoJoint",
     "ServoOptions",
+    "UrOptions",
     "ZenohOptions",
     "ur_models",
 ]
@@ -178,6 +179,24 @@ class MotionOptions(_Frozen):
     feedback_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
 
 
+class UrOptions(_Frozen):
+    """Options of the ``ur`` backend."""
+
+    startup: bool = False
+    """At start-up (and after every reconnect): power on, release the brakes and start the program."""
+    reverse_ip: str | None = None
+    """Address the robot connects back to; default: the daemon's end of its RTDE connection."""
+    listen_address: str = "0.0.0.0"
+    """Where the four callback servers listen."""
+    servoj_lookahead: Annotated[float, Field(ge=0.03, le=0.2)] = 0.03
+    """servoj lookahead time (s); UR allows 0.03–0.2."""
+    servoj_gain: Annotated[int, Field(ge=100, le=2000)] = 2000
+    receive_timeout: Annotated[float, Field(ge=0.004, le=1.0)] = 0.1
+    """The robot halts the program when no command arrives for this long (s)."""
+    calibration_check: Literal["warn", "error"] = "warn"
+    """A kinematics hash that differs from the configured calibration: log a warning, or refuse to run."""
+
+
 class MockOptions(_Frozen):
     """Options of the ``mock`` backend."""
 
@@ -277,6 +296,7 @@ class Robot(_Frozen):
     motion: MotionOptions = MotionOptions()
     mock: MockOptions | None = None
     servo: ServoOptions | None = None
+    ur: UrOptions | None = None
 
     @property
     def prefix(self) -> str:
@@ -322,6 +342,8 @@ class Robot(_Frozen):
             raise ValueError(f"'servo' section given but backend is {self.backend!r}")
         if self.backend != "mock" and self.mock is not None:
             raise ValueError(f"'mock' section given but backend is {self.backend!r}")
+        if self.backend != "ur" and self.ur is not None:
+            raise ValueError(f"'ur' section given but backend is {self.backend!r}")
         if self.backend == "ur":
             if self.address is None:
                 raise ValueError("backend 'ur' needs the robot's 'address'")

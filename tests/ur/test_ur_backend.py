@@ -1,0 +1,98 @@
+"""The `ur` backend through the whole daemon, against the fake controller."""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import pytest
+
+from tests.helpers import free_tcp_port
+from tests.integration.conftest import running_daemon
+from urdaemon.client import Client
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.model import RobotMode
+
+pytestmark = pytest.mark.timeout(90)
+
+ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(160))
+HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
+
+
+def _cell(address: str, *, headless: bool = True, startup: bool = True) -> str:
+    ports = [free_tcp_port() for _ in range(4)]
+    return f"""
+cell: urcell
+robots:
+  - name: alice
+    model: ur10e
+    backend: ur
+    address: {address}
+    headless: {str(headless).lower()}
+    ports:
+      {{reverse: {ports[0]}, script_sender: {ports[1]}, trajectory: {ports[2]}, script_command: {ports[3]}}}
+    ur: {{startup: {str(startup).lower()}, listen_address: 127.0.0.1}}
+"""
+
+
+async def _until(client: Client, key: str, predicate: Any, limit: int = 400) -> dict[str, Any]:
+    sub = client.subscribe(key, 100)
+    try:
+        for _ in range(limit):
+            message = await sub.get_json(timeout=10.0)
+            if predicate(message):
+                return message
+        raise AssertionError(f"no message on {key} matched")
+    finally:
+        client.unsubscribe(sub)
+
+
+async def test_startup_from_powered_off_headless_then_a_move_succeeds() -> None:
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        assert fake.arm.robot_mode is RobotMode.POWER_OFF
+        async with running_daemon(_cell(fake.address)) as (daemon, client):
+            alice = await client.robot("alice")
+            status = await _until(client, alice.keys.status, lambda s: s["ready"])
+            assert status["backend"] == "ur"
+            assert status["robot_mode"] == "RUNNING"
+            assert status["program_running"] is True
+            assert status["rate_hz"] == 500.0
+            target = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
+            goal = await alice.move(target, duration=2.0)
+            result = await goal.result(timeout=20)
+            assert result["status"] == "succeeded", result
+            assert fake.arm.q == pytest.approx(target, abs=0.01)
+            # services go through RTDE inputs and the script command socket
+            assert (await alice.set_speed_slider(0.5))["ok"] is True
+            assert (await alice.set_io("digital", 4, True))["ok"] is True
+            assert (await alice.set_payload(1.25, (0.0, 0.0, 0.05)))["ok"] is True
+            io_state = await _until(
+                client, alice.keys.io, lambda m: m["digital_out"][4] and m["payload"]["mass"] == 1.25
+            )
+            assert io_state["digital_out"][4] is True
+            assert fake.arm.speed_slider == pytest.approx(0.5)
+            assert fake.arm.payload_mass == pytest.approx(1.25)
+            assert daemon.runtimes[0].backend.statistics().cycles > 500
+    finally:
+        await fake.close()
+
+
+async def test_urcap_mode_plays_the_program_which_fetches_the_script() -> None:
+    address = next(ADDRESSES)
+    text = _cell(address, headless=False)
+    script_sender = int(text.split("script_sender: ")[1].split(",")[0])
+    fake = FakeController(
+        "ur10e", address=address, initial_positions=HOME, urcap=("127.0.0.1", script_sender)
+    )
+    await fake.start()
+    try:
+        async with running_daemon(text) as (_, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            goal = await alice.move([0.2, *HOME[1:]], duration=1.0)
+            assert (await goal.result(timeout=20))["status"] == "succeeded"
+            assert fake.arm.q[0] == pytest.approx(0.2, abs=0.01)
+    finally:
+        await fake.close()

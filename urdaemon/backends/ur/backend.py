@@ -1,0 +1,329 @@
+"""The ``ur`` backend: one UR controller over RTDE, the primary interface, the dashboard and the four
+callback servers, with the RTDE output stream as the clock.
+
+Each RTDE package: the state is mapped in place, ``on_cycle()`` runs the controller, and the
+command goes out on the reverse socket in the same turn of the loop (servoj / speedj / idle
+keepalive). ``run()`` returns only by raising: when any link drops, the runtime above aborts the
+motion and calls ``run()`` again after its backoff, so every reconnect starts from scratch and
+motion resumes only from a new command, seeded from the measured pose.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.backends.ur.dashboard_link import DashboardLink
+from urdaemon.backends.ur.primary_link import PrimaryLink
+from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
+from urdaemon.backends.ur.servers import CallbackServers
+from urdaemon.cell.config import Robot, UrOptions
+from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrTimeoutError
+from urdaemon.model import CommandMode, Lifecycle, RobotMode
+from urdaemon.protocols import dashboard as dash
+from urdaemon.protocols import primary as prim
+from urdaemon.protocols import reverse, script_command, script_sender
+
+__all__ = ["UR_IO_SIZES", "UrBackend"]
+
+log = logging.getLogger("urdaemon.ur")
+
+UR_IO_SIZES = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}
+KINEMATICS_TIMEOUT_S = 10.0
+"""urcl waits up to 10 s for the first state package after connecting (ur-protocols.md §6.7)."""
+PROGRAM_RESEND_S = 2.0
+"""Headless: after sending the program, wait this long for it to connect back before sending again."""
+IDLE_TIMEOUT_S = 1.0
+"""Read timeout sent with a keepalive (urcl's default, ur-protocols.md §4.2)."""
+STARTUP_TIMEOUT_S = 30.0
+"""How long power-on and brake release may take (urcl polls for 30 s)."""
+
+
+class UrBackend(Backend):
+    """Drives one UR controller."""
+
+    kind = "ur"
+
+    def __init__(
+        self,
+        robot: Robot,
+        joint_names: Sequence[str],
+        *,
+        expected_hash: str | None,
+        program: Callable[[str, UrOptions, dict[str, int]], str] | None = None,
+    ) -> None:
+        super().__init__(robot.name, joint_names, 500.0)
+        assert robot.address is not None
+        self.robot = robot
+        self.address = robot.address
+        self.options = robot.ur or UrOptions()
+        self.ports = robot.ports.as_dict()
+        self.expected_hash = expected_hash
+        self._program_builder = program
+        self.servers = CallbackServers(self.address, self.ports, self)
+        self._servers_started = False
+        self._mapper = StateMapper(output_recipe())
+        self._inputs = input_recipe()
+        self._rtde: RtdeLink | None = None
+        self._primary: PrimaryLink | None = None
+        self._dashboard: DashboardLink | None = None
+        self._on_cycle: Callable[[], None] = lambda: None
+        self._program_sent_at = -1e9
+        self._host_ip = ""
+        self.robot_messages: list[str] = []
+        self.calibration_ok: bool | None = None
+
+    # ---- Backend interface ---------------------------------------------------------------------------
+
+    async def run(self, on_cycle: Callable[[], None]) -> None:
+        """Connect every link, start streaming, keep the program running; raise when a link drops."""
+        self._on_cycle = on_cycle
+        state = self.state
+        state.lifecycle = Lifecycle.CONNECTING
+        state.lifecycle_reason = f"connecting to {self.address}"
+        state.program_running = False
+        if not self._servers_started:
+            await self.servers.start(self.options.listen_address)
+            self._servers_started = True
+        try:
+            rtde = self._rtde = await RtdeLink.connect(self.address, self._on_package)
+            await rtde.handshake(output_recipe(), self._inputs)
+            self.rate_hz = rtde.frequency
+            self.period = 1.0 / rtde.frequency
+            sockname = rtde.transport.get_extra_info("sockname") if rtde.transport else None
+            self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "127.0.0.1")
+            primary = self._primary = await PrimaryLink.connect(self.address, self._on_robot_message)
+            primary_task = asyncio.get_running_loop().create_task(primary.run())
+            try:
+                self._dashboard = await DashboardLink.connect(self.address)
+                await self._check_calibration(primary)
+                await rtde.start()
+                if self.options.startup:
+                    await self.startup()
+                watched: set[asyncio.Future[Any]] = {primary_task, rtde.closed}
+                done, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
+                if rtde.closed in done:
+                    raise rtde.closed.result() or ConnectionLostError("rtde: closed")
+                primary_task.result()
+                raise ConnectionLostError("primary: link ended")
+            finally:
+                primary_task.cancel()
+                with contextlib.suppress(BaseException):
+                    await primary_task
+        finally:
+            self._close_links()
+            state.program_running = False
+            if state.lifecycle is not Lifecycle.CONNECTING:
+                state.lifecycle = Lifecycle.DISCONNECTED
+
+    async def close(self) -> None:
+        """Close the links and the callback servers (the daemon is stopping)."""
+        self._close_links()
+        if self._servers_started:
+            await self.servers.close()
+            self._servers_started = False
+
+    async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
+        """Set an output through RTDE inputs."""
+        self.check_io(kind, pin, value, UR_IO_SIZES)
+        fields: dict[str, Any] = {}
+        if kind == "analog":
+            fields = {
+                "standard_analog_output_mask": 1 << pin,
+                "standard_analog_output_type": 1 << pin,  # voltage
+                f"standard_analog_output_{pin}": float(value),
+            }
+        else:
+            prefix = {"digital": "standard", "configurable": "configurable", "tool": "tool"}[kind]
+            fields = {
+                f"{prefix}_digital_output_mask": 1 << pin,
+                f"{prefix}_digital_output": 0xFF if value else 0x00,
+            }
+        self._send_inputs(fields)
+
+    async def set_speed_slider(self, fraction: float) -> None:
+        """Set the speed slider through RTDE inputs."""
+        if not 0.0 <= fraction <= 1.0:
+            raise BackendError(f"speed slider must be within 0..1, got {fraction!r}")
+        self._send_inputs({"speed_slider_mask": 1, "speed_slider_fraction": float(fraction)})
+
+    async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
+        """Set the payload through the script command socket (or a secondary program without one)."""
+        if self.servers.script_command.connected:
+            self.servers.script_command.send(script_command.SetPayload(mass, cog))
+            return
+        if self._primary is None:
+            raise BackendError("not connected to the robot")
+        x, y, z = cog
+        self._primary.send_script(prim.sec_program("setup", f"set_payload({mass!r}, [{x!r}, {y!r}, {z!r}])"))
+
+    # ---- services --------------------------------------------------------------------------------------
+
+    async def dashboard(self, command: Any) -> Any:
+        """Send a dashboard command; its typed reply."""
+        if self._dashboard is None:
+            raise BackendError("dashboard not connected")
+        return await self._dashboard.command(command)
+
+    async def startup(self) -> None:
+        """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
+        if self._dashboard is None:
+            raise BackendError("dashboard not connected")
+        deadline = time.monotonic() + STARTUP_TIMEOUT_S
+        if self.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
+            reply = await self._dashboard.command(dash.PowerOn())
+            if not reply.success:
+                raise RobotFaultError(f"power on refused: {reply.text}")
+            await self._wait_mode((RobotMode.IDLE, RobotMode.RUNNING), deadline)
+        if self.state.robot_mode is not RobotMode.RUNNING:
+            reply = await self._dashboard.command(dash.BrakeRelease())
+            if not reply.success:
+                raise RobotFaultError(f"brake release refused: {reply.text}")
+            await self._wait_mode((RobotMode.RUNNING,), deadline)
+        if self.robot.headless:
+            self._send_program(force=True)
+        elif not self.servers.reverse.connected:
+            reply = await self._dashboard.command(dash.Play())
+            if not reply.success:
+                raise RobotFaultError(f"play refused: {reply.text}")
+
+    def resend_program(self) -> None:
+        """Send the control program again (headless)."""
+        self._send_program(force=True)
+
+    def hand_back_control(self) -> None:
+        """End the control program's loop (a STOPPED frame); in URCap mode the pendant program continues."""
+        self.servers.reverse.send(reverse.Stopped())
+
+    # ---- the cycle ---------------------------------------------------------------------------------------
+
+    def _on_package(self, values: tuple[Any, ...]) -> None:
+        state = self.state
+        self._mapper.apply(values, state)
+        reverse_server = self.servers.reverse
+        state.program_running = state.program_running and reverse_server.connected
+        if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
+            state.lifecycle_reason = "waiting for the control program to connect"
+        else:
+            state.lifecycle_reason = ""
+        self._cycles += 1
+        self._on_cycle()
+        if reverse_server.connected:
+            command = self.command
+            timeout = self.options.receive_timeout
+            if command.mode is CommandMode.POSITION:
+                reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
+            elif command.mode is CommandMode.VELOCITY:
+                reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
+            else:
+                reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
+        elif (
+            self.robot.headless
+            and state.robot_mode is RobotMode.RUNNING
+            and state.lifecycle is Lifecycle.RUNNING
+        ):
+            self._send_program(force=False)
+
+    def _send_program(self, *, force: bool) -> None:
+        now = time.monotonic()
+        if self._primary is None or (not force and now - self._program_sent_at < PROGRAM_RESEND_S):
+            return
+        self._program_sent_at = now
+        self._primary.send_script(prim.headless_program(self._program_text()))
+        log.info("[%s] control program sent (headless, connecting back to %s)", self.name, self._host_ip)
+
+    def _program_text(self) -> str:
+        if self._program_builder is not None:
+            return self._program_builder(self._host_ip, self.options, self.ports)
+        from urdaemon.urscript import ScriptParameters, render_control_script
+
+        return render_control_script(
+            ScriptParameters(
+                server_ip=self._host_ip,
+                reverse_port=self.ports["reverse"],
+                trajectory_port=self.ports["trajectory"],
+                script_command_port=self.ports["script_command"],
+                servoj_lookahead=self.options.servoj_lookahead,
+                servoj_gain=self.options.servoj_gain,
+            )
+        )
+
+    # ---- callbacks from the links and servers --------------------------------------------------------------
+
+    def on_link(self, name: str, connected: bool, reason: str) -> None:
+        """A callback server's connection came or went."""
+        log.info("[%s] %s", self.name, reason)
+
+    def on_event(self, name: str, event: Any) -> None:
+        """Something arrived on a callback connection."""
+        if isinstance(event, script_sender.ProgramRequested):
+            self.servers.script_sender.send(script_sender.Program(self._program_text()))
+            log.info("[%s] control program sent to the External Control URCap", self.name)
+
+    def _on_robot_message(self, message: Any) -> None:
+        text = ""
+        if isinstance(message, prim.RuntimeExceptionMessage):
+            text = f"runtime exception at {message.line}:{message.column}: {message.text}"
+            log.warning("[%s] %s", self.name, text)
+        elif isinstance(message, prim.ErrorCodeMessage):
+            text = f"error C{message.code}A{message.argument}: {message.text}"
+            log.warning("[%s] %s", self.name, text)
+        elif isinstance(message, prim.TextMessage | prim.KeyMessage):
+            text = (
+                message.text if isinstance(message, prim.TextMessage) else f"{message.title}: {message.text}"
+            )
+            log.info("[%s] robot: %s", self.name, text)
+        if text:
+            self.robot_messages = [*self.robot_messages[-19:], text]
+
+    # ---- helpers ------------------------------------------------------------------------------------
+
+    async def _check_calibration(self, primary: PrimaryLink) -> None:
+        kinematics = await primary.wait_kinematics(KINEMATICS_TIMEOUT_S)
+        actual = kinematics.kinematics_hash()
+        self.calibration_ok = self.expected_hash is None or actual == self.expected_hash
+        if not self.calibration_ok:
+            text = (
+                f"the robot's kinematics hash is {actual}, the configured calibration's is "
+                f"{self.expected_hash}: the URDF does not match this robot "
+                "(write its calibration with `urdaemon calibration`)"
+            )
+            if self.options.calibration_check == "error":
+                raise RobotFaultError(text)
+            log.warning("[%s] %s", self.name, text)
+            self.robot_messages = [*self.robot_messages[-19:], text]
+
+    def _send_inputs(self, fields: dict[str, Any]) -> None:
+        rtde = self._rtde
+        if rtde is None:
+            raise BackendError("not connected to the robot")
+        values = []
+        for name in self._inputs:
+            value = fields.get(name, 0)
+            values.append(float(value) if name in _DOUBLE_INPUTS else int(value))
+        rtde.send_inputs(values)
+
+    async def _wait_mode(self, modes: tuple[RobotMode, ...], deadline: float) -> None:
+        while self.state.robot_mode not in modes:
+            if time.monotonic() > deadline:
+                raise UrTimeoutError(
+                    f"robot mode {self.state.robot_mode.name} did not become {modes[0].name}"
+                )
+            await asyncio.sleep(0.05)
+
+    def _close_links(self) -> None:
+        for link in (self._rtde, self._primary, self._dashboard):
+            if link is not None:
+                link.close()
+        for server in self.servers.all:
+            if server.link is not None:
+                server.link.close()
+        self._rtde = self._primary = self._dashboard = None
+
+
+_DOUBLE_INPUTS = {"speed_slider_fraction", "standard_analog_output_0", "standard_analog_output_1"}
