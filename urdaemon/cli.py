@@ -74,6 +74,14 @@ def _parser() -> argparse.ArgumentParser:
     echo.add_argument("--timeout", type=float, default=0.0, help="give up after S seconds without a sample")
     _connect_arg(echo)
 
+    board = sub.add_parser("dashboard", help="send a dashboard command to a robot and print the reply")
+    board.add_argument("robot")
+    board.add_argument(
+        "words", nargs="+", metavar="COMMAND", help="e.g. power on | brake release | robotmode"
+    )
+    board.add_argument("--cell", default=None)
+    _connect_arg(board)
+
     move = sub.add_parser("move", help="move a robot to joint positions and wait for the result")
     move.add_argument("robot")
     move.add_argument(
@@ -127,6 +135,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
         if args.command == "move":
             return asyncio.run(_move(args))
+        if args.command == "dashboard":
+            return asyncio.run(_dashboard(args))
         if args.command == "calibration":
             return _calibration(args)
     except (ConfigError, DescriptionError) as err:
@@ -253,6 +263,27 @@ async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
             print(json.dumps({"key": sample_key, "value": value}), flush=True)
             received += 1
     return EXIT_OK
+
+
+async def _dashboard(args: argparse.Namespace) -> int:
+    from urdaemon.client import Client
+
+    problem = _bad_endpoint(args.connect)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        async with await Client.connect(args.connect) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            reply = await robot.dashboard(" ".join(args.words))
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    if "reply" in reply:
+        print(reply["reply"])
+    else:
+        print(f"error: {reply.get('reason', 'refused')}", file=sys.stderr)
+    return EXIT_OK if reply.get("ok") else EXIT_FAILED
 
 
 async def _move(args: argparse.Namespace) -> int:

@@ -384,6 +384,32 @@ class RobotClient:
         """Set the speed slider (0..1)."""
         return await self.client.request(self.keys.service("set_speed_slider"), {"fraction": fraction})
 
+    async def dashboard(self, command: str, *, timeout: float = 30.0) -> dict[str, Any]:
+        """Send a dashboard command line (``power on``, ``robotmode`` …); the reply or the reason."""
+        return await self.client.request(
+            self.keys.service("dashboard"), {"command": command}, timeout=timeout
+        )
+
+    async def startup(self, *, timeout: float = 60.0) -> dict[str, Any]:
+        """Power on, release the brakes and start the control program."""
+        return await self.client.request(self.keys.service("startup"), {}, timeout=timeout)
+
+    async def resend_program(self) -> dict[str, Any]:
+        """Send the control program again (headless) or play it (URCap)."""
+        return await self.client.request(self.keys.service("resend_program"), {})
+
+    async def hand_back_control(self) -> dict[str, Any]:
+        """End the control program so the pendant program continues."""
+        return await self.client.request(self.keys.service("hand_back_control"), {})
+
+    async def zero_ft_sensor(self) -> dict[str, Any]:
+        """Zero the force/torque sensor."""
+        return await self.client.request(self.keys.service("zero_ft_sensor"), {})
+
+    async def set_tool_voltage(self, volts: int) -> dict[str, Any]:
+        """Set the tool voltage (0, 12 or 24 V)."""
+        return await self.client.request(self.keys.service("set_tool_voltage"), {"volts": volts})
+
     async def stop(self) -> dict[str, Any]:
         """Stop whatever moves the robot."""
         return await self.client.request(self.keys.service("stop"), {})

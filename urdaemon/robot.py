@@ -111,6 +111,11 @@ class RobotRuntime:
         node.queryable(keys.service("set_payload"), self._on_set_payload)
         node.queryable(keys.service("set_speed_slider"), self._on_set_speed_slider)
         node.queryable(keys.service("stop"), self._on_stop)
+        node.queryable(keys.service("dashboard"), self._on_dashboard)
+        for name in ("startup", "resend_program", "hand_back_control", "zero_ft_sensor"):
+            node.queryable(keys.service(name), self._on_simple_service(name))
+        node.queryable(keys.service("set_tool_voltage"), self._on_tool_voltage)
+        self.backend.on_notice = self._publish_notice
         node.subscriber(keys.command_joint_position, self._on_stream_position)
         node.subscriber(keys.command_joint_velocity, self._on_stream_velocity)
         node.liveliness_token(keys.alive)
@@ -495,6 +500,42 @@ class RobotRuntime:
         self.controller.stop("stop requested", time.monotonic())
         self._publish_events()
         _reply(query, {"ok": True})
+
+    def _on_simple_service(self, name: str) -> Any:
+        def handle(query: Any) -> None:
+            self._service(query, name, getattr(self.backend, name)())
+
+        return handle
+
+    def _on_tool_voltage(self, query: Any) -> None:
+        async def work() -> None:
+            volts = codec.decode_tool_voltage(_payload(query))
+            await self.backend.set_tool_voltage(volts)
+
+        self._service(query, "set_tool_voltage", work())
+
+    def _on_dashboard(self, query: Any) -> None:
+        async def serve() -> None:
+            try:
+                line = codec.decode_dashboard(_payload(query))
+                ok, text = await self.backend.dashboard(line)
+            except asyncio.CancelledError:
+                _reply(query, {"ok": False, "reason": "daemon shutting down"})
+                raise
+            except UrDaemonError as err:
+                _reply(query, {"ok": False, "reason": str(err)})
+                return
+            except Exception as err:  # a bug must still answer the client
+                self.log.exception("dashboard failed")
+                _reply(query, {"ok": False, "reason": f"{type(err).__name__}: {err}"})
+                return
+            _reply(query, {"ok": ok, "reply": text})
+
+        self._spawn(serve())
+
+    def _publish_notice(self, kind: str, text: str) -> None:
+        if self._pub_events is not None:
+            self._pub_events.put(codec.encode({"robot": self.robot.name, "kind": kind, "text": text}))
 
     async def _set_io(self, payload: bytes | None) -> None:
         kind, pin, value = codec.decode_set_io(payload)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import itertools
+import sys
 from typing import Any
 
 import pytest
@@ -10,6 +12,7 @@ import pytest
 from tests.helpers import free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
+from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.model import RobotMode
 
@@ -96,3 +99,77 @@ async def test_urcap_mode_plays_the_program_which_fetches_the_script() -> None:
             assert fake.arm.q[0] == pytest.approx(0.2, abs=0.01)
     finally:
         await fake.close()
+
+
+async def test_dashboard_and_program_services_and_robot_messages_over_zenoh() -> None:
+    address = next(ADDRESSES)
+    nominal = load_ur_model("ur10e").dh
+    calibrated = type(nominal)(
+        theta=nominal.theta, a=nominal.a, d=tuple(v + 1e-4 for v in nominal.d), alpha=nominal.alpha
+    )
+    fake = FakeController("ur10e", address=address, initial_positions=HOME, dh=calibrated)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(address, startup=False)) as (daemon, client):
+            alice = await client.robot("alice")
+            events = client.subscribe(alice.keys.events, 100)
+            assert await alice.dashboard("robotmode") == {"v": 1, "ok": True, "reply": "Robotmode: POWER_OFF"}
+            assert (await alice.dashboard("brake release"))["ok"] is False
+            assert (await alice.startup())["ok"] is True
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            assert (await alice.set_tool_voltage(24))["ok"] is True
+            assert (await alice.set_tool_voltage(5))["ok"] is False
+            assert (await alice.zero_ft_sensor())["ok"] is True
+            await _until(client, alice.keys.io, lambda m: m["tool_voltage"] == 24)
+            assert fake.arm.io.tool_voltage == 24
+            # the fake's DH differs from the nominal one the cell expects: a mismatch is published
+            assert daemon.runtimes[0].backend.calibration_ok is False  # type: ignore[attr-defined]
+            endpoint = daemon.listen_endpoints[0]
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable,
+                "-m",
+                "urdaemon",
+                "dashboard",
+                "alice",
+                "robotmode",
+                "--connect",
+                endpoint,
+                stdout=asyncio.subprocess.PIPE,
+                stderr=asyncio.subprocess.PIPE,
+            )
+            out, err = await asyncio.wait_for(proc.communicate(), 60.0)
+            assert proc.returncode == 0, err
+            assert out.decode().strip() == "Robotmode: RUNNING"
+            events.close()
+    finally:
+        await fake.close()
+
+
+async def test_a_calibration_mismatch_is_published_on_the_events_key() -> None:
+    address = next(ADDRESSES)
+    nominal = load_ur_model("ur10e").dh
+    calibrated = type(nominal)(
+        theta=nominal.theta, a=nominal.a, d=tuple(v + 2e-4 for v in nominal.d), alpha=nominal.alpha
+    )
+    fake = FakeController("ur10e", address=address, initial_positions=HOME, dh=calibrated)
+    await fake.start()
+    try:
+        text = _cell(address, startup=False)
+        async with running_daemon(text) as (_, client):
+            alice = await client.robot("alice")
+            events = client.subscribe(alice.keys.events, 100)
+            # reconnect so that the check runs again while we listen: drop the RTDE link
+            fake.drop("rtde")
+            event = await _next_kind(events, "calibration_mismatch")
+            assert "kinematics hash" in event["text"]
+            assert "urdaemon calibration" in event["text"]
+    finally:
+        await fake.close()
+
+
+async def _next_kind(sub: Any, kind: str) -> dict[str, Any]:
+    for _ in range(100):
+        event: dict[str, Any] = await sub.get_json(timeout=20.0)
+        if event["kind"] == kind:
+            return event
+    raise AssertionError(f"no {kind} event")

@@ -48,6 +48,8 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
+        self.on_notice: Callable[[str, str], None] | None = None
+        """Set by the runtime: ``(kind, text)`` of what the robot or the backend wants users to know."""
 
     @abc.abstractmethod
     async def run(self, on_cycle: Callable[[], None]) -> None:
@@ -64,6 +66,35 @@ class Backend(abc.ABC):
     async def set_speed_slider(self, fraction: float) -> None:
         """Set the speed slider (0..1)."""
         raise BackendError(f"{self.kind} backend has no speed slider")
+
+    async def dashboard(self, line: str) -> tuple[bool, str]:
+        """Send a dashboard command line; (success, the robot's reply)."""
+        raise BackendError(f"{self.kind} backend has no dashboard server")
+
+    async def startup(self) -> None:
+        """Power on, release the brakes and start the control program."""
+        raise BackendError(f"{self.kind} backend has no start-up to do")
+
+    async def resend_program(self) -> None:
+        """Send the control program again."""
+        raise BackendError(f"{self.kind} backend runs no control program")
+
+    async def hand_back_control(self) -> None:
+        """End the control program's loop so the pendant program continues."""
+        raise BackendError(f"{self.kind} backend runs no control program")
+
+    async def zero_ft_sensor(self) -> None:
+        """Zero the force/torque sensor."""
+        raise BackendError(f"{self.kind} backend has no force/torque sensor")
+
+    async def set_tool_voltage(self, volts: int) -> None:
+        """Set the tool voltage (0, 12 or 24 V)."""
+        raise BackendError(f"{self.kind} backend has no tool voltage")
+
+    def notice(self, kind: str, text: str) -> None:
+        """Tell users something (a robot message, a calibration mismatch)."""
+        if self.on_notice is not None:
+            self.on_notice(kind, text)
 
     async def close(self) -> None:
         """Release what outlives one ``run`` (listening sockets); the daemon is stopping."""

@@ -110,6 +110,18 @@ class MockBackend(Backend):
         self.state.payload_mass = float(mass)
         self.state.payload_cog = (float(cog[0]), float(cog[1]), float(cog[2]))
 
+    async def set_tool_voltage(self, volts: int) -> None:
+        """Store the tool voltage."""
+        if volts not in (0, 12, 24):
+            raise BackendError(f"tool voltage must be 0, 12 or 24 V, got {volts!r}")
+        self.state.tool_voltage = volts
+
+    async def zero_ft_sensor(self) -> None:
+        """Acknowledged: the mock's force/torque reading is always zero."""
+
+    async def startup(self) -> None:
+        """Nothing to do: the mock is always running."""
+
     async def set_speed_slider(self, fraction: float) -> None:
         """Store the slider; the reported speed scaling follows from the next cycle on."""
         if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):

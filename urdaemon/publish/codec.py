@@ -25,6 +25,7 @@ __all__ = [
     "ToleranceMessage",
     "TrajectoryGoalMessage",
     "decode_cancel",
+    "decode_dashboard",
     "decode_message",
     "decode_move_goal",
     "decode_set_io",
@@ -32,6 +33,7 @@ __all__ = [
     "decode_speed_slider",
     "decode_stream_position",
     "decode_stream_velocity",
+    "decode_tool_voltage",
     "decode_trajectory_goal",
     "encode",
     "encode_feedback",
@@ -333,6 +335,30 @@ def decode_set_payload(payload: bytes | None) -> tuple[float, tuple[float, float
     if len(cog) != 3 or not all(math.isfinite(c) for c in cog):
         raise MessageError(f"{what}.cog: expected three finite numbers")
     return mass, (cog[0], cog[1], cog[2])
+
+
+def decode_dashboard(payload: bytes | None) -> str:
+    """Decode a dashboard request: command (one line, e.g. ``power on``)."""
+    what = "dashboard"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"command"})
+    command = data.get("command")
+    if not isinstance(command, str) or not command.strip():
+        raise MessageError(f'{what}.command: expected a dashboard command line, e.g. "power on"')
+    if "\n" in command or "\r" in command or len(command) > 1024:
+        raise MessageError(f"{what}.command: must be one line of at most 1024 characters")
+    return command.strip()
+
+
+def decode_tool_voltage(payload: bytes | None) -> int:
+    """Decode a set_tool_voltage request: volts (0, 12 or 24)."""
+    what = "set_tool_voltage"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"volts"})
+    volts = data.get("volts")
+    if isinstance(volts, bool) or volts not in (0, 12, 24):
+        raise MessageError(f"{what}.volts: must be 0, 12 or 24")
+    return int(volts)
 
 
 def decode_speed_slider(payload: bytes | None) -> float:

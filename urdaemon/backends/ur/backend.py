@@ -164,41 +164,67 @@ class UrBackend(Backend):
 
     # ---- services --------------------------------------------------------------------------------------
 
-    async def dashboard(self, command: Any) -> Any:
-        """Send a dashboard command; its typed reply."""
-        if self._dashboard is None:
-            raise BackendError("dashboard not connected")
-        return await self._dashboard.command(command)
+    async def dashboard(self, line: str) -> tuple[bool, str]:
+        """Send a dashboard command line; (success, the robot's reply)."""
+        command = dash.parse_command(line) or dash.Raw(line)
+        try:
+            reply = await (await self._dashboard_link()).command(command)
+        except ConnectionLostError:
+            self._dashboard = None  # the dashboard dropped: connect once more
+            reply = await (await self._dashboard_link()).command(command)
+        success = getattr(reply, "success", None)
+        if success is None:  # a query: it succeeded if it could be read
+            success = all(getattr(reply, f, "") is not None for f in ("mode", "state", "running", "remote"))
+        return bool(success), str(getattr(reply, "text", ""))
+
+    async def zero_ft_sensor(self) -> None:
+        """Zero the force/torque sensor (script command)."""
+        if not self.servers.script_command.send(script_command.ZeroFtSensor()):
+            raise BackendError("the control program is not connected")
+
+    async def set_tool_voltage(self, volts: int) -> None:
+        """Set the tool voltage (script command)."""
+        if volts not in (0, 12, 24):
+            raise BackendError(f"tool voltage must be 0, 12 or 24 V, got {volts!r}")
+        if not self.servers.script_command.send(script_command.SetToolVoltage(volts)):
+            raise BackendError("the control program is not connected")
 
     async def startup(self) -> None:
         """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
-        if self._dashboard is None:
-            raise BackendError("dashboard not connected")
+        board = await self._dashboard_link()
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         if self.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
-            reply = await self._dashboard.command(dash.PowerOn())
+            reply = await board.command(dash.PowerOn())
             if not reply.success:
                 raise RobotFaultError(f"power on refused: {reply.text}")
             await self._wait_mode((RobotMode.IDLE, RobotMode.RUNNING), deadline)
         if self.state.robot_mode is not RobotMode.RUNNING:
-            reply = await self._dashboard.command(dash.BrakeRelease())
+            reply = await board.command(dash.BrakeRelease())
             if not reply.success:
                 raise RobotFaultError(f"brake release refused: {reply.text}")
             await self._wait_mode((RobotMode.RUNNING,), deadline)
         if self.robot.headless:
             self._send_program(force=True)
         elif not self.servers.reverse.connected:
-            reply = await self._dashboard.command(dash.Play())
+            reply = await board.command(dash.Play())
             if not reply.success:
                 raise RobotFaultError(f"play refused: {reply.text}")
 
-    def resend_program(self) -> None:
-        """Send the control program again (headless)."""
-        self._send_program(force=True)
+    async def resend_program(self) -> None:
+        """Send the control program again (headless) or play the loaded one (URCap)."""
+        if self.robot.headless:
+            if self._primary is None:
+                raise BackendError("not connected to the robot")
+            self._send_program(force=True)
+        else:
+            reply = await (await self._dashboard_link()).command(dash.Play())
+            if not reply.success:
+                raise BackendError(f"play refused: {reply.text}")
 
-    def hand_back_control(self) -> None:
+    async def hand_back_control(self) -> None:
         """End the control program's loop (a STOPPED frame); in URCap mode the pendant program continues."""
-        self.servers.reverse.send(reverse.Stopped())
+        if not self.servers.reverse.send(reverse.Stopped()):
+            raise BackendError("the control program is not connected")
 
     # ---- the cycle ---------------------------------------------------------------------------------------
 
@@ -280,6 +306,7 @@ class UrBackend(Backend):
             log.info("[%s] robot: %s", self.name, text)
         if text:
             self.robot_messages = [*self.robot_messages[-19:], text]
+            self.notice("robot_message", text)
 
     # ---- helpers ------------------------------------------------------------------------------------
 
@@ -297,6 +324,7 @@ class UrBackend(Backend):
                 raise RobotFaultError(text)
             log.warning("[%s] %s", self.name, text)
             self.robot_messages = [*self.robot_messages[-19:], text]
+            self.notice("calibration_mismatch", text)
 
     def _send_inputs(self, fields: dict[str, Any]) -> None:
         rtde = self._rtde
@@ -307,6 +335,12 @@ class UrBackend(Backend):
             value = fields.get(name, 0)
             values.append(float(value) if name in _DOUBLE_INPUTS else int(value))
         rtde.send_inputs(values)
+
+    async def _dashboard_link(self) -> DashboardLink:
+        """The dashboard connection, opened now if there is none (it does not need the other links)."""
+        if self._dashboard is None:
+            self._dashboard = await DashboardLink.connect(self.address)
+        return self._dashboard
 
     async def _wait_mode(self, modes: tuple[RobotMode, ...], deadline: float) -> None:
         while self.state.robot_mode not in modes:
