@@ -332,9 +332,15 @@ class RobotClient:
         joint_names: Sequence[str] | None = None,
         tolerances: dict[str, Any] | None = None,
         preempt: bool = False,
+        passthrough: bool = False,
     ) -> GoalHandle:
-        """Send a trajectory goal; raises ``GoalRejected`` with the daemon's reason."""
+        """Send a trajectory goal; raises ``GoalRejected`` with the daemon's reason.
+
+        ``passthrough``: the robot interpolates the points itself (UR controllers).
+        """
         body: dict[str, Any] = {"points": list(points), "preempt": preempt}
+        if passthrough:
+            body["passthrough"] = True
         if joint_names is not None:
             body["joint_names"] = list(joint_names)
         if tolerances is not None:

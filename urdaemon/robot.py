@@ -22,6 +22,7 @@ from urdaemon.cell.config import PublishOptions, Robot
 from urdaemon.control import (
     GoalFeedback,
     GoalResult,
+    GoalStatus,
     MotionController,
     Tolerances,
 )
@@ -334,6 +335,10 @@ class RobotRuntime:
             tolerances = self._tolerances(goal.tolerances, names)
             if self._planning is not None:
                 raise GoalRejected(f"busy: still planning trajectory {self._planning}")
+            if goal.passthrough:
+                problem = self.backend.passthrough_problem()
+                if problem is not None:
+                    raise GoalRejected(f"passthrough: {problem}")
             self.controller.check_can_start(state, time.monotonic(), goal.preempt)
             planner = self.controller.prepare_trajectory(names, goal.points, state)
         except (MessageError, GoalRejected) as err:
@@ -351,6 +356,10 @@ class RobotRuntime:
             try:
                 await _plan_tail(planner)
                 goal_id = self._new_goal_id()
+                if goal.passthrough:
+                    duration = self._start_passthrough(goal_id, planner, tolerances)
+                    self._accept_goal(query, "passthrough trajectory", goal_id, duration)
+                    return
                 duration = self.controller.accept_trajectory(
                     goal_id,
                     names,
@@ -414,6 +423,35 @@ class RobotRuntime:
         self.log.warning("%s goal rejected: %s", kind, reason)
         _reply(query, {"accepted": False, "reason": reason})
 
+    def _start_passthrough(
+        self, goal_id: str, planner: TrajectoryPlanner, tolerances: Tolerances | None
+    ) -> float:
+        """Accept a goal the robot interpolates itself and send it its points (no await in between)."""
+        problem = self.backend.passthrough_problem()
+        if problem is not None:
+            raise GoalRejected(f"passthrough: {problem}")
+        duration = self.controller.accept_external(
+            goal_id, planner, self.backend.state, time.monotonic(), tolerances=tolerances
+        )
+        points = planner.points
+        velocities = planner.velocities
+        previous = 0.0
+        spline = []
+        for point, velocity in zip(points, velocities, strict=True):
+            spline.append((point.positions, velocity, point.accelerations, point.time_from_start - previous))
+            previous = point.time_from_start
+        self.backend.start_passthrough(goal_id, spline, self._on_passthrough_result)
+        return duration
+
+    def _on_passthrough_result(self, goal_id: str, code: int) -> None:
+        status, reason = {
+            0: (GoalStatus.SUCCEEDED, "the robot finished the trajectory"),
+            1: (GoalStatus.CANCELED, "canceled on the robot"),
+        }.get(code, (GoalStatus.ABORTED, "the robot reported that the trajectory failed"))
+        if self.controller.finish_external(goal_id, status, reason, self.backend.state):
+            self._publish_events()
+            self._publish_status()
+
     def _on_cancel(self, query: Any) -> None:
         try:
             goal_id = codec.decode_cancel(_payload(query))
@@ -421,7 +459,10 @@ class RobotRuntime:
             _reply(query, {"canceled": False, "reason": str(err)})
             return
         target = goal_id if goal_id is not None else self.controller.active_goal_id
+        external = self.controller.external_goal_id
         canceled = self.controller.cancel(goal_id)
+        if canceled and external is not None and external == target:
+            self.backend.cancel_passthrough()
         body: dict[str, Any] = {"canceled": canceled, "goal_id": target}
         if not canceled:
             body["reason"] = "no active goal" if target is None else f"goal {target} is not active"
@@ -497,6 +538,8 @@ class RobotRuntime:
         self._service(query, "set_speed_slider", self._set_speed_slider(_payload(query)))
 
     def _on_stop(self, query: Any) -> None:
+        if self.controller.external_goal_id is not None:
+            self.backend.cancel_passthrough()
         self.controller.stop("stop requested", time.monotonic())
         self._publish_events()
         _reply(query, {"ok": True})

@@ -13,6 +13,7 @@ from tests.helpers import free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.description.urmodels import load_ur_model
+from urdaemon.errors import GoalRejected
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.model import RobotMode
 
@@ -173,3 +174,74 @@ async def _next_kind(sub: Any, kind: str) -> dict[str, Any]:
         if event["kind"] == kind:
             return event
     raise AssertionError(f"no {kind} event")
+
+
+def _two_robot_cell(alice: str, bob: str) -> str:
+    ports = [free_tcp_port() for _ in range(8)]
+    robots = []
+    for name, model, address, p in (("alice", "ur10e", alice, ports[:4]), ("bob", "ur3e", bob, ports[4:])):
+        robots.append(
+            f"""  - name: {name}
+    model: {model}
+    backend: ur
+    address: {address}
+    ports: {{reverse: {p[0]}, script_sender: {p[1]}, trajectory: {p[2]}, script_command: {p[3]}}}
+    ur: {{startup: true, listen_address: 127.0.0.1}}
+"""
+        )
+    return "cell: twocell\nrobots:\n" + "".join(robots)
+
+
+PASSTHROUGH_POINTS = [
+    {"positions": [0.2, -1.5, 1.5, -1.5, -1.6, 0.1], "time_from_start": 1.0},
+    {"positions": [0.4, -1.4, 1.4, -1.5, -1.6, 0.2], "time_from_start": 2.0},
+    {"positions": [0.3, -1.45, 1.45, -1.55, -1.6, 0.15], "time_from_start": 3.0},
+]
+
+
+async def test_alice_servos_a_trajectory_while_bob_runs_a_passthrough_trajectory() -> None:
+    fake_a = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    fake_b = FakeController("ur3e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake_a.start()
+    await fake_b.start()
+    try:
+        async with running_daemon(_two_robot_cell(fake_a.address, fake_b.address)) as (_, client):
+            alice, bob = await client.robot("alice"), await client.robot("bob")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            await _until(client, bob.keys.status, lambda s: s["ready"])
+            alice_goal = await alice.send_trajectory(
+                [{"positions": [0.5, -1.3, 1.3, -1.5, -1.5, 0.3], "time_from_start": 2.0}]
+            )
+            bob_goal = await bob.send_trajectory(PASSTHROUGH_POINTS, passthrough=True)
+            assert bob_goal.duration == pytest.approx(3.0, abs=0.01)
+            with pytest.raises(GoalRejected, match=r"passthrough goal .* runs on the robot"):
+                await bob.move(HOME, preempt=True)
+            feedback = [f async for f in bob_goal.feedback()]
+            assert feedback, "feedback while the robot interpolates"
+            results = [await alice_goal.result(timeout=20), await bob_goal.result(timeout=20)]
+            assert [r["status"] for r in results] == ["succeeded", "succeeded"], results
+            assert fake_b.arm.q == pytest.approx(PASSTHROUGH_POINTS[-1]["positions"], abs=0.01)
+            assert fake_a.arm.q == pytest.approx([0.5, -1.3, 1.3, -1.5, -1.5, 0.3], abs=0.01)
+            # a canceled passthrough ends CANCELED and the robot stops short of the goal
+            again = await bob.send_trajectory(
+                [{"positions": [-0.4, *HOME[1:]], "time_from_start": 4.0}], passthrough=True
+            )
+            async for _ in again.feedback():
+                break
+            assert (await bob.cancel())["canceled"] is True
+            result = await again.result(timeout=20)
+            assert result["status"] == "canceled"
+            assert fake_b.arm.q[0] > -0.4 + 0.05, "stopped before the goal"
+    finally:
+        await fake_a.close()
+        await fake_b.close()
+
+
+async def test_passthrough_on_a_mock_robot_is_refused_with_the_reason() -> None:
+    text = "cell: m\nrobots:\n  - {name: alice, model: ur10e, backend: mock}\n"
+    async with running_daemon(text) as (_, client):
+        alice = await client.robot("alice")
+        with pytest.raises(
+            GoalRejected, match="passthrough: the mock backend has no robot-side interpolation"
+        ):
+            await alice.send_trajectory(PASSTHROUGH_POINTS, passthrough=True)

@@ -91,6 +91,23 @@ class Backend(abc.ABC):
         """Set the tool voltage (0, 12 or 24 V)."""
         raise BackendError(f"{self.kind} backend has no tool voltage")
 
+    def passthrough_problem(self) -> str | None:
+        """Why a passthrough trajectory cannot start now (None when it can)."""
+        return f"the {self.kind} backend has no robot-side interpolation (passthrough)"
+
+    def start_passthrough(
+        self,
+        goal_id: str,
+        points: Sequence[tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...] | None, float]],
+        on_result: Callable[[str, int], None],
+    ) -> None:
+        """Send (positions, velocities, accelerations or None, segment time) points for the robot to run."""
+        raise BackendError(self.passthrough_problem() or "passthrough unavailable")
+
+    def cancel_passthrough(self) -> None:
+        """Cancel the passthrough trajectory the robot runs (no-op when none runs)."""
+        return  # backends without passthrough never have one running
+
     def notice(self, kind: str, text: str) -> None:
         """Tell users something (a robot message, a calibration mismatch)."""
         if self.on_notice is not None:

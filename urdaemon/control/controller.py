@@ -82,6 +82,8 @@ class _Mode(enum.Enum):
     STREAM_POSITION = "stream_position"
     STREAM_VELOCITY = "stream_velocity"
     STOPPING = "stopping"
+    EXTERNAL = "external"
+    """A goal the robot interpolates itself (passthrough): we hold still and wait for its result."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -318,6 +320,65 @@ class MotionController:
         self._start_goal(goal_id, plan, path_tol, goal_tol, goal_time, seed_p, seed_v, seed_a, state)
         return plan.duration
 
+    def accept_external(
+        self,
+        goal_id: str,
+        planner: TrajectoryPlanner,
+        state: RobotState,
+        now: float,
+        *,
+        tolerances: Tolerances | None = None,
+    ) -> float:
+        """Start a goal the robot executes itself (passthrough); planned here only to check and to report.
+
+        The robot follows its own interpolation, so no path tolerance applies; the goal ends with
+        ``finish_external`` (the robot's result), a cancel, a stop, or the robot becoming not ready.
+        """
+        if self._goal is not None or self._mode is not _Mode.IDLE:
+            active = self._goal.goal_id if self._goal is not None else self._mode.value
+            raise GoalRejected(f"busy: {active} is running; a passthrough trajectory starts from rest")
+        self._check_can_start(goal_id, state, now, False)
+        if planner.limits is not self.limits:
+            raise ValueError("the planner was prepared by another controller")
+        path_tol, goal_tol, goal_time = self._resolve_tolerances(tolerances)
+        zeros = [0.0] * self._n
+        plan = planner.finish(list(state.positions), zeros, zeros)
+        self._pos[:] = state.positions
+        self._vel[:] = self._zeros
+        self._acc[:] = self._zeros
+        self._goal = _Goal(goal_id, plan, tuple(math.inf for _ in path_tol), goal_tol, goal_time)
+        self._mode = _Mode.EXTERNAL
+        self._last_stream_now = -math.inf
+        self._goals_accepted += 1
+        return plan.duration
+
+    def finish_external(self, goal_id: str, status: GoalStatus, reason: str, state: RobotState) -> bool:
+        """End the passthrough goal ``goal_id`` as the robot reported; False if it is not the active one.
+
+        A reported success with a joint outside the goal tolerance ends ABORTED, naming the joint.
+        """
+        goal = self._goal
+        if goal is None or goal.goal_id != goal_id or self._mode is not _Mode.EXTERNAL:
+            return False
+        if status is GoalStatus.SUCCEEDED:
+            for i, (final, actual) in enumerate(zip(goal.final, state.positions, strict=True)):
+                if abs(final - actual) > goal.goal_tol[i]:
+                    status = GoalStatus.ABORTED
+                    reason = (
+                        f"the robot reported success but {self.joint_names[i]} is {final - actual:.4g} "
+                        f"from its goal (tolerance {goal.goal_tol[i]:.4g})"
+                    )
+                    break
+        self._pos[:] = goal.final
+        self._finish_goal(status, reason, state.positions)
+        self._go_idle()
+        return True
+
+    @property
+    def external_goal_id(self) -> str | None:
+        """The id of the running passthrough goal, or None."""
+        return self._goal.goal_id if self._goal is not None and self._mode is _Mode.EXTERNAL else None
+
     def check_can_start(self, state: RobotState, now: float, preempt: bool) -> None:
         """Raise GoalRejected if a goal could not start now (not ready, busy); nothing changes."""
         self._check_can_start("", state, now, preempt)
@@ -361,14 +422,20 @@ class MotionController:
         if goal is None or (goal_id is not None and goal_id != goal.goal_id):
             return False
         self._finish_goal(GoalStatus.CANCELED, "canceled by request", self._meas)
-        self._enter_stopping()
+        if self._mode is _Mode.EXTERNAL:
+            self._go_idle()  # the robot stops its own trajectory on CANCEL
+        else:
+            self._enter_stopping()
         return True
 
     def stop(self, reason: str, now: float) -> None:
         """Bring whatever runs to a jerk-limited stop; an executing goal ends ABORTED with ``reason`` now."""
         if self._goal is not None:
             self._finish_goal(GoalStatus.ABORTED, reason, self._meas)
-            self._enter_stopping()
+            if self._mode is _Mode.EXTERNAL:
+                self._go_idle()
+            else:
+                self._enter_stopping()
         elif self._mode is _Mode.STREAM_POSITION or self._mode is _Mode.STREAM_VELOCITY:
             self._enter_stopping()
         # Commands of a stopped stream must not keep it "active" for busy checks.
@@ -473,6 +540,8 @@ class MotionController:
             return
         if mode is _Mode.GOAL:
             self._tick_goal(state, command, now)
+        elif mode is _Mode.EXTERNAL:
+            self._tick_external(state, command, now)
         elif mode is _Mode.STOPPING:
             self._tick_stopping(state, command)
         elif now - self._last_stream_now > self._stream_timeout:
@@ -483,6 +552,28 @@ class MotionController:
             self._tick_stream_position(state, command)
         else:
             self._tick_stream_velocity(state, command)
+
+    def _tick_external(self, state: RobotState, command: JointCommand, now: float) -> None:
+        """The robot runs the trajectory: command nothing, estimate progress for feedback."""
+        goal = self._goal
+        assert goal is not None
+        goal.t = min(goal.t + self._period * state.speed_scaling, goal.duration)
+        self._write_idle(state, command)
+        if now >= goal.next_feedback:
+            goal.next_feedback = now + self._feedback_period
+            goal.plan.sample(goal.t, self._pos, self._vel, self._acc)
+            desired = tuple(self._pos)
+            actual = tuple(state.positions)
+            self._events.append(
+                GoalFeedback(
+                    goal_id=goal.goal_id,
+                    time_from_start=goal.t,
+                    duration=goal.duration,
+                    desired=desired,
+                    actual=actual,
+                    error=tuple(d - a for d, a in zip(desired, actual, strict=True)),
+                )
+            )
 
     def _tick_goal(self, state: RobotState, command: JointCommand, now: float) -> None:
         goal = self._goal
@@ -647,6 +738,9 @@ class MotionController:
         if not state.ready_for_motion:
             raise GoalRejected(f"robot not ready: {state.not_ready_reason()}")
         goal = self._goal
+        if goal is not None and self._mode is _Mode.EXTERNAL:
+            # the robot runs that trajectory itself: taking over mid-way would fight it
+            raise GoalRejected(f"busy: passthrough goal {goal.goal_id} runs on the robot; cancel it first")
         if goal is not None:
             if goal_id == goal.goal_id:
                 raise GoalRejected(f"goal {goal_id} is already executing")

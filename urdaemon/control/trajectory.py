@@ -349,6 +349,11 @@ class TrajectoryPlanner:
         self._elapsed = self.points[0].time_from_start  # the tail aims at absolute times from point 0's
 
     @property
+    def velocities(self) -> list[tuple[float, ...]]:
+        """The velocity at each point: the client's, else the chosen one (0 at the last)."""
+        return list(self._velocities)
+
+    @property
     def tail_done(self) -> bool:
         """True when every segment after the first is planned."""
         return len(self._tail) == len(self.points) - 1

@@ -65,6 +65,8 @@ class TrajectoryGoalMessage:
     points: tuple[TrajectoryPoint, ...]
     tolerances: ToleranceMessage
     preempt: bool
+    passthrough: bool = False
+    """Forward the points to the robot, which interpolates them itself (UR controllers only)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -198,7 +200,7 @@ def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
     """Decode a trajectory goal: points [{positions, velocities?, accelerations?, time_from_start}]."""
     what = "trajectory goal"
     data = decode_message(payload, what)
-    _allowed(data, what, {"joint_names", "points", "tolerances", "preempt"})
+    _allowed(data, what, {"joint_names", "points", "tolerances", "preempt", "passthrough"})
     raw_points = data.get("points")
     if not isinstance(raw_points, list):
         raise MessageError(f"{what}.points: expected a list of points")
@@ -231,6 +233,7 @@ def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
         points=tuple(points),
         tolerances=_tolerances(data.get("tolerances"), what),
         preempt=_bool(data, "preempt", what),
+        passthrough=_bool(data, "passthrough", what),
     )
 
 

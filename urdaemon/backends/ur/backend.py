@@ -27,7 +27,7 @@ from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, 
 from urdaemon.model import CommandMode, Lifecycle, RobotMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
-from urdaemon.protocols import reverse, script_command, script_sender
+from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 
 __all__ = ["UR_IO_SIZES", "UrBackend"]
 
@@ -40,6 +40,8 @@ PROGRAM_RESEND_S = 2.0
 """Headless: after sending the program, wait this long for it to connect back before sending again."""
 IDLE_TIMEOUT_S = 1.0
 """Read timeout sent with a keepalive (urcl's default, ur-protocols.md §4.2)."""
+PASSTHROUGH_TIMEOUT_S = 0.2
+"""Read timeout sent with trajectory control frames (urcl's default for non-realtime control, §4.2)."""
 STARTUP_TIMEOUT_S = 30.0
 """How long power-on and brake release may take (urcl polls for 30 s)."""
 
@@ -77,6 +79,7 @@ class UrBackend(Backend):
         self._host_ip = ""
         self.robot_messages: list[str] = []
         self.calibration_ok: bool | None = None
+        self._passthrough: tuple[str, Callable[[str, int], None]] | None = None
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -204,7 +207,9 @@ class UrBackend(Backend):
                 raise RobotFaultError(f"brake release refused: {reply.text}")
             await self._wait_mode((RobotMode.RUNNING,), deadline)
         if self.robot.headless:
-            self._send_program(force=True)
+            # the cycle may already have sent it the moment the brakes came off: a second program
+            # would replace the first while it is still connecting back
+            self._send_program(force=False)
         elif not self.servers.reverse.connected:
             reply = await board.command(dash.Play())
             if not reply.success:
@@ -226,6 +231,42 @@ class UrBackend(Backend):
         if not self.servers.reverse.send(reverse.Stopped()):
             raise BackendError("the control program is not connected")
 
+    # ---- passthrough: the robot interpolates -----------------------------------------------------------
+
+    def passthrough_problem(self) -> str | None:
+        """Why a passthrough trajectory cannot start now (None when it can)."""
+        if not (self.servers.reverse.connected and self.servers.trajectory.connected):
+            return "the control program is not connected (no reverse or trajectory connection)"
+        if self._passthrough is not None:
+            return f"passthrough goal {self._passthrough[0]} is still running on the robot"
+        return None
+
+    def start_passthrough(
+        self,
+        goal_id: str,
+        points: Sequence[tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...] | None, float]],
+        on_result: Callable[[str, int], None],
+    ) -> None:
+        """START(n) on the reverse socket, then the n spline points on the trajectory socket."""
+        problem = self.passthrough_problem()
+        if problem is not None:
+            raise BackendError(problem)
+        self._passthrough = (goal_id, on_result)
+        self.servers.reverse.send(
+            reverse.TrajectoryControl(reverse.TrajectoryAction.START, len(points), PASSTHROUGH_TIMEOUT_S)
+        )
+        for positions, velocities, accelerations, segment_time in points:
+            self.servers.trajectory.send(
+                trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time)
+            )
+
+    def cancel_passthrough(self) -> None:
+        """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
+        if self._passthrough is not None:
+            self.servers.reverse.send(
+                reverse.TrajectoryControl(reverse.TrajectoryAction.CANCEL, 0, PASSTHROUGH_TIMEOUT_S)
+            )
+
     # ---- the cycle ---------------------------------------------------------------------------------------
 
     def _on_package(self, values: tuple[Any, ...]) -> None:
@@ -246,6 +287,10 @@ class UrBackend(Backend):
                 reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
             elif command.mode is CommandMode.VELOCITY:
                 reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
+            elif self._passthrough is not None:  # the robot runs the trajectory: keep it alive
+                reverse_server.send(
+                    reverse.TrajectoryControl(reverse.TrajectoryAction.NOOP, 0, PASSTHROUGH_TIMEOUT_S)
+                )
             else:
                 reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
         elif (
@@ -284,9 +329,18 @@ class UrBackend(Backend):
     def on_link(self, name: str, connected: bool, reason: str) -> None:
         """A callback server's connection came or went."""
         log.info("[%s] %s", self.name, reason)
+        if not connected and name in ("reverse", "trajectory") and self._passthrough is not None:
+            goal_id, on_result = self._passthrough
+            self._passthrough = None
+            on_result(goal_id, int(trajectory_point.TrajectoryResultCode.FAILURE))
 
     def on_event(self, name: str, event: Any) -> None:
         """Something arrived on a callback connection."""
+        if isinstance(event, trajectory_point.TrajectoryResult) and self._passthrough is not None:
+            goal_id, on_result = self._passthrough
+            self._passthrough = None
+            on_result(goal_id, int(event.result))
+            return
         if isinstance(event, script_sender.ProgramRequested):
             self.servers.script_sender.send(script_sender.Program(self._program_text()))
             log.info("[%s] control program sent to the External Control URCap", self.name)

@@ -1,7 +1,8 @@
 """The servers the robot's control program dials: reverse, script sender, trajectory, script command.
 
 Each listens on one of the robot's configured host ports, accepts only the robot's own address and
-one connection at a time (a second is closed, like UR's client library does), and wraps the daemon
+keeps one connection (a newer one from the robot replaces an older one: a new program replaced the
+old), and wraps the daemon
 side of its sans-IO codec. ``send`` writes at once (one write per frame: the script reads fixed-size
 frames); events and connect/disconnect reach the owner through callbacks on the loop.
 """
@@ -119,10 +120,13 @@ class CallbackServer:
                 "%s: refused a connection from %s (the robot is %s)", self.name, link.peer, self.robot_address
             )
             return False
-        if self.link is not None:
-            self.refused += 1
-            log.warning("%s: refused a second connection from %s", self.name, link.peer)
-            return False
+        old = self.link
+        if old is not None:
+            # the robot runs one program at a time: a new connection means a new program replaced the
+            # old one, whose connection is dead even if its close has not reached us yet
+            log.info("%s: a new connection from %s replaces the previous one", self.name, link.peer)
+            self.link = None
+            old.close()
         self.link = link
         self.hooks.on_link(self.name, True, f"{self.name}: connected from {link.peer}")
         return True
