@@ -229,6 +229,8 @@ class RobotRuntime:
             "late_cycles": stats.late_cycles,
             "restarts": self._restarts,
             "rejected_stream_commands": self._stream_rejections,
+            # UR robots: does the robot's kinematics hash match the configured calibration (None: not checked)
+            "calibration_ok": getattr(self.backend, "calibration_ok", None),
         }
 
     def io_message(self) -> dict[str, Any]:
