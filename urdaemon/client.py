@@ -427,6 +427,45 @@ class RobotClient:
             body["velocities"] = list(velocities)
         self.client.session.put(self.keys.command_joint_position, _encode(body))
 
+    def freedrive(self, active: bool = True) -> None:
+        """Keep freedrive (hand guiding) on for one deadman period, or end it; repeat while it should last."""
+        self.client.session.put(f"{self.keys.base}/command/freedrive", _encode({"active": active}))
+
+    async def start_force_mode(
+        self,
+        task_frame: Sequence[float],
+        selection: Sequence[int],
+        wrench: Sequence[float],
+        limits: Sequence[float],
+        *,
+        force_type: int = 2,
+        damping: float = 0.025,
+        gain_scaling: float = 0.5,
+    ) -> dict[str, Any]:
+        """Start force mode (URScript ``force_mode`` semantics)."""
+        body = {
+            "task_frame": list(task_frame),
+            "selection": list(selection),
+            "wrench": list(wrench),
+            "type": force_type,
+            "limits": list(limits),
+            "damping": damping,
+            "gain_scaling": gain_scaling,
+        }
+        return await self.client.request(self.keys.service("start_force_mode"), body)
+
+    async def end_force_mode(self) -> dict[str, Any]:
+        """End force mode."""
+        return await self.client.request(self.keys.service("end_force_mode"), {})
+
+    async def start_tool_contact(self) -> dict[str, Any]:
+        """Arm tool-contact detection; the outcome comes as a ``tool_contact`` event."""
+        return await self.client.request(self.keys.service("start_tool_contact"), {})
+
+    async def end_tool_contact(self) -> dict[str, Any]:
+        """End tool-contact detection."""
+        return await self.client.request(self.keys.service("end_tool_contact"), {})
+
     def stream_velocities(self, velocities: Sequence[float]) -> None:
         """Publish one streaming velocity command (repeat faster than the deadman timeout)."""
         self.client.session.put(self.keys.command_joint_velocity, _encode({"velocities": list(velocities)}))

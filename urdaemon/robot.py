@@ -116,6 +116,11 @@ class RobotRuntime:
         for name in ("startup", "resend_program", "hand_back_control", "zero_ft_sensor"):
             node.queryable(keys.service(name), self._on_simple_service(name))
         node.queryable(keys.service("set_tool_voltage"), self._on_tool_voltage)
+        node.queryable(keys.service("start_force_mode"), self._on_start_force_mode)
+        node.queryable(keys.service("end_force_mode"), self._on_end_force_mode)
+        node.queryable(keys.service("start_tool_contact"), self._on_tool_contact(True))
+        node.queryable(keys.service("end_tool_contact"), self._on_tool_contact(False))
+        node.subscriber(f"{keys.base}/command/freedrive", self._on_freedrive)
         self.backend.on_notice = self._publish_notice
         node.subscriber(keys.command_joint_position, self._on_stream_position)
         node.subscriber(keys.command_joint_velocity, self._on_stream_velocity)
@@ -337,6 +342,7 @@ class RobotRuntime:
             tolerances = self._tolerances(goal.tolerances, names)
             if self._planning is not None:
                 raise GoalRejected(f"busy: still planning trajectory {self._planning}")
+            self._check_not_freedrive()
             if goal.passthrough:
                 problem = self.backend.passthrough_problem()
                 if problem is not None:
@@ -391,6 +397,7 @@ class RobotRuntime:
     def _on_move_goal(self, query: Any) -> None:
         try:
             goal = codec.decode_move_goal(_payload(query))
+            self._check_not_freedrive()
             names = self._joint_names(goal.joint_names)
             goal_id = self._new_goal_id()
             duration = self.controller.accept_move(
@@ -486,6 +493,7 @@ class RobotRuntime:
         state = self.backend.state
         try:
             message = codec.decode_stream_position(payload)
+            self._check_not_freedrive()
             assert message.positions is not None
             self.controller.stream_positions(
                 self._joint_names(message.joint_names),
@@ -504,6 +512,7 @@ class RobotRuntime:
         state = self.backend.state
         try:
             message = codec.decode_stream_velocity(payload)
+            self._check_not_freedrive()
             assert message.velocities is not None
             self.controller.stream_velocities(
                 self._joint_names(message.joint_names), message.velocities, state, time.monotonic()
@@ -549,6 +558,44 @@ class RobotRuntime:
     def _on_simple_service(self, name: str) -> Any:
         def handle(query: Any) -> None:
             self._service(query, name, getattr(self.backend, name)())
+
+        return handle
+
+    def _check_not_freedrive(self) -> None:
+        if self.backend.freedrive_active:
+            raise GoalRejected(
+                "busy: freedrive is on (stop sending freedrive commands, or send active: false)"
+            )
+
+    def _on_freedrive(self, key: str, payload: bytes) -> None:
+        try:
+            active = codec.decode_freedrive(payload)
+            if active and self.controller.mode != "idle":
+                raise GoalRejected(
+                    f"busy: the robot is {self.controller.mode.replace('_', ' ')}; freedrive starts at rest"
+                )
+            self.backend.freedrive(active, self.robot.motion.stream_timeout)
+        except (MessageError, GoalRejected) as err:
+            self._reject_stream(key, err)
+        except BackendError as err:
+            self._reject_stream(key, GoalRejected(str(err)))
+
+    def _on_start_force_mode(self, query: Any) -> None:
+        async def work() -> None:
+            from urdaemon.protocols.script_command import StartForceMode
+
+            fields = codec.decode_force_mode(_payload(query))
+            await self.backend.force_mode(StartForceMode(**fields))
+
+        self._service(query, "start_force_mode", work())
+
+    def _on_end_force_mode(self, query: Any) -> None:
+        self._service(query, "end_force_mode", self.backend.force_mode(None))
+
+    def _on_tool_contact(self, start: bool) -> Any:
+        def handle(query: Any) -> None:
+            name = "start_tool_contact" if start else "end_tool_contact"
+            self._service(query, name, self.backend.tool_contact(start))
 
         return handle
 

@@ -108,6 +108,23 @@ class Backend(abc.ABC):
         """Cancel the passthrough trajectory the robot runs (no-op when none runs)."""
         return  # backends without passthrough never have one running
 
+    @property
+    def freedrive_active(self) -> bool:
+        """True while the robot is in freedrive (hand guiding)."""
+        return False
+
+    def freedrive(self, active: bool, timeout: float) -> None:
+        """Keep freedrive on for ``timeout`` s more (deadman), or end it now."""
+        raise BackendError(f"the {self.kind} backend has no freedrive")
+
+    async def force_mode(self, start: object | None) -> None:
+        """Start force mode with a ``StartForceMode`` message, or end it (None)."""
+        raise BackendError(f"the {self.kind} backend has no force mode")
+
+    async def tool_contact(self, start: bool) -> None:
+        """Arm tool-contact detection, or end it; the outcome arrives as a ``tool_contact`` notice."""
+        raise BackendError(f"the {self.kind} backend has no tool contact detection")
+
     def notice(self, kind: str, text: str) -> None:
         """Tell users something (a robot message, a calibration mismatch)."""
         if self.on_notice is not None:

@@ -26,6 +26,8 @@ __all__ = [
     "TrajectoryGoalMessage",
     "decode_cancel",
     "decode_dashboard",
+    "decode_force_mode",
+    "decode_freedrive",
     "decode_message",
     "decode_move_goal",
     "decode_set_io",
@@ -362,6 +364,46 @@ def decode_tool_voltage(payload: bytes | None) -> int:
     if isinstance(volts, bool) or volts not in (0, 12, 24):
         raise MessageError(f"{what}.volts: must be 0, 12 or 24")
     return int(volts)
+
+
+def decode_freedrive(payload: bytes | None) -> bool:
+    """Decode a freedrive command: active (true keeps freedrive on for one deadman period, false ends it)."""
+    what = "freedrive command"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"active"})
+    return _bool(data, "active", what, default=True)
+
+
+def decode_force_mode(payload: bytes | None) -> dict[str, Any]:
+    """Decode a start_force_mode request into the fields of the script command (ur-protocols.md §4.5)."""
+    what = "start_force_mode"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"task_frame", "selection", "wrench", "type", "limits", "damping", "gain_scaling"})
+    fields: dict[str, Any] = {}
+    for key in ("task_frame", "wrench", "limits"):
+        values = _numbers(data.get(key), f"{what}.{key}")
+        if len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise MessageError(f"{what}.{key}: expected six finite numbers")
+        fields[key] = values
+    selection = data.get("selection")
+    if (
+        not isinstance(selection, list)
+        or len(selection) != 6
+        or any(v not in (0, 1) or isinstance(v, bool) for v in selection)
+    ):
+        raise MessageError(f"{what}.selection: expected six 0/1 values")
+    fields["selection"] = tuple(int(v) for v in selection)
+    force_type = data.get("type", 2)
+    if isinstance(force_type, bool) or force_type not in (1, 2, 3):
+        raise MessageError(f"{what}.type: must be 1, 2 or 3")
+    fields["force_type"] = int(force_type)
+    for key, low, high, default in (("damping", 0.0, 1.0, 0.025), ("gain_scaling", 0.0, 2.0, 0.5)):
+        value = data.get(key, default)
+        value = _number(value, f"{what}.{key}")
+        if not low <= value <= high:
+            raise MessageError(f"{what}.{key}: must be within {low}..{high}")
+        fields[key] = value
+    return fields
 
 
 def decode_speed_slider(payload: bytes | None) -> float:

@@ -80,6 +80,8 @@ class UrBackend(Backend):
         self.robot_messages: list[str] = []
         self.calibration_ok: bool | None = None
         self._passthrough: tuple[str, Callable[[str, int], None]] | None = None
+        self._freedrive_until = 0.0
+        self._freedrive_on = False
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -267,6 +269,46 @@ class UrBackend(Backend):
                 reverse.TrajectoryControl(reverse.TrajectoryAction.CANCEL, 0, PASSTHROUGH_TIMEOUT_S)
             )
 
+    # ---- freedrive, force mode, tool contact -------------------------------------------------------------
+
+    @property
+    def freedrive_active(self) -> bool:
+        """True while freedrive is on."""
+        return self._freedrive_on
+
+    def freedrive(self, active: bool, timeout: float) -> None:
+        """Keep freedrive on for ``timeout`` s more (a deadman: it ends when commands stop), or end it now."""
+        if not self.servers.reverse.connected:
+            raise BackendError("the control program is not connected")
+        if active:
+            self._freedrive_until = time.monotonic() + timeout
+            if not self._freedrive_on:
+                self._freedrive_on = True
+                self.servers.reverse.send(
+                    reverse.FreedriveControl(reverse.FreedriveAction.START, PASSTHROUGH_TIMEOUT_S)
+                )
+        else:
+            self._end_freedrive()
+
+    def _end_freedrive(self) -> None:
+        if self._freedrive_on:
+            self._freedrive_on = False
+            self.servers.reverse.send(
+                reverse.FreedriveControl(reverse.FreedriveAction.STOP, PASSTHROUGH_TIMEOUT_S)
+            )
+
+    async def force_mode(self, start: object | None) -> None:
+        """Start force mode (a ``StartForceMode`` script command) or end it (None)."""
+        message = script_command.EndForceMode() if start is None else start
+        if not self.servers.script_command.send(message):
+            raise BackendError("the control program is not connected")
+
+    async def tool_contact(self, start: bool) -> None:
+        """Arm tool-contact detection, or end it; the result comes back as a ``tool_contact`` notice."""
+        message = script_command.StartToolContact() if start else script_command.EndToolContact()
+        if not self.servers.script_command.send(message):
+            raise BackendError("the control program is not connected")
+
     # ---- the cycle ---------------------------------------------------------------------------------------
 
     def _on_package(self, values: tuple[Any, ...]) -> None:
@@ -287,6 +329,13 @@ class UrBackend(Backend):
                 reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
             elif command.mode is CommandMode.VELOCITY:
                 reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
+            elif self._freedrive_on:  # hand guiding: keep it alive while the deadman holds
+                if time.monotonic() > self._freedrive_until:
+                    self._end_freedrive()
+                else:
+                    reverse_server.send(
+                        reverse.FreedriveControl(reverse.FreedriveAction.NOOP, PASSTHROUGH_TIMEOUT_S)
+                    )
             elif self._passthrough is not None:  # the robot runs the trajectory: keep it alive
                 reverse_server.send(
                     reverse.TrajectoryControl(reverse.TrajectoryAction.NOOP, 0, PASSTHROUGH_TIMEOUT_S)
@@ -329,6 +378,8 @@ class UrBackend(Backend):
     def on_link(self, name: str, connected: bool, reason: str) -> None:
         """A callback server's connection came or went."""
         log.info("[%s] %s", self.name, reason)
+        if not connected and name == "reverse":
+            self._freedrive_on = False  # the program ended: so did its freedrive
         if not connected and name in ("reverse", "trajectory") and self._passthrough is not None:
             goal_id, on_result = self._passthrough
             self._passthrough = None
@@ -340,6 +391,10 @@ class UrBackend(Backend):
             goal_id, on_result = self._passthrough
             self._passthrough = None
             on_result(goal_id, int(event.result))
+            return
+        if isinstance(event, script_command.ToolContactResult):
+            outcome = "contact" if event.code == script_command.ToolContactResultCode.SUCCESS else "canceled"
+            self.notice("tool_contact", outcome)
             return
         if isinstance(event, script_sender.ProgramRequested):
             self.servers.script_sender.send(script_sender.Program(self._program_text()))

@@ -1,0 +1,96 @@
+"""Freedrive with its deadman, force mode and tool contact on the `ur` backend, against the fake."""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import pytest
+
+from tests.integration.conftest import running_daemon
+from tests.ur.test_ur_backend import HOME, _cell, _until
+from urdaemon.errors import GoalRejected
+from urdaemon.fakeur.controller import FakeController
+
+pytestmark = pytest.mark.timeout(90)
+
+ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(200))
+
+
+def _freedrive(fake: FakeController) -> bool:
+    """Read through a call: the type checker must not pin a flag the fake changes behind its back."""
+    return fake.arm.freedrive
+
+
+async def test_freedrive_holds_while_commanded_blocks_motion_and_the_deadman_ends_it() -> None:
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (_, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            states = alice.joint_states(10_000)
+            for _ in range(40):  # 0.4 s of commands, one every 5 cycles (10 ms) at 500 Hz
+                alice.freedrive(True)
+                for _ in range(5):
+                    await states.get(timeout=5.0)
+            assert fake.arm.freedrive is True
+            with pytest.raises(GoalRejected, match="freedrive is on"):
+                await alice.move(HOME, duration=1.0)
+            # no more commands: the deadman (stream_timeout 0.2 s) ends freedrive
+            for _ in range(1000):
+                await states.get(timeout=5.0)
+                if not _freedrive(fake):
+                    break
+            assert _freedrive(fake) is False
+            goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
+            assert (await goal.result(timeout=20))["status"] == "succeeded"
+    finally:
+        await fake.close()
+
+
+async def test_force_mode_and_tool_contact_reach_the_robot() -> None:
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (_, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            events = client.subscribe(alice.keys.events, 100)
+            reply = await alice.start_force_mode(
+                [0.0] * 6, [0, 0, 1, 0, 0, 0], [0.0, 0.0, -10.0, 0.0, 0.0, 0.0], [0.1] * 6
+            )
+            assert reply["ok"] is True
+            await _until(client, alice.keys.joint_states, lambda m: fake.arm.force_mode, limit=2000)
+            assert fake.arm.force_mode is True
+            bad = await alice.client.request(alice.keys.service("start_force_mode"), {"selection": [2] * 6})
+            assert bad["ok"] is False
+            assert (await alice.end_force_mode())["ok"] is True
+            await _until(client, alice.keys.joint_states, lambda m: not fake.arm.force_mode, limit=2000)
+            assert (await alice.start_tool_contact())["ok"] is True
+            assert (await alice.end_tool_contact())["ok"] is True
+            event: dict[str, Any] = {}
+            for _ in range(50):
+                event = await events.get_json(timeout=10.0)
+                if event["kind"] == "tool_contact":
+                    break
+            assert event["kind"] == "tool_contact"
+            assert event["text"] == "canceled", "the fake never detects contact: ending it cancels"
+    finally:
+        await fake.close()
+
+
+async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons() -> None:
+    async with running_daemon("cell: m\nrobots:\n  - {name: alice, model: ur10e, backend: mock}\n") as (
+        _,
+        client,
+    ):
+        alice = await client.robot("alice")
+        events = client.subscribe(alice.keys.events, 10)
+        alice.freedrive(True)
+        event = await events.get_json(timeout=10.0)
+        assert event["kind"] == "command_rejected"
+        assert "no freedrive" in event["reason"]
+        reply = await alice.start_force_mode([0.0] * 6, [0] * 6, [0.0] * 6, [0.1] * 6)
+        assert reply["ok"] is False
+        assert "no force mode" in reply["reason"]
