@@ -122,6 +122,7 @@ class RobotRuntime:
         node.queryable(keys.service("end_tool_contact"), self._on_tool_contact(False))
         node.subscriber(f"{keys.base}/command/freedrive", self._on_freedrive)
         self.backend.on_notice = self._publish_notice
+        self.backend.on_change = self._publish_status
         node.subscriber(keys.command_joint_position, self._on_stream_position)
         node.subscriber(keys.command_joint_velocity, self._on_stream_velocity)
         node.liveliness_token(keys.alive)

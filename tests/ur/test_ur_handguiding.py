@@ -94,3 +94,39 @@ async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons
         reply = await alice.start_force_mode([0.0] * 6, [0] * 6, [0.0] * 6, [0.1] * 6)
         assert reply["ok"] is False
         assert "no force mode" in reply["reason"]
+
+
+async def test_hand_back_control_ends_the_program_until_it_is_resent_and_a_lost_link_shows_recovering() -> (
+    None
+):
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (daemon, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            backend = daemon.runtimes[0].backend
+            statuses = client.subscribe(alice.keys.status, 1000)
+            assert (await alice.hand_back_control())["ok"] is True
+            handed = await _until(client, alice.keys.status, lambda s: not s["program_running"])
+            assert handed["reason"] == "control handed back to the robot"
+            # the program is not sent again by itself: 3 s of status (past the 2 s resend window)
+            states = alice.joint_states(10_000)
+            for _ in range(1500):
+                await states.get(timeout=5.0)
+            assert not backend.servers.reverse.connected  # type: ignore[attr-defined]
+            assert (await alice.resend_program())["ok"] is True
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            # a lost link: the robot shows recovering, then ready again
+            fake.drop("rtde")
+            seen = []
+            for _ in range(100):
+                status = await statuses.get_json(timeout=10.0)
+                seen.append(status["lifecycle"])
+                if "recovering" in seen and status["ready"]:
+                    break
+            assert "recovering" in seen, seen
+            goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
+            assert (await goal.result(timeout=20))["status"] == "succeeded"
+    finally:
+        await fake.close()

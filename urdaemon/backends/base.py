@@ -48,6 +48,8 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
+        self.on_change: Callable[[], None] | None = None
+        """Set by the runtime: called when the backend changes the state outside a cycle (lifecycle)."""
         self.on_notice: Callable[[str, str], None] | None = None
         """Set by the runtime: ``(kind, text)`` of what the robot or the backend wants users to know."""
 

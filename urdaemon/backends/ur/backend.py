@@ -82,6 +82,9 @@ class UrBackend(Backend):
         self._passthrough: tuple[str, Callable[[str, int], None]] | None = None
         self._freedrive_until = 0.0
         self._freedrive_on = False
+        self._handed_back = False
+        """After hand_back_control the program is not sent again until resend_program or startup."""
+        self._runs = 0
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -89,8 +92,15 @@ class UrBackend(Backend):
         """Connect every link, start streaming, keep the program running; raise when a link drops."""
         self._on_cycle = on_cycle
         state = self.state
-        state.lifecycle = Lifecycle.CONNECTING
-        state.lifecycle_reason = f"connecting to {self.address}"
+        self._runs += 1
+        if self._runs == 1:
+            state.lifecycle = Lifecycle.CONNECTING
+            state.lifecycle_reason = f"connecting to {self.address}"
+        else:  # a link was lost: reconnecting, motion resumes only from a new command
+            state.lifecycle = Lifecycle.RECOVERING
+            state.lifecycle_reason = f"reconnecting to {self.address}"
+        if self.on_change is not None:
+            self.on_change()  # no cycle runs until RTDE streams again: say it now
         state.program_running = False
         if not self._servers_started:
             await self.servers.start(self.options.listen_address)
@@ -123,7 +133,7 @@ class UrBackend(Backend):
         finally:
             self._close_links()
             state.program_running = False
-            if state.lifecycle is not Lifecycle.CONNECTING:
+            if state.lifecycle not in (Lifecycle.CONNECTING, Lifecycle.RECOVERING):
                 state.lifecycle = Lifecycle.DISCONNECTED
 
     async def close(self) -> None:
@@ -197,6 +207,7 @@ class UrBackend(Backend):
     async def startup(self) -> None:
         """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
         board = await self._dashboard_link()
+        self._handed_back = False
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         if self.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
             reply = await board.command(dash.PowerOn())
@@ -219,6 +230,7 @@ class UrBackend(Backend):
 
     async def resend_program(self) -> None:
         """Send the control program again (headless) or play the loaded one (URCap)."""
+        self._handed_back = False
         if self.robot.headless:
             if self._primary is None:
                 raise BackendError("not connected to the robot")
@@ -232,6 +244,7 @@ class UrBackend(Backend):
         """End the control program's loop (a STOPPED frame); in URCap mode the pendant program continues."""
         if not self.servers.reverse.send(reverse.Stopped()):
             raise BackendError("the control program is not connected")
+        self._handed_back = True
 
     # ---- passthrough: the robot interpolates -----------------------------------------------------------
 
@@ -317,7 +330,11 @@ class UrBackend(Backend):
         reverse_server = self.servers.reverse
         state.program_running = state.program_running and reverse_server.connected
         if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
-            state.lifecycle_reason = "waiting for the control program to connect"
+            state.lifecycle_reason = (
+                "control handed back to the robot"
+                if self._handed_back
+                else "waiting for the control program to connect"
+            )
         else:
             state.lifecycle_reason = ""
         self._cycles += 1
@@ -344,6 +361,7 @@ class UrBackend(Backend):
                 reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
         elif (
             self.robot.headless
+            and not self._handed_back
             and state.robot_mode is RobotMode.RUNNING
             and state.lifecycle is Lifecycle.RUNNING
         ):
