@@ -74,6 +74,24 @@ def _parser() -> argparse.ArgumentParser:
     echo.add_argument("--timeout", type=float, default=0.0, help="give up after S seconds without a sample")
     _connect_arg(echo)
 
+    call = sub.add_parser(
+        "service",
+        help="call a robot service (set_io, set_speed_slider, set_payload, zero_ft_sensor, set_tool_voltage, "
+        "startup, resend_program, hand_back_control, start_force_mode, end_force_mode, start_tool_contact, "
+        "end_tool_contact, stop) and print the reply",
+    )
+    call.add_argument("robot")
+    call.add_argument("name", help="service name, e.g. set_io")
+    call.add_argument(
+        "body",
+        nargs="?",
+        default="{}",
+        help='request as JSON, e.g. \'{"kind": "digital", "pin": 3, "value": true}\'',
+    )
+    call.add_argument("--cell", default=None)
+    call.add_argument("--timeout", type=float, default=60.0)
+    _connect_arg(call)
+
     board = sub.add_parser("dashboard", help="send a dashboard command to a robot and print the reply")
     board.add_argument("robot")
     board.add_argument(
@@ -137,6 +155,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return asyncio.run(_move(args))
         if args.command == "dashboard":
             return asyncio.run(_dashboard(args))
+        if args.command == "service":
+            return asyncio.run(_call_service(args))
         if args.command == "calibration":
             return _calibration(args)
     except (ConfigError, DescriptionError) as err:
@@ -263,6 +283,39 @@ async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
             print(json.dumps({"key": sample_key, "value": value}), flush=True)
             received += 1
     return EXIT_OK
+
+
+SERVICE_NAME = r"^[a-z_]{1,40}$"
+
+
+async def _call_service(args: argparse.Namespace) -> int:
+    import re
+
+    from urdaemon.client import Client
+
+    problem = _bad_endpoint(args.connect)
+    if problem is None and not re.match(SERVICE_NAME, args.name):
+        problem = f"{args.name!r} is not a service name"
+    body: object = None
+    if problem is None:
+        try:
+            body = json.loads(args.body)
+        except json.JSONDecodeError as err:
+            problem = f"the request is not JSON: {err}"
+    if problem is None and not isinstance(body, dict):
+        problem = "the request must be a JSON object"
+    if problem is not None or not isinstance(body, dict):
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        async with await Client.connect(args.connect) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            reply = await client.request(robot.keys.service(args.name), body, timeout=args.timeout)
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    print(json.dumps(reply))
+    return EXIT_OK if reply.get("ok") else EXIT_FAILED
 
 
 async def _dashboard(args: argparse.Namespace) -> int:

@@ -130,3 +130,59 @@ async def test_hand_back_control_ends_the_program_until_it_is_resent_and_a_lost_
             assert (await goal.result(timeout=20))["status"] == "succeeded"
     finally:
         await fake.close()
+
+
+async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services() -> None:
+    import asyncio
+    import json
+    import sys
+
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (daemon, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            states = alice.joint_states(10_000)
+            target = [0.15, *HOME[1:]]
+            for _ in range(60):  # 0.6 s of streaming, one command every 5 cycles
+                alice.stream_positions(target)
+                for _ in range(5):
+                    await states.get(timeout=5.0)
+            assert fake.arm.q[0] == pytest.approx(0.15, abs=0.005), "servoj streaming reached the target"
+            for _ in range(1000):  # the deadman stops the stream; the arm rests
+                sample = await states.get_json(timeout=5.0)
+                if all(v == 0.0 for v in sample["velocity"]) and daemon.runtimes[0].controller.mode == "idle":
+                    break
+            assert daemon.runtimes[0].controller.mode == "idle"
+
+            async def cli(*args: str) -> tuple[int, str]:
+                proc = await asyncio.create_subprocess_exec(
+                    sys.executable,
+                    "-m",
+                    "urdaemon",
+                    "service",
+                    "alice",
+                    *args,
+                    "--connect",
+                    daemon.listen_endpoints[0],
+                    stdout=asyncio.subprocess.PIPE,
+                    stderr=asyncio.subprocess.PIPE,
+                )
+                out, err = await asyncio.wait_for(proc.communicate(), 60.0)
+                assert proc.returncode is not None
+                return proc.returncode, (out + err).decode()
+
+            code, out = await cli("set_io", json.dumps({"kind": "digital", "pin": 6, "value": True}))
+            assert code == 0, out
+            assert json.loads(out.splitlines()[0])["ok"] is True
+            await _until(client, alice.keys.io, lambda m: m["digital_out"][6])
+            assert fake.arm.io.digital_out & (1 << 6)
+            code, out = await cli("set_tool_voltage", json.dumps({"volts": 7}))
+            assert code == 1
+            assert "0, 12 or 24" in out
+            code, out = await cli("set_io", "not json")
+            assert code == 2
+            assert "not JSON" in out
+    finally:
+        await fake.close()
