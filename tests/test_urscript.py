@@ -363,3 +363,13 @@ def test_headless_program_arrives_as_one_def(script: str) -> None:
         CommandReceived("stop program")
     ]
     assert find_callback_sockets(programs[0].text).reverse == fake.Endpoint(HOST, 51001)
+
+
+def test_older_controllers_get_set_payload_instead_of_set_target_payload() -> None:
+    new = render_control_script(ScriptParameters(server_ip="10.0.0.2", controller_version=(5, 15, 0)))
+    old = render_control_script(ScriptParameters(server_ip="10.0.0.2", controller_version=(3, 15, 7)))
+    assert "set_target_payload(" in new
+    assert "set_target_payload(" not in old, "CB3 / PolyScope < 5.10 has no set_target_payload"
+    assert "set_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3))" in old
+    assert "= tool_contact(direction=" in new
+    assert "= tool_contact(" not in old, "tool_contact is e-Series only"

@@ -69,6 +69,8 @@ PLACEHOLDERS: Final = (
     "SERVOJ_LOOKAHEAD",
     "SERVOJ_GAIN",
     "TOOL_SETUP",
+    "TARGET_PAYLOAD_CALL",
+    "TOOL_CONTACT_CALL",
 )
 """Every placeholder the template must contain and the renderer fills."""
 
@@ -139,6 +141,10 @@ def _check_tool_setup(value: object) -> tuple[str, ...]:
     return lines
 
 
+TARGET_PAYLOAD_SINCE = (5, 10, 0)
+"""First PolyScope version with ``set_target_payload`` (ur-protocols.md §5.1 version gates)."""
+
+
 @dataclass(frozen=True, slots=True)
 class ScriptParameters:
     """What differs per robot in the control script; checked on construction (ValueError names the field)."""
@@ -150,6 +156,9 @@ class ScriptParameters:
     servoj_lookahead: float = DEFAULT_SERVOJ_LOOKAHEAD_S
     servoj_gain: float = DEFAULT_SERVOJ_GAIN
     tool_setup: tuple[str, ...] = field(default=())
+    controller_version: tuple[int, int, int] = (5, 10, 0)
+    """The controller's version: ``set_target_payload`` exists from PolyScope 5.10 on; older ones
+    (CB3 3.x included) get ``set_payload(mass, cog)`` for SET_TARGET_PAYLOAD instead."""
 
     def __post_init__(self) -> None:
         _check_host(self.server_ip)
@@ -188,6 +197,17 @@ def _values(params: ScriptParameters) -> dict[str, str]:
         "SERVOJ_LOOKAHEAD": _number(params.servoj_lookahead),
         "SERVOJ_GAIN": _number(params.servoj_gain),
         "TOOL_SETUP": "\n".join(params.tool_setup),
+        "TARGET_PAYLOAD_CALL": (
+            "set_target_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3), ud_scaled6(raw, 6), raw[12] / UD_MULT)"
+            if params.controller_version >= TARGET_PAYLOAD_SINCE
+            else "set_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3))"
+        ),
+        # tool_contact exists on e-Series only (ur-protocols.md §4.5); elsewhere: never a contact
+        "TOOL_CONTACT_CALL": (
+            "tool_contact(direction=get_actual_tcp_speed())"
+            if params.controller_version >= (5, 0, 0)
+            else "0"
+        ),
     }
 
 

@@ -82,6 +82,7 @@ class UrBackend(Backend):
         self._passthrough: tuple[str, Callable[[str, int], None]] | None = None
         self._freedrive_until = 0.0
         self._freedrive_on = False
+        self._controller_version = (5, 10, 0)
         self._handed_back = False
         """After hand_back_control the program is not sent again until resend_program or startup."""
         self._runs = 0
@@ -110,6 +111,9 @@ class UrBackend(Backend):
             await rtde.handshake(output_recipe(), self._inputs)
             self.rate_hz = rtde.frequency
             self.period = 1.0 / rtde.frequency
+            if rtde.controller_version is not None:
+                version = rtde.controller_version
+                self._controller_version = (version.major, version.minor, version.bugfix)
             sockname = rtde.transport.get_extra_info("sockname") if rtde.transport else None
             self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "127.0.0.1")
             primary = self._primary = await PrimaryLink.connect(self.address, self._on_robot_message)
@@ -388,6 +392,7 @@ class UrBackend(Backend):
                 script_command_port=self.ports["script_command"],
                 servoj_lookahead=self.options.servoj_lookahead,
                 servoj_gain=self.options.servoj_gain,
+                controller_version=self._controller_version,
             )
         )
 
