@@ -84,6 +84,7 @@ class RobotRuntime:
         self._io_signature: tuple[Any, ...] = ()
         self._tasks: set[asyncio.Task[None]] = set()
         self._planning: str | None = None
+        self._external_goal: str | None = None
         self._restarts = 0
         self._stream_rejections = 0
         self._frame = f"{robot.prefix}base"
@@ -192,6 +193,11 @@ class RobotRuntime:
 
     def _publish_events(self) -> None:
         for event in self.controller.drain_events():
+            if isinstance(event, GoalResult) and event.goal_id == self._external_goal:
+                # the goal ended here (not ready, stopped, aborted), not by the robot's result: the
+                # robot must stop its trajectory too, or it would carry on after play
+                self._external_goal = None
+                self.backend.cancel_passthrough()
             if isinstance(event, GoalFeedback):
                 self.node.put(
                     self.keys.goal_feedback(event.goal_id), codec.encode_feedback(self.robot.name, event)
@@ -451,9 +457,12 @@ class RobotRuntime:
             spline.append((point.positions, velocity, point.accelerations, point.time_from_start - previous))
             previous = point.time_from_start
         self.backend.start_passthrough(goal_id, spline, self._on_passthrough_result)
+        self._external_goal = goal_id
         return duration
 
     def _on_passthrough_result(self, goal_id: str, code: int) -> None:
+        if self._external_goal == goal_id:
+            self._external_goal = None
         status, reason = {
             0: (GoalStatus.SUCCEEDED, "the robot finished the trajectory"),
             1: (GoalStatus.CANCELED, "canceled on the robot"),

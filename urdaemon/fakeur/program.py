@@ -741,20 +741,31 @@ class ProgramRunner:
     async def _read_reverse(self, timeout: float | None) -> ReverseEvent:
         """The next reverse frame; TimeoutError after ``timeout`` s, _LinkClosed when the socket closed."""
         pending = self._reverse_events
-        if not pending:
-            reader = self._links[REVERSE_SOCKET].reader
-            async with asyncio.timeout(timeout):
-                while not pending:
-                    try:
-                        data = await reader.read(READ_CHUNK)
-                    except ConnectionError:
-                        data = b""
-                    if not data:
-                        with contextlib.suppress(RemoteProtocolError):  # a torn frame is a read failure too
-                            self._reverse_codec.receive_eof()
-                        raise _LinkClosed
-                    pending.extend(self._reverse_codec.receive_data(data))
+        while not pending:
+            try:
+                await self._fill_reverse(timeout)
+            except TimeoutError:
+                # a paused program's threads are suspended: its read does not time out (real controllers
+                # wait; UR's drivers send nothing while the program is paused, §6.2)
+                if self.arm.runtime_state is RuntimeState.PAUSED:
+                    continue
+                raise
         return pending.popleft()
+
+    async def _fill_reverse(self, timeout: float | None) -> None:
+        pending = self._reverse_events
+        reader = self._links[REVERSE_SOCKET].reader
+        async with asyncio.timeout(timeout):
+            while not pending:
+                try:
+                    data = await reader.read(READ_CHUNK)
+                except ConnectionError:
+                    data = b""
+                if not data:
+                    with contextlib.suppress(RemoteProtocolError):  # a torn frame is a read failure too
+                        self._reverse_codec.receive_eof()
+                    raise _LinkClosed
+                pending.extend(self._reverse_codec.receive_data(data))
 
     def _halt(self, reason: str) -> str:
         """The script's abort path (§4.2): log, end freedrive, stop every thread, stopj, halt."""

@@ -23,7 +23,8 @@ from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.cell.config import Robot, UrOptions
-from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrTimeoutError
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrDaemonError, UrTimeoutError
 from urdaemon.model import CommandMode, Lifecycle, RobotMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -40,6 +41,10 @@ PROGRAM_RESEND_S = 2.0
 """Headless: after sending the program, wait this long for it to connect back before sending again."""
 IDLE_TIMEOUT_S = 1.0
 """Read timeout sent with a keepalive (urcl's default, ur-protocols.md §4.2)."""
+RUNTIME_PLAYING = 2
+RUNTIME_PAUSING = 3
+RTDE_WATCHDOG_S = 0.5
+"""No output package for this long is a lost link (a pulled cable closes no socket); urcl waits 1 s."""
 PASSTHROUGH_TIMEOUT_S = 0.2
 """Read timeout sent with trajectory control frames (urcl's default for non-realtime control, §4.2)."""
 STARTUP_TIMEOUT_S = 30.0
@@ -59,7 +64,8 @@ class UrBackend(Backend):
         expected_hash: str | None,
         program: Callable[[str, UrOptions, dict[str, int]], str] | None = None,
     ) -> None:
-        super().__init__(robot.name, joint_names, 500.0)
+        # the controller's rate is fixed by the model; the motion controller is built with it up front
+        super().__init__(robot.name, joint_names, float(load_ur_model(robot.model).control_rate_hz))
         assert robot.address is not None
         self.robot = robot
         self.address = robot.address
@@ -83,6 +89,13 @@ class UrBackend(Backend):
         self._freedrive_until = 0.0
         self._freedrive_on = False
         self._controller_version = (5, 10, 0)
+        self._step_time = reverse.step_time_for_frequency(self.rate_hz)
+        self._program_cache: tuple[tuple[Any, ...], str] | None = None
+        self._first_package = asyncio.Event()
+        self._last_package = 0.0
+        self._swallow_result = False
+        self._cycle_error_logged = False
+        self._dashboard_lock = asyncio.Lock()
         self._handed_back = False
         """After hand_back_control the program is not sent again until resend_program or startup."""
         self._runs = 0
@@ -109,27 +122,38 @@ class UrBackend(Backend):
         try:
             rtde = self._rtde = await RtdeLink.connect(self.address, self._on_package)
             await rtde.handshake(output_recipe(), self._inputs)
-            self.rate_hz = rtde.frequency
-            self.period = 1.0 / rtde.frequency
+            if abs(rtde.frequency - self.rate_hz) > 1e-6:
+                raise RobotFaultError(
+                    f"the controller streams at {rtde.frequency:g} Hz but a {self.robot.model} runs at "
+                    f"{self.rate_hz:g} Hz: is the cell file's model right?"
+                )
+            self._step_time = reverse.step_time_for_frequency(rtde.frequency)
             if rtde.controller_version is not None:
                 version = rtde.controller_version
                 self._controller_version = (version.major, version.minor, version.bugfix)
             sockname = rtde.transport.get_extra_info("sockname") if rtde.transport else None
             self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "127.0.0.1")
+            peer = rtde.transport.get_extra_info("peername") if rtde.transport else None
+            if peer:  # a host name in the cell file: the robot's connections come from its IP
+                self.servers.set_robot_address(str(peer[0]))
             primary = self._primary = await PrimaryLink.connect(self.address, self._on_robot_message)
             primary_task = asyncio.get_running_loop().create_task(primary.run())
             try:
-                self._dashboard = await DashboardLink.connect(self.address)
+                try:
+                    await self._dashboard_link()
+                except UrDaemonError as err:  # PolyScope X has none; services will say so when asked
+                    log.warning("[%s] no dashboard: %s", self.name, err)
                 await self._check_calibration(primary)
+                self._first_package.clear()
                 await rtde.start()
                 if self.options.startup:
-                    await self.startup()
-                watched: set[asyncio.Future[Any]] = {primary_task, rtde.closed}
-                done, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
-                if rtde.closed in done:
-                    raise rtde.closed.result() or ConnectionLostError("rtde: closed")
-                primary_task.result()
-                raise ConnectionLostError("primary: link ended")
+                    try:
+                        await self.startup()
+                    except (RobotFaultError, UrTimeoutError, BackendError) as err:
+                        # e.g. an emergency stop: report it and keep the links; the status shows why
+                        log.warning("[%s] start-up failed: %s", self.name, err)
+                        self.notice("startup_failed", str(err))
+                await self._watch(primary_task, rtde)
             finally:
                 primary_task.cancel()
                 with contextlib.suppress(BaseException):
@@ -140,8 +164,26 @@ class UrBackend(Backend):
             if state.lifecycle not in (Lifecycle.CONNECTING, Lifecycle.RECOVERING):
                 state.lifecycle = Lifecycle.DISCONNECTED
 
+    async def _watch(self, primary_task: asyncio.Task[None], rtde: RtdeLink) -> None:
+        """Return never; raise when the primary link ends, RTDE closes, or RTDE falls silent."""
+        watched: set[asyncio.Future[Any]] = {primary_task, rtde.closed}
+        while True:
+            done, _ = await asyncio.wait(
+                watched, timeout=RTDE_WATCHDOG_S / 2, return_when=asyncio.FIRST_COMPLETED
+            )
+            if rtde.closed in done:
+                raise rtde.closed.result() or ConnectionLostError("rtde: closed")
+            if primary_task in done:
+                primary_task.result()
+                raise ConnectionLostError("primary: link ended")
+            silent = time.monotonic() - self._last_package
+            if self._first_package.is_set() and silent > RTDE_WATCHDOG_S:
+                raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")
+
     async def close(self) -> None:
-        """Close the links and the callback servers (the daemon is stopping)."""
+        """Hand control back (STOPPED), close the links and the callback servers (the daemon stops)."""
+        if self.servers.reverse.connected:
+            self.servers.reverse.send(reverse.Stopped())  # urcl does the same on shutdown (§6.7)
         self._close_links()
         if self._servers_started:
             await self.servers.close()
@@ -189,8 +231,11 @@ class UrBackend(Backend):
         try:
             reply = await (await self._dashboard_link()).command(command)
         except ConnectionLostError:
-            self._dashboard = None  # the dashboard dropped: connect once more
+            self._drop_dashboard()  # the dashboard dropped: connect once more
             reply = await (await self._dashboard_link()).command(command)
+        except UrTimeoutError:
+            self._drop_dashboard()  # its late reply would be read as the next command's answer
+            raise
         success = getattr(reply, "success", None)
         if success is None:  # a query: it succeeded if it could be read
             success = all(getattr(reply, f, "") is not None for f in ("mode", "state", "running", "remote"))
@@ -213,6 +258,10 @@ class UrBackend(Backend):
         board = await self._dashboard_link()
         self._handed_back = False
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
+        try:  # decide on fresh state, not on what the last connection left behind
+            await asyncio.wait_for(self._first_package.wait(), STARTUP_TIMEOUT_S)
+        except TimeoutError as err:
+            raise UrTimeoutError("no RTDE data to start up from") from err
         if self.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
             reply = await board.command(dash.PowerOn())
             if not reply.success:
@@ -282,6 +331,8 @@ class UrBackend(Backend):
     def cancel_passthrough(self) -> None:
         """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
         if self._passthrough is not None:
+            self._passthrough = None
+            self._swallow_result = True  # the robot answers CANCELED (or its SUCCESS crossed our CANCEL)
             self.servers.reverse.send(
                 reverse.TrajectoryControl(reverse.TrajectoryAction.CANCEL, 0, PASSTHROUGH_TIMEOUT_S)
             )
@@ -342,10 +393,22 @@ class UrBackend(Backend):
         else:
             state.lifecycle_reason = ""
         self._cycles += 1
-        self._on_cycle()
-        if reverse_server.connected:
+        self._last_package = time.monotonic()
+        self._first_package.set()
+        try:
+            self._on_cycle()
+        except Exception:  # a bug above must not cost the RTDE link: hold still this cycle, say so once
+            self.command.mode = CommandMode.IDLE
+            if not self._cycle_error_logged:
+                self._cycle_error_logged = True
+                log.exception("[%s] the cycle failed; holding still", self.name)
+        # frames only while the program reads them (ur-protocols.md §6.2.5): a paused program does not,
+        # and frames queued meanwhile would be replayed on play
+        if reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING):
             command = self.command
-            timeout = self.options.receive_timeout
+            timeout = reverse.clamp_timeout(
+                reverse.ControlMode.SERVOJ, self.options.receive_timeout, self._step_time
+            )
             if command.mode is CommandMode.POSITION:
                 reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
             elif command.mode is CommandMode.VELOCITY:
@@ -366,6 +429,8 @@ class UrBackend(Backend):
         elif (
             self.robot.headless
             and not self._handed_back
+            and not self.servers.trajectory.connected
+            and not self.servers.script_command.connected
             and state.robot_mode is RobotMode.RUNNING
             and state.lifecycle is Lifecycle.RUNNING
         ):
@@ -380,6 +445,14 @@ class UrBackend(Backend):
         log.info("[%s] control program sent (headless, connecting back to %s)", self.name, self._host_ip)
 
     def _program_text(self) -> str:
+        key = (self._host_ip, self._controller_version)
+        if self._program_cache is not None and self._program_cache[0] == key:
+            return self._program_cache[1]
+        text = self._build_program()
+        self._program_cache = (key, text)
+        return text
+
+    def _build_program(self) -> str:
         if self._program_builder is not None:
             return self._program_builder(self._host_ip, self.options, self.ports)
         from urdaemon.urscript import ScriptParameters, render_control_script
@@ -403,6 +476,7 @@ class UrBackend(Backend):
         log.info("[%s] %s", self.name, reason)
         if not connected and name == "reverse":
             self._freedrive_on = False  # the program ended: so did its freedrive
+            self._swallow_result = False
         if not connected and name in ("reverse", "trajectory") and self._passthrough is not None:
             goal_id, on_result = self._passthrough
             self._passthrough = None
@@ -410,15 +484,24 @@ class UrBackend(Backend):
 
     def on_event(self, name: str, event: Any) -> None:
         """Something arrived on a callback connection."""
-        if isinstance(event, trajectory_point.TrajectoryResult) and self._passthrough is not None:
-            goal_id, on_result = self._passthrough
-            self._passthrough = None
-            on_result(goal_id, int(event.result))
+        if isinstance(event, trajectory_point.TrajectoryResult):
+            if self._swallow_result:  # the answer to our CANCEL: that goal has already ended
+                self._swallow_result = False
+                return
+            if self._passthrough is not None:
+                goal_id, on_result = self._passthrough
+                self._passthrough = None
+                on_result(goal_id, int(event.result))
             return
         if isinstance(event, script_command.ToolContactResult):
             outcome = "contact" if event.code == script_command.ToolContactResultCode.SUCCESS else "canceled"
             self.notice("tool_contact", outcome)
             return
+        if isinstance(event, script_sender.ProgramRequested) and not self._host_ip:
+            # asked before RTDE told us our address: the one the robot just reached us at is right
+            link = self.servers.script_sender.link
+            sockname = link.transport.get_extra_info("sockname") if link and link.transport else None
+            self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "")
         if isinstance(event, script_sender.ProgramRequested):
             self.servers.script_sender.send(script_sender.Program(self._program_text()))
             log.info("[%s] control program sent to the External Control URCap", self.name)
@@ -470,9 +553,15 @@ class UrBackend(Backend):
 
     async def _dashboard_link(self) -> DashboardLink:
         """The dashboard connection, opened now if there is none (it does not need the other links)."""
-        if self._dashboard is None:
-            self._dashboard = await DashboardLink.connect(self.address)
-        return self._dashboard
+        async with self._dashboard_lock:
+            if self._dashboard is None:
+                self._dashboard = await DashboardLink.connect(self.address)
+            return self._dashboard
+
+    def _drop_dashboard(self) -> None:
+        if self._dashboard is not None:
+            self._dashboard.close()
+            self._dashboard = None
 
     async def _wait_mode(self, modes: tuple[RobotMode, ...], deadline: float) -> None:
         while self.state.robot_mode not in modes:

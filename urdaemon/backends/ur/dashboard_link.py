@@ -41,9 +41,13 @@ class DashboardLink:
                 f"dashboard: cannot connect to {host}:{port}: {err.strerror or err}"
             ) from err
         link = cls(reader, writer)
-        banner = await link._next(BANNER_TIMEOUT_S)
-        if not isinstance(banner, dash.Banner):
-            raise RemoteProtocolError("dashboard: no banner", protocol="dashboard")
+        try:
+            banner = await link._next(BANNER_TIMEOUT_S)
+            if not isinstance(banner, dash.Banner):
+                raise RemoteProtocolError("dashboard: no banner", protocol="dashboard")
+        except BaseException:
+            link.close()
+            raise
         link.banner = banner
         return link
 

@@ -127,6 +127,7 @@ class CallbackServer:
             log.info("%s: a new connection from %s replaces the previous one", self.name, link.peer)
             self.link = None
             old.close()
+            self.hooks.on_link(self.name, False, f"{self.name}: replaced by a new connection")
         self.link = link
         self.hooks.on_link(self.name, True, f"{self.name}: connected from {link.peer}")
         return True
@@ -189,6 +190,11 @@ class CallbackServers:
             hooks,
         )
         self.all = (self.reverse, self.script_sender, self.trajectory, self.script_command)
+
+    def set_robot_address(self, address: str) -> None:
+        """Accept connections from ``address`` (the robot's resolved IP)."""
+        for server in self.all:
+            server.robot_address = address
 
     async def start(self, host: str) -> None:
         """Listen on every port (closing what started if one fails)."""
