@@ -560,20 +560,24 @@ class MotionController:
         goal.t = min(goal.t + self._period * state.speed_scaling, goal.duration)
         self._write_idle(state, command)
         if now >= goal.next_feedback:
-            goal.next_feedback = now + self._feedback_period
             goal.plan.sample(goal.t, self._pos, self._vel, self._acc)
-            desired = tuple(self._pos)
-            actual = tuple(state.positions)
-            self._events.append(
-                GoalFeedback(
-                    goal_id=goal.goal_id,
-                    time_from_start=goal.t,
-                    duration=goal.duration,
-                    desired=desired,
-                    actual=actual,
-                    error=tuple(d - a for d, a in zip(desired, actual, strict=True)),
-                )
+            self._emit_feedback(goal, self._pos, state.positions, now)
+
+    def _emit_feedback(
+        self, goal: _Goal, desired: Sequence[float], actual: Sequence[float], now: float
+    ) -> None:
+        goal.next_feedback = now + self._feedback_period
+        want, got = tuple(desired), tuple(actual)
+        self._events.append(
+            GoalFeedback(
+                goal_id=goal.goal_id,
+                time_from_start=goal.t,
+                duration=goal.duration,
+                desired=want,
+                actual=got,
+                error=tuple(d - a for d, a in zip(want, got, strict=True)),
             )
+        )
 
     def _tick_goal(self, state: RobotState, command: JointCommand, now: float) -> None:
         goal = self._goal
@@ -596,19 +600,7 @@ class MotionController:
                 self._write_idle(state, command)
                 return
         if now >= goal.next_feedback:
-            goal.next_feedback = now + self._feedback_period
-            desired = tuple(pos)
-            actual = tuple(meas)
-            self._events.append(
-                GoalFeedback(
-                    goal_id=goal.goal_id,
-                    time_from_start=goal.t,
-                    duration=goal.duration,
-                    desired=desired,
-                    actual=actual,
-                    error=tuple(d - a for d, a in zip(desired, actual, strict=True)),
-                )
-            )
+            self._emit_feedback(goal, pos, meas, now)
         if goal.t >= goal.duration:
             if goal.end_now is None:
                 goal.end_now = now
