@@ -90,6 +90,7 @@ class UrBackend(Backend):
         self._freedrive_on = False
         self._controller_version = (5, 10, 0)
         self._step_time = reverse.step_time_for_frequency(self.rate_hz)
+        self._servo_timeout = self._clamped_timeout()
         self._program_cache: tuple[tuple[Any, ...], str] | None = None
         self._first_package = asyncio.Event()
         self._last_package = 0.0
@@ -128,6 +129,7 @@ class UrBackend(Backend):
                     f"{self.rate_hz:g} Hz: is the cell file's model right?"
                 )
             self._step_time = reverse.step_time_for_frequency(rtde.frequency)
+            self._servo_timeout = self._clamped_timeout()
             if rtde.controller_version is not None:
                 version = rtde.controller_version
                 self._controller_version = (version.major, version.minor, version.bugfix)
@@ -406,9 +408,7 @@ class UrBackend(Backend):
         # and frames queued meanwhile would be replayed on play
         if reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING):
             command = self.command
-            timeout = reverse.clamp_timeout(
-                reverse.ControlMode.SERVOJ, self.options.receive_timeout, self._step_time
-            )
+            timeout = self._servo_timeout
             if command.mode is CommandMode.POSITION:
                 reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
             elif command.mode is CommandMode.VELOCITY:
@@ -557,6 +557,12 @@ class UrBackend(Backend):
             if self._dashboard is None:
                 self._dashboard = await DashboardLink.connect(self.address)
             return self._dashboard
+
+    def _clamped_timeout(self) -> float:
+        """The servoj/speedj read timeout: the configured one within [one step, 200 ms] (§4.2)."""
+        return reverse.clamp_timeout(
+            reverse.ControlMode.SERVOJ, self.options.receive_timeout, self._step_time
+        )
 
     def _drop_dashboard(self) -> None:
         if self._dashboard is not None:
