@@ -186,3 +186,19 @@ async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services
             assert "not JSON" in out
     finally:
         await fake.close()
+
+
+async def test_missed_rtde_packages_are_counted_from_the_controllers_clock() -> None:
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (daemon, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            before = daemon.runtimes[0].backend.statistics().missed_cycles
+            fake.stall(0.1)  # 50 packages at 500 Hz never sent
+            status = await _until(client, alice.keys.status, lambda s: s["missed_cycles"] >= before + 45)
+            assert status["missed_cycles"] - before <= 55
+            assert status["late_cycles"] >= 1
+    finally:
+        await fake.close()

@@ -383,7 +383,13 @@ class UrBackend(Backend):
 
     def _on_package(self, values: tuple[Any, ...]) -> None:
         state = self.state
+        previous = state.controller_time
         self._mapper.apply(values, state)
+        # the controller's own clock shows missed packages: a gap of k steps means k - 1 never arrived
+        gap = state.controller_time - previous
+        if gap > 1.5 * self.period and previous > 0.0:
+            self._missed += round(gap / self.period) - 1
+            self._late += 1
         reverse_server = self.servers.reverse
         state.program_running = state.program_running and reverse_server.connected
         if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
