@@ -15,7 +15,7 @@ import ipaddress
 import logging
 import socket
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 from urdaemon.errors import ProtocolError
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
@@ -49,8 +49,8 @@ class CallbackLink(asyncio.Protocol):
         self.peer = ""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # uvloop's transports are not asyncio.Transport subclasses but offer the same methods
+        self.transport = cast(asyncio.Transport, transport)
         peer = transport.get_extra_info("peername")
         self.peer = str(peer[0]) if peer else ""
         if not self.server.admit(self):
