@@ -483,10 +483,15 @@ class UrBackend(Backend):
         if not connected and name == "reverse":
             self._freedrive_on = False  # the program ended: so did its freedrive
             self._swallow_result = False
-        if not connected and name in ("reverse", "trajectory") and self._passthrough is not None:
+        if not connected and name in ("reverse", "trajectory"):
+            self._end_passthrough(int(trajectory_point.TrajectoryResultCode.FAILURE))
+
+    def _end_passthrough(self, code: int) -> None:
+        """The running passthrough goal (if any) ends with this trajectory result code."""
+        if self._passthrough is not None:
             goal_id, on_result = self._passthrough
             self._passthrough = None
-            on_result(goal_id, int(trajectory_point.TrajectoryResultCode.FAILURE))
+            on_result(goal_id, code)
 
     def on_event(self, name: str, event: Any) -> None:
         """Something arrived on a callback connection."""
@@ -494,10 +499,7 @@ class UrBackend(Backend):
             if self._swallow_result:  # the answer to our CANCEL: that goal has already ended
                 self._swallow_result = False
                 return
-            if self._passthrough is not None:
-                goal_id, on_result = self._passthrough
-                self._passthrough = None
-                on_result(goal_id, int(event.result))
+            self._end_passthrough(int(event.result))
             return
         if isinstance(event, script_command.ToolContactResult):
             outcome = "contact" if event.code == script_command.ToolContactResultCode.SUCCESS else "canceled"
@@ -526,10 +528,14 @@ class UrBackend(Backend):
             )
             log.info("[%s] robot: %s", self.name, text)
         if text:
-            self.robot_messages = [*self.robot_messages[-19:], text]
-            self.notice("robot_message", text)
+            self._report("robot_message", text)
 
     # ---- helpers ------------------------------------------------------------------------------------
+
+    def _report(self, kind: str, text: str) -> None:
+        """Keep the text among the last 20 robot messages and publish it as a notice of this kind."""
+        self.robot_messages = [*self.robot_messages[-19:], text]
+        self.notice(kind, text)
 
     async def _check_calibration(self, primary: PrimaryLink) -> None:
         kinematics = await primary.wait_kinematics(KINEMATICS_TIMEOUT_S)
@@ -544,8 +550,7 @@ class UrBackend(Backend):
             if self.options.calibration_check == "error":
                 raise RobotFaultError(text)
             log.warning("[%s] %s", self.name, text)
-            self.robot_messages = [*self.robot_messages[-19:], text]
-            self.notice("calibration_mismatch", text)
+            self._report("calibration_mismatch", text)
 
     def _send_inputs(self, fields: dict[str, Any]) -> None:
         rtde = self._rtde
