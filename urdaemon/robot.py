@@ -360,8 +360,7 @@ class RobotRuntime:
             self._reject_goal(query, "trajectory", err)
             return
         except Exception as err:  # a bug must still answer the client, once
-            self.log.exception("trajectory goal failed")
-            _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
+            self._fail_goal(query, "trajectory", err)
             return
 
         label = f"of {len(goal.points)} points"
@@ -392,8 +391,7 @@ class RobotRuntime:
                 _reply(query, {"accepted": False, "reason": "daemon shutting down"})
                 raise
             except Exception as err:  # a bug must still answer the client, once
-                self.log.exception("trajectory goal failed")
-                _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
+                self._fail_goal(query, "trajectory", err)
                 return
             finally:
                 self._planning = None
@@ -423,8 +421,7 @@ class RobotRuntime:
             self._reject_goal(query, "move", err)
             return
         except Exception as err:  # a bug must still answer the client, once
-            self.log.exception("move goal failed")
-            _reply(query, {"accepted": False, "reason": f"internal error: {type(err).__name__}: {err}"})
+            self._fail_goal(query, "move", err)
             return
         self._accept_goal(query, "move", goal_id, duration)
 
@@ -433,6 +430,11 @@ class RobotRuntime:
         _reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration})
         self._publish_events()  # a preempted goal's result goes out before the new goal's feedback
         self._publish_status()
+
+    def _fail_goal(self, query: Any, kind: str, err: Exception) -> None:
+        """Answer a goal that failed on a bug (call it from the except block: it logs the traceback)."""
+        self.log.exception("%s goal failed", kind)
+        _reply(query, {"accepted": False, "reason": _internal_error(err)})
 
     def _reject_goal(self, query: Any, kind: str, err: UrDaemonError) -> None:
         reason = err.reason if isinstance(err, GoalRejected) else str(err)
@@ -516,7 +518,7 @@ class RobotRuntime:
             self._reject_stream(key, err)
         except Exception as err:  # a bug must not kill the subscriber; the client hears of it
             self.log.exception("streaming command failed")
-            self._reject_stream(key, GoalRejected(f"internal error: {type(err).__name__}: {err}"))
+            self._reject_stream(key, GoalRejected(_internal_error(err)))
 
     def _on_stream_velocity(self, key: str, payload: bytes) -> None:
         state = self.backend.state
@@ -531,7 +533,7 @@ class RobotRuntime:
             self._reject_stream(key, err)
         except Exception as err:  # a bug must not kill the subscriber; the client hears of it
             self.log.exception("streaming command failed")
-            self._reject_stream(key, GoalRejected(f"internal error: {type(err).__name__}: {err}"))
+            self._reject_stream(key, GoalRejected(_internal_error(err)))
 
     def _reject_stream(self, key: str, err: UrDaemonError) -> None:
         self._stream_rejections += 1
@@ -704,3 +706,8 @@ def _reply(query: Any, body: dict[str, Any]) -> None:
         query.reply(query.key_expr, codec.encode(body))
     with contextlib.suppress(Exception):
         query.drop()
+
+
+def _internal_error(err: Exception) -> str:
+    """The reason a client hears when a bug, not its request, made the command fail."""
+    return f"internal error: {type(err).__name__}: {err}"
