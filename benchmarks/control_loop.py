@@ -307,7 +307,7 @@ def run_one(robots: int, seconds: float, profile: Path | None) -> Row:
                 out = profile.with_name(f"{profile.stem}-{robots}{profile.suffix or '.txt'}")
                 pid = str(procs["daemon"].pid)
                 subprocess.run(
-                    ["py-spy", "record", "-d", "5", "-f", "raw", "-o", str(out), "-p", pid, "--nonblocking"],
+                    ["py-spy", "record", "-d", "5", "-r", "1000", "-f", "raw", "-o", str(out), "-p", pid, "--nonblocking"],
                     check=False,
                     timeout=60,
                     capture_output=True,

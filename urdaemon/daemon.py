@@ -27,7 +27,7 @@ from urdaemon.model import JointLimits
 from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
 
 __all__ = ["CellDescription", "Daemon", "describe_cell"]
@@ -159,7 +159,7 @@ class Daemon:
             log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
             async with asyncio.TaskGroup() as group:
                 tasks = [group.create_task(rt.run()) for rt in self.runtimes]
-                tasks.append(group.create_task(self._publish_tf(tf_pub)))
+                tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
                 await stop.wait()
                 for task in tasks:
                     task.cancel()
@@ -199,12 +199,14 @@ class Daemon:
         finally:
             query.drop()
 
-    async def _publish_tf(self, publisher: Any) -> None:
+    async def _publish_tf(self, publisher: Any, wanted: Matching) -> None:
         period = 1.0 / self.cell.publish.tf_rate_hz
         tree = self.description.tree
         last_error = ""
         while True:
             await asyncio.sleep(period)
+            if not wanted.active:  # the whole cell's forward kinematics, for nobody: skip it
+                continue
             positions: dict[str, float] = {}
             try:
                 for runtime in self.runtimes:

@@ -33,7 +33,7 @@ from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.codec import ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.node import Matching, ZenohNode
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
 
@@ -91,6 +91,8 @@ class RobotRuntime:
         self._child = f"{robot.prefix}tool0"
         self._pub_joints: Any = None
         self._pub_pose: Any = None
+        self._joints_wanted = Matching(False)
+        self._pose_wanted = Matching(False)
         self._pub_status: Any = None
         self._pub_io: Any = None
         self._pub_events: Any = None
@@ -101,7 +103,9 @@ class RobotRuntime:
         """Declare this robot's publishers, queryables, subscribers and liveliness token."""
         node, keys = self.node, self.keys
         self._pub_joints = node.publisher(keys.joint_states, realtime=True)
+        self._joints_wanted = node.matching(self._pub_joints)
         self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if self._kinematics else None
+        self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)
         self._pub_status = node.publisher(keys.status)
         self._pub_io = node.publisher(keys.io)
         self._pub_events = node.publisher(keys.events)
@@ -182,8 +186,10 @@ class RobotRuntime:
         state = backend.state
         self.controller.tick(state, backend.command, state.monotonic_ns * 1e-9)
         if state.cycle % self._decimation == 0:
-            self._pub_joints.put(self._encoder.encode(state))
-            if self._kinematics is not None:
+            # nothing is computed or encoded for a stream nobody subscribes to
+            if self._joints_wanted.active:
+                self._pub_joints.put(self._encoder.encode(state))
+            if self._pose_wanted.active and self._kinematics is not None:
                 pose = self._kinematics.tool_pose(state.positions)
                 self._pub_pose.put(self._encoder.encode_pose(state, self._frame, self._child, pose))
         if self.controller.has_events:

@@ -303,3 +303,14 @@ async def test_a_dense_trajectory_is_planned_in_slices_and_succeeds_while_bob_mo
     result = await goal.result(timeout=30)
     assert result["status"] == "succeeded", result
     assert (await bob_goal.result(timeout=30))["status"] == "succeeded"
+
+
+async def test_tcp_pose_is_computed_only_while_someone_subscribes(cell: tuple[Daemon, Client]) -> None:
+    """Forward kinematics and encoding are skipped for a stream nobody receives (issue 5)."""
+    daemon, client = cell
+    runtime = next(rt for rt in daemon.runtimes if rt.robot.name == "alice")
+    alice = await client.robot("alice")
+    assert not runtime._pose_wanted.active  # nobody has subscribed to tcp_pose yet
+    pose = await _next_matching(client, alice.keys.tcp_pose, lambda data: True)
+    assert pose["frame"] == "alice_base" and pose["child"] == "alice_tool0"
+    assert len(pose["position"]) == 3 and len(pose["orientation"]) == 4

@@ -1119,3 +1119,52 @@ def test_a_trailing_comma_in_a_setup_request_adds_no_name() -> None:
     (event,) = robot.receive_data(package)
     assert isinstance(event, SetupOutputsRequested)
     assert event.names == ("timestamp", "actual_q")
+
+
+# -- the 500 Hz fast path (receive_output) ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_receive_output_gives_the_values_of_one_whole_package(version: int) -> None:
+    pair = Pair(version)
+    pair.configure()
+    values = standard_output_values(5)
+    pair.robot.send(OutputData(values))
+    wire = pair.robot.data_to_send()
+    assert pair.daemon.receive_output(wire) == values
+    # the slow path sees the same values for the same bytes, and the stream stays in step afterwards
+    assert pair.daemon.receive_data(wire) == [DataPackage(1 if version == 2 else None, values)]
+    assert pair.daemon.receive_output(wire) == values
+
+
+def test_receive_output_declines_anything_but_one_whole_package_and_consumes_nothing() -> None:
+    pair = Pair()
+    pair.configure()
+    values = standard_output_values(2)
+    pair.robot.send(OutputData(values))
+    wire = pair.robot.data_to_send()
+    other_recipe = wire[:3] + bytes([9]) + wire[4:]
+    wrong_size_field = struct.pack(">H", len(wire) - 1) + wire[2:]
+    wrong_kind = wire[:2] + b"M" + wire[3:]
+    for chunk in (wire[:-1], wire + wire, wire + wire[:5], other_recipe, wrong_size_field, wrong_kind, b""):
+        assert pair.daemon.receive_output(chunk) is None
+    # nothing was consumed or buffered: the slow path decodes a split package as before
+    assert pair.daemon.receive_data(wire[:100]) == []
+    assert pair.daemon.receive_output(wire) is None  # bytes are buffered: only the slow path may go on
+    assert pair.daemon.receive_data(wire[100:]) == [DataPackage(1, values)]
+    assert pair.daemon.receive_output(wire) == values
+    # and the slow path still reports what is wrong with a package the fast path declined
+    with pytest.raises(RemoteProtocolError, match="recipe 9"):
+        pair.daemon.receive_data(other_recipe)
+
+
+def test_receive_output_declines_before_the_stream_started() -> None:
+    started = Pair()
+    started.configure()
+    started.robot.send(OutputData(standard_output_values()))
+    wire = started.robot.data_to_send()  # a well-formed package for the standard recipe, id 1
+    pair = Pair()
+    pair.configure(start=False)
+    assert pair.daemon.receive_output(wire) is None
+    with pytest.raises(RemoteProtocolError, match="before outputs were started"):
+        pair.daemon.receive_data(wire)

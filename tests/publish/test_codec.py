@@ -778,3 +778,23 @@ def test_encode_pose_escapes_frame_names() -> None:
     data = json.loads(encoder.encode_pose(make_state([0.0], [0.0], [0.0]), 'my"frame', "tool\\0", [0.0] * 7))
     assert data["frame"] == 'my"frame'
     assert data["child"] == "tool\\0"
+
+
+def test_joint_state_encoder_keeps_percent_signs_in_names_literal() -> None:
+    encoder = JointStateEncoder("r%d", ["j%r", "k%%"])
+    state = make_state([1.0, 2.0], [0.0, 0.0], [0.0, 0.0])
+    data = json.loads(encoder.encode(state))
+    assert (data["robot"], data["names"], data["position"]) == ("r%d", ["j%r", "k%%"], [1.0, 2.0])
+    pose = json.loads(encoder.encode_pose(state, "b%s", "t%", [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]))
+    assert (pose["frame"], pose["child"], pose["orientation"]) == ("b%s", "t%", [0.0, 0.0, 0.0, 1.0])
+
+
+def test_joint_state_encoder_copes_with_a_state_of_another_length() -> None:
+    """The fast template is made for the joint count; a state of another length still encodes."""
+    data = json.loads(JointStateEncoder("r", ["a", "b"]).encode(make_state([1.0, 2.0, 3.0], [0.0], [])))
+    assert (data["position"], data["velocity"], data["effort"]) == ([1.0, 2.0, 3.0], [0.0], [])
+
+
+def test_joint_state_encoder_finite_values_whose_sum_overflows() -> None:
+    data = json.loads(JointStateEncoder("r", ["a", "b"]).encode(make_state([1e308, 1e308], [0, 0], [0, 0])))
+    assert data["position"] == [1e308, 1e308]

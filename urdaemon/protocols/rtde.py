@@ -186,6 +186,9 @@ class PackageType(enum.IntEnum):
     # READ_PROPERTIES ('R') exists only with protocol v3 in UR's newest client (§1.12): not spoken here.
 
 
+_KIND_DATA: Final = int(PackageType.DATA_PACKAGE)
+
+
 class MessageLevel(enum.IntEnum):
     """TEXT_MESSAGE severity levels as UR's RTDE client names them (§1.3); other values pass through."""
 
@@ -840,6 +843,28 @@ class RtdeConnection:
             self._state = RtdeState.ERROR
             raise
         return events
+
+    def receive_output(self, data: bytes | bytearray | memoryview) -> tuple[RtdeValue, ...] | None:
+        """The 500 Hz fast path: the values when ``data`` is exactly one whole DATA_PACKAGE of the
+        output recipe and nothing is buffered; otherwise ``None`` with nothing consumed, and the
+        caller feeds ``data`` to ``receive_data`` (which also reports anything wrong with it)."""
+        recipe = self._output_recipe
+        if recipe is None or len(self._buffer) or (self._state, _Step.OUTPUT_DATA) not in _TRANSITIONS:
+            return None
+        size = len(data)
+        if self._version == 1:
+            if size != HEADER_BYTES + recipe.size or _HEADER.unpack_from(data) != (size, _KIND_DATA):
+                return None
+            self._consumed += size
+            return recipe.decode(data, HEADER_BYTES)
+        if (
+            size != HEADER_BYTES + 1 + recipe.size
+            or _HEADER.unpack_from(data) != (size, _KIND_DATA)
+            or data[HEADER_BYTES] != self._output_recipe_id
+        ):
+            return None
+        self._consumed += size
+        return recipe.decode(data, HEADER_BYTES + 1)
 
     def receive_eof(self) -> list[Event]:
         """The peer closed; RemoteProtocolError if it closed in the middle of a package."""

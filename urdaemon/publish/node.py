@@ -19,7 +19,7 @@ import zenoh
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import UrDaemonError
 
-__all__ = ["ZenohNode", "zenoh_config"]
+__all__ = ["Matching", "ZenohNode", "zenoh_config"]
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +38,21 @@ def zenoh_config(
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
     return conf
+
+
+class Matching:
+    """Whether a publisher has subscribers anywhere, kept up to date by a Zenoh matching listener.
+
+    The 500 Hz streams read ``active`` to skip computing and encoding what nobody would receive
+    (forward kinematics and JSON for ``tcp_pose``, the whole cell's link poses for ``tf``).
+    """
+
+    def __init__(self, active: bool) -> None:
+        self.active = active
+
+    def update(self, status: Any) -> None:
+        """The listener's callback (on a Zenoh thread: one attribute store, atomic under the GIL)."""
+        self.active = bool(status.matching)
 
 
 class ZenohNode:
@@ -75,6 +90,14 @@ class ZenohNode:
             pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP)
         self._entities.append(pub)
         return pub
+
+    def matching(self, publisher: Any) -> Matching:
+        """A :class:`Matching` for ``publisher`` (undeclared with everything else on ``close``)."""
+        flag = Matching(bool(publisher.matching_status.matching))
+        self._entities.append(publisher.declare_matching_listener(flag.update))
+        # a subscriber may have appeared between the first read and the listener's declaration
+        flag.active = flag.active or bool(publisher.matching_status.matching)
+        return flag
 
     def put(self, key: str, payload: bytes) -> None:
         """Publish once on ``key`` (dropped rather than blocking when congested)."""

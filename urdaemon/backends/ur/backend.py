@@ -108,6 +108,7 @@ class UrBackend(Backend):
         self._on_cycle = on_cycle
         state = self.state
         self._runs += 1
+        self._mapper.forget()
         if self._runs == 1:
             state.lifecycle = Lifecycle.CONNECTING
             state.lifecycle_reason = f"connecting to {self.address}"

@@ -181,6 +181,12 @@ class RtdeLink(asyncio.Protocol):
     # ---- receiving ------------------------------------------------------------------------------------
 
     def data_received(self, data: bytes) -> None:
+        if self._streaming and self._waiter is None:  # the 500 Hz path: one whole package, no request
+            values = self.conn.receive_output(data)
+            if values is not None:
+                self.packages += 1
+                self.on_package(values)
+                return
         try:
             events = self.conn.receive_data(data)
         except ProtocolError as err:
@@ -247,9 +253,18 @@ class StateMapper:
         if min(self._timestamp, self._q, self._qd) < 0:
             raise ValueError("the output recipe needs timestamp, actual_q and actual_qd")
         self.runtime_state = 0
+        self._lifecycle = Lifecycle.DISCONNECTED
+        self._last_modes: tuple[Any, ...] | None = None
+        self._last_dout = -1
+        self._last_din = -1
 
     def apply(self, values: Sequence[Any], state: RobotState) -> None:
-        """Write one package's values into ``state`` (in place; also the host receive times)."""
+        """Write one package's values into ``state`` (in place; also the host receive times).
+
+        The 500 Hz path: the joint vectors are copied every time; the modes, IO bits and the lifecycle
+        are decoded again only when their raw values changed (they rarely do), so a package costs a
+        handful of comparisons beyond the copies.
+        """
         state.controller_time = values[self._timestamp]
         state.positions[:] = values[self._q]
         state.velocities[:] = values[self._qd]
@@ -265,34 +280,55 @@ class StateMapper:
         state.speed_slider = slider
         # ur-protocols.md §6.2: slider × controller scaling; nothing moves while resuming
         state.speed_scaling = 0.0 if runtime == RUNTIME_RESUMING else slider * scaling
-        if self._robot_mode >= 0:
-            state.robot_mode = _robot_mode(values[self._robot_mode])
-        if self._safety_mode >= 0:
-            state.safety_mode = _safety_mode(values[self._safety_mode])
+        robot_mode = values[self._robot_mode] if self._robot_mode >= 0 else None
+        safety_mode = values[self._safety_mode] if self._safety_mode >= 0 else None
+        modes = (robot_mode, safety_mode, runtime)
+        if modes != self._last_modes:
+            self._last_modes = modes
+            if robot_mode is not None:
+                state.robot_mode = _robot_mode(robot_mode)
+            if safety_mode is not None:
+                state.safety_mode = _safety_mode(safety_mode)
+            self._lifecycle = _lifecycle(state, runtime)
         if self._status_bits >= 0:
             state.program_running = bool(values[self._status_bits] & 0b10)
         if self._dout >= 0:
             bits = values[self._dout]
-            state.digital_out[:] = [bool(bits >> i & 1) for i in range(8)]
-            state.configurable_out[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
-            state.tool_out[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+            if bits != self._last_dout:
+                self._last_dout = bits
+                state.digital_out[:] = [bool(bits >> i & 1) for i in range(8)]
+                state.configurable_out[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
+                state.tool_out[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
         if self._din >= 0:
             bits = values[self._din]
-            state.digital_in[:] = [bool(bits >> i & 1) for i in range(8)]
-            state.configurable_in[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
-            state.tool_in[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+            if bits != self._last_din:
+                self._last_din = bits
+                state.digital_in[:] = [bool(bits >> i & 1) for i in range(8)]
+                state.configurable_in[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
+                state.tool_in[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+        analog = state.analog_out
         if self._aout[0] >= 0:
-            state.analog_out[:] = [values[self._aout[0]], values[self._aout[1]]]
+            analog[0] = values[self._aout[0]]
+            analog[1] = values[self._aout[1]]
+        analog = state.analog_in
         if self._ain[0] >= 0:
-            state.analog_in[:] = [values[self._ain[0]], values[self._ain[1]]]
+            analog[0] = values[self._ain[0]]
+            analog[1] = values[self._ain[1]]
         if self._tool_voltage >= 0:
             state.tool_voltage = int(values[self._tool_voltage])
         if self._payload >= 0:
             state.payload_mass = values[self._payload]
         if self._payload_cog >= 0:
             cog = values[self._payload_cog]
-            state.payload_cog = (cog[0], cog[1], cog[2])
-        state.lifecycle = _lifecycle(state, runtime)
+            if cog != state.payload_cog:
+                state.payload_cog = (cog[0], cog[1], cog[2])
+        # assigned every time: run() sets CONNECTING / RECOVERING / DISCONNECTED between packages
+        state.lifecycle = self._lifecycle
+
+    def forget(self) -> None:
+        """Decode everything again from the next package (after a reconnect)."""
+        self._last_modes = None
+        self._last_dout = self._last_din = -1
 
 
 def _robot_mode(value: int) -> RobotMode:
