@@ -49,6 +49,7 @@ AMPLITUDE = 0.2
 PERIOD_S = 5.0
 POINT_SPACING_S = 0.1
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+PY_SPY = ("py-spy", "record", "-d", "5", "-r", "1000", "-f", "raw", "--nonblocking")
 
 
 @dataclass
@@ -307,7 +308,7 @@ def run_one(robots: int, seconds: float, profile: Path | None) -> Row:
                 out = profile.with_name(f"{profile.stem}-{robots}{profile.suffix or '.txt'}")
                 pid = str(procs["daemon"].pid)
                 subprocess.run(
-                    ["py-spy", "record", "-d", "5", "-r", "1000", "-f", "raw", "-o", str(out), "-p", pid, "--nonblocking"],
+                    [*PY_SPY, "-o", str(out), "-p", pid],
                     check=False,
                     timeout=60,
                     capture_output=True,

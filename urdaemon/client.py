@@ -408,6 +408,11 @@ class RobotClient:
         """End the control program so the pendant program continues."""
         return await self.client.request(self.keys.service("hand_back_control"), {})
 
+    async def cycle_stats(self, *, reset: bool = False) -> dict[str, Any]:
+        """Cycle counters and the turnaround (state in → command out, µs: count, p50, p99, p99.9,
+        max) since the last reset; ``reset`` starts a new measuring window after this reply."""
+        return await self.client.request(self.keys.service("cycle_stats"), {"reset": reset})
+
     async def zero_ft_sensor(self) -> dict[str, Any]:
         """Zero the force/torque sensor."""
         return await self.client.request(self.keys.service("zero_ft_sensor"), {})

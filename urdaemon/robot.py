@@ -117,6 +117,7 @@ class RobotRuntime:
         node.queryable(keys.service("set_payload"), self._on_set_payload)
         node.queryable(keys.service("set_speed_slider"), self._on_set_speed_slider)
         node.queryable(keys.service("stop"), self._on_stop)
+        node.queryable(keys.service("cycle_stats"), self._on_cycle_stats)
         node.queryable(keys.service("dashboard"), self._on_dashboard)
         for name in ("startup", "resend_program", "hand_back_control", "zero_ft_sensor"):
             node.queryable(keys.service(name), self._on_simple_service(name))
@@ -572,6 +573,27 @@ class RobotRuntime:
         self.controller.stop("stop requested", time.monotonic())
         self._publish_events()
         _reply(query, {"ok": True})
+
+    def _on_cycle_stats(self, query: Any) -> None:
+        try:
+            reset = codec.decode_cycle_stats(_payload(query))
+        except MessageError as err:
+            _reply(query, {"ok": False, "reason": str(err)})
+            return
+        backend = self.backend
+        stats = backend.statistics()
+        _reply(
+            query,
+            {
+                "ok": True,
+                "cycles": stats.cycles,
+                "missed_cycles": stats.missed_cycles,
+                "late_cycles": stats.late_cycles,
+                "turnaround": backend.turnaround.summary(),
+            },
+        )
+        if reset:
+            backend.turnaround.reset()
 
     def _on_simple_service(self, name: str) -> Any:
         def handle(query: Any) -> None:

@@ -798,3 +798,14 @@ def test_joint_state_encoder_copes_with_a_state_of_another_length() -> None:
 def test_joint_state_encoder_finite_values_whose_sum_overflows() -> None:
     data = json.loads(JointStateEncoder("r", ["a", "b"]).encode(make_state([1e308, 1e308], [0, 0], [0, 0])))
     assert data["position"] == [1e308, 1e308]
+
+
+def test_cycle_stats_request() -> None:
+    assert codec.decode_cycle_stats(None) is False
+    assert codec.decode_cycle_stats(b"") is False
+    assert codec.decode_cycle_stats(b'{"reset": true}') is True
+    assert codec.decode_cycle_stats(b"{}") is False
+    with pytest.raises(MessageError, match="unknown field"):
+        codec.decode_cycle_stats(b'{"reste": true}')
+    with pytest.raises(MessageError, match="expected a JSON object"):
+        codec.decode_cycle_stats(b"[1]")

@@ -195,6 +195,18 @@ async def test_both_robots_start_from_powered_off_and_move_concurrently(
             assert _count(cell, name, "PROGRAM_XXX_STARTED") == 1, name
         assert (await cell.alice.status())["restarts"] == 0
         assert (await cell.bob.status())["restarts"] == 0
+        # the daemon's own turnaround counters (issue 5): one per servoj / keepalive frame sent
+        stats = await cell.alice.cycle_stats(reset=True)
+        turnaround = stats["turnaround"]
+        assert stats["ok"] is True
+        assert turnaround["count"] > 500  # 1.5 s of servoj at 500 Hz, and keepalives before it
+        assert 0.0 < turnaround["p50_us"] <= turnaround["p99_us"] <= turnaround["p999_us"]
+        assert turnaround["p999_us"] <= turnaround["max_us"]
+        assert stats["missed_cycles"] >= 0
+        after = await cell.alice.cycle_stats()
+        assert after["turnaround"]["count"] < turnaround["count"]  # the reset started a new window
+        refused = await cell.client.request(cell.alice.keys.service("cycle_stats"), {"reset": "yes"})
+        assert (refused["ok"], refused["reason"]) == (False, "cycle_stats.reset: expected true or false")
 
 
 # ---- 2. speed slider -------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ import abc
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from urdaemon.backends.timing import Histogram
 from urdaemon.errors import BackendError
 from urdaemon.model import JointCommand, RobotState
 
@@ -48,6 +49,9 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
+        self.turnaround = Histogram()
+        """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
+        receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""
         self.on_change: Callable[[], None] | None = None
         """Set by the runtime: called when the backend changes the state outside a cycle (lifecycle)."""
         self.on_notice: Callable[[str, str], None] | None = None

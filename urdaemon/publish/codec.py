@@ -418,6 +418,16 @@ def decode_speed_slider(payload: bytes | None) -> float:
     return fraction
 
 
+def decode_cycle_stats(payload: bytes | None) -> bool:
+    """Decode a cycle_stats request: whether to reset the counters after reading them (default no)."""
+    what = "cycle_stats"
+    if payload is None or len(payload) == 0:
+        return False
+    data = decode_message(payload, what)
+    _allowed(data, what, {"reset"})
+    return _bool(data, "reset", what)
+
+
 def encode_feedback(robot: str, feedback: GoalFeedback) -> bytes:
     """Encode goal feedback."""
     return encode(
@@ -478,10 +488,8 @@ class JointStateEncoder:
         check = sum(positions) + sum(velocities) + sum(efforts) + state.controller_time
         if check - check == 0.0:  # all finite (a NaN or inf anywhere makes this NaN)
             with contextlib.suppress(TypeError):  # not as many values as joints: the slow path copes
-                return (
-                    self._joints
-                    % (state.controller_time, state.host_time_ns, state.cycle, *positions, *velocities, *efforts)
-                ).encode()
+                values = (state.controller_time, state.host_time_ns, state.cycle, *positions, *velocities)
+                return (self._joints % (*values, *efforts)).encode()
         return (
             f'{self._head}"controller_time":{_float(state.controller_time)},'
             f'"host_time_ns":{state.host_time_ns},"cycle":{state.cycle},"position":[{_floats(positions)}],'
@@ -492,9 +500,10 @@ class JointStateEncoder:
         """The tcp_pose message: position and quaternion (x, y, z, w) of ``child`` in ``frame``."""
         template = self._poses.get((frame, child))
         if template is None:
-            template = self._poses[(frame, child)] = _escape(
-                f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},'
-            ) + '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
+            template = self._poses[(frame, child)] = (
+                _escape(f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},')
+                + '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
+            )
         check = sum(pose) + state.controller_time
         if len(pose) == 7 and check - check == 0.0:
             return (template % (state.controller_time, state.host_time_ns, *pose)).encode()

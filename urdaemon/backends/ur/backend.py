@@ -433,6 +433,9 @@ class UrBackend(Backend):
                 )
             else:
                 reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
+            rtde = self._rtde
+            if rtde is not None:  # package in → command out (issue 5's turnaround)
+                self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
         elif (
             self.robot.headless
             and not self._handed_back

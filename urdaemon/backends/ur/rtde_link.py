@@ -63,6 +63,8 @@ class RtdeLink(asyncio.Protocol):
         self._waiting_for: tuple[type[Any], ...] = ()
         self._streaming = False
         self.packages = 0
+        self.received_ns = 0
+        """``time.perf_counter_ns()`` when the bytes of the latest package reached ``data_received``."""
         self.text_messages: list[rtde.TextMessage] = []
 
     # ---- connection ------------------------------------------------------------------------------
@@ -181,6 +183,7 @@ class RtdeLink(asyncio.Protocol):
     # ---- receiving ------------------------------------------------------------------------------------
 
     def data_received(self, data: bytes) -> None:
+        self.received_ns = time.perf_counter_ns()  # the cycle's turnaround starts here
         if self._streaming and self._waiter is None:  # the 500 Hz path: one whole package, no request
             values = self.conn.receive_output(data)
             if values is not None:
