@@ -62,6 +62,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     fake.add_argument("--delay", type=float, default=0.0, help="delay every write by S seconds")
     fake.add_argument("--late-start", type=float, default=0.0, help="start listening only after S seconds")
+    fake.add_argument(
+        "--phases",
+        choices=("aligned", "spread"),
+        default="aligned",
+        help="several fakes: tick together, one burst of RTDE packages per period (default), or spread "
+        "over the period, each at its own phase like independent controllers",
+    )
 
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)

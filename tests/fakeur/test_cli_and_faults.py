@@ -60,9 +60,12 @@ async def test_fake_robot_from_a_cell_file_serves_every_ur_robot_at_its_address(
     }
     path = tmp_path / "cell.yaml"
     path.write_text(yaml.safe_dump(cell))
-    proc = await _serve(["--config", str(path)], "serving 2 fake robot(s)")
+    proc = await _serve(["--config", str(path), "--phases", "spread"], "serving 2 fake robot(s)")
     try:
         for address, model in (("127.0.0.91", "UR10"), ("127.0.0.92", "UR3")):
+            # both tick on the process's one shared clock: each streams its own robot state
+            state = await _first(prim.PrimaryConnection(Side.DAEMON), address, 30001, prim.RobotState)
+            assert isinstance(state, prim.RobotState)
             conn = dash.DashboardConnection(Side.DAEMON)
             reader, writer = await asyncio.open_connection(address, 29999)
             banner = await asyncio.wait_for(reader.readline(), 5.0)

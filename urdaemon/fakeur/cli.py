@@ -11,7 +11,7 @@ from urdaemon.cell import load_cell
 from urdaemon.description.calibration import load_calibration, robot_dh
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError
-from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
 
 __all__ = ["build_fakes", "parse_version", "run_fakes"]
@@ -82,9 +82,21 @@ def build_fakes(args: argparse.Namespace) -> list[FakeController]:
     ]
 
 
+def share_clock(fakes: list[FakeController], phases: str) -> SharedClock | None:
+    """One timing thread for all ``fakes`` (they run at one rate): ``aligned`` ticks them together,
+    ``spread`` gives each its own phase within the period, as independent controllers have."""
+    if len(fakes) < 2:
+        return None
+    clock = SharedClock(fakes[0].step_time, slots=len(fakes) if phases == "spread" else 1)
+    for slot, fake in enumerate(fakes):
+        fake.use_clock(clock, slot)
+    return clock
+
+
 def run_fakes(args: argparse.Namespace) -> int:
     """Serve the fakes until Ctrl-C or SIGTERM; exit code."""
     fakes = build_fakes(args)
+    share_clock(fakes, args.phases)
 
     async def serve() -> None:
         stop = asyncio.Event()

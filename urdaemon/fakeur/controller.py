@@ -69,6 +69,47 @@ class _RtdeClient:
     inputs: dict[int, tuple[str, ...]] = field(default_factory=dict)
 
 
+class SharedClock:
+    """One timing thread for every fake controller in a process, instead of one thread each.
+
+    ``slots`` spreads the controllers over the period: slot ``k`` ticks ``k·period/slots`` after
+    slot 0, so with one controller per slot each sends its RTDE packages at its own phase, as
+    independent controllers do (the daemon sees one package at a time, the worst case for it).
+    With one slot every controller ticks in the same loop callback and their packages leave in
+    one burst (cheapest for the fake: one wake-up per period for the whole cell).
+    """
+
+    def __init__(self, period: float, slots: int = 1) -> None:
+        if slots < 1:
+            raise ValueError(f"slots must be at least 1, got {slots}")
+        self.period = period
+        self.slots: list[list[Callable[[], None]]] = [[] for _ in range(slots)]
+        self._next = 0
+        self._thread: ThreadClock | None = None
+
+    def add(self, tick: Callable[[], None], slot: int, loop: asyncio.AbstractEventLoop) -> None:
+        """Tick ``tick`` once per period in ``slot`` (modulo the slot count); starts the thread."""
+        self.slots[slot % len(self.slots)].append(tick)
+        if self._thread is None:
+            self._thread = ThreadClock(self.period / len(self.slots), self._fire, loop)
+            self._thread.start()
+
+    def remove(self, tick: Callable[[], None]) -> None:
+        """Stop ticking ``tick``; the thread stops with the last one."""
+        for ticks in self.slots:
+            if tick in ticks:
+                ticks.remove(tick)
+        if self._thread is not None and not any(self.slots):
+            self._thread.stop()
+            self._thread = None
+
+    def _fire(self) -> None:
+        ticks = self.slots[self._next]
+        self._next = (self._next + 1) % len(self.slots)
+        for tick in ticks:
+            tick()
+
+
 class FakeController:
     """One fake UR controller serving ``model`` on ``address``."""
 
@@ -110,9 +151,19 @@ class FakeController:
         self._writers: dict[str, set[asyncio.StreamWriter]] = {}
         self._next_state = 0.0
         self._clock: asyncio.Task[None] | None = None
+        self._shared_clock: tuple[SharedClock, int] | None = None
+        """A clock shared with the other fakes of this process, and this fake's slot on it."""
         self.cycles = 0
 
     # ---- lifecycle ---------------------------------------------------------------------------------
+
+    def use_clock(self, clock: SharedClock, slot: int) -> None:
+        """Tick on ``clock`` (in ``slot``) instead of a clock of its own; call before ``start``."""
+        if abs(clock.period - self.step_time) > 1e-12:
+            raise ValueError(
+                f"a clock of period {clock.period} s cannot tick a {self.step_time} s controller"
+            )
+        self._shared_clock = (clock, slot)
 
     async def start(self) -> None:
         """Listen on every port and start the controller clock."""
@@ -195,6 +246,14 @@ class FakeController:
     # ---- the clock -----------------------------------------------------------------------------------
 
     async def _run_clock(self) -> None:
+        if self._shared_clock is not None:
+            shared, slot = self._shared_clock
+            shared.add(self._tick, slot, asyncio.get_running_loop())
+            try:
+                await asyncio.Event().wait()  # until cancelled by close()
+            finally:
+                shared.remove(self._tick)
+            return
         clock = ThreadClock(self.step_time, self._tick, asyncio.get_running_loop())
         clock.start()
         try:
