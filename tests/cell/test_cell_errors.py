@@ -54,6 +54,12 @@ BAD_CELLS: dict[str, Bad] = {
     "unknown-publish-key": Bad(
         "cell: c\npublish: {tf_rate: 10}\nrobots: [" + ALICE + "}]\n", "publish.tf_rate", "unknown key"
     ),
+    "read-only-with-startup": Bad(
+        "cell: c\nrobots: [{name: alice, model: ur5e, backend: ur, address: 127.0.0.5, "
+        "ur: {read_only: true, startup: true}}]\n",
+        "robots[0] (alice).ur",
+        "cannot also be started up",
+    ),
     "unknown-robot-key": Bad(one_robot(", adress: 10.0.0.2"), "robots[0] (alice).adress", "unknown key"),
     "unknown-ports-key": Bad(
         one_robot(

@@ -245,3 +245,42 @@ async def test_passthrough_on_a_mock_robot_is_refused_with_the_reason() -> None:
             GoalRejected, match="passthrough: the mock backend has no robot-side interpolation"
         ):
             await alice.send_trajectory(PASSTHROUGH_POINTS, passthrough=True)
+
+
+async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
+    """ur.read_only: state is published; no inputs claimed, no program, no callback server; commands refused."""
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME, powered=True)
+    await fake.start()
+    text = _cell(fake.address, startup=False).replace(
+        "ur: {startup: false,", "ur: {read_only: true, startup: false,"
+    )
+    reverse_port = int(text.split("reverse: ")[1].split(",")[0])
+    try:
+        async with running_daemon(text) as (daemon, client):
+            alice = await client.robot("alice")
+            status = await _until(
+                client, alice.keys.status, lambda s: s["lifecycle"] == "running" and s["cycles"] > 10
+            )
+            assert "read-only" in status["reason"]
+            assert status["ready"] is False
+            states = alice.joint_states(10)
+            state = await states.get_json(timeout=10.0)
+            states.close()
+            assert state["position"] == pytest.approx(HOME, abs=1e-9)
+            assert fake._input_owner == {}  # no RTDE input claimed: another client may own them all
+            with pytest.raises(OSError):  # no callback server listens
+                await asyncio.open_connection("127.0.0.1", reverse_port)
+            for reply in (
+                await alice.set_io("digital", 1, True),
+                await alice.set_speed_slider(0.5),
+                await alice.startup(),
+                await alice.resend_program(),
+            ):
+                assert reply["ok"] is False
+                assert "read-only" in reply["reason"]
+            with pytest.raises(GoalRejected):
+                await alice.move([0.1, *HOME[1:]], duration=1.0)
+            assert daemon.runtimes[0].backend.statistics().cycles > 10
+            assert fake.arm.q == pytest.approx(HOME, abs=1e-9)
+    finally:
+        await fake.close()

@@ -195,6 +195,16 @@ class UrOptions(_Frozen):
     """The robot halts the program when no command arrives for this long (s)."""
     calibration_check: Literal["warn", "error"] = "warn"
     """A kinematics hash that differs from the configured calibration: log a warning, or refuse to run."""
+    read_only: bool = False
+    """Only watch the robot: RTDE outputs (state published as usual), the primary interface and the
+    dashboard; no RTDE inputs are claimed, no program is sent, no callback server listens, and goals
+    and services that would command the robot are refused. For a robot another program drives."""
+
+    @model_validator(mode="after")
+    def _read_only_does_not_start(self) -> UrOptions:
+        if self.read_only and self.startup:
+            raise ValueError("read_only: a read-only robot cannot also be started up (startup: true)")
+        return self
 
 
 class MockOptions(_Frozen):

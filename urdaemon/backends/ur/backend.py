@@ -118,12 +118,13 @@ class UrBackend(Backend):
         if self.on_change is not None:
             self.on_change()  # no cycle runs until RTDE streams again: say it now
         state.program_running = False
-        if not self._servers_started:
+        read_only = self.options.read_only
+        if not self._servers_started and not read_only:
             await self.servers.start(self.options.listen_address)
             self._servers_started = True
         try:
             rtde = self._rtde = await RtdeLink.connect(self.address, self._on_package)
-            await rtde.handshake(output_recipe(), self._inputs)
+            await rtde.handshake(output_recipe(), None if read_only else self._inputs)
             if abs(rtde.frequency - self.rate_hz) > 1e-6:
                 raise RobotFaultError(
                     f"the controller streams at {rtde.frequency:g} Hz but a {self.robot.model} runs at "
@@ -218,6 +219,7 @@ class UrBackend(Backend):
 
     async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
         """Set the payload through the script command socket (or a secondary program without one)."""
+        self._check_commanding()
         if self.servers.script_command.connected:
             self.servers.script_command.send(script_command.SetPayload(mass, cog))
             return
@@ -258,6 +260,7 @@ class UrBackend(Backend):
 
     async def startup(self) -> None:
         """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
+        self._check_commanding()
         board = await self._dashboard_link()
         self._handed_back = False
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
@@ -286,6 +289,7 @@ class UrBackend(Backend):
 
     async def resend_program(self) -> None:
         """Send the control program again (headless) or play the loaded one (URCap)."""
+        self._check_commanding()
         self._handed_back = False
         if self.robot.headless:
             if self._primary is None:
@@ -395,7 +399,9 @@ class UrBackend(Backend):
         state.program_running = state.program_running and reverse_server.connected
         if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
             state.lifecycle_reason = (
-                "control handed back to the robot"
+                "read-only (ur.read_only: true): watching, not commanding"
+                if self.options.read_only
+                else "control handed back to the robot"
                 if self._handed_back
                 else "waiting for the control program to connect"
             )
@@ -438,6 +444,7 @@ class UrBackend(Backend):
                 self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
         elif (
             self.robot.headless
+            and not self.options.read_only
             and not self._handed_back
             and not self.servers.trajectory.connected
             and not self.servers.script_command.connected
@@ -557,6 +564,7 @@ class UrBackend(Backend):
             self._report("calibration_mismatch", text)
 
     def _send_inputs(self, fields: dict[str, Any]) -> None:
+        self._check_commanding()
         rtde = self._rtde
         if rtde is None:
             raise BackendError("not connected to the robot")
@@ -565,6 +573,10 @@ class UrBackend(Backend):
             value = fields.get(name, 0)
             values.append(float(value) if name in _DOUBLE_INPUTS else int(value))
         rtde.send_inputs(values)
+
+    def _check_commanding(self) -> None:
+        if self.options.read_only:
+            raise BackendError("read-only robot (ur.read_only: true): it is watched, not commanded")
 
     async def _dashboard_link(self) -> DashboardLink:
         """The dashboard connection, opened now if there is none (it does not need the other links)."""
