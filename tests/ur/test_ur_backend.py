@@ -248,7 +248,7 @@ async def test_passthrough_on_a_mock_robot_is_refused_with_the_reason() -> None:
 
 
 async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
-    """ur.read_only: state is published; no inputs claimed, no program, no callback server; commands refused."""
+    """ur.read_only: state published; no inputs claimed, no program, no callback server, commands refused."""
     fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME, powered=True)
     await fake.start()
     text = _cell(fake.address, startup=False).replace(
@@ -268,7 +268,7 @@ async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
             states.close()
             assert state["position"] == pytest.approx(HOME, abs=1e-9)
             assert fake._input_owner == {}  # no RTDE input claimed: another client may own them all
-            with pytest.raises(OSError):  # no callback server listens
+            with pytest.raises(ConnectionRefusedError):  # no callback server listens
                 await asyncio.open_connection("127.0.0.1", reverse_port)
             for reply in (
                 await alice.set_io("digital", 1, True),
