@@ -110,6 +110,12 @@ class Backend(abc.ABC):
         """Send (positions, velocities, accelerations or None, segment time) points for the robot to run."""
         raise BackendError(self.passthrough_problem() or "passthrough unavailable")
 
+    def send_command(self) -> None:
+        """Send this cycle's command now, if the backend sends commands itself (``ur``: the reverse
+        frame). The runtime calls it right after the controller's tick, before publishing the state;
+        backends that apply the command in their own step (mock, servo) do nothing here."""
+        return
+
     def cancel_passthrough(self) -> None:
         """Cancel the passthrough trajectory the robot runs (no-op when none runs)."""
         return  # backends without passthrough never have one running

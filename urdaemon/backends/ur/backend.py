@@ -96,6 +96,7 @@ class UrBackend(Backend):
         self._last_package = 0.0
         self._swallow_result = False
         self._cycle_error_logged = False
+        self._command_sent = True
         self._dashboard_lock = asyncio.Lock()
         self._handed_back = False
         """After hand_back_control the program is not sent again until resend_program or startup."""
@@ -410,40 +411,21 @@ class UrBackend(Backend):
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
+        self._command_sent = False
         try:
-            self._on_cycle()
+            self._on_cycle()  # the runtime's tick calls send_command() before it publishes anything
         except Exception:  # a bug above must not cost the RTDE link: hold still this cycle, say so once
             self.command.mode = CommandMode.IDLE
             if not self._cycle_error_logged:
                 self._cycle_error_logged = True
                 log.exception("[%s] the cycle failed; holding still", self.name)
-        # frames only while the program reads them (ur-protocols.md §6.2.5): a paused program does not,
-        # and frames queued meanwhile would be replayed on play
-        if reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING):
-            command = self.command
-            timeout = self._servo_timeout
-            if command.mode is CommandMode.POSITION:
-                reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
-            elif command.mode is CommandMode.VELOCITY:
-                reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
-            elif self._freedrive_on:  # hand guiding: keep it alive while the deadman holds
-                if time.monotonic() > self._freedrive_until:
-                    self._end_freedrive()
-                else:
-                    reverse_server.send(
-                        reverse.FreedriveControl(reverse.FreedriveAction.NOOP, PASSTHROUGH_TIMEOUT_S)
-                    )
-            elif self._passthrough is not None:  # the robot runs the trajectory: keep it alive
-                reverse_server.send(
-                    reverse.TrajectoryControl(reverse.TrajectoryAction.NOOP, 0, PASSTHROUGH_TIMEOUT_S)
-                )
-            else:
-                reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
-            rtde = self._rtde
-            if rtde is not None:  # package in → command out (issue 5's turnaround)
-                self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
-        elif (
-            self.robot.headless
+        if not self._command_sent:
+            self.send_command()
+        if (
+            not (
+                reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING)
+            )
+            and self.robot.headless
             and not self.options.read_only
             and not self._handed_back
             and not self.servers.trajectory.connected
@@ -452,6 +434,42 @@ class UrBackend(Backend):
             and state.lifecycle is Lifecycle.RUNNING
         ):
             self._send_program(force=False)
+
+    def send_command(self) -> None:
+        """This cycle's frame on the reverse socket, at once: publishing the state can wait, the robot
+        cannot. Called by the runtime right after the controller's tick (or by the cycle itself)."""
+        if self._command_sent:
+            return
+        self._command_sent = True
+        reverse_server = self.servers.reverse
+        # frames only while the program reads them (ur-protocols.md §6.2.5): a paused program does not,
+        # and frames queued meanwhile would be replayed on play
+        if not (
+            reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING)
+        ):
+            return
+        command = self.command
+        timeout = self._servo_timeout
+        if command.mode is CommandMode.POSITION:
+            reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
+        elif command.mode is CommandMode.VELOCITY:
+            reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
+        elif self._freedrive_on:  # hand guiding: keep it alive while the deadman holds
+            if time.monotonic() > self._freedrive_until:
+                self._end_freedrive()
+            else:
+                reverse_server.send(
+                    reverse.FreedriveControl(reverse.FreedriveAction.NOOP, PASSTHROUGH_TIMEOUT_S)
+                )
+        elif self._passthrough is not None:  # the robot runs the trajectory: keep it alive
+            reverse_server.send(
+                reverse.TrajectoryControl(reverse.TrajectoryAction.NOOP, 0, PASSTHROUGH_TIMEOUT_S)
+            )
+        else:
+            reverse_server.send(reverse.Idle(IDLE_TIMEOUT_S))
+        rtde = self._rtde
+        if rtde is not None:  # package in → command out (issue 5's turnaround)
+            self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
 
     def _send_program(self, *, force: bool) -> None:
         now = time.monotonic()
