@@ -5,8 +5,9 @@
 
 Every process is separate: the fake controllers (``urdaemon fake-robot``, one process, one shared
 timing thread, each robot at its own phase unless ``--phases aligned``), the daemon
-(``urdaemon serve``), a Zenoh subscriber of every robot's ``joint_states`` and ``tcp_pose``
-(benchmarks/state_subscriber.py) and, for the comparison, SDU's ur_rtde (benchmarks/ur_rtde_receive.py).
+(``urdaemon serve``), a Zenoh subscriber of every robot's ``joint_states`` (and ``tcp_pose`` with
+``--tcp-pose``; benchmarks/state_subscriber.py) and, for the comparison, SDU's ur_rtde
+(benchmarks/ur_rtde_receive.py).
 
 Printed, with the machine:
 1. per robot count: the turnaround per cycle (RTDE package in → servoj frame out, from the daemon's
@@ -205,9 +206,14 @@ def free_port() -> int:
         return port
 
 
-def cell_yaml(robots: int, *, read_only: bool = False) -> str:
+def cell_yaml(robots: int, *, read_only: bool = False, decimation: int = 1, low_latency: bool = False) -> str:
     """A cell of ``robots`` UR10e on the ur backend, each with its own four callback ports."""
-    lines = ["cell: bench", "zenoh: {mode: peer, multicast_scouting: false}", "robots:"]
+    lines = [
+        "cell: bench",
+        f"zenoh: {{mode: peer, multicast_scouting: false, low_latency: {str(low_latency).lower()}}}",
+        f"publish: {{joint_states_decimation: {decimation}}}",
+        "robots:",
+    ]
     ur = "{read_only: true}" if read_only else "{startup: true, listen_address: 127.0.0.1}"
     for i in range(robots):
         p = [free_port() for _ in range(4)]
@@ -290,12 +296,12 @@ async def first_position(robot: RobotClient) -> list[float]:
         sub.close()
 
 
-def start_subscriber(procs: Processes, endpoint: str, keys: list[str]) -> Path:
+def start_subscriber(procs: Processes, endpoint: str, keys: list[str], low_latency: bool = False) -> Path:
     """The state subscriber in its own process; the file its figures go to."""
     result = procs.logs / "latency.json"
-    procs.start(
-        "subscriber", [sys.executable, str(HERE / "state_subscriber.py"), endpoint, str(result), *keys]
-    )
+    flags = ["--low-latency"] if low_latency else []
+    script = str(HERE / "state_subscriber.py")
+    procs.start("subscriber", [sys.executable, script, *flags, endpoint, str(result), *keys])
     return result
 
 
@@ -373,19 +379,28 @@ async def measure_control(robots: int, seconds: float, endpoint: str, procs: Pro
             await asyncio.wait_for(client.close(), 5.0)
 
 
-def run_control(robots: int, seconds: float, phases: str, profile: Path | None) -> Row:
+def run_control(
+    robots: int,
+    seconds: float,
+    phases: str,
+    tcp_pose: bool,
+    decimation: int,
+    low_latency: bool,
+    profile: Path | None,
+) -> Row:
     """Fakes, daemon and subscriber for ``robots`` robots; measure; stop them all."""
     with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
         procs = Processes(Path(tmp))
         config = procs.logs / "cell.yaml"
-        config.write_text(cell_yaml(robots))
+        config.write_text(cell_yaml(robots, decimation=decimation, low_latency=low_latency))
         endpoint = f"tcp/127.0.0.1:{free_port()}"
         try:
             procs.start(
                 "fake", urdaemon("fake-robot", "--config", str(config), "--powered", "--phases", phases)
             )
             procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
-            start_subscriber(procs, endpoint, ["bench/*/joint_states", "bench/*/tcp_pose"])
+            keys = ["bench/*/joint_states", *(["bench/*/tcp_pose"] if tcp_pose else [])]
+            start_subscriber(procs, endpoint, keys, low_latency)
             row: Row = asyncio.run(_with_subscriber(procs, measure_control(robots, seconds, endpoint, procs)))
             if profile is not None:  # after the window, so that sampling does not disturb the figures
                 profile.parent.mkdir(parents=True, exist_ok=True)
@@ -447,18 +462,18 @@ async def measure_read_only(seconds: float, endpoint: str, procs: Processes, add
             await asyncio.wait_for(client.close(), 5.0)
 
 
-def run_read_only(seconds: float) -> Comparison:
+def run_read_only(seconds: float, low_latency: bool) -> Comparison:
     """One fake, a daemon with the robot read-only, the subscriber and ur_rtde."""
     with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
         procs = Processes(Path(tmp))
         config = procs.logs / "cell.yaml"
-        config.write_text(cell_yaml(1, read_only=True))
+        config.write_text(cell_yaml(1, read_only=True, low_latency=low_latency))
         endpoint = f"tcp/127.0.0.1:{free_port()}"
         address = f"127.0.0.{FIRST_ADDRESS}"
         try:
             procs.start("fake", urdaemon("fake-robot", "--config", str(config), "--powered"))
             procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
-            start_subscriber(procs, endpoint, ["bench/*/joint_states"])
+            start_subscriber(procs, endpoint, ["bench/*/joint_states"], low_latency)
             work = measure_read_only(seconds, endpoint, procs, address)
             comparison: Comparison = asyncio.run(_with_subscriber(procs, work))
             return comparison
@@ -524,10 +539,15 @@ def yes(ok: bool) -> str:
     return "yes" if ok else "NO"
 
 
-def control_table(rows: list[Row], seconds: float, phases: str) -> str:
+def control_table(
+    rows: list[Row], seconds: float, phases: str, tcp_pose: bool, decimation: int, low_latency: bool
+) -> str:
     """Tables 1, 2 and 4 for every robot count."""
+    streams = "joint_states and tcp_pose" if tcp_pose else "joint_states"
+    streams += f" at {500 / decimation:g} Hz" + (", Zenoh low-latency transport" if low_latency else "")
     lines = [
-        f"## Full control: servoj streamed to every robot, {seconds:g} s window, fakes' phases: {phases}",
+        f"## Full control: servoj streamed to every robot, {seconds:g} s window, fakes' phases: {phases}, "
+        f"subscriber of every robot's {streams}",
         "",
         "| robots | turnaround p50 / p99 / p99.9 / max µs (worst robot) | missed | late | cycles/s min / mean "
         "| daemon CPU-s/s | per robot (≤ 0.04) | RSS (peak) MiB | state latency p50 / p99 µs (≤ 300 / 1000) "
@@ -612,6 +632,20 @@ def main() -> None:
         help="the fakes' RTDE packages: each at its own phase (default, like independent robots) or all at once",
     )
     parser.add_argument(
+        "--decimation",
+        type=int,
+        default=1,
+        help="publish.joint_states_decimation of the cell (default 1: every cycle, 500 Hz)",
+    )
+    parser.add_argument(
+        "--low-latency",
+        action="store_true",
+        help="zenoh.low_latency in the cell and the subscriber (the ur_rtde comparison too)",
+    )
+    parser.add_argument(
+        "--tcp-pose", action="store_true", help="subscribe to tcp_pose too (forward kinematics every cycle)"
+    )
+    parser.add_argument(
         "--no-compare", action="store_true", help="skip the read-only comparison with ur_rtde"
     )
     parser.add_argument("--no-tracking", action="store_true", help="skip planning and tracking")
@@ -629,12 +663,27 @@ def main() -> None:
         rows = []
         for n in counts:
             print(f"measuring {n} robot(s) for {args.seconds:g} s …", file=sys.stderr)
-            rows.append(run_control(n, args.seconds, args.phases, args.profile))
+            rows.append(
+                run_control(
+                    n,
+                    args.seconds,
+                    args.phases,
+                    args.tcp_pose,
+                    args.decimation,
+                    args.low_latency,
+                    args.profile,
+                )
+            )
         if rows:
-            print(control_table(rows, args.seconds, args.phases) + "\n")
+            print(
+                control_table(
+                    rows, args.seconds, args.phases, args.tcp_pose, args.decimation, args.low_latency
+                )
+                + "\n"
+            )
         if not args.no_compare:
             print("measuring a read-only robot against ur_rtde …", file=sys.stderr)
-            print(comparison_table(run_read_only(args.seconds), args.seconds) + "\n")
+            print(comparison_table(run_read_only(args.seconds, args.low_latency), args.seconds) + "\n")
         if not args.no_tracking:
             print("planning and tracking …", file=sys.stderr)
             print(tracking_table(run_tracking()))

@@ -1,6 +1,6 @@
 """A Zenoh subscriber in its own process, for benchmarks/control_loop.py: state latency.
 
-    python benchmarks/state_subscriber.py ENDPOINT RESULT_FILE KEY [KEY ...]
+    python benchmarks/state_subscriber.py [--low-latency] ENDPOINT RESULT_FILE KEY [KEY ...]
 
 Subscribes to every KEY (e.g. ``bench/*/joint_states``) through ENDPOINT and, for every sample that
 carries ``host_time_ns`` (the daemon's ``time.time_ns()`` when the RTDE package arrived), records
@@ -20,17 +20,17 @@ from typing import Any
 
 import zenoh
 
+from urdaemon.publish.node import zenoh_config
+
 MARK = b'"host_time_ns":'
 
 
 def main() -> None:
     """Subscribe and serve the signals until told to stop."""
-    endpoint, result_file, *keys = sys.argv[1:]
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    session: Any = zenoh.open(conf)
+    args = sys.argv[1:]
+    low_latency = "--low-latency" in args
+    endpoint, result_file, *keys = [a for a in args if a != "--low-latency"]
+    session: Any = zenoh.open(zenoh_config("peer", [], [endpoint], low_latency=low_latency))
     latencies: list[int] = []
     counts: dict[str, int] = {}
 

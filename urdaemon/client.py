@@ -97,11 +97,15 @@ class Client:
         self._closers: list[Callable[[], object]] = []
 
     @classmethod
-    async def connect(cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0) -> Client:
-        """Open a Zenoh session connected to ``endpoint`` (no multicast scouting)."""
+    async def connect(
+        cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0, low_latency: bool = False
+    ) -> Client:
+        """Open a Zenoh session connected to ``endpoint`` (no multicast scouting); ``low_latency``
+        to match a daemon whose cell sets ``zenoh: {low_latency: true}`` (half the CPU per sample
+        for both; without it the client still works)."""
         loop = asyncio.get_running_loop()
         try:
-            conf = zenoh_config("peer", [], [endpoint])
+            conf = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
             conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
             session = await loop.run_in_executor(None, zenoh.open, conf)
         except zenoh.ZError as err:

@@ -314,3 +314,30 @@ async def test_tcp_pose_is_computed_only_while_someone_subscribes(cell: tuple[Da
     pose = await _next_matching(client, alice.keys.tcp_pose, lambda data: True)
     assert (pose["frame"], pose["child"]) == ("alice_base", "alice_tool0")
     assert (len(pose["position"]), len(pose["orientation"])) == (3, 4)
+
+
+LOW_LATENCY_CELL = """
+cell: fastcell
+zenoh: {low_latency: true}
+robots:
+  - name: alice
+    model: ur10e
+    backend: mock
+"""
+
+
+async def test_a_low_latency_daemon_serves_low_latency_and_default_clients() -> None:
+    """zenoh.low_latency: true changes the transport, not who may connect (issue 5)."""
+    async with running_daemon(LOW_LATENCY_CELL) as (daemon, default_client):
+        endpoint = daemon.listen_endpoints[0]
+        async with await Client.connect(endpoint, low_latency=True) as fast_client:
+            for client in (default_client, fast_client):
+                alice = await client.robot("alice")
+                states = alice.joint_states(10)
+                try:
+                    state = await states.get_json(timeout=5.0)
+                finally:
+                    states.close()
+                assert state["robot"] == "alice"
+                assert len(state["position"]) == 6
+                assert (await alice.status())["ready"] is True

@@ -81,6 +81,10 @@ class ZenohOptions(_Frozen):
     listen: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ()
     multicast_scouting: bool = False
+    low_latency: bool = False
+    """Zenoh's low-latency unicast transport (no batching, no QoS priorities): about half the CPU per
+    published sample when the subscriber enables it too (``Client.connect(..., low_latency=True)``);
+    peers without it still connect. See docs/performance.md."""
 
     @model_validator(mode="after")
     def _client_needs_connect(self) -> ZenohOptions:

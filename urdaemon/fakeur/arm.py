@@ -112,6 +112,9 @@ class FakeArm:
         ]
         self.max_position = [j.max_position if j.max_position is not None else math.inf for j in model.joints]
         self.timestamp = 0.0
+        self._pose_cache: tuple[tuple[float, ...], tuple[float, float, float, float, float, float]] | None = (
+            None
+        )
         """Controller time since boot (s), RTDE ``timestamp``."""
         self.robot_mode = RobotMode.POWER_OFF
         self.safety_mode = SafetyMode.NORMAL
@@ -341,9 +344,18 @@ class FakeArm:
     # ---- derived values ----------------------------------------------------------------------------
 
     def tcp_pose(self) -> tuple[float, float, float, float, float, float]:
-        """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector."""
-        x, y, z, qx, qy, qz, qw = self.kinematics.tool_pose(self.q)
-        return (x, y, z, *_rotation_vector(qx, qy, qz, qw))
+        """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector.
+
+        Kept for the joint values it was computed for: one RTDE package asks for it twice (actual and
+        target TCP pose) and several clients may each ask once per cycle."""
+        q = tuple(self.q)
+        cached = self._pose_cache
+        if cached is not None and cached[0] == q:
+            return cached[1]
+        x, y, z, qx, qy, qz, qw = self.kinematics.tool_pose(q)
+        pose = (x, y, z, *_rotation_vector(qx, qy, qz, qw))
+        self._pose_cache = (q, pose)
+        return pose
 
     @property
     def robot_status_bits(self) -> int:

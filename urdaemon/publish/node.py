@@ -30,13 +30,18 @@ def zenoh_config(
     connect: tuple[str, ...] | list[str],
     *,
     multicast: bool = False,
+    low_latency: bool = False,
 ) -> Any:
-    """A ``zenoh.Config`` with explicit endpoints and multicast scouting as given."""
+    """A ``zenoh.Config`` with explicit endpoints, multicast scouting and the low-latency transport
+    (which needs QoS off) as given."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
+    if low_latency:
+        conf.insert_json5("transport/unicast/lowlatency", "true")
+        conf.insert_json5("transport/unicast/qos/enabled", "false")
     return conf
 
 
@@ -65,7 +70,13 @@ class ZenohNode:
         endpoints = options.listen if listen is None else listen
         try:
             self.session: Any = zenoh.open(
-                zenoh_config(options.mode, endpoints, options.connect, multicast=options.multicast_scouting)
+                zenoh_config(
+                    options.mode,
+                    endpoints,
+                    options.connect,
+                    multicast=options.multicast_scouting,
+                    low_latency=options.low_latency,
+                )
             )
         except zenoh.ZError as err:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
