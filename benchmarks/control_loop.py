@@ -44,7 +44,7 @@ from typing import Any
 
 from urdaemon.backends.ur.rtde_link import output_recipe
 from urdaemon.cell import parse_cell
-from urdaemon.client import Client, RobotClient
+from urdaemon.client import Client, GoalHandle, RobotClient
 from urdaemon.control import TrajectoryPoint
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.daemon import describe_cell
@@ -89,6 +89,8 @@ class Row:
     goals_active: int
     turnaround: dict[str, float]
     latency: dict[str, Any]
+    ended: list[str] = field(default_factory=list)
+    """How the goals that ended before the window closed ended (status: reason)."""
 
 
 @dataclass
@@ -322,6 +324,22 @@ async def read_latency(procs: Processes, result: Path) -> dict[str, Any]:
     raise RuntimeError("the subscriber wrote no figures")
 
 
+async def _ending(goal: GoalHandle) -> str:
+    """``status: reason`` of a goal that has ended."""
+    try:
+        result = await goal.result(timeout=5.0)
+    except UrDaemonError as err:
+        return f"no result: {err}"
+    return f"{result['status']}: {result.get('reason', '')}"
+
+
+async def _stamped(reply: Any) -> dict[str, Any]:
+    """The reply of a cycle_stats query with the monotonic time it arrived as ``at``."""
+    stats: dict[str, Any] = await reply
+    stats["at"] = time.monotonic()
+    return stats
+
+
 def worst(stats: list[dict[str, Any]]) -> dict[str, float]:
     """The worst robot's turnaround figures (each figure's maximum over robots)."""
     keys = ("p50_us", "p99_us", "p999_us", "max_us")
@@ -334,18 +352,19 @@ def worst(stats: list[dict[str, Any]]) -> dict[str, float]:
 async def measure_control(robots: int, seconds: float, endpoint: str, procs: Processes) -> Row:
     """Wait for ready, start the trajectories and the subscriber window, measure for ``seconds``."""
     client = await connect(endpoint, procs)
+    goals: list[GoalHandle] = []
     try:
         handles = [await client.robot(f"r{i}", cell="bench", timeout=30.0) for i in range(robots)]
         for handle in handles:
             await wait_status(handle, procs, lambda s: s["ready"], "ready")
         for handle in handles:
             start = await first_position(handle)
-            await handle.send_trajectory(sinusoid(start, seconds + 30.0))
+            goals.append(await handle.send_trajectory(sinusoid(start, seconds + 30.0)))
         await asyncio.sleep(WARMUP_S)
         procs.check()
 
         daemon, fake, sub = procs.pid("daemon"), procs.pid("fake"), procs.pid("subscriber")
-        before = [await h.cycle_stats(reset=True) for h in handles]
+        before = [await _stamped(h.cycle_stats(reset=True)) for h in handles]
         signal_subscriber(procs, signal.SIGUSR1)
         t0 = time.monotonic()
         cpu0 = cpu_seconds(daemon), cpu_seconds(fake), cpu_seconds(sub)
@@ -354,11 +373,14 @@ async def measure_control(robots: int, seconds: float, endpoint: str, procs: Pro
         cpu1 = cpu_seconds(daemon), cpu_seconds(fake), cpu_seconds(sub)
         rss, hwm = memory_mib(daemon)
         latency = await read_latency(procs, procs.logs / "latency.json")
-        after = [await h.cycle_stats() for h in handles]
+        after = [await _stamped(h.cycle_stats()) for h in handles]
         statuses = [await h.status() for h in handles]
         procs.check()
         wall = t1 - t0
-        rates = [(a["cycles"] - b["cycles"]) / wall for a, b in zip(after, before, strict=True)]
+        # each robot's rate over the time between its own two replies (the queries run one by one)
+        rates = [
+            (a["cycles"] - b["cycles"]) / (a["at"] - b["at"]) for a, b in zip(after, before, strict=True)
+        ]
         return Row(
             robots=robots,
             daemon_cpu=(cpu1[0] - cpu0[0]) / wall,
@@ -371,6 +393,9 @@ async def measure_control(robots: int, seconds: float, endpoint: str, procs: Pro
             missed=sum(a["missed_cycles"] - b["missed_cycles"] for a, b in zip(after, before, strict=True)),
             late=sum(a["late_cycles"] - b["late_cycles"] for a, b in zip(after, before, strict=True)),
             goals_active=sum(s["active_goal"] is not None for s in statuses),
+            ended=[
+                await _ending(g) for g, st in zip(goals, statuses, strict=True) if st["active_goal"] is None
+            ],
             turnaround=worst(after),
             latency=latency,
         )
@@ -568,6 +593,9 @@ def control_table(
             f"| {per:.3f} {yes(per <= TARGET_CPU_PER_ROBOT)} | {r.rss_mib:.0f} ({r.hwm_mib:.0f}) | {lat_text} "
             f"| {r.fake_cpu:.3f} | {r.subscriber_cpu:.3f} | {r.goals_active}/{r.robots} |"
         )
+    for r in rows:
+        if r.ended:
+            lines += ["", f"{r.robots} robots, goals that ended early: " + "; ".join(sorted(set(r.ended)))]
     eight = [r for r in rows if r.robots == 8]
     for r in eight:
         ok = (
