@@ -312,16 +312,28 @@ def signal_subscriber(procs: Processes, signum: int) -> None:
     os.kill(procs.pid("subscriber"), signum)
 
 
+def _figures(result: Path) -> dict[str, Any] | None:
+    """The subscriber's figures once its file is complete."""
+    if not result.exists() or not result.stat().st_size:
+        return None
+    figures: dict[str, Any] = json.loads(result.read_text())
+    return figures
+
+
 async def read_latency(procs: Processes, result: Path) -> dict[str, Any]:
     """Ask the subscriber for its window's figures and wait for the file (bounded)."""
-    result.unlink(missing_ok=True)
+    _forget(result)
     signal_subscriber(procs, signal.SIGUSR2)
     for _ in range(100):
-        if result.exists() and result.stat().st_size:
-            figures: dict[str, Any] = json.loads(result.read_text())
+        figures = _figures(result)
+        if figures is not None:
             return figures
         await asyncio.sleep(0.05)
     raise RuntimeError("the subscriber wrote no figures")
+
+
+def _forget(result: Path) -> None:
+    result.unlink(missing_ok=True)
 
 
 async def _ending(goal: GoalHandle) -> str:
@@ -574,7 +586,8 @@ def control_table(
         f"## Full control: servoj streamed to every robot, {seconds:g} s window, fakes' phases: {phases}, "
         f"subscriber of every robot's {streams}",
         "",
-        "| robots | turnaround p50 / p99 / p99.9 / max µs (worst robot) | missed | late | cycles/s min / mean "
+        "| robots | turnaround p50 / p99 / p99.9 / max µs (worst robot) | missed | late "
+        "| cycles/s min / mean "
         "| daemon CPU-s/s | per robot (≤ 0.04) | RSS (peak) MiB | state latency p50 / p99 µs (≤ 300 / 1000) "
         "| fake CPU-s/s | subscriber CPU-s/s | goals active at end |",
         "|" + " --- |" * 12,
@@ -590,7 +603,8 @@ def control_table(
         lines.append(
             f"| {r.robots} | {t['p50_us']:.0f} / {t['p99_us']:.0f} / {t['p999_us']:.0f} / {t['max_us']:.0f} "
             f"| {r.missed} | {r.late} | {r.rate_min:.1f} / {r.rate_mean:.1f} | {r.daemon_cpu:.3f} "
-            f"| {per:.3f} {yes(per <= TARGET_CPU_PER_ROBOT)} | {r.rss_mib:.0f} ({r.hwm_mib:.0f}) | {lat_text} "
+            f"| {per:.3f} {yes(per <= TARGET_CPU_PER_ROBOT)} "
+            f"| {r.rss_mib:.0f} ({r.hwm_mib:.0f}) | {lat_text} "
             f"| {r.fake_cpu:.3f} | {r.subscriber_cpu:.3f} | {r.goals_active}/{r.robots} |"
         )
     for r in rows:
@@ -621,11 +635,14 @@ def comparison_table(c: Comparison, seconds: float) -> str:
             "| receiver | CPU-s/s | RSS MiB | what it does |",
             "| --- | --- | --- | --- |",
             f"| urdaemon (read-only robot) | {c.daemon_cpu:.3f} | {c.daemon_rss_mib:.0f} | RTDE at 500 Hz, "
-            f"joint_states published to a subscriber in another process (latency p50 {lat.get('p50_us') or 0:.0f} µs) |",
-            f"| ur_rtde RTDEReceiveInterface | {c.ur_rtde_cpu:.3f} | {c.ur_rtde_rss_mib:.0f} | RTDE at 500 Hz "
+            "joint_states published to a subscriber in another process "
+            f"(latency p50 {lat.get('p50_us') or 0:.0f} µs) |",
+            f"| ur_rtde RTDEReceiveInterface | {c.ur_rtde_cpu:.3f} | {c.ur_rtde_rss_mib:.0f} "
+            "| RTDE at 500 Hz "
             f"({c.ur_rtde_variables}), kept in memory |",
             "",
-            f"ratio urdaemon / ur_rtde: {ratio:.2f} (target ≤ {TARGET_READ_ONLY_RATIO}: {yes(ratio <= TARGET_READ_ONLY_RATIO)})",
+            f"ratio urdaemon / ur_rtde: {ratio:.2f} "
+            f"(target ≤ {TARGET_READ_ONLY_RATIO}: {yes(ratio <= TARGET_READ_ONLY_RATIO)})",
         ]
     )
 
@@ -640,7 +657,8 @@ def tracking_table(t: Tracking) -> str:
             "",
             f"ruckig planning (whole trajectory, {len(plan)} runs): median {statistics.median(plan):.2f} ms, "
             f"max {plan[-1]:.2f} ms",
-            f"executed on the fake: {t.status} in {t.duration:.3f} s, final error max |e| = {worst_error:.2e} rad "
+            f"executed on the fake: {t.status} in {t.duration:.3f} s, "
+            f"final error max |e| = {worst_error:.2e} rad "
             f"({', '.join(f'{e:+.1e}' for e in t.final_error)})",
         ]
     )
@@ -657,7 +675,8 @@ def main() -> None:
         "--phases",
         choices=("spread", "aligned"),
         default="spread",
-        help="the fakes' RTDE packages: each at its own phase (default, like independent robots) or all at once",
+        help="the fakes' RTDE packages: each at its own phase (default, like independent robots) "
+        "or all at once",
     )
     parser.add_argument(
         "--decimation",

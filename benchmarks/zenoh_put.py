@@ -97,7 +97,8 @@ def main() -> None:
         f"eclipse-zenoh {version('eclipse-zenoh')}"
     )
     print(
-        "| publisher | put() µs (calling thread) | µs per sample (whole process) | CPU-s/s per 500 Hz stream |"
+        "| publisher | put() µs (calling thread) | µs per sample (whole process) "
+        "| CPU-s/s per 500 Hz stream |"
     )
     print("| --- | --- | --- | --- |")
     for label, express, low_latency, subscriber_low_latency in (
