@@ -10,12 +10,21 @@ import time
 __all__ = ["drain_in_background", "free_tcp_port", "wait_for_line"]
 
 
+_HANDED_OUT: set[int] = set()
+"""Ports this test process was already given: the kernel may offer a released port again at once,
+and two of a cell's callback ports must never be the same."""
+
+
 def free_tcp_port(host: str = "127.0.0.1") -> int:
-    """A TCP port on ``host`` that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((host, 0))
-        port: int = sock.getsockname()[1]
-        return port
+    """A TCP port on ``host`` that was free a moment ago and not handed out before in this process."""
+    for _ in range(1000):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.bind((host, 0))
+            port: int = sock.getsockname()[1]
+        if port not in _HANDED_OUT:
+            _HANDED_OUT.add(port)
+            return port
+    raise RuntimeError("no fresh free TCP port in 1000 attempts")
 
 
 async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: float) -> list[str]:

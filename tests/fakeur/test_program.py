@@ -14,7 +14,7 @@ import itertools
 import math
 import socket
 import struct
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import pytest
@@ -127,6 +127,8 @@ class Daemon:
         self.trajectory = TrajectoryPointConnection(Side.DAEMON)
         self.script = sc.ScriptCommandConnection(Side.DAEMON)
         self.results: asyncio.Queue[TrajectoryResultCode] = asyncio.Queue()
+        self.greeting: dict[str, bytes] = {}
+        """Bytes written to a socket the moment it is accepted."""
         self.tool_contact: asyncio.Queue[sc.ToolContactResultCode] = asyncio.Queue()
         self._servers: list[asyncio.Server] = []
 
@@ -142,6 +144,8 @@ class Daemon:
     async def _handle(self, name: str, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         self.accepted.append(name)
         self.writers[name] = writer
+        if name in self.greeting:
+            writer.write(self.greeting[name])
         self.connected[name].set()
         try:
             while data := await reader.read(65536):
@@ -189,6 +193,18 @@ class Daemon:
             server.close()
 
 
+_READING = {"poll": False}
+"""How this test's programs read the reverse socket (the fixture below runs every test both ways)."""
+
+
+@pytest.fixture(autouse=True, params=["reverse-awaited", "reverse-polled"])
+def _reverse_reading(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Every test twice: the program waking for each reverse frame, and reading it in the cycle."""
+    _READING["poll"] = request.param == "reverse-polled"
+    yield
+    _READING["poll"] = False
+
+
 class Clock:
     """The controller's cycle: ``runner.step(DT)`` then ``arm.step(DT)``, ``speedup`` × real time."""
 
@@ -217,6 +233,9 @@ class Clock:
     async def _run(self) -> None:
         while True:
             for _ in range(self.batch):
+                if self.runner.polls_reverse:  # as the fake controller does: read, let the program
+                    self.runner.poll()  # apply what it read, then the cycle
+                    await asyncio.sleep(0)
                 self.runner.step(DT)
                 self.arm.step(DT)
                 self.cycles += 1
@@ -302,14 +321,18 @@ class Rig:
 
 
 @contextlib.asynccontextmanager
-async def running_program(*, speedup: float = FAST) -> AsyncIterator[Rig]:
+async def running_program(*, speedup: float = FAST, reverse_greeting: bytes = b"") -> AsyncIterator[Rig]:
     """A connected program with its clock running; cancels and closes everything afterwards."""
     daemon = Daemon()
+    if reverse_greeting:
+        daemon.greeting[REV] = reverse_greeting
     for name in NAMES:
         await daemon.serve(name)
     arm = make_arm()
     events = Events()
-    runner = ProgramRunner(arm, program_text(daemon.ports), step_time=DT, on_event=events)
+    runner = ProgramRunner(
+        arm, program_text(daemon.ports), step_time=DT, on_event=events, poll_reverse=_READING["poll"]
+    )
     run = asyncio.get_running_loop().create_task(runner.run())
     clock = Clock(runner, arm, speedup=speedup)
     try:
@@ -565,6 +588,41 @@ async def test_servoj_tracks_the_targets_and_ignores_an_impossible_one() -> None
         assert rig.arm.q[0] == pytest.approx(final[0], abs=2 * step)
         rig.daemon.send(Stopped())
         assert await rig.result() == REASON_STOPPED
+
+
+async def test_a_frame_sent_the_moment_the_reverse_socket_connects_is_not_lost() -> None:
+    """The daemon may write before the program's first read (and, polled, before reading is paused)."""
+    codec = ReverseConnection(Side.DAEMON)
+    codec.send(SpeedJ(v0(0.25), timeout=5.0))
+    async with running_program(speedup=1.0, reverse_greeting=codec.data_to_send()) as rig:
+        await rig.clock.until(lambda: rig.arm.qd[0] == pytest.approx(0.25))
+        assert rig.runner.control_mode == ControlMode.SPEEDJ
+
+
+async def test_polling_starts_with_the_bytes_the_stream_reader_already_holds() -> None:
+    """Poll mode takes over a reverse socket whose transport may already have read a frame."""
+    from urdaemon.fakeur.program import _Link
+
+    ours, theirs = socket.socketpair()
+    reader, writer = await asyncio.open_connection(sock=ours)
+    codec = ReverseConnection(Side.DAEMON)
+    codec.send(SpeedJ(v0(0.1), timeout=1.0))
+    early = codec.data_to_send()
+    codec.send(Idle(timeout=1.0))
+    late = codec.data_to_send()
+    try:
+        reader.feed_data(early)  # what the transport read before reading was paused
+        runner = ProgramRunner(make_arm(), "def p():\nend", step_time=DT, poll_reverse=True)
+        runner._start_polling(_Link(reader, writer))
+        theirs.sendall(late)  # what arrives afterwards waits in the socket for the cycle's poll
+        runner.poll()
+        assert [type(e) for e in runner._reverse_events] == [SpeedJ, Idle]
+        theirs.close()  # the daemon hangs up: the next poll sees the end of the stream
+        runner.poll()
+        assert runner._reverse_eof is True
+    finally:
+        writer.close()
+        theirs.close()
 
 
 async def test_speedj_drives_joint_velocities_and_idle_stops_them() -> None:

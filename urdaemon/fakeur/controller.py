@@ -262,7 +262,16 @@ class FakeController:
             clock.stop()
 
     def _tick(self) -> None:
-        """One controller cycle: program, arm, then whatever streams are due."""
+        """One controller cycle: the program's reverse socket read, then (once the program has applied
+        what it read) program, arm and whatever streams are due."""
+        runner = self._runner
+        if runner is not None and runner.polls_reverse:
+            runner.poll()  # wakes the program's main loop, whose turn comes before _cycle's
+            asyncio.get_running_loop().call_soon(self._cycle)
+        else:
+            self._cycle()
+
+    def _cycle(self) -> None:
         arm, dt = self.arm, self.step_time
         runner = self._runner
         if runner is not None:
@@ -522,6 +531,7 @@ class FakeController:
             name=name,
             on_event=self._program_event,
             local_address=self.address,  # a real robot's connections come from its own address
+            poll_reverse=True,  # read in the controller cycle: no wake-up per frame (issue 5)
         )
         self._runner = runner
         self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))

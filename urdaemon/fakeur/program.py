@@ -32,6 +32,7 @@ import asyncio
 import contextlib
 import enum
 import math
+import os
 import re
 import socket
 import time
@@ -580,9 +581,13 @@ class ProgramRunner:
         name: str = "externalControl",
         on_event: Callable[[str, str], None] | None = None,
         local_address: str | None = None,
+        poll_reverse: bool = False,
     ) -> None:
         self.arm = arm
         self.local_address = local_address
+        self.polls_reverse = poll_reverse
+        """Read the reverse socket only in ``poll()``, once per controller cycle, instead of waking for
+        every frame (the controller must call ``poll()`` each cycle; see ``poll``)."""
         """The robot's own address: its connections come from there, as a real robot's do."""
         self.program_text = program_text
         self.step_time = step_time
@@ -609,6 +614,11 @@ class ProgramRunner:
         self._tasks: list[asyncio.Task[None]] = []
         self._reverse_codec = ReverseConnection(Side.ROBOT)
         self._reverse_events: deque[ReverseEvent] = deque()
+        self._reverse_sock: socket.socket | None = None
+        """Poll mode: our own handle on the reverse socket (its transport never reads)."""
+        self._reverse_waiter: asyncio.Future[None] | None = None
+        self._reverse_deadline: float | None = None
+        self._reverse_eof = False
         self._violations = 0
         self._violation_log_every = max(1, round(VIOLATION_LOG_PERIOD_S / step_time))
         # servo thread
@@ -662,6 +672,8 @@ class ProgramRunner:
             failure = await self._connect(sockets)
             if failure is not None:
                 return failure
+            if self.polls_reverse:
+                self._start_polling(self._links[REVERSE_SOCKET])
             self._emit(EVENT_TEXT, "ExternalControl: External control active")
             self._spawn(self._serve_script_commands(self._links[SCRIPT_COMMAND_SOCKET]))
             self._spawn(self._read_points(self._links[TRAJECTORY_SOCKET]))
@@ -753,6 +765,9 @@ class ProgramRunner:
         return pending.popleft()
 
     async def _fill_reverse(self, timeout: float | None) -> None:
+        if self._reverse_sock is not None:
+            await self._wait_polled(timeout)
+            return
         pending = self._reverse_events
         reader = self._links[REVERSE_SOCKET].reader
         async with asyncio.timeout(timeout):
@@ -766,6 +781,83 @@ class ProgramRunner:
                         self._reverse_codec.receive_eof()
                     raise _LinkClosed
                 pending.extend(self._reverse_codec.receive_data(data))
+
+    # ---- poll mode: the reverse socket read once per controller cycle ------------------------------------
+
+    def _start_polling(self, link: _Link) -> None:
+        sock = link.writer.get_extra_info("socket")
+        if sock is None:
+            self.polls_reverse = False  # no socket to poll (an unusual transport): read as usual
+            return
+        transport: Any = link.writer.transport
+        transport.pause_reading()  # the event loop no longer wakes for reverse frames
+        raw = socket.socket(fileno=os.dup(sock.fileno()))
+        raw.setblocking(False)
+        self._reverse_sock = raw
+        # bytes the transport read before the pause (the daemon writes as soon as it accepts) are in
+        # the stream reader, not the socket: they come first
+        buffered: Any = getattr(link.reader, "_buffer", b"")
+        if buffered:
+            self._reverse_events.extend(self._reverse_codec.receive_data(bytes(buffered)))
+            buffered.clear()
+        if link.reader.at_eof():
+            self._reverse_eof = True
+
+    def poll(self) -> None:
+        """One controller cycle's read of the reverse socket (poll mode; a no-op otherwise).
+
+        Decodes every frame that arrived since the last cycle and wakes the main loop, which applies
+        them before the cycle's ``step()`` when the controller calls ``step`` after yielding to the
+        loop once; a read waiting past its timeout fails here, to the cycle (2 ms at 500 Hz).
+        """
+        sock = self._reverse_sock
+        if sock is None or self._finished:
+            return
+        pending = self._reverse_events
+        while not self._reverse_eof:
+            try:
+                data = sock.recv(READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                data = b""
+            if not data:
+                self._reverse_eof = True
+                break
+            try:
+                pending.extend(self._reverse_codec.receive_data(data))
+            except RemoteProtocolError as err:
+                self._wake_reader(err)
+                return
+        waiter = self._reverse_waiter
+        if waiter is None or waiter.done():
+            return
+        if pending:
+            waiter.set_result(None)
+        elif self._reverse_eof:
+            self._wake_reader(_LinkClosed())
+        elif self._reverse_deadline is not None and time.monotonic() >= self._reverse_deadline:
+            self._wake_reader(TimeoutError())
+
+    def _wake_reader(self, error: BaseException) -> None:
+        waiter = self._reverse_waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_exception(error)
+
+    async def _wait_polled(self, timeout: float | None) -> None:
+        if self._reverse_eof:
+            with contextlib.suppress(RemoteProtocolError):  # a torn frame is a read failure too
+                self._reverse_codec.receive_eof()
+            raise _LinkClosed
+        waiter = self._reverse_waiter = asyncio.get_running_loop().create_future()
+        self._reverse_deadline = None if timeout is None else time.monotonic() + timeout
+        try:
+            await waiter
+        except RemoteProtocolError:
+            raise _LinkClosed from None
+        finally:
+            self._reverse_waiter = None
+            self._reverse_deadline = None
 
     def _halt(self, reason: str) -> str:
         """The script's abort path (§4.2): log, end freedrive, stop every thread, stopj, halt."""
@@ -792,6 +884,8 @@ class ProgramRunner:
         reverse = self._links.get(REVERSE_SOCKET)
         if reverse is not None:
             reverse.writer.close()
+        self._reverse_eof = self._reverse_sock is not None or self._reverse_eof
+        self._wake_reader(_LinkClosed())
 
     async def _close(self) -> None:
         self._finished = True
@@ -801,6 +895,8 @@ class ProgramRunner:
             task.cancel()
         if tasks:
             await asyncio.wait(tasks, timeout=CLOSE_TIMEOUT_S)
+        if self._reverse_sock is not None:
+            self._reverse_sock.close()
         links = list(self._links.values())
         for link in links:
             link.writer.close()
