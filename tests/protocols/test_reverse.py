@@ -33,6 +33,7 @@ from urdaemon.protocols.reverse import (
     clamp_timeout,
     decode_reverse_command,
     encode_reverse_command,
+    encode_servoj,
     step_time_for_frequency,
 )
 
@@ -426,3 +427,35 @@ def test_pair_a_session_from_first_keepalive_to_stop() -> None:
         assert daemon.receive_data(robot.data_to_send()) == []
     assert received == script
     assert robot.receive_eof() == []
+
+
+# -- the 500 Hz servoj path (encode_servoj, no message object) ------------------------------------------
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    positions=st.lists(st.floats(min_value=-2147.0, max_value=2147.0), min_size=6, max_size=6),
+    timeout=st.floats(min_value=0.0, max_value=1000.0),
+)
+def test_encode_servoj_gives_the_bytes_of_sending_servoj(positions: list[float], timeout: float) -> None:
+    assert encode_servoj(positions, timeout) == _sent(ServoJ(tuple(positions), timeout))
+
+
+@pytest.mark.parametrize(
+    ("positions", "timeout"),
+    [
+        ((math.nan, 0.0, 0.0, 0.0, 0.0, 0.0), 0.1),
+        ((math.inf, 0.0, 0.0, 0.0, 0.0, 0.0), 0.1),
+        ((3000.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0.1),
+        ((0.0,) * 5, 0.1),
+        ((0.0,) * 6, math.nan),
+    ],
+)
+def test_encode_servoj_refuses_what_sending_servoj_refuses(
+    positions: tuple[float, ...], timeout: float
+) -> None:
+    with pytest.raises(LocalProtocolError) as expected:
+        _sent(ServoJ(positions, timeout))
+    with pytest.raises(LocalProtocolError) as got:
+        encode_servoj(positions, timeout)
+    assert str(got.value) == str(expected.value)

@@ -303,6 +303,15 @@ def _encode_servoj(message: ServoJ) -> bytes:
     return _pack_values(message, message.timeout, message.positions, ControlMode.SERVOJ, "positions")
 
 
+def encode_servoj(positions: Sequence[float], timeout: float) -> bytes:
+    """The SERVOJ frame for ``positions`` without building a message (the 500 Hz path); the same bytes
+    as sending ``ServoJ(positions, timeout)``, and the same LocalProtocolError when they cannot be sent."""
+    try:
+        return _pack_values(None, timeout, positions, ControlMode.SERVOJ, "positions")
+    except LocalProtocolError:
+        return _encode_servoj(ServoJ(tuple(positions), timeout))  # raises again, naming the message
+
+
 def _encode_speedj(message: SpeedJ) -> bytes:
     return _pack_values(message, message.timeout, message.velocities, ControlMode.SPEEDJ, "velocities")
 

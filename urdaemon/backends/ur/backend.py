@@ -451,7 +451,7 @@ class UrBackend(Backend):
         command = self.command
         timeout = self._servo_timeout
         if command.mode is CommandMode.POSITION:
-            reverse_server.send(reverse.ServoJ(tuple(command.positions), timeout))
+            reverse_server.write(reverse.encode_servoj(command.positions, timeout))
         elif command.mode is CommandMode.VELOCITY:
             reverse_server.send(reverse.SpeedJ(tuple(command.velocities), timeout))
         elif self._freedrive_on:  # hand guiding: keep it alive while the deadman holds

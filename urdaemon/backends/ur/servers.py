@@ -80,7 +80,10 @@ class CallbackLink(asyncio.Protocol):
     def send(self, message: Any) -> None:
         """Encode and write ``message`` now; LocalProtocolError if it cannot be encoded."""
         self.codec.send(message)
-        data = self.codec.data_to_send()
+        self.write(self.codec.data_to_send())
+
+    def write(self, data: bytes) -> None:
+        """Write bytes already encoded for this protocol (the 500 Hz servoj frame)."""
         if self.transport is not None and not self.transport.is_closing():
             self.transport.write(data)
 
@@ -149,6 +152,14 @@ class CallbackServer:
         if link is None:
             return False
         link.send(message)  # LocalProtocolError propagates: the caller built a message that cannot be sent
+        return True
+
+    def write(self, data: bytes) -> bool:
+        """Write an already encoded frame to the connected robot; False if none is connected."""
+        link = self.link
+        if link is None:
+            return False
+        link.write(data)
         return True
 
     async def close(self) -> None:
