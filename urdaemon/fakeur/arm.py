@@ -112,10 +112,11 @@ class FakeArm:
         ]
         self.max_position = [j.max_position if j.max_position is not None else math.inf for j in model.joints]
         self.timestamp = 0.0
+        """Controller time since boot (s), RTDE ``timestamp``."""
         self._pose_cache: tuple[tuple[float, ...], tuple[float, float, float, float, float, float]] | None = (
             None
         )
-        """Controller time since boot (s), RTDE ``timestamp``."""
+        """The last ``tcp_pose()`` and the joint values it is for."""
         self.robot_mode = RobotMode.POWER_OFF
         self.safety_mode = SafetyMode.NORMAL
         self.runtime_state = RuntimeState.STOPPED

@@ -585,10 +585,10 @@ class ProgramRunner:
     ) -> None:
         self.arm = arm
         self.local_address = local_address
+        """The robot's own address: its connections come from there, as a real robot's do."""
         self.polls_reverse = poll_reverse
         """Read the reverse socket only in ``poll()``, once per controller cycle, instead of waking for
         every frame (the controller must call ``poll()`` each cycle; see ``poll``)."""
-        """The robot's own address: its connections come from there, as a real robot's do."""
         self.program_text = program_text
         self.step_time = step_time
         self.name = name
