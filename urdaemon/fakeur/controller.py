@@ -246,20 +246,12 @@ class FakeController:
     # ---- the clock -----------------------------------------------------------------------------------
 
     async def _run_clock(self) -> None:
-        if self._shared_clock is not None:
-            shared, slot = self._shared_clock
-            shared.add(self._tick, slot, asyncio.get_running_loop())
-            try:
-                await asyncio.Event().wait()  # until cancelled by close()
-            finally:
-                shared.remove(self._tick)
-            return
-        clock = ThreadClock(self.step_time, self._tick, asyncio.get_running_loop())
-        clock.start()
+        clock, slot = self._shared_clock or (SharedClock(self.step_time), 0)  # alone: a clock of its own
+        clock.add(self._tick, slot, asyncio.get_running_loop())
         try:
             await asyncio.Event().wait()  # until cancelled by close()
         finally:
-            clock.stop()
+            clock.remove(self._tick)
 
     def _tick(self) -> None:
         """One controller cycle: the program's reverse socket read, then (once the program has applied

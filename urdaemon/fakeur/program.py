@@ -884,7 +884,8 @@ class ProgramRunner:
         reverse = self._links.get(REVERSE_SOCKET)
         if reverse is not None:
             reverse.writer.close()
-        self._reverse_eof = self._reverse_sock is not None or self._reverse_eof
+        if self._reverse_sock is not None:  # poll mode: closing the writer does not reach the reader
+            self._reverse_eof = True
         self._wake_reader(_LinkClosed())
 
     async def _close(self) -> None:

@@ -852,19 +852,15 @@ class RtdeConnection:
         if recipe is None or len(self._buffer) or (self._state, _Step.OUTPUT_DATA) not in _TRANSITIONS:
             return None
         size = len(data)
-        if self._version == 1:
-            if size != HEADER_BYTES + recipe.size or _HEADER.unpack_from(data) != (size, _KIND_DATA):
-                return None
-            self._consumed += size
-            return recipe.decode(data, HEADER_BYTES)
+        start = HEADER_BYTES if self._version == 1 else HEADER_BYTES + 1  # v2: the recipe id first
         if (
-            size != HEADER_BYTES + 1 + recipe.size
+            size != start + recipe.size
             or _HEADER.unpack_from(data) != (size, _KIND_DATA)
-            or data[HEADER_BYTES] != self._output_recipe_id
+            or (start > HEADER_BYTES and data[HEADER_BYTES] != self._output_recipe_id)
         ):
             return None
         self._consumed += size
-        return recipe.decode(data, HEADER_BYTES + 1)
+        return recipe.decode(data, start)
 
     def receive_eof(self) -> list[Event]:
         """The peer closed; RemoteProtocolError if it closed in the middle of a package."""

@@ -460,8 +460,7 @@ def encode_result(robot: str, result: GoalResult) -> bytes:
 
 
 def _floats(values: Sequence[float]) -> str:
-    # repr gives the shortest round-tripping text; JSON has no NaN/inf, so map them to null
-    return ",".join([repr(v) if v == v and v not in (math.inf, -math.inf) else "null" for v in values])
+    return ",".join([_float(v) for v in values])
 
 
 class JointStateEncoder:
@@ -480,7 +479,8 @@ class JointStateEncoder:
             f'"controller_time":%r,"host_time_ns":%d,"cycle":%d,"position":[{floats}],'
             f'"velocity":[{floats}],"effort":[{floats}]}}'
         )
-        self._poses: dict[tuple[str, str], str] = {}
+        self._poses: dict[tuple[str, str], tuple[str, str]] = {}
+        """(frame, child) → (the message's head, the whole message's ``%`` template)."""
 
     def encode(self, state: RobotState) -> bytes:
         """The joint_states message for ``state``."""
@@ -498,18 +498,19 @@ class JointStateEncoder:
 
     def encode_pose(self, state: RobotState, frame: str, child: str, pose: Sequence[float]) -> bytes:
         """The tcp_pose message: position and quaternion (x, y, z, w) of ``child`` in ``frame``."""
-        template = self._poses.get((frame, child))
-        if template is None:
-            template = self._poses[(frame, child)] = (
-                _escape(f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},')
-                + '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
+        known = self._poses.get((frame, child))
+        if known is None:
+            head = f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},'
+            template = _escape(head) + (
+                '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
             )
+            known = self._poses[(frame, child)] = (head, template)
+        head, template = known
         check = sum(pose) + state.controller_time
         if len(pose) == 7 and check - check == 0.0:
             return (template % (state.controller_time, state.host_time_ns, *pose)).encode()
         return (
-            f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},'
-            f'"controller_time":{_float(state.controller_time)},"host_time_ns":{state.host_time_ns},'
+            f'{head}"controller_time":{_float(state.controller_time)},"host_time_ns":{state.host_time_ns},'
             f'"position":[{_floats(pose[:3])}],"orientation":[{_floats(pose[3:7])}]}}'
         ).encode()
 
@@ -520,4 +521,5 @@ def _escape(text: str) -> str:
 
 
 def _float(value: float) -> str:
+    # repr gives the shortest round-tripping text; JSON has no NaN/inf, so map them to null
     return repr(value) if value == value and value not in (math.inf, -math.inf) else "null"

@@ -422,9 +422,7 @@ class UrBackend(Backend):
         if not self._command_sent:
             self.send_command()
         if (
-            not (
-                reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING)
-            )
+            not self._program_reads_frames()
             and self.robot.headless
             and not self.options.read_only
             and not self._handed_back
@@ -441,13 +439,9 @@ class UrBackend(Backend):
         if self._command_sent:
             return
         self._command_sent = True
-        reverse_server = self.servers.reverse
-        # frames only while the program reads them (ur-protocols.md §6.2.5): a paused program does not,
-        # and frames queued meanwhile would be replayed on play
-        if not (
-            reverse_server.connected and self._mapper.runtime_state in (RUNTIME_PLAYING, RUNTIME_PAUSING)
-        ):
+        if not self._program_reads_frames():
             return
+        reverse_server = self.servers.reverse
         command = self.command
         timeout = self._servo_timeout
         if command.mode is CommandMode.POSITION:
@@ -470,6 +464,14 @@ class UrBackend(Backend):
         rtde = self._rtde
         if rtde is not None:  # package in → command out (issue 5's turnaround)
             self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
+
+    def _program_reads_frames(self) -> bool:
+        """Frames go out only while the program reads them (ur-protocols.md §6.2.5): a paused program
+        does not, and frames queued meanwhile would be replayed on play."""
+        return self.servers.reverse.connected and self._mapper.runtime_state in (
+            RUNTIME_PLAYING,
+            RUNTIME_PAUSING,
+        )
 
     def _send_program(self, *, force: bool) -> None:
         now = time.monotonic()
