@@ -38,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import AsyncIterator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -276,6 +277,34 @@ async def connect(endpoint: str, procs: Processes) -> Client:
     raise RuntimeError(f"cannot connect to the daemon at {endpoint}")
 
 
+@contextlib.contextmanager
+def running_cell(cell: str, *fake_args: str) -> Iterator[tuple[Processes, str]]:
+    """The fakes and the daemon for ``cell`` in their own processes (logs in a temporary directory);
+    yields the processes and the daemon's endpoint, and stops every process started meanwhile."""
+    with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
+        procs = Processes(Path(tmp))
+        config = procs.logs / "cell.yaml"
+        config.write_text(cell)
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        try:
+            procs.start("fake", urdaemon("fake-robot", "--config", str(config), "--powered", *fake_args))
+            procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
+            yield procs, endpoint
+        finally:
+            procs.stop_all()
+
+
+@contextlib.asynccontextmanager
+async def daemon_client(endpoint: str, procs: Processes) -> AsyncIterator[Client]:
+    """A client of the daemon (retried while it starts), closed afterwards whatever happens."""
+    client = await connect(endpoint, procs)
+    try:
+        yield client
+    finally:
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(client.close(), 5.0)
+
+
 async def wait_status(robot: RobotClient, procs: Processes, predicate: Any, what: str) -> dict[str, Any]:
     """Until ``predicate(status)`` (polled every 0.2 s, bounded by READY_TIMEOUT_S)."""
     status: dict[str, Any] = {}
@@ -363,9 +392,8 @@ def worst(stats: list[dict[str, Any]]) -> dict[str, float]:
 
 async def measure_control(robots: int, seconds: float, endpoint: str, procs: Processes) -> Row:
     """Wait for ready, start the trajectories and the subscriber window, measure for ``seconds``."""
-    client = await connect(endpoint, procs)
     goals: list[GoalHandle] = []
-    try:
+    async with daemon_client(endpoint, procs) as client:
         handles = [await client.robot(f"r{i}", cell="bench", timeout=30.0) for i in range(robots)]
         for handle in handles:
             await wait_status(handle, procs, lambda s: s["ready"], "ready")
@@ -411,9 +439,6 @@ async def measure_control(robots: int, seconds: float, endpoint: str, procs: Pro
             turnaround=worst(after),
             latency=latency,
         )
-    finally:
-        with contextlib.suppress(Exception):
-            await asyncio.wait_for(client.close(), 5.0)
 
 
 def run_control(
@@ -426,30 +451,18 @@ def run_control(
     profile: Path | None,
 ) -> Row:
     """Fakes, daemon and subscriber for ``robots`` robots; measure; stop them all."""
-    with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
-        procs = Processes(Path(tmp))
-        config = procs.logs / "cell.yaml"
-        config.write_text(cell_yaml(robots, decimation=decimation, low_latency=low_latency))
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        try:
-            procs.start(
-                "fake", urdaemon("fake-robot", "--config", str(config), "--powered", "--phases", phases)
-            )
-            procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
-            keys = ["bench/*/joint_states", *(["bench/*/tcp_pose"] if tcp_pose else [])]
-            start_subscriber(procs, endpoint, keys, low_latency)
-            row: Row = asyncio.run(_with_subscriber(procs, measure_control(robots, seconds, endpoint, procs)))
-            if profile is not None:  # after the window, so that sampling does not disturb the figures
-                profile.parent.mkdir(parents=True, exist_ok=True)
-                out = profile.with_name(f"{profile.stem}-{robots}{profile.suffix or '.txt'}")
-                pid = str(procs.pid("daemon"))
-                subprocess.run(
-                    [*PY_SPY, "-o", str(out), "-p", pid], check=False, timeout=60, capture_output=True
-                )
-                print(f"  py-spy profile of the daemon ({robots} robots): {out}", file=sys.stderr)
-            return row
-        finally:
-            procs.stop_all()
+    cell = cell_yaml(robots, decimation=decimation, low_latency=low_latency)
+    with running_cell(cell, "--phases", phases) as (procs, endpoint):
+        keys = ["bench/*/joint_states", *(["bench/*/tcp_pose"] if tcp_pose else [])]
+        start_subscriber(procs, endpoint, keys, low_latency)
+        row: Row = asyncio.run(_with_subscriber(procs, measure_control(robots, seconds, endpoint, procs)))
+        if profile is not None:  # after the window, so that sampling does not disturb the figures
+            profile.parent.mkdir(parents=True, exist_ok=True)
+            out = profile.with_name(f"{profile.stem}-{robots}{profile.suffix or '.txt'}")
+            pid = str(procs.pid("daemon"))
+            subprocess.run([*PY_SPY, "-o", str(out), "-p", pid], check=False, timeout=60, capture_output=True)
+            print(f"  py-spy profile of the daemon ({robots} robots): {out}", file=sys.stderr)
+        return row
 
 
 async def _with_subscriber(procs: Processes, work: Any) -> Any:
@@ -462,8 +475,7 @@ async def _with_subscriber(procs: Processes, work: Any) -> Any:
 
 async def measure_read_only(seconds: float, endpoint: str, procs: Processes, address: str) -> Comparison:
     """A read-only robot in the daemon and ur_rtde on the same fake, measured in the same window."""
-    client = await connect(endpoint, procs)
-    try:
+    async with daemon_client(endpoint, procs) as client:
         robot = await client.robot("r0", cell="bench", timeout=30.0)
         await wait_status(robot, procs, lambda s: s["lifecycle"] == "running", "streaming")
         variables = list(output_recipe())
@@ -494,28 +506,15 @@ async def measure_read_only(seconds: float, endpoint: str, procs: Processes, add
             ur_rtde_variables=f"the daemon's {len(variables)} outputs" if variables else "ur_rtde's default",
             latency=latency,
         )
-    finally:
-        with contextlib.suppress(Exception):
-            await asyncio.wait_for(client.close(), 5.0)
 
 
 def run_read_only(seconds: float, low_latency: bool) -> Comparison:
     """One fake, a daemon with the robot read-only, the subscriber and ur_rtde."""
-    with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
-        procs = Processes(Path(tmp))
-        config = procs.logs / "cell.yaml"
-        config.write_text(cell_yaml(1, read_only=True, low_latency=low_latency))
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        address = f"127.0.0.{FIRST_ADDRESS}"
-        try:
-            procs.start("fake", urdaemon("fake-robot", "--config", str(config), "--powered"))
-            procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
-            start_subscriber(procs, endpoint, ["bench/*/joint_states"], low_latency)
-            work = measure_read_only(seconds, endpoint, procs, address)
-            comparison: Comparison = asyncio.run(_with_subscriber(procs, work))
-            return comparison
-        finally:
-            procs.stop_all()
+    with running_cell(cell_yaml(1, read_only=True, low_latency=low_latency)) as (procs, endpoint):
+        start_subscriber(procs, endpoint, ["bench/*/joint_states"], low_latency)
+        work = measure_read_only(seconds, endpoint, procs, f"127.0.0.{FIRST_ADDRESS}")
+        comparison: Comparison = asyncio.run(_with_subscriber(procs, work))
+        return comparison
 
 
 # ---- 5: planning time and tracking on the fake ----------------------------------------------------------
@@ -540,32 +539,19 @@ def planning_times(runs: int = 50) -> list[float]:
 
 async def measure_tracking(endpoint: str, procs: Processes) -> tuple[str, list[float], float]:
     """Execute the 10-waypoint trajectory on the fake: (status, final error per joint, duration)."""
-    client = await connect(endpoint, procs)
-    try:
+    async with daemon_client(endpoint, procs) as client:
         robot = await client.robot("r0", cell="bench", timeout=30.0)
         await wait_status(robot, procs, lambda s: s["ready"], "ready")
         goal = await robot.send_trajectory(ten_waypoints(await first_position(robot)))
         result = await goal.result(timeout=60.0)
         return result["status"], [float(e) for e in result["final_error"]], float(result["duration"])
-    finally:
-        with contextlib.suppress(Exception):
-            await asyncio.wait_for(client.close(), 5.0)
 
 
 def run_tracking() -> Tracking:
     """Planning in this process; execution by a daemon on one fake."""
     plan_ms = planning_times()
-    with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
-        procs = Processes(Path(tmp))
-        config = procs.logs / "cell.yaml"
-        config.write_text(cell_yaml(1))
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        try:
-            procs.start("fake", urdaemon("fake-robot", "--config", str(config), "--powered"))
-            procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
-            status, error, duration = asyncio.run(measure_tracking(endpoint, procs))
-        finally:
-            procs.stop_all()
+    with running_cell(cell_yaml(1)) as (procs, endpoint):
+        status, error, duration = asyncio.run(measure_tracking(endpoint, procs))
     return Tracking(plan_ms, status, error, duration)
 
 

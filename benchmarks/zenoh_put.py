@@ -10,7 +10,6 @@ express or batched, and Zenoh's low-latency transport (at both ends, or at the p
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -19,25 +18,16 @@ from typing import Any
 
 import zenoh
 
+from urdaemon.publish.node import zenoh_config
+
 SAMPLES = 2500
 PERIOD_S = 0.002
 PAYLOAD = b"x" * 400
 
 
-def config(key: str, endpoint: str, low_latency: bool) -> Any:
-    """A peer configuration listening on or connecting to ``endpoint``."""
-    conf = zenoh.Config()
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5(key, json.dumps([endpoint]))
-    if low_latency:
-        conf.insert_json5("transport/unicast/lowlatency", "true")
-        conf.insert_json5("transport/unicast/qos/enabled", "false")
-    return conf
-
-
 def subscribe(endpoint: str, low_latency: bool, seconds: float) -> None:
     """The subscriber process: count samples for ``seconds``."""
-    session: Any = zenoh.open(config("connect/endpoints", endpoint, low_latency))
+    session: Any = zenoh.open(zenoh_config("peer", [], [endpoint], low_latency=low_latency))
     received = [0]
     session.declare_subscriber("bench/**", lambda _: received.__setitem__(0, received[0] + 1))
     time.sleep(seconds)
@@ -49,7 +39,7 @@ def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency
     """Publish SAMPLES samples at 500 Hz to a subscriber in another process; print the costs."""
     port = 17600 + (os.getpid() % 300)
     endpoint = f"tcp/127.0.0.1:{port}"
-    session: Any = zenoh.open(config("listen/endpoints", endpoint, low_latency))
+    session: Any = zenoh.open(zenoh_config("peer", [endpoint], [], low_latency=low_latency))
     pub = session.declare_publisher(
         "bench/state",
         express=express,

@@ -12,6 +12,7 @@ from types import ModuleType
 import pytest
 
 from urdaemon.cell import parse_cell
+from urdaemon.publish.node import zenoh_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -110,4 +111,12 @@ def test_micro_benchmarks_import(bench: ModuleType) -> None:
     assert len(floor.PACKAGE) == 560
     assert len(floor.REPLY) == 28
     zput = _load("zenoh_put")
-    assert zput.config("listen/endpoints", "tcp/127.0.0.1:7447", True) is not None
+    assert zput.zenoh_config is zenoh_config  # the daemon's own session settings, low latency included
+    conf = zenoh_config("peer", ["tcp/127.0.0.1:7447"], [], low_latency=True)
+    assert (
+        conf.get_json("transport/unicast/lowlatency"),
+        conf.get_json("transport/unicast/qos/enabled"),
+    ) == (
+        "true",
+        "false",
+    )
