@@ -459,9 +459,13 @@ def run_control(
         if profile is not None:  # after the window, so that sampling does not disturb the figures
             profile.parent.mkdir(parents=True, exist_ok=True)
             out = profile.with_name(f"{profile.stem}-{robots}{profile.suffix or '.txt'}")
-            pid = str(procs.pid("daemon"))
-            subprocess.run([*PY_SPY, "-o", str(out), "-p", pid], check=False, timeout=60, capture_output=True)
-            print(f"  py-spy profile of the daemon ({robots} robots): {out}", file=sys.stderr)
+            for part in ("daemon", "fake"):
+                out_part = out.with_name(f"{out.stem}-{part}{out.suffix}")
+                pid = str(procs.pid(part))
+                subprocess.run(
+                    [*PY_SPY, "-o", str(out_part), "-p", pid], check=False, timeout=60, capture_output=True
+                )
+                print(f"  py-spy profile of the {part} ({robots} robots): {out_part}", file=sys.stderr)
         return row
 
 
@@ -683,7 +687,10 @@ def main() -> None:
     )
     parser.add_argument("--no-tracking", action="store_true", help="skip planning and tracking")
     parser.add_argument(
-        "--profile", type=Path, help="after each control window, py-spy the daemon for 5 s into PATH-<N>.txt"
+        "--profile",
+        type=Path,
+        help="after each control window, py-spy the daemon, then the fake, 5 s each, "
+        "into PATH-<N>-daemon.txt and PATH-<N>-fake.txt",
     )
     args = parser.parse_args()
     counts = [int(n) for n in args.robots.split(",") if n.strip()]

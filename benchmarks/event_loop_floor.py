@@ -1,12 +1,18 @@
 """The floor under any Python driver's cycle: one wake-up, one read, one write per robot package.
 
     python benchmarks/event_loop_floor.py            # asyncio, uvloop (if installed), a bare selector
+    python benchmarks/event_loop_floor.py --clock    # the fake's tick clocks: a thread or a timerfd
 
 A sender process writes a 560-byte package (the size of the daemon's RTDE output package) to each of
 N connections every 2 ms, each connection at its own phase (independent robots); the receiver answers
 every package with 28 bytes (a servoj frame) and does nothing else. What the receiver spends per
 package is what the event loop and the kernel cost before any decoding, control or publishing: the
 part of the 0.04 CPU-s/s budget per robot that no change to urdaemon's own code can win back.
+
+``--clock`` measures the other side of the same wire: what it costs the fake controllers' process
+to be woken ``robots`` times per 2 ms (spread phases) by ``ThreadClock`` (a thread sleeping to
+deadlines, handing each tick to the loop) and by ``TimerFdClock`` (the loop wakes on a timerfd),
+doing nothing else per tick.
 """
 
 from __future__ import annotations
@@ -121,8 +127,43 @@ def measure(kind: str, robots: int) -> tuple[float, float]:
     return cpu / WINDOW_S / robots, cpu / max(count, 1) * 1e6
 
 
+def measure_clock(kind: str, robots: int) -> tuple[float, float, int]:
+    """(CPU-s/s per robot, µs per tick, missed) for a ``kind`` clock ticking ``robots`` × 500 Hz."""
+    from urdaemon.backends.clock import ThreadClock, TimerFdClock
+
+    async def run() -> tuple[float, float, int]:
+        loop = asyncio.get_running_loop()
+        ticks = [0]
+
+        def tick() -> None:
+            ticks[0] += 1
+
+        clock_type = ThreadClock if kind == "thread" else TimerFdClock
+        clock = clock_type(PERIOD_S / robots, tick, loop)
+        clock.start()
+        try:
+            await asyncio.sleep(0.5)  # settle
+            cpu0, ticks0 = time.process_time(), ticks[0]
+            await asyncio.sleep(WINDOW_S)
+            cpu, count = time.process_time() - cpu0, ticks[0] - ticks0
+        finally:
+            clock.stop()
+        return cpu / WINDOW_S / robots, cpu / max(count, 1) * 1e6, clock.missed
+
+    return asyncio.run(run())
+
+
 def main() -> None:
-    """Every loop kind at 1, 4 and 8 robots."""
+    """Every loop kind at 1, 4 and 8 robots (or, with ``--clock``, both tick clocks)."""
+    if "--clock" in sys.argv[1:]:
+        print(f"{os.cpu_count()} cores, Python {sys.version.split()[0]}; one tick per robot every 2 ms")
+        print("| clock | robots | CPU-s/s per robot | µs per tick | missed |")
+        print("| --- | --- | --- | --- | --- |")
+        for kind in ("thread", "timerfd"):
+            for robots in (1, 4, 8, 16):
+                per_robot, per_tick, missed = measure_clock(kind, robots)
+                print(f"| {kind} | {robots} | {per_robot:.4f} | {per_tick:.1f} | {missed} |", flush=True)
+        return
     kinds = ["asyncio", "selector"]
     try:
         import uvloop  # noqa: F401

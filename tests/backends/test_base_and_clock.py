@@ -276,3 +276,83 @@ async def test_thread_clock_ticks_on_the_loop_and_stops() -> None:
         await asyncio.sleep(0)
     assert set(ticks) == {threading.get_ident()}, "ticks run on the loop's thread"
     assert len(ticks) <= seen + 1, "no ticks after stop"
+
+
+async def test_timerfd_clock_ticks_on_the_loop_and_stops() -> None:
+    import asyncio
+    import os
+    import threading
+
+    from urdaemon.backends.clock import TimerFdClock, tick_clock
+
+    loop = asyncio.get_running_loop()
+    ten = asyncio.Event()
+    ticks: list[int] = []
+
+    def tick() -> None:
+        ticks.append(threading.get_ident())
+        if len(ticks) == 10:
+            ten.set()
+
+    clock = tick_clock(0.002, tick, loop)
+    assert isinstance(clock, TimerFdClock)  # Linux: the loop wakes on a timerfd, no thread
+    threads_before = threading.active_count()
+    clock.start()
+    assert threading.active_count() == threads_before
+    fd = clock._fd
+    await asyncio.wait_for(ten.wait(), 5.0)
+    clock.stop()
+    seen = len(ticks)
+    for _ in range(3):
+        await asyncio.sleep(0)
+    assert set(ticks) == {threading.get_ident()}, "ticks run on the loop's thread"
+    assert len(ticks) == seen, "no ticks after stop"
+    with pytest.raises(OSError, match="Bad file descriptor"):  # the timer's fd is closed
+        os.fstat(fd)
+    clock.stop()  # twice is harmless
+
+
+@pytest.mark.parametrize(("catch_up", "burst"), [(1, 1), (4, 4)])
+async def test_timerfd_clock_after_a_stall_ticks_catch_up_times_and_counts_the_rest_missed(
+    catch_up: int, burst: int
+) -> None:
+    import asyncio
+    import time
+
+    from urdaemon.backends.clock import TimerFdClock
+
+    loop = asyncio.get_running_loop()
+    first = asyncio.Event()
+    ticks: list[float] = []
+
+    def tick() -> None:
+        ticks.append(time.monotonic())
+        first.set()
+
+    clock = TimerFdClock(0.002, tick, loop, catch_up=catch_up)
+    clock.start()
+    try:
+        time.sleep(0.021)  # noqa: ASYNC251 (the stimulus: the loop is held up for over ten periods)
+        await asyncio.wait_for(first.wait(), 5.0)
+        # every tick of the first wake-up ran before this task resumed
+        assert len(ticks) == burst
+        assert clock.missed >= 10 - burst
+    finally:
+        clock.stop()
+
+
+def test_clocks_refuse_nonsense_settings() -> None:
+    import asyncio
+
+    from urdaemon.backends.clock import ThreadClock, TimerFdClock
+
+    loop = asyncio.new_event_loop()
+    try:
+        with pytest.raises(ValueError, match="catch_up"):
+            ThreadClock(0.002, lambda: None, loop, catch_up=0)
+        with pytest.raises(ValueError, match="catch_up"):
+            TimerFdClock(0.002, lambda: None, loop, catch_up=0)
+        with pytest.raises(ValueError, match="period"):
+            TimerFdClock(0.0, lambda: None, loop)
+    finally:
+        loop.close()

@@ -47,7 +47,7 @@ async def test_spread_clock_ticks_one_slot_per_sub_period() -> None:
     clock = SharedClock(0.002, slots=2)
     order = await _ticks(clock, ["a", "b"], [0, 1], 8)
     assert order in (["a", "b"] * 4, ["b", "a"] * 4)
-    assert clock._thread is None  # the last remove stopped the thread
+    assert clock._clock is None  # the last remove stopped the clock
 
 
 def test_share_clock_gives_each_fake_a_slot_and_refuses_mixed_rates() -> None:

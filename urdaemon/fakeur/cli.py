@@ -83,7 +83,7 @@ def build_fakes(args: argparse.Namespace) -> list[FakeController]:
 
 
 def share_clock(fakes: list[FakeController], phases: str) -> SharedClock | None:
-    """One timing thread for all ``fakes`` (they run at one rate): ``aligned`` ticks them together,
+    """One clock for all ``fakes`` (they run at one rate): ``aligned`` ticks them together,
     ``spread`` gives each its own phase within the period, as independent controllers have."""
     if len(fakes) < 2:
         return None
