@@ -278,14 +278,15 @@ async def connect(endpoint: str, procs: Processes) -> Client:
 
 
 @contextlib.contextmanager
-def running_cell(cell: str, *fake_args: str) -> Iterator[tuple[Processes, str]]:
+def running_cell(cell: str, *fake_args: str, unix: bool = False) -> Iterator[tuple[Processes, str]]:
     """The fakes and the daemon for ``cell`` in their own processes (logs in a temporary directory);
-    yields the processes and the daemon's endpoint, and stops every process started meanwhile."""
+    yields the processes and the daemon's Zenoh endpoint (on loopback TCP, or with ``unix`` a Unix
+    socket in that directory), and stops every process started meanwhile."""
     with tempfile.TemporaryDirectory(prefix="urdaemon-bench-") as tmp:
         procs = Processes(Path(tmp))
         config = procs.logs / "cell.yaml"
         config.write_text(cell)
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        endpoint = f"unixsock-stream/{procs.logs}/zenoh.sock" if unix else f"tcp/127.0.0.1:{free_port()}"
         try:
             procs.start("fake", urdaemon("fake-robot", "--config", str(config), "--powered", *fake_args))
             procs.start("daemon", urdaemon("serve", "--config", str(config), "--listen", endpoint))
@@ -449,10 +450,11 @@ def run_control(
     decimation: int,
     low_latency: bool,
     profile: Path | None,
+    unix: bool = False,
 ) -> Row:
     """Fakes, daemon and subscriber for ``robots`` robots; measure; stop them all."""
     cell = cell_yaml(robots, decimation=decimation, low_latency=low_latency)
-    with running_cell(cell, "--phases", phases) as (procs, endpoint):
+    with running_cell(cell, "--phases", phases, unix=unix) as (procs, endpoint):
         keys = ["bench/*/joint_states", *(["bench/*/tcp_pose"] if tcp_pose else [])]
         start_subscriber(procs, endpoint, keys, low_latency)
         row: Row = asyncio.run(_with_subscriber(procs, measure_control(robots, seconds, endpoint, procs)))
@@ -512,9 +514,10 @@ async def measure_read_only(seconds: float, endpoint: str, procs: Processes, add
         )
 
 
-def run_read_only(seconds: float, low_latency: bool) -> Comparison:
+def run_read_only(seconds: float, low_latency: bool, unix: bool = False) -> Comparison:
     """One fake, a daemon with the robot read-only, the subscriber and ur_rtde."""
-    with running_cell(cell_yaml(1, read_only=True, low_latency=low_latency)) as (procs, endpoint):
+    cell = cell_yaml(1, read_only=True, low_latency=low_latency)
+    with running_cell(cell, unix=unix) as (procs, endpoint):
         start_subscriber(procs, endpoint, ["bench/*/joint_states"], low_latency)
         work = measure_read_only(seconds, endpoint, procs, f"127.0.0.{FIRST_ADDRESS}")
         comparison: Comparison = asyncio.run(_with_subscriber(procs, work))
@@ -567,11 +570,18 @@ def yes(ok: bool) -> str:
 
 
 def control_table(
-    rows: list[Row], seconds: float, phases: str, tcp_pose: bool, decimation: int, low_latency: bool
+    rows: list[Row],
+    seconds: float,
+    phases: str,
+    tcp_pose: bool,
+    decimation: int,
+    low_latency: bool,
+    unix: bool = False,
 ) -> str:
     """Tables 1, 2 and 4 for every robot count."""
     streams = "joint_states and tcp_pose" if tcp_pose else "joint_states"
     streams += f" at {500 / decimation:g} Hz" + (", Zenoh low-latency transport" if low_latency else "")
+    streams += ", Zenoh over a Unix socket" if unix else ""
     lines = [
         f"## Full control: servoj streamed to every robot, {seconds:g} s window, fakes' phases: {phases}, "
         f"subscriber of every robot's {streams}",
@@ -680,6 +690,11 @@ def main() -> None:
         help="zenoh.low_latency in the cell and the subscriber (the ur_rtde comparison too)",
     )
     parser.add_argument(
+        "--unix",
+        action="store_true",
+        help="the daemon's Zenoh endpoint is a Unix socket (the subscriber's and clients' too)",
+    )
+    parser.add_argument(
         "--tcp-pose", action="store_true", help="subscribe to tcp_pose too (forward kinematics every cycle)"
     )
     parser.add_argument(
@@ -712,18 +727,28 @@ def main() -> None:
                     args.decimation,
                     args.low_latency,
                     args.profile,
+                    args.unix,
                 )
             )
         if rows:
             print(
                 control_table(
-                    rows, args.seconds, args.phases, args.tcp_pose, args.decimation, args.low_latency
+                    rows,
+                    args.seconds,
+                    args.phases,
+                    args.tcp_pose,
+                    args.decimation,
+                    args.low_latency,
+                    args.unix,
                 )
                 + "\n"
             )
         if not args.no_compare:
             print("measuring a read-only robot against ur_rtde …", file=sys.stderr)
-            print(comparison_table(run_read_only(args.seconds, args.low_latency), args.seconds) + "\n")
+            print(
+                comparison_table(run_read_only(args.seconds, args.low_latency, args.unix), args.seconds)
+                + "\n"
+            )
         if not args.no_tracking:
             print("planning and tracking …", file=sys.stderr)
             print(tracking_table(run_tracking()))

@@ -5,14 +5,17 @@
 Publishes a 400-byte sample (the size of a joint_states message) every 2 ms for a few seconds, as the
 daemon does for every robot, and prints the CPU the publishing process spends per sample (the
 calling thread's ``put`` and Zenoh's own threads), for the publisher settings worth comparing:
-express or batched, and Zenoh's low-latency transport (at both ends, or at the publisher only).
+express or batched, Zenoh's low-latency transport (at both ends, or at the publisher only), and a
+Unix socket instead of loopback TCP between the two processes.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -35,10 +38,13 @@ def subscribe(endpoint: str, low_latency: bool, seconds: float) -> None:
     os._exit(0)
 
 
-def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency: bool) -> None:
+def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency: bool, unix: bool) -> None:
     """Publish SAMPLES samples at 500 Hz to a subscriber in another process; print the costs."""
-    port = 17600 + (os.getpid() % 300)
-    endpoint = f"tcp/127.0.0.1:{port}"
+    sockets = tempfile.mkdtemp(prefix="zenoh-put-")
+    if unix:
+        endpoint = f"unixsock-stream/{sockets}/zenoh.sock"
+    else:
+        endpoint = f"tcp/127.0.0.1:{17600 + os.getpid() % 300}"
     session: Any = zenoh.open(zenoh_config("peer", [endpoint], [], low_latency=low_latency))
     pub = session.declare_publisher(
         "bench/state",
@@ -71,6 +77,7 @@ def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency
         flush=True,
     )
     sub.wait(seconds + 10)
+    shutil.rmtree(sockets, ignore_errors=True)
     os._exit(0)
 
 
@@ -79,7 +86,7 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--subscribe":
         subscribe(sys.argv[2], sys.argv[3] == "1", float(sys.argv[4]))
     if len(sys.argv) > 1 and sys.argv[1] == "--publish":
-        publish(sys.argv[2], sys.argv[3] == "1", sys.argv[4] == "1", sys.argv[5] == "1")
+        publish(sys.argv[2], *(flag == "1" for flag in sys.argv[3:7]))
     from importlib.metadata import version
 
     print(
@@ -91,13 +98,15 @@ def main() -> None:
         "| CPU-s/s per 500 Hz stream |"
     )
     print("| --- | --- | --- | --- |")
-    for label, express, low_latency, subscriber_low_latency in (
-        ("express, real-time priority, drop (urdaemon's state streams)", True, False, False),
-        ("batched (express off)", False, False, False),
-        ("express + low-latency transport at both ends", True, True, True),
-        ("express + low-latency transport at the publisher only", True, True, False),
+    for label, express, low_latency, subscriber_low_latency, unix in (
+        ("express, real-time priority, drop (urdaemon's state streams)", True, False, False, False),
+        ("batched (express off)", False, False, False, False),
+        ("express + low-latency transport at both ends", True, True, True, False),
+        ("express + low-latency transport at the publisher only", True, True, False, False),
+        ("express, over a Unix socket", True, False, False, True),
+        ("express + low-latency transport at both ends, over a Unix socket", True, True, True, True),
     ):
-        flags = [str(int(express)), str(int(low_latency)), str(int(subscriber_low_latency))]
+        flags = [str(int(flag)) for flag in (express, low_latency, subscriber_low_latency, unix)]
         subprocess.run(
             [sys.executable, __file__, "--publish", label, *flags],
             check=False,

@@ -35,10 +35,11 @@ robots:
 
 @asynccontextmanager
 async def running_daemon(
-    text: str, base_dir: Path = ROOT / "configs"
+    text: str, base_dir: Path = ROOT / "configs", endpoint: str | None = None
 ) -> AsyncIterator[tuple[Daemon, Client]]:
-    """Start a daemon for cell-file ``text`` in this loop; yield it with a connected client."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    """Start a daemon for cell-file ``text`` in this loop, listening on ``endpoint`` (a free loopback
+    TCP port if None); yield it with a client connected there."""
+    endpoint = endpoint or f"tcp/127.0.0.1:{free_tcp_port()}"
     daemon = Daemon(parse_cell(text, base_dir=base_dir), listen=(endpoint,))
     stop = asyncio.Event()
     task = asyncio.create_task(daemon.run(stop))

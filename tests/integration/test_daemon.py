@@ -341,3 +341,24 @@ async def test_a_low_latency_daemon_serves_low_latency_and_default_clients() -> 
                 assert state["robot"] == "alice"
                 assert len(state["position"]) == 6
                 assert (await alice.status())["ready"] is True
+
+
+async def test_a_daemon_listening_on_a_unix_socket_serves_a_client_there(tmp_path: Any) -> None:
+    """A subscriber on the same machine can use a Unix socket instead of loopback TCP (issue 5:
+    less CPU per published sample, docs/performance.md)."""
+    endpoint = f"unixsock-stream/{tmp_path}/urdaemon.sock"
+    async with running_daemon(LOW_LATENCY_CELL.replace("{low_latency: true}", "{}"), endpoint=endpoint) as (
+        daemon,
+        client,
+    ):
+        assert daemon.listen_endpoints == (endpoint,)
+        alice = await client.robot("alice")
+        states = alice.joint_states(10)
+        try:
+            state = await states.get_json(timeout=5.0)
+        finally:
+            states.close()
+        assert state["robot"] == "alice"
+        assert len(state["position"]) == 6
+        goal = await alice.move([0.1, *HOME[1:]], duration=2.0)
+        assert (await goal.result(timeout=30))["status"] == "succeeded"
