@@ -31,6 +31,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import signal
 import socket
 import statistics
@@ -70,6 +71,9 @@ PERIOD_S = 5.0
 POINT_SPACING_S = 0.1
 HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+KEEP_LOGS: Path | None = None
+"""``--logs``: where every run's process logs are copied to (they are deleted otherwise)."""
+
 PY_SPY = ("py-spy", "record", "-d", "5", "-r", "1000", "-f", "raw", "--nonblocking")
 
 
@@ -293,6 +297,10 @@ def running_cell(cell: str, *fake_args: str, unix: bool = False) -> Iterator[tup
             yield procs, endpoint
         finally:
             procs.stop_all()
+            if KEEP_LOGS is not None:
+                run = KEEP_LOGS / f"{time.strftime('%H%M%S')}-{cell.count('- name:')}-robots"
+                shutil.copytree(procs.logs, run, dirs_exist_ok=True)
+                print(f"  logs: {run}", file=sys.stderr)
 
 
 @contextlib.asynccontextmanager
@@ -707,7 +715,12 @@ def main() -> None:
         help="after each control window, py-spy the daemon, then the fake, 5 s each, "
         "into PATH-<N>-daemon.txt and PATH-<N>-fake.txt",
     )
+    parser.add_argument(
+        "--logs", type=Path, help="copy every run's process logs (fakes, daemon, subscriber) into PATH"
+    )
     args = parser.parse_args()
+    global KEEP_LOGS
+    KEEP_LOGS = args.logs
     counts = [int(n) for n in args.robots.split(",") if n.strip()]
     if counts and (min(counts) < 1 or max(counts) > 200):
         parser.error("--robots: counts between 1 and 200")

@@ -29,6 +29,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
+from urdaemon.scheduling import RealtimeUnavailable, use_realtime_priority
 
 __all__ = ["CellDescription", "Daemon", "describe_cell"]
 
@@ -153,6 +154,12 @@ class Daemon:
         loop = asyncio.get_running_loop()
         self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen)
         try:
+            if self.cell.realtime_priority:  # after Zenoh started its threads: they stay as they are
+                try:
+                    use_realtime_priority(self.cell.realtime_priority)
+                    log.info("event loop thread: SCHED_FIFO priority %d", self.cell.realtime_priority)
+                except RealtimeUnavailable as err:
+                    log.warning("serving at normal priority: %s", err)
             self._build(node)
             node.queryable(self.keys.robot_description, self._on_description)
             tf_pub = node.publisher(self.keys.tf)

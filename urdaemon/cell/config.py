@@ -386,6 +386,10 @@ class Cell(_Frozen):
     """Cell name: the first chunk of every key (``<cell>/<robot>/...``)."""
     zenoh: ZenohOptions = ZenohOptions()
     publish: PublishOptions = PublishOptions()
+    realtime_priority: Annotated[int, Field(ge=0, le=99, strict=True)] = 0
+    """``SCHED_FIFO`` priority (1–99) of the daemon's event loop thread, which clocks every robot; 0
+    keeps normal scheduling. Needs ``CAP_SYS_NICE`` or an ``rtprio`` limit; without it the daemon
+    warns and serves at normal priority. See docs/performance.md."""
     robots: tuple[Robot, ...]
 
     @model_validator(mode="before")

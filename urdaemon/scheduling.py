@@ -1,0 +1,45 @@
+"""Real-time scheduling for the daemon's event loop thread (``realtime_priority`` in the cell file).
+
+The loop thread clocks every robot: while it waits for a core behind other processes, packages
+queue up and turnarounds grow by whole scheduler time slices (milliseconds). Under ``SCHED_FIFO``
+it runs as soon as a package arrives. Only that thread is raised: Zenoh's threads, started before,
+keep the normal policy, and threads the loop thread starts later begin with the normal policy too
+(``SCHED_RESET_ON_FORK``). Linux keeps 5 % of every second for other processes
+(``/proc/sys/kernel/sched_rt_runtime_us``), so a runaway loop cannot lock the machine up.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from urdaemon.errors import UrDaemonError
+
+__all__ = ["RealtimeUnavailable", "use_realtime_priority"]
+
+
+class RealtimeUnavailable(UrDaemonError, OSError):
+    """The calling thread could not be given the real-time priority; the message says why."""
+
+
+def use_realtime_priority(priority: int) -> None:
+    """Run the calling thread under ``SCHED_FIFO`` at ``priority`` (1–99).
+
+    Raises :class:`RealtimeUnavailable` where the platform has no ``SCHED_FIFO`` or the process may
+    not use it (it needs ``CAP_SYS_NICE`` or an ``rtprio`` limit of at least ``priority``).
+    """
+    if not 1 <= priority <= 99:
+        raise ValueError(f"realtime priority must be between 1 and 99, got {priority}")
+    fifo = getattr(os, "SCHED_FIFO", None)
+    setter = getattr(os, "sched_setscheduler", None)
+    if fifo is None or setter is None or not sys.platform.startswith("linux"):
+        raise RealtimeUnavailable(f"SCHED_FIFO is not available on {sys.platform}")
+    try:
+        setter(0, fifo | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
+    except PermissionError as err:
+        raise RealtimeUnavailable(
+            f"not permitted to use SCHED_FIFO priority {priority} ({err.strerror}): give the user an "
+            f"rtprio limit of at least {priority} (/etc/security/limits.conf, or LimitRTPRIO= in a "
+            "systemd unit, or --ulimit rtprio= / cap_add SYS_NICE in a container) or the "
+            "CAP_SYS_NICE capability"
+        ) from err
