@@ -205,18 +205,34 @@ def memory_mib(pid: int) -> tuple[float, float]:
     return values["VmRSS"], values["VmHWM"]
 
 
+_PORTS_GIVEN: set[int] = set()
+
+
 def free_port() -> int:
-    """A TCP port nobody listens on at the moment."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
+    """A TCP port nobody listens on at the moment, never the same one twice (the kernel may hand a
+    just-closed ephemeral port out again, and two roles of one robot must not share a port)."""
+    for _ in range(1000):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.bind(("127.0.0.1", 0))
+            port: int = sock.getsockname()[1]
+        if port not in _PORTS_GIVEN:
+            _PORTS_GIVEN.add(port)
+            return port
+    raise RuntimeError("no fresh free TCP port in 1000 attempts")
 
 
-def cell_yaml(robots: int, *, read_only: bool = False, decimation: int = 1, low_latency: bool = False) -> str:
+def cell_yaml(
+    robots: int,
+    *,
+    read_only: bool = False,
+    decimation: int = 1,
+    low_latency: bool = False,
+    realtime_priority: int = 0,
+) -> str:
     """A cell of ``robots`` UR10e on the ur backend, each with its own four callback ports."""
     lines = [
         "cell: bench",
+        f"realtime_priority: {realtime_priority}",
         f"zenoh: {{mode: peer, multicast_scouting: false, low_latency: {str(low_latency).lower()}}}",
         f"publish: {{joint_states_decimation: {decimation}}}",
         "robots:",
@@ -459,9 +475,12 @@ def run_control(
     low_latency: bool,
     profile: Path | None,
     unix: bool = False,
+    realtime_priority: int = 0,
 ) -> Row:
     """Fakes, daemon and subscriber for ``robots`` robots; measure; stop them all."""
-    cell = cell_yaml(robots, decimation=decimation, low_latency=low_latency)
+    cell = cell_yaml(
+        robots, decimation=decimation, low_latency=low_latency, realtime_priority=realtime_priority
+    )
     with running_cell(cell, "--phases", phases, unix=unix) as (procs, endpoint):
         keys = ["bench/*/joint_states", *(["bench/*/tcp_pose"] if tcp_pose else [])]
         start_subscriber(procs, endpoint, keys, low_latency)
@@ -585,11 +604,13 @@ def control_table(
     decimation: int,
     low_latency: bool,
     unix: bool = False,
+    realtime_priority: int = 0,
 ) -> str:
     """Tables 1, 2 and 4 for every robot count."""
     streams = "joint_states and tcp_pose" if tcp_pose else "joint_states"
     streams += f" at {500 / decimation:g} Hz" + (", Zenoh low-latency transport" if low_latency else "")
     streams += ", Zenoh over a Unix socket" if unix else ""
+    streams += f", daemon loop at SCHED_FIFO {realtime_priority}" if realtime_priority else ""
     lines = [
         f"## Full control: servoj streamed to every robot, {seconds:g} s window, fakes' phases: {phases}, "
         f"subscriber of every robot's {streams}",
@@ -703,6 +724,13 @@ def main() -> None:
         help="the daemon's Zenoh endpoint is a Unix socket (the subscriber's and clients' too)",
     )
     parser.add_argument(
+        "--realtime",
+        type=int,
+        default=0,
+        metavar="PRIORITY",
+        help="realtime_priority of the cell: the daemon's loop thread under SCHED_FIFO (1-99)",
+    )
+    parser.add_argument(
         "--tcp-pose", action="store_true", help="subscribe to tcp_pose too (forward kinematics every cycle)"
     )
     parser.add_argument(
@@ -724,6 +752,8 @@ def main() -> None:
     counts = [int(n) for n in args.robots.split(",") if n.strip()]
     if counts and (min(counts) < 1 or max(counts) > 200):
         parser.error("--robots: counts between 1 and 200")
+    if not 0 <= args.realtime <= 99:
+        parser.error("--realtime: a priority between 1 and 99 (0: normal scheduling)")
     if not 0 < args.seconds <= 600:
         parser.error("--seconds: between 0 and 600")
     print(f"machine: {machine()}\n")
@@ -741,6 +771,7 @@ def main() -> None:
                     args.low_latency,
                     args.profile,
                     args.unix,
+                    args.realtime,
                 )
             )
         if rows:
@@ -753,6 +784,7 @@ def main() -> None:
                     args.decimation,
                     args.low_latency,
                     args.unix,
+                    args.realtime,
                 )
                 + "\n"
             )
