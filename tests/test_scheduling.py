@@ -49,24 +49,27 @@ def _in_a_thread(work: Any) -> Any:
 
 
 def test_the_calling_thread_runs_fifo_and_the_threads_it_starts_do_not() -> None:
-    def work() -> tuple[int, int, tuple[int, int]]:
-        use_realtime_priority(7)
+    def work() -> tuple[int, int, tuple[int, int], int]:
+        restore = use_realtime_priority(7)
         children: list[tuple[int, int]] = []
         child = threading.Thread(
             target=lambda: children.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority))
         )
         child.start()
         child.join(10.0)
-        return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, children[0]
+        raised = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+        restore()
+        return *raised, children[0], os.sched_getscheduler(0)
 
     try:
-        policy, priority, child = _in_a_thread(work)
+        policy, priority, child, restored = _in_a_thread(work)
     except RealtimeUnavailable as err:
         pytest.skip(f"this machine does not allow SCHED_FIFO: {err}")
     assert policy & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO
     assert policy & os.SCHED_RESET_ON_FORK
     assert priority == 7
     assert child == (os.SCHED_OTHER, 0), "threads started later keep normal scheduling"
+    assert restored == os.SCHED_OTHER, "restore() puts the previous policy back"
     assert os.sched_getscheduler(0) == os.SCHED_OTHER, "only the calling thread was raised"
 
 
@@ -95,14 +98,20 @@ def test_the_cell_file_takes_0_to_99_and_names_the_field_otherwise() -> None:
 
 async def test_the_daemon_raises_its_loop_thread_after_zenoh_started(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[tuple[int, int]] = []
-    monkeypatch.setattr(
-        daemon_module, "use_realtime_priority", lambda p: calls.append((p, threading.get_ident()))
-    )
+    restored: list[int] = []
+
+    def raise_priority(priority: int) -> Any:
+        calls.append((priority, threading.get_ident()))
+        return lambda: restored.append(threading.get_ident())
+
+    monkeypatch.setattr(daemon_module, "use_realtime_priority", raise_priority)
     async with running_daemon(CELL.format(priority=42)) as (daemon, client):
         assert daemon.node is not None
         alice = await client.robot("alice")
         assert (await alice.status())["ready"] is True
+        assert restored == []
     assert calls == [(42, threading.get_ident())], "once, on the loop's thread"
+    assert restored == [threading.get_ident()], "put back when the daemon stops"
 
 
 async def test_a_daemon_not_allowed_fifo_warns_and_serves(
@@ -126,7 +135,7 @@ async def test_a_daemon_not_allowed_fifo_warns_and_serves(
 
 async def test_no_priority_no_change(monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[int] = []
-    monkeypatch.setattr(daemon_module, "use_realtime_priority", calls.append)
+    monkeypatch.setattr(daemon_module, "use_realtime_priority", calls.append)  # must not be called
     async with running_daemon(CELL.format(priority=0)) as (_, client):
         assert (await (await client.robot("alice")).status())["ready"] is True
     assert calls == []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -153,10 +154,11 @@ class Daemon:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
         self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen)
+        restore_priority: Callable[[], None] | None = None
         try:
             if self.cell.realtime_priority:  # after Zenoh started its threads: they stay as they are
                 try:
-                    use_realtime_priority(self.cell.realtime_priority)
+                    restore_priority = use_realtime_priority(self.cell.realtime_priority)
                     log.info("event loop thread: SCHED_FIFO priority %d", self.cell.realtime_priority)
                 except RealtimeUnavailable as err:
                     log.warning("serving at normal priority: %s", err)
@@ -177,6 +179,8 @@ class Daemon:
                 except Exception:  # one backend failing to close must not keep the others open
                     log.exception("closing %s failed", runtime.robot.name)
             node.close()
+            if restore_priority is not None:  # the thread may go on running someone else's loop
+                restore_priority()
             log.info("cell %r stopped", self.cell.cell)
 
     def _build(self, node: ZenohNode) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Callable
 
 from urdaemon.errors import UrDaemonError
 
@@ -22,8 +23,9 @@ class RealtimeUnavailable(UrDaemonError, OSError):
     """The calling thread could not be given the real-time priority; the message says why."""
 
 
-def use_realtime_priority(priority: int) -> None:
-    """Run the calling thread under ``SCHED_FIFO`` at ``priority`` (1–99).
+def use_realtime_priority(priority: int) -> Callable[[], None]:
+    """Run the calling thread under ``SCHED_FIFO`` at ``priority`` (1–99); returns what puts the
+    thread's previous policy back (call it on the same thread).
 
     Raises :class:`RealtimeUnavailable` where the platform has no ``SCHED_FIFO`` or the process may
     not use it (it needs ``CAP_SYS_NICE`` or an ``rtprio`` limit of at least ``priority``).
@@ -34,12 +36,18 @@ def use_realtime_priority(priority: int) -> None:
     setter = getattr(os, "sched_setscheduler", None)
     if fifo is None or setter is None or not sys.platform.startswith("linux"):
         raise RealtimeUnavailable(f"SCHED_FIFO is not available on {sys.platform}")
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         setter(0, fifo | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
-    except PermissionError as err:
+    except OSError as err:
         raise RealtimeUnavailable(
             f"not permitted to use SCHED_FIFO priority {priority} ({err.strerror}): give the user an "
             f"rtprio limit of at least {priority} (/etc/security/limits.conf, or LimitRTPRIO= in a "
             "systemd unit, or --ulimit rtprio= / cap_add SYS_NICE in a container) or the "
             "CAP_SYS_NICE capability"
         ) from err
+
+    def restore() -> None:
+        setter(0, *before)
+
+    return restore

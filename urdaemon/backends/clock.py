@@ -151,7 +151,7 @@ class TimerFdClock:
 
     The kernel keeps the periodic deadlines (drift-free, to the microsecond) and the loop wakes on
     the timer's file descriptor like on a socket: one wake-up per tick, no thread and no hand-over
-    through the loop's self-pipe. That costs a third less CPU per tick than ``ThreadClock``
+    through the loop's self-pipe. That costs a third to a half less CPU per tick than ``ThreadClock``
     (``python benchmarks/event_loop_floor.py --clock``). When the loop was held up for more than a period,
     the timer reports how many deadlines passed: ``tick()`` runs once and the rest count as
     ``missed`` (no burst of catch-up ticks); with ``catch_up`` n, up to n passed deadlines each get
