@@ -5,8 +5,9 @@
 Publishes a 400-byte sample (the size of a joint_states message) every 2 ms for a few seconds, as the
 daemon does for every robot, and prints the CPU the publishing process spends per sample (the
 calling thread's ``put`` and Zenoh's own threads), for the publisher settings worth comparing:
-express or batched, Zenoh's low-latency transport (at both ends, or at the publisher only), and a
-Unix socket instead of loopback TCP between the two processes.
+express or batched, real-time or data priority, drop or block when congested, Zenoh's low-latency
+transport (at both ends, or at the publisher only), and a Unix socket instead of loopback TCP
+between the two processes.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import zenoh
@@ -38,24 +40,53 @@ def subscribe(endpoint: str, low_latency: bool, seconds: float) -> None:
     os._exit(0)
 
 
-def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency: bool, unix: bool) -> None:
+@dataclass(frozen=True)
+class Setting:
+    """One publisher configuration to measure (the defaults are urdaemon's state streams)."""
+
+    label: str
+    express: bool = True
+    real_time_priority: bool = True
+    drop: bool = True
+    low_latency: bool = False
+    subscriber_low_latency: bool = False
+    unix: bool = False
+
+
+SETTINGS = (
+    Setting("express, real-time priority, drop (urdaemon's state streams)"),
+    Setting("batched (express off)", express=False),
+    Setting("data priority (Zenoh's default) instead of real-time", real_time_priority=False),
+    Setting("block instead of drop when congested", drop=False),
+    Setting("express + low-latency transport at both ends", low_latency=True, subscriber_low_latency=True),
+    Setting("express + low-latency transport at the publisher only", low_latency=True),
+    Setting("express, over a Unix socket", unix=True),
+    Setting(
+        "express + low-latency transport at both ends, over a Unix socket",
+        low_latency=True,
+        subscriber_low_latency=True,
+        unix=True,
+    ),
+)
+
+
+def publish(setting: Setting) -> None:
     """Publish SAMPLES samples at 500 Hz to a subscriber in another process; print the costs."""
     sockets = tempfile.mkdtemp(prefix="zenoh-put-")
-    if unix:
+    if setting.unix:
         endpoint = f"unixsock-stream/{sockets}/zenoh.sock"
     else:
         endpoint = f"tcp/127.0.0.1:{17600 + os.getpid() % 300}"
-    session: Any = zenoh.open(zenoh_config("peer", [endpoint], [], low_latency=low_latency))
+    session: Any = zenoh.open(zenoh_config("peer", [endpoint], [], low_latency=setting.low_latency))
     pub = session.declare_publisher(
         "bench/state",
-        express=express,
-        congestion_control=zenoh.CongestionControl.DROP,
-        priority=zenoh.Priority.REAL_TIME,
+        express=setting.express,
+        congestion_control=zenoh.CongestionControl.DROP if setting.drop else zenoh.CongestionControl.BLOCK,
+        priority=zenoh.Priority.REAL_TIME if setting.real_time_priority else zenoh.Priority.DATA,
     )
     seconds = SAMPLES * PERIOD_S + 3.0
-    sub = subprocess.Popen(
-        [sys.executable, __file__, "--subscribe", endpoint, str(int(subscriber_low_latency)), str(seconds)]
-    )
+    subscriber_flag = str(int(setting.subscriber_low_latency))
+    sub = subprocess.Popen([sys.executable, __file__, "--subscribe", endpoint, subscriber_flag, str(seconds)])
     time.sleep(1.5)  # the subscriber connects and declares
     put_ns = 0
     idle_cpu = 0.0
@@ -72,7 +103,7 @@ def publish(label: str, express: bool, low_latency: bool, subscriber_low_latency
         idle_cpu += time.thread_time() - before_sleep
     total = time.process_time() - cpu0 - idle_cpu  # without the pacing loop's own sleeps
     print(
-        f"| {label} | {put_ns / SAMPLES / 1e3:.1f} | {total / SAMPLES * 1e6:.1f} "
+        f"| {setting.label} | {put_ns / SAMPLES / 1e3:.1f} | {total / SAMPLES * 1e6:.1f} "
         f"| {total / SAMPLES * 500:.4f} |",
         flush=True,
     )
@@ -86,7 +117,7 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--subscribe":
         subscribe(sys.argv[2], sys.argv[3] == "1", float(sys.argv[4]))
     if len(sys.argv) > 1 and sys.argv[1] == "--publish":
-        publish(sys.argv[2], *(flag == "1" for flag in sys.argv[3:7]))
+        publish(SETTINGS[int(sys.argv[2])])
     from importlib.metadata import version
 
     print(
@@ -98,20 +129,8 @@ def main() -> None:
         "| CPU-s/s per 500 Hz stream |"
     )
     print("| --- | --- | --- | --- |")
-    for label, express, low_latency, subscriber_low_latency, unix in (
-        ("express, real-time priority, drop (urdaemon's state streams)", True, False, False, False),
-        ("batched (express off)", False, False, False, False),
-        ("express + low-latency transport at both ends", True, True, True, False),
-        ("express + low-latency transport at the publisher only", True, True, False, False),
-        ("express, over a Unix socket", True, False, False, True),
-        ("express + low-latency transport at both ends, over a Unix socket", True, True, True, True),
-    ):
-        flags = [str(int(flag)) for flag in (express, low_latency, subscriber_low_latency, unix)]
-        subprocess.run(
-            [sys.executable, __file__, "--publish", label, *flags],
-            check=False,
-            timeout=120,
-        )
+    for index in range(len(SETTINGS)):
+        subprocess.run([sys.executable, __file__, "--publish", str(index)], check=False, timeout=120)
 
 
 if __name__ == "__main__":

@@ -120,3 +120,30 @@ def test_micro_benchmarks_import(bench: ModuleType) -> None:
         "true",
         "false",
     )
+
+
+def test_zenoh_put_measures_the_daemons_own_state_stream_settings_first() -> None:
+    import asyncio
+
+    import zenoh
+
+    from tests.helpers import free_tcp_port
+    from urdaemon.cell.config import ZenohOptions
+    from urdaemon.publish.node import ZenohNode
+
+    zput = _load("zenoh_put")
+    first = zput.SETTINGS[0]
+    assert (first.express, first.real_time_priority, first.drop) == (True, True, True)
+    assert (first.low_latency, first.unix) == (False, False)
+    assert len({setting.label for setting in zput.SETTINGS}) == len(zput.SETTINGS)
+    loop = asyncio.new_event_loop()
+    node = ZenohNode(ZenohOptions(listen=(f"tcp/127.0.0.1:{free_tcp_port()}",)), loop)
+    try:
+        state = node.publisher("bench/state", realtime=True)
+        assert (state.congestion_control, state.priority) == (
+            zenoh.CongestionControl.DROP,
+            zenoh.Priority.REAL_TIME,
+        )
+    finally:
+        node.close()
+        loop.close()
