@@ -316,6 +316,15 @@ async def test_tcp_pose_is_computed_only_while_someone_subscribes(cell: tuple[Da
     assert (len(pose["position"]), len(pose["orientation"])) == (3, 4)
 
 
+async def _first_joint_state(robot: RobotClient) -> dict[str, Any]:
+    states = robot.joint_states(10)
+    try:
+        state: dict[str, Any] = await states.get_json(timeout=5.0)
+    finally:
+        states.close()
+    return state
+
+
 LOW_LATENCY_CELL = """
 cell: fastcell
 zenoh: {low_latency: true}
@@ -333,11 +342,7 @@ async def test_a_low_latency_daemon_serves_low_latency_and_default_clients() -> 
         async with await Client.connect(endpoint, low_latency=True) as fast_client:
             for client in (default_client, fast_client):
                 alice = await client.robot("alice")
-                states = alice.joint_states(10)
-                try:
-                    state = await states.get_json(timeout=5.0)
-                finally:
-                    states.close()
+                state = await _first_joint_state(alice)
                 assert state["robot"] == "alice"
                 assert len(state["position"]) == 6
                 assert (await alice.status())["ready"] is True
@@ -353,11 +358,7 @@ async def test_a_daemon_listening_on_a_unix_socket_serves_a_client_there(tmp_pat
     ):
         assert daemon.listen_endpoints == (endpoint,)
         alice = await client.robot("alice")
-        states = alice.joint_states(10)
-        try:
-            state = await states.get_json(timeout=5.0)
-        finally:
-            states.close()
+        state = await _first_joint_state(alice)
         assert state["robot"] == "alice"
         assert len(state["position"]) == 6
         goal = await alice.move([0.1, *HOME[1:]], duration=2.0)

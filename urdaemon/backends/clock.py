@@ -46,7 +46,29 @@ class PeriodicClock:
             self.late += 1
 
 
-class ThreadClock:
+class _Ticker:
+    """What both tick clocks keep: the period, the catch-up allowance, the count of missed ticks."""
+
+    def __init__(
+        self,
+        period: float,
+        tick: Callable[[], None],
+        loop: asyncio.AbstractEventLoop,
+        *,
+        catch_up: int = 1,
+    ) -> None:
+        if not period > 0.0:
+            raise ValueError(f"period must be positive, got {period}")
+        if catch_up < 1:
+            raise ValueError(f"catch_up must be at least 1, got {catch_up}")
+        self.period = period
+        self.catch_up = catch_up
+        self.missed = 0
+        self._tick = tick
+        self._loop = loop
+
+
+class ThreadClock(_Ticker):
     """Calls ``tick()`` on the event loop every ``period`` seconds, timed by a thread.
 
     asyncio rounds timer waits up to whole milliseconds (epoll), so a 2 ms grid slips and then
@@ -57,32 +79,21 @@ class ThreadClock:
     ticks are handed over back to back.
     """
 
-    def __init__(
-        self,
-        period: float,
-        tick: Callable[[], None],
-        loop: asyncio.AbstractEventLoop,
-        *,
-        catch_up: int = 1,
-    ) -> None:
-        if catch_up < 1:
-            raise ValueError(f"catch_up must be at least 1, got {catch_up}")
-        self.period = period
-        self.catch_up = catch_up
-        self.missed = 0
-        self._tick = tick
-        self._loop = loop
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="urdaemon-clock", daemon=True)
+    _thread: threading.Thread | None = None
 
     def start(self) -> None:
         """Start ticking."""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="urdaemon-clock", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
         """Stop ticking (returns once the thread has ended)."""
+        if self._thread is None:
+            return
         self._stop.set()
         self._thread.join(timeout=1.0)
+        self._thread = None
 
     def _run(self) -> None:
         deadline = time.monotonic()
@@ -146,7 +157,7 @@ def _load_timerfd() -> tuple[Callable[..., int], Callable[..., int]] | None:
 _TIMERFD = _load_timerfd()
 
 
-class TimerFdClock:
+class TimerFdClock(_Ticker):
     """Calls ``tick()`` on the event loop every ``period`` seconds, timed by a Linux timerfd.
 
     The kernel keeps the periodic deadlines (drift-free, to the microsecond) and the loop wakes on
@@ -159,30 +170,13 @@ class TimerFdClock:
     ticks over while the loop is held up, and they all run late, back to back.)
     """
 
-    def __init__(
-        self,
-        period: float,
-        tick: Callable[[], None],
-        loop: asyncio.AbstractEventLoop,
-        *,
-        catch_up: int = 1,
-    ) -> None:
-        if _TIMERFD is None:
-            raise OSError("timerfd is not available on this platform")
-        if not period > 0.0:
-            raise ValueError(f"period must be positive, got {period}")
-        if catch_up < 1:
-            raise ValueError(f"catch_up must be at least 1, got {catch_up}")
-        self.period = period
-        self.catch_up = catch_up
-        self.missed = 0
-        self._tick = tick
-        self._loop = loop
-        self._fd = -1
+    _fd = -1
 
     def start(self) -> None:
-        """Arm the timer: the first tick comes one period from now."""
-        assert _TIMERFD is not None
+        """Arm the timer: the first tick comes one period from now (OSError where Linux's timerfd
+        is not available; ``tick_clock`` chooses this clock only where it is)."""
+        if _TIMERFD is None:
+            raise OSError("timerfd is not available on this platform")
         create, settime = _TIMERFD
         fd = create(_CLOCK_MONOTONIC, os.O_NONBLOCK | os.O_CLOEXEC)
         if fd < 0:
