@@ -352,13 +352,16 @@ async def first_position(robot: RobotClient) -> list[float]:
         sub.close()
 
 
-def start_subscriber(procs: Processes, endpoint: str, keys: list[str], low_latency: bool = False) -> Path:
-    """The state subscriber in its own process; the file its figures go to."""
-    result = procs.logs / "latency.json"
+def latency_file(procs: Processes) -> Path:
+    """Where the state subscriber writes its figures."""
+    return procs.logs / "latency.json"
+
+
+def start_subscriber(procs: Processes, endpoint: str, keys: list[str], low_latency: bool = False) -> None:
+    """The state subscriber in its own process (figures in ``latency_file(procs)``)."""
     flags = ["--low-latency"] if low_latency else []
     script = str(HERE / "state_subscriber.py")
-    procs.start("subscriber", [sys.executable, script, *flags, endpoint, str(result), *keys])
-    return result
+    procs.start("subscriber", [sys.executable, script, *flags, endpoint, str(latency_file(procs)), *keys])
 
 
 def signal_subscriber(procs: Processes, signum: int) -> None:
@@ -374,9 +377,10 @@ def _figures(result: Path) -> dict[str, Any] | None:
     return figures
 
 
-async def read_latency(procs: Processes, result: Path) -> dict[str, Any]:
+async def read_latency(procs: Processes) -> dict[str, Any]:
     """Ask the subscriber for its window's figures and wait for the file (bounded)."""
-    _forget(result)
+    result = latency_file(procs)
+    result.unlink(missing_ok=True)
     signal_subscriber(procs, signal.SIGUSR2)
     for _ in range(100):
         figures = _figures(result)
@@ -384,10 +388,6 @@ async def read_latency(procs: Processes, result: Path) -> dict[str, Any]:
             return figures
         await asyncio.sleep(0.05)
     raise RuntimeError("the subscriber wrote no figures")
-
-
-def _forget(result: Path) -> None:
-    result.unlink(missing_ok=True)
 
 
 async def _ending(goal: GoalHandle) -> str:
@@ -437,7 +437,7 @@ async def measure_control(robots: int, seconds: float, endpoint: str, procs: Pro
         t1 = time.monotonic()
         cpu1 = cpu_seconds(daemon), cpu_seconds(fake), cpu_seconds(sub)
         rss, hwm = memory_mib(daemon)
-        latency = await read_latency(procs, procs.logs / "latency.json")
+        latency = await read_latency(procs)
         after = [await _stamped(h.cycle_stats()) for h in handles]
         statuses = [await h.status() for h in handles]
         procs.check()
@@ -528,7 +528,7 @@ async def measure_read_only(seconds: float, endpoint: str, procs: Processes, add
         await asyncio.sleep(seconds)
         t1 = time.monotonic()
         cpu1 = cpu_seconds(daemon), cpu_seconds(urr)
-        latency = await read_latency(procs, procs.logs / "latency.json")
+        latency = await read_latency(procs)
         procs.check()
         wall = t1 - t0
         return Comparison(
