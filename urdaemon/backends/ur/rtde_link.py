@@ -299,16 +299,12 @@ class StateMapper:
             bits = values[self._dout]
             if bits != self._last_dout:
                 self._last_dout = bits
-                state.digital_out[:] = [bool(bits >> i & 1) for i in range(8)]
-                state.configurable_out[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
-                state.tool_out[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+                _split_io_bits(bits, state.digital_out, state.configurable_out, state.tool_out)
         if self._din >= 0:
             bits = values[self._din]
             if bits != self._last_din:
                 self._last_din = bits
-                state.digital_in[:] = [bool(bits >> i & 1) for i in range(8)]
-                state.configurable_in[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
-                state.tool_in[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+                _split_io_bits(bits, state.digital_in, state.configurable_in, state.tool_in)
         analog = state.analog_out
         if self._aout[0] >= 0:
             analog[0] = values[self._aout[0]]
@@ -346,6 +342,13 @@ def _safety_mode(value: int) -> SafetyMode:
         return SafetyMode(value)
     except ValueError:
         return SafetyMode.UNDEFINED_SAFETY_MODE
+
+
+def _split_io_bits(bits: int, standard: list[bool], configurable: list[bool], tool: list[bool]) -> None:
+    """RTDE's digital IO bit field (bits 0-7 standard, 8-15 configurable, 16-17 tool) into the lists."""
+    standard[:] = [bool(bits >> i & 1) for i in range(8)]
+    configurable[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
+    tool[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
 
 
 def _lifecycle(state: RobotState, runtime: int) -> Lifecycle:
