@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 
 from tests.integration.conftest import running_daemon
 from tests.ur.test_ur_backend import HOME, _cell, _until
+from urdaemon.client import Client, RobotClient
+from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected
 from urdaemon.fakeur.controller import FakeController
 
@@ -17,67 +21,67 @@ pytestmark = pytest.mark.timeout(90)
 ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(200))
 
 
+@contextlib.asynccontextmanager
+async def _ready_alice() -> AsyncIterator[tuple[FakeController, Daemon, Client, RobotClient]]:
+    """A fake UR10e at HOME and a daemon driving it as alice, once alice is ready; both closed after."""
+    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    await fake.start()
+    try:
+        async with running_daemon(_cell(fake.address)) as (daemon, client):
+            alice = await client.robot("alice")
+            await _until(client, alice.keys.status, lambda s: s["ready"])
+            yield fake, daemon, client, alice
+    finally:
+        await fake.close()
+
+
 def _freedrive(fake: FakeController) -> bool:
     """Read through a call: the type checker must not pin a flag the fake changes behind its back."""
     return fake.arm.freedrive
 
 
 async def test_freedrive_holds_while_commanded_blocks_motion_and_the_deadman_ends_it() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    await fake.start()
-    try:
-        async with running_daemon(_cell(fake.address)) as (_, client):
-            alice = await client.robot("alice")
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            states = alice.joint_states(10_000)
-            for _ in range(40):  # 0.4 s of commands, one every 5 cycles (10 ms) at 500 Hz
-                alice.freedrive(True)
-                for _ in range(5):
-                    await states.get(timeout=5.0)
-            assert fake.arm.freedrive is True
-            with pytest.raises(GoalRejected, match="freedrive is on"):
-                await alice.move(HOME, duration=1.0)
-            # no more commands: the deadman (stream_timeout 0.2 s) ends freedrive
-            for _ in range(1000):
+    async with _ready_alice() as (fake, _, _, alice):
+        states = alice.joint_states(10_000)
+        for _ in range(40):  # 0.4 s of commands, one every 5 cycles (10 ms) at 500 Hz
+            alice.freedrive(True)
+            for _ in range(5):
                 await states.get(timeout=5.0)
-                if not _freedrive(fake):
-                    break
-            assert _freedrive(fake) is False
-            goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
-            assert (await goal.result(timeout=20))["status"] == "succeeded"
-    finally:
-        await fake.close()
+        assert fake.arm.freedrive is True
+        with pytest.raises(GoalRejected, match="freedrive is on"):
+            await alice.move(HOME, duration=1.0)
+        # no more commands: the deadman (stream_timeout 0.2 s) ends freedrive
+        for _ in range(1000):
+            await states.get(timeout=5.0)
+            if not _freedrive(fake):
+                break
+        assert _freedrive(fake) is False
+        goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
+        assert (await goal.result(timeout=20))["status"] == "succeeded"
 
 
 async def test_force_mode_and_tool_contact_reach_the_robot() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    await fake.start()
-    try:
-        async with running_daemon(_cell(fake.address)) as (_, client):
-            alice = await client.robot("alice")
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            events = client.subscribe(alice.keys.events, 100)
-            reply = await alice.start_force_mode(
-                [0.0] * 6, [0, 0, 1, 0, 0, 0], [0.0, 0.0, -10.0, 0.0, 0.0, 0.0], [0.1] * 6
-            )
-            assert reply["ok"] is True
-            await _until(client, alice.keys.joint_states, lambda m: fake.arm.force_mode, limit=2000)
-            assert fake.arm.force_mode is True
-            bad = await alice.client.request(alice.keys.service("start_force_mode"), {"selection": [2] * 6})
-            assert bad["ok"] is False
-            assert (await alice.end_force_mode())["ok"] is True
-            await _until(client, alice.keys.joint_states, lambda m: not fake.arm.force_mode, limit=2000)
-            assert (await alice.start_tool_contact())["ok"] is True
-            assert (await alice.end_tool_contact())["ok"] is True
-            event: dict[str, Any] = {}
-            for _ in range(50):
-                event = await events.get_json(timeout=10.0)
-                if event["kind"] == "tool_contact":
-                    break
-            assert event["kind"] == "tool_contact"
-            assert event["text"] == "canceled", "the fake never detects contact: ending it cancels"
-    finally:
-        await fake.close()
+    async with _ready_alice() as (fake, _, client, alice):
+        events = client.subscribe(alice.keys.events, 100)
+        reply = await alice.start_force_mode(
+            [0.0] * 6, [0, 0, 1, 0, 0, 0], [0.0, 0.0, -10.0, 0.0, 0.0, 0.0], [0.1] * 6
+        )
+        assert reply["ok"] is True
+        await _until(client, alice.keys.joint_states, lambda m: fake.arm.force_mode, limit=2000)
+        assert fake.arm.force_mode is True
+        bad = await alice.client.request(alice.keys.service("start_force_mode"), {"selection": [2] * 6})
+        assert bad["ok"] is False
+        assert (await alice.end_force_mode())["ok"] is True
+        await _until(client, alice.keys.joint_states, lambda m: not fake.arm.force_mode, limit=2000)
+        assert (await alice.start_tool_contact())["ok"] is True
+        assert (await alice.end_tool_contact())["ok"] is True
+        event: dict[str, Any] = {}
+        for _ in range(50):
+            event = await events.get_json(timeout=10.0)
+            if event["kind"] == "tool_contact":
+                break
+        assert event["kind"] == "tool_contact"
+        assert event["text"] == "canceled", "the fake never detects contact: ending it cancels"
 
 
 async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons() -> None:
@@ -99,37 +103,30 @@ async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons
 async def test_hand_back_control_ends_the_program_until_it_is_resent_and_a_lost_link_shows_recovering() -> (
     None
 ):
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    await fake.start()
-    try:
-        async with running_daemon(_cell(fake.address)) as (daemon, client):
-            alice = await client.robot("alice")
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            backend = daemon.runtimes[0].backend
-            statuses = client.subscribe(alice.keys.status, 1000)
-            assert (await alice.hand_back_control())["ok"] is True
-            handed = await _until(client, alice.keys.status, lambda s: not s["program_running"])
-            assert handed["reason"] == "control handed back to the robot"
-            # the program is not sent again by itself: 3 s of status (past the 2 s resend window)
-            states = alice.joint_states(10_000)
-            for _ in range(1500):
-                await states.get(timeout=5.0)
-            assert not backend.servers.reverse.connected  # type: ignore[attr-defined]
-            assert (await alice.resend_program())["ok"] is True
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            # a lost link: the robot shows recovering, then ready again
-            fake.drop("rtde")
-            seen = []
-            for _ in range(100):
-                status = await statuses.get_json(timeout=10.0)
-                seen.append(status["lifecycle"])
-                if "recovering" in seen and status["ready"]:
-                    break
-            assert "recovering" in seen, seen
-            goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
-            assert (await goal.result(timeout=20))["status"] == "succeeded"
-    finally:
-        await fake.close()
+    async with _ready_alice() as (fake, daemon, client, alice):
+        backend = daemon.runtimes[0].backend
+        statuses = client.subscribe(alice.keys.status, 1000)
+        assert (await alice.hand_back_control())["ok"] is True
+        handed = await _until(client, alice.keys.status, lambda s: not s["program_running"])
+        assert handed["reason"] == "control handed back to the robot"
+        # the program is not sent again by itself: 3 s of status (past the 2 s resend window)
+        states = alice.joint_states(10_000)
+        for _ in range(1500):
+            await states.get(timeout=5.0)
+        assert not backend.servers.reverse.connected  # type: ignore[attr-defined]
+        assert (await alice.resend_program())["ok"] is True
+        await _until(client, alice.keys.status, lambda s: s["ready"])
+        # a lost link: the robot shows recovering, then ready again
+        fake.drop("rtde")
+        seen = []
+        for _ in range(100):
+            status = await statuses.get_json(timeout=10.0)
+            seen.append(status["lifecycle"])
+            if "recovering" in seen and status["ready"]:
+                break
+        assert "recovering" in seen, seen
+        goal = await alice.move([0.1, *HOME[1:]], duration=1.0)
+        assert (await goal.result(timeout=20))["status"] == "succeeded"
 
 
 async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services() -> None:
@@ -137,68 +134,54 @@ async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services
     import json
     import sys
 
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    await fake.start()
-    try:
-        async with running_daemon(_cell(fake.address)) as (daemon, client):
-            alice = await client.robot("alice")
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            states = alice.joint_states(10_000)
-            target = [0.15, *HOME[1:]]
-            for _ in range(60):  # 0.6 s of streaming, one command every 5 cycles
-                alice.stream_positions(target)
-                for _ in range(5):
-                    await states.get(timeout=5.0)
-            assert fake.arm.q[0] == pytest.approx(0.15, abs=0.005), "servoj streaming reached the target"
-            for _ in range(1000):  # the deadman stops the stream; the arm rests
-                sample = await states.get_json(timeout=5.0)
-                if all(v == 0.0 for v in sample["velocity"]) and daemon.runtimes[0].controller.mode == "idle":
-                    break
-            assert daemon.runtimes[0].controller.mode == "idle"
+    async with _ready_alice() as (fake, daemon, client, alice):
+        states = alice.joint_states(10_000)
+        target = [0.15, *HOME[1:]]
+        for _ in range(60):  # 0.6 s of streaming, one command every 5 cycles
+            alice.stream_positions(target)
+            for _ in range(5):
+                await states.get(timeout=5.0)
+        assert fake.arm.q[0] == pytest.approx(0.15, abs=0.005), "servoj streaming reached the target"
+        for _ in range(1000):  # the deadman stops the stream; the arm rests
+            sample = await states.get_json(timeout=5.0)
+            if all(v == 0.0 for v in sample["velocity"]) and daemon.runtimes[0].controller.mode == "idle":
+                break
+        assert daemon.runtimes[0].controller.mode == "idle"
 
-            async def cli(*args: str) -> tuple[int, str]:
-                proc = await asyncio.create_subprocess_exec(
-                    sys.executable,
-                    "-m",
-                    "urdaemon",
-                    "service",
-                    "alice",
-                    *args,
-                    "--connect",
-                    daemon.listen_endpoints[0],
-                    stdout=asyncio.subprocess.PIPE,
-                    stderr=asyncio.subprocess.PIPE,
-                )
-                out, err = await asyncio.wait_for(proc.communicate(), 60.0)
-                assert proc.returncode is not None
-                return proc.returncode, (out + err).decode()
+        async def cli(*args: str) -> tuple[int, str]:
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable,
+                "-m",
+                "urdaemon",
+                "service",
+                "alice",
+                *args,
+                "--connect",
+                daemon.listen_endpoints[0],
+                stdout=asyncio.subprocess.PIPE,
+                stderr=asyncio.subprocess.PIPE,
+            )
+            out, err = await asyncio.wait_for(proc.communicate(), 60.0)
+            assert proc.returncode is not None
+            return proc.returncode, (out + err).decode()
 
-            code, out = await cli("set_io", json.dumps({"kind": "digital", "pin": 6, "value": True}))
-            assert code == 0, out
-            assert json.loads(out.splitlines()[0])["ok"] is True
-            await _until(client, alice.keys.io, lambda m: m["digital_out"][6])
-            assert fake.arm.io.digital_out & (1 << 6)
-            code, out = await cli("set_tool_voltage", json.dumps({"volts": 7}))
-            assert code == 1
-            assert "0, 12 or 24" in out
-            code, out = await cli("set_io", "not json")
-            assert code == 2
-            assert "not JSON" in out
-    finally:
-        await fake.close()
+        code, out = await cli("set_io", json.dumps({"kind": "digital", "pin": 6, "value": True}))
+        assert code == 0, out
+        assert json.loads(out.splitlines()[0])["ok"] is True
+        await _until(client, alice.keys.io, lambda m: m["digital_out"][6])
+        assert fake.arm.io.digital_out & (1 << 6)
+        code, out = await cli("set_tool_voltage", json.dumps({"volts": 7}))
+        assert code == 1
+        assert "0, 12 or 24" in out
+        code, out = await cli("set_io", "not json")
+        assert code == 2
+        assert "not JSON" in out
 
 
 async def test_missed_rtde_packages_are_counted_from_the_controllers_clock() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    await fake.start()
-    try:
-        async with running_daemon(_cell(fake.address)) as (daemon, client):
-            alice = await client.robot("alice")
-            await _until(client, alice.keys.status, lambda s: s["ready"])
-            before = daemon.runtimes[0].backend.statistics().missed_cycles
-            fake.stall(0.1)  # 50 packages at 500 Hz never sent
-            status = await _until(client, alice.keys.status, lambda s: s["missed_cycles"] >= before + 45)
-            assert status["missed_cycles"] - before <= 55
-            assert status["late_cycles"] >= 1
-    finally:
-        await fake.close()
+    async with _ready_alice() as (fake, daemon, client, alice):
+        before = daemon.runtimes[0].backend.statistics().missed_cycles
+        fake.stall(0.1)  # 50 packages at 500 Hz never sent
+        status = await _until(client, alice.keys.status, lambda s: s["missed_cycles"] >= before + 45)
+        assert status["missed_cycles"] - before <= 55
+        assert status["late_cycles"] >= 1
