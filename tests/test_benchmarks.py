@@ -147,3 +147,18 @@ def test_zenoh_put_measures_the_daemons_own_state_stream_settings_first() -> Non
     finally:
         node.close()
         loop.close()
+
+
+@pytest.mark.parametrize("transport", ["loopback TCP", "low latency + Unix socket"])
+def test_event_loop_floor_publishes_to_a_subscriber_in_another_process(transport: str) -> None:
+    floor = _load("event_loop_floor")
+    assert transport in floor.TRANSPORTS
+    assert len(floor.SAMPLE) == len(_load("zenoh_put").PAYLOAD)  # the size of a joint_states message
+    publishers = floor.Publishers(transport, 2, seconds=1.0)  # returns once both publishers match
+    try:
+        assert len(publishers.publishers) == 2
+        assert all(p.matching_status.matching for p in publishers.publishers)
+        for pub in publishers.publishers:
+            pub.put(floor.SAMPLE)
+    finally:
+        assert publishers.close() == 0
