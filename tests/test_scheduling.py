@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import asyncio
+import gc
 import logging
 import os
+import signal
 import threading
+import weakref
 from typing import Any
 
 import pytest
@@ -14,7 +18,8 @@ from tests.integration.conftest import running_daemon
 from urdaemon import daemon as daemon_module
 from urdaemon.cell import parse_cell
 from urdaemon.errors import ConfigError
-from urdaemon.scheduling import RealtimeUnavailable, use_realtime_priority
+from urdaemon.fakeur import cli as fake_cli
+from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -139,3 +144,79 @@ async def test_no_priority_no_change(monkeypatch: pytest.MonkeyPatch) -> None:
     async with running_daemon(CELL.format(priority=0)) as (_, client):
         assert (await (await client.robot("alice")).status())["ready"] is True
     assert calls == []
+
+
+class _Node:
+    """A container the collector tracks, able to take part in a reference cycle."""
+
+    def __init__(self) -> None:
+        self.other: _Node | None = None
+
+
+def _cycle() -> weakref.ref[_Node]:
+    """A reference cycle nothing else refers to: only the collector can free it."""
+    a, b = _Node(), _Node()
+    a.other, b.other = b, a
+    return weakref.ref(a)
+
+
+def test_startup_objects_are_kept_out_of_collections_and_later_garbage_is_collected() -> None:
+    assert gc.get_freeze_count() == 0
+    alive = _Node()
+    with startup_objects_frozen() as frozen:
+        assert frozen > 0
+        assert gc.get_freeze_count() > 0  # less than frozen once frozen objects are freed by refcount
+        assert not any(o is alive for o in gc.get_objects()), "frozen: no collection walks it"
+        later = _Node()
+        assert any(o is later for o in gc.get_objects())
+        garbage = _cycle()
+        gc.collect()
+        assert garbage() is None, "cyclic garbage made after the freeze is still freed"
+    assert gc.get_freeze_count() == 0, "unfrozen when the block ends"
+    assert any(o is alive for o in gc.get_objects())
+
+
+def test_garbage_alive_at_the_freeze_is_collected_first() -> None:
+    garbage = _cycle()
+    assert garbage() is not None
+    with startup_objects_frozen():
+        assert garbage() is None
+
+
+def test_leaving_by_an_exception_unfreezes_too() -> None:
+    with pytest.raises(RuntimeError, match="boom"), startup_objects_frozen():
+        raise RuntimeError("boom")
+    assert gc.get_freeze_count() == 0
+
+
+async def test_the_daemon_serves_with_its_startup_objects_frozen() -> None:
+    async with running_daemon(CELL.format(priority=0)) as (daemon, client):
+        assert (await (await client.robot("alice")).status())["ready"] is True
+        assert gc.get_freeze_count() > 0
+        assert not any(o is daemon for o in gc.get_objects())
+    assert gc.get_freeze_count() == 0, "unfrozen when the daemon stops"
+
+
+def test_the_fake_robot_command_serves_with_its_startup_objects_frozen(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    seen: list[int] = []
+
+    class Fake:
+        """Stands in for FakeController: its start() is where the fakes' startup ends."""
+
+        async def start(self) -> None:
+            def serving() -> None:
+                seen.append(gc.get_freeze_count())
+                os.kill(os.getpid(), signal.SIGTERM)  # what ends `urdaemon fake-robot`
+
+            asyncio.get_running_loop().call_later(0.05, serving)
+
+        async def close(self) -> None:
+            seen.append(gc.get_freeze_count())
+
+    monkeypatch.setattr(fake_cli, "build_fakes", lambda args: [Fake()])
+    monkeypatch.setattr(fake_cli, "share_clock", lambda fakes, phases: None)
+    assert fake_cli.run_fakes(argparse.Namespace(late_start=0.0, phases="aligned")) == 0
+    assert seen[0] > 0, "frozen while serving"
+    assert seen[1] == 0, "unfrozen before the fakes close"

@@ -30,7 +30,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
-from urdaemon.scheduling import RealtimeUnavailable, use_realtime_priority
+from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
 __all__ = ["CellDescription", "Daemon", "describe_cell"]
 
@@ -165,13 +165,15 @@ class Daemon:
             self._build(node)
             node.queryable(self.keys.robot_description, self._on_description)
             tf_pub = node.publisher(self.keys.tf)
-            log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
-            async with asyncio.TaskGroup() as group:
-                tasks = [group.create_task(rt.run()) for rt in self.runtimes]
-                tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
-                await stop.wait()
-                for task in tasks:
-                    task.cancel()
+            with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
+                log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
+                log.debug("%d objects of startup kept out of garbage collection", frozen)
+                async with asyncio.TaskGroup() as group:
+                    tasks = [group.create_task(rt.run()) for rt in self.runtimes]
+                    tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
+                    await stop.wait()
+                    for task in tasks:
+                        task.cancel()
         finally:
             for runtime in self.runtimes:
                 try:

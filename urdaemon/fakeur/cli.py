@@ -13,6 +13,7 @@ from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError
 from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
+from urdaemon.scheduling import startup_objects_frozen
 
 __all__ = ["build_fakes", "parse_version", "run_fakes"]
 
@@ -115,7 +116,8 @@ def run_fakes(args: argparse.Namespace) -> int:
                 await fake.start()
                 started.append(fake)
             print(f"serving {len(fakes)} fake robot(s)", file=sys.stderr, flush=True)
-            await stop.wait()
+            with startup_objects_frozen():  # a controller's cycle has no collector pauses either
+                await stop.wait()
         finally:
             for fake in started:
                 await fake.close()
