@@ -113,3 +113,48 @@ async def test_unknown_outputs_and_a_vanishing_robot_are_errors_with_reasons() -
         await fake.close()
     with pytest.raises(ConnectionLostError, match="cannot connect"):
         await RtdeLink.connect(fake.address, lambda values: None)
+
+
+async def test_packages_that_queued_up_run_one_cycle_for_the_newest() -> None:
+    fake = FakeController("ur10e", address=next(ADDRESSES), powered=True)
+    await fake.start()
+    try:
+        state = RobotState.zeros(UR_JOINTS)
+        mapper = StateMapper(output_recipe())
+        stamps: list[tuple[float, int]] = []  # (controller time, superseded just before)
+        link: RtdeLink | None = None
+
+        def on_package(values: tuple[Any, ...]) -> None:
+            mapper.apply(values, state)
+            assert link is not None
+            stamps.append((state.controller_time, link.superseded_before))
+
+        link = await RtdeLink.connect(fake.address, on_package)
+        await link.handshake(output_recipe(), input_recipe())
+        await link.start()
+        for _ in range(500):  # streaming: a few packages in, one by one
+            if len(stamps) >= 5:
+                break
+            await asyncio.sleep(0.005)
+        assert link.superseded == 0
+        assert link.transport is not None
+        link.transport.pause_reading()  # the loop is held up: packages queue in the socket
+        queued_from = fake.cycles
+        for _ in range(500):
+            if fake.cycles >= queued_from + 10:
+                break
+            await asyncio.sleep(0.005)
+        calls, packages, last = len(stamps), link.packages, stamps[-1][0]
+        link.transport.resume_reading()
+        for _ in range(500):
+            if len(stamps) > calls:
+                break
+            await asyncio.sleep(0.001)
+        newest, skipped = stamps[calls]
+        assert skipped >= 9, "the queued packages ran no cycle of their own"
+        assert link.packages - packages >= skipped + 1
+        assert link.superseded == skipped
+        assert round((newest - last) / 0.002) >= skipped + 1, "the cycle ran for the newest of them"
+        link.close()
+    finally:
+        await fake.close()

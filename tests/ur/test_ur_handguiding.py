@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import itertools
 from collections.abc import AsyncIterator
@@ -185,3 +186,26 @@ async def test_missed_rtde_packages_are_counted_from_the_controllers_clock() -> 
         status = await _until(client, alice.keys.status, lambda s: s["missed_cycles"] >= before + 45)
         assert status["missed_cycles"] - before <= 55
         assert status["late_cycles"] >= 1
+
+
+async def test_packages_queued_while_the_loop_was_held_up_count_late_not_missed_the_goal_goes_on() -> None:
+    async with _ready_alice() as (fake, daemon, _, alice):
+        backend = daemon.runtimes[0].backend
+        rtde: Any = getattr(backend, "_rtde", None)
+        assert rtde is not None
+        goal = await alice.move([0.2, *HOME[1:]], duration=1.0)
+        before = backend.statistics()
+        rtde.transport.pause_reading()  # as if the loop were held up for ~20 ms
+        queued_from = fake.cycles
+        for _ in range(500):
+            if fake.cycles >= queued_from + 10:
+                break
+            await asyncio.sleep(0.002)
+        rtde.transport.resume_reading()
+        result = await goal.result(timeout=20)
+        assert result["status"] == "succeeded"
+        after = backend.statistics()
+        assert rtde.superseded >= 9
+        assert after.late_cycles - before.late_cycles >= rtde.superseded
+        assert after.missed_cycles == before.missed_cycles, "they arrived: none was missed"
+        assert max(abs(e) for e in result["final_error"]) < 1e-3

@@ -391,11 +391,14 @@ class UrBackend(Backend):
         state = self.state
         previous = state.controller_time
         self._mapper.apply(values, state)
-        # the controller's own clock shows missed packages: a gap of k steps means k - 1 never arrived
+        # the controller's own clock shows missed packages: a gap of k steps means k - 1 never arrived,
+        # less those that did arrive but behind this one in the same read (late: no cycle ran for them)
         gap = state.controller_time - previous
         if gap > 1.5 * self.period and previous > 0.0:
-            self._missed += round(gap / self.period) - 1
-            self._late += 1
+            rtde = self._rtde
+            superseded = rtde.superseded_before if rtde is not None else 0
+            self._missed += max(round(gap / self.period) - 1 - superseded, 0)
+            self._late += 1 + superseded
         reverse_server = self.servers.reverse
         state.program_running = state.program_running and reverse_server.connected
         if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:

@@ -3,6 +3,10 @@
 An ``asyncio.Protocol`` around the sans-IO ``RtdeConnection``: during the handshake each request
 waits on a future for its reply; once streaming, ``data_received`` decodes each DATA_PACKAGE and
 calls ``on_package(values)`` synchronously, in the same turn of the loop (the robot is the clock).
+When one read brings several packages (the loop was held up and they queued in the socket), only
+the newest runs a cycle: a command computed for a state the robot has already left would reach it
+behind the current one, and working through the backlog of every robot would hold the loop up
+further (ur-protocols.md §4.2: the program's read waits only the frame's timeout, ``ur.receive_timeout``).
 ``StateMapper`` copies a package's values into ``RobotState`` through indices computed once.
 """
 
@@ -63,6 +67,10 @@ class RtdeLink(asyncio.Protocol):
         self._waiting_for: tuple[type[Any], ...] = ()
         self._streaming = False
         self.packages = 0
+        self.superseded = 0
+        """Packages that ran no cycle because a newer one came in the same read."""
+        self.superseded_before = 0
+        """How many of those came just before the package ``on_package`` is being called with."""
         self.received_ns = 0
         """``time.perf_counter_ns()`` when the bytes of the latest package reached ``data_received``."""
         self.text_messages: list[rtde.TextMessage] = []
@@ -188,6 +196,7 @@ class RtdeLink(asyncio.Protocol):
             values = self.conn.receive_output(data)
             if values is not None:
                 self.packages += 1
+                self.superseded_before = 0
                 self.on_package(values)
                 return
         try:
@@ -196,11 +205,15 @@ class RtdeLink(asyncio.Protocol):
             self._fail(err)
             self.close()
             return
+        newest: tuple[Any, ...] | None = None
+        older = 0
         for event in events:
             if isinstance(event, rtde.DataPackage):
                 self.packages += 1
                 if self._streaming:
-                    self.on_package(event.values)
+                    if newest is not None:
+                        older += 1
+                    newest = event.values
                 if (
                     self._waiter is not None
                     and not self._waiter.done()
@@ -214,6 +227,10 @@ class RtdeLink(asyncio.Protocol):
                 self._waiter is not None and not self._waiter.done() and isinstance(event, self._waiting_for)
             ):
                 self._waiter.set_result(event)
+        if newest is not None:
+            self.superseded += older
+            self.superseded_before = older
+            self.on_package(newest)
 
     def _flush(self) -> None:
         data = self.conn.data_to_send()
