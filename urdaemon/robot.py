@@ -186,6 +186,8 @@ class RobotRuntime:
         backend = self.backend
         state = backend.state
         self.controller.tick(state, backend.command, state.monotonic_ns * 1e-9)
+        if backend.catching_up:  # a newer package follows at once: it sends and publishes
+            return
         backend.send_command()  # the robot's frame first, then everything users see
         if state.cycle % self._decimation == 0:
             # nothing is computed or encoded for a stream nobody subscribes to

@@ -590,6 +590,24 @@ async def test_servoj_tracks_the_targets_and_ignores_an_impossible_one() -> None
         assert await rig.result() == REASON_STOPPED
 
 
+async def test_extrapolating_between_frames_never_outruns_the_joint_speed_limit() -> None:
+    async with running_program(speedup=1.0) as rig:
+        # two frames 0.03 rad apart: 15 rad/s, under the script's 20 rad/s check, over the joint's limit
+        rig.daemon.send(ServoJ(j0(0.0), timeout=0.5))
+        rig.daemon.send(ServoJ(j0(0.03), timeout=0.5))
+        start = len(rig.clock.history)
+        await rig.clock.until(lambda: rig.runner._servo_q[0] >= HOME[0] + 0.03)
+        setpoint = rig.runner._servo_q
+        frozen = setpoint[0]
+        await rig.clock.until(lambda: len(rig.clock.history) >= start + 25)  # cycles with no frame
+        cycles = len(rig.clock.history) - start
+        limit = rig.arm.max_velocity[0]
+        assert 0.0 < setpoint[0] - frozen <= cycles * limit * DT + 1e-9, "extrapolated at most at the limit"
+        assert setpoint[0] - frozen < 0.5 * cycles * 0.03, "not at the frames' 15 rad/s"
+        rig.daemon.send(Stopped())
+        assert await rig.result() == REASON_STOPPED
+
+
 async def test_a_frame_sent_the_moment_the_reverse_socket_connects_is_not_lost() -> None:
     """The daemon may write before the program's first read (and, polled, before reading is paused)."""
     codec = ReverseConnection(Side.DAEMON)

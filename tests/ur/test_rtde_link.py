@@ -115,19 +115,19 @@ async def test_unknown_outputs_and_a_vanishing_robot_are_errors_with_reasons() -
         await RtdeLink.connect(fake.address, lambda values: None)
 
 
-async def test_packages_that_queued_up_run_one_cycle_for_the_newest() -> None:
+async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest_catching_up() -> None:
     fake = FakeController("ur10e", address=next(ADDRESSES), powered=True)
     await fake.start()
     try:
         state = RobotState.zeros(UR_JOINTS)
         mapper = StateMapper(output_recipe())
-        stamps: list[tuple[float, int]] = []  # (controller time, superseded just before)
+        stamps: list[tuple[float, bool]] = []  # (controller time, catching up)
         link: RtdeLink | None = None
 
         def on_package(values: tuple[Any, ...]) -> None:
             mapper.apply(values, state)
             assert link is not None
-            stamps.append((state.controller_time, link.superseded_before))
+            stamps.append((state.controller_time, link.catching_up))
 
         link = await RtdeLink.connect(fake.address, on_package)
         await link.handshake(output_recipe(), input_recipe())
@@ -137,6 +137,7 @@ async def test_packages_that_queued_up_run_one_cycle_for_the_newest() -> None:
                 break
             await asyncio.sleep(0.005)
         assert link.superseded == 0
+        assert not any(catching for _, catching in stamps)
         assert link.transport is not None
         link.transport.pause_reading()  # the loop is held up: packages queue in the socket
         queued_from = fake.cycles
@@ -144,17 +145,20 @@ async def test_packages_that_queued_up_run_one_cycle_for_the_newest() -> None:
             if fake.cycles >= queued_from + 10:
                 break
             await asyncio.sleep(0.005)
-        calls, packages, last = len(stamps), link.packages, stamps[-1][0]
+        calls = len(stamps)
         link.transport.resume_reading()
         for _ in range(500):
-            if len(stamps) > calls:
+            if len(stamps) > calls + 10:
                 break
             await asyncio.sleep(0.001)
-        newest, skipped = stamps[calls]
-        assert skipped >= 9, "the queued packages ran no cycle of their own"
-        assert link.packages - packages >= skipped + 1
-        assert link.superseded == skipped
-        assert round((newest - last) / 0.002) >= skipped + 1, "the cycle ran for the newest of them"
         link.close()
+        times = [t for t, _ in stamps]
+        assert {round(b - a, 6) for a, b in itertools.pairwise(times)} == {0.002}, "every package, in order"
+        flags = [catching for _, catching in stamps[calls:]]
+        burst = flags.index(False)  # the newest package of the read that brought the backlog
+        assert burst >= 9, "the queued packages came in one read, all but its newest catching up"
+        assert all(flags[:burst])
+        assert link.superseded == burst
+        assert link.catching_up is False
     finally:
         await fake.close()

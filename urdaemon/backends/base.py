@@ -49,6 +49,9 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
+        self.catching_up = False
+        """True while the cycle runs for a package a newer one already follows (``ur``, after the loop
+        was held up): the runtime then ticks the controller only, sends and publishes nothing."""
         self.turnaround = Histogram()
         """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
         receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""

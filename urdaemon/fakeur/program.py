@@ -1204,9 +1204,13 @@ class ProgramRunner:
             # The script extrapolates at get_target_joint_speeds(). While servoj tracks a setpoint stream
             # that is the stream's own rate, which we use directly: the fake arm reaches each setpoint
             # in one cycle, so its measured speed would turn every late frame into a speed spike.
-            qd = self._servo_qd
+            # A real arm's target speed never exceeds its joint limits: the rate is clipped to them, or
+            # a frame that corrects an extrapolation (a steep rate) followed by more missing frames
+            # would extrapolate ever further (it grew without bound at 16 robots on two cores).
+            qd, vmax = self._servo_qd, self.arm.max_velocity
             for joint in range(JOINTS):
-                q[joint] += qd[joint] * dt
+                rate, limit = qd[joint], vmax[joint]
+                q[joint] += (limit if rate > limit else -limit if rate < -limit else rate) * dt
         else:
             self._servo_state = _Servo.IDLE
         self.arm.servoj(q)

@@ -391,14 +391,11 @@ class UrBackend(Backend):
         state = self.state
         previous = state.controller_time
         self._mapper.apply(values, state)
-        # the controller's own clock shows missed packages: a gap of k steps means k - 1 never arrived,
-        # less those that did arrive but behind this one in the same read (late: no cycle ran for them)
+        # the controller's own clock shows missed packages: a gap of k steps means k - 1 never arrived
         gap = state.controller_time - previous
         if gap > 1.5 * self.period and previous > 0.0:
-            rtde = self._rtde
-            superseded = rtde.superseded_before if rtde is not None else 0
-            self._missed += max(round(gap / self.period) - 1 - superseded, 0)
-            self._late += 1 + superseded
+            self._missed += round(gap / self.period) - 1
+            self._late += 1
         reverse_server = self.servers.reverse
         state.program_running = state.program_running and reverse_server.connected
         if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
@@ -414,6 +411,17 @@ class UrBackend(Backend):
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
+        rtde = self._rtde
+        if rtde is not None and rtde.catching_up:  # a newer package of the same read follows
+            self._late += 1
+            self.catching_up = True
+            try:
+                self._on_cycle()  # the controller keeps the robot's time; nothing is sent or published
+            except Exception:
+                log.exception("[%s] the cycle failed", self.name)
+            finally:
+                self.catching_up = False
+            return
         self._command_sent = False
         try:
             self._on_cycle()  # the runtime's tick calls send_command() before it publishes anything

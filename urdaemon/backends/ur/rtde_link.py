@@ -3,10 +3,12 @@
 An ``asyncio.Protocol`` around the sans-IO ``RtdeConnection``: during the handshake each request
 waits on a future for its reply; once streaming, ``data_received`` decodes each DATA_PACKAGE and
 calls ``on_package(values)`` synchronously, in the same turn of the loop (the robot is the clock).
-When one read brings several packages (the loop was held up and they queued in the socket), only
-the newest runs a cycle: a command computed for a state the robot has already left would reach it
-behind the current one, and working through the backlog of every robot would hold the loop up
-further (ur-protocols.md §4.2: the program's read waits only the frame's timeout, ``ur.receive_timeout``).
+When one read brings several packages (the loop was held up and they queued in the socket), the
+older ones are delivered with ``catching_up`` set: the controller keeps the robot's time with them,
+but only the newest sends a command and publishes. Commands for states the robot has already left
+would be useless to it, and a full cycle for every package of every robot's backlog would hold the
+loop up further (ur-protocols.md §4.2: the program's read waits only the frame's timeout,
+``ur.receive_timeout``).
 ``StateMapper`` copies a package's values into ``RobotState`` through indices computed once.
 """
 
@@ -68,9 +70,9 @@ class RtdeLink(asyncio.Protocol):
         self._streaming = False
         self.packages = 0
         self.superseded = 0
-        """Packages that ran no cycle because a newer one came in the same read."""
-        self.superseded_before = 0
-        """How many of those came just before the package ``on_package`` is being called with."""
+        """Packages delivered with ``catching_up``: a newer one came in the same read."""
+        self.catching_up = False
+        """True while ``on_package`` is called with a package that a newer one of the same read follows."""
         self.received_ns = 0
         """``time.perf_counter_ns()`` when the bytes of the latest package reached ``data_received``."""
         self.text_messages: list[rtde.TextMessage] = []
@@ -196,7 +198,6 @@ class RtdeLink(asyncio.Protocol):
             values = self.conn.receive_output(data)
             if values is not None:
                 self.packages += 1
-                self.superseded_before = 0
                 self.on_package(values)
                 return
         try:
@@ -205,15 +206,12 @@ class RtdeLink(asyncio.Protocol):
             self._fail(err)
             self.close()
             return
-        newest: tuple[Any, ...] | None = None
-        older = 0
+        packages: list[tuple[Any, ...]] = []
         for event in events:
             if isinstance(event, rtde.DataPackage):
                 self.packages += 1
                 if self._streaming:
-                    if newest is not None:
-                        older += 1
-                    newest = event.values
+                    packages.append(event.values)
                 if (
                     self._waiter is not None
                     and not self._waiter.done()
@@ -227,9 +225,16 @@ class RtdeLink(asyncio.Protocol):
                 self._waiter is not None and not self._waiter.done() and isinstance(event, self._waiting_for)
             ):
                 self._waiter.set_result(event)
-        if newest is not None:
-            self.superseded += older
-            self.superseded_before = older
+        if packages:
+            newest = packages.pop()
+            if packages:
+                self.superseded += len(packages)
+                self.catching_up = True
+                try:
+                    for values in packages:
+                        self.on_package(values)
+                finally:
+                    self.catching_up = False
             self.on_package(newest)
 
     def _flush(self) -> None:
