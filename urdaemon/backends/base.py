@@ -49,9 +49,6 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
-        self.catching_up = False
-        """True while the cycle runs for a package a newer one already follows (``ur``, after the loop
-        was held up): the runtime then ticks the controller only, sends and publishes nothing."""
         self.turnaround = Histogram()
         """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
         receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""
@@ -59,6 +56,12 @@ class Backend(abc.ABC):
         """Set by the runtime: called when the backend changes the state outside a cycle (lifecycle)."""
         self.on_notice: Callable[[str, str], None] | None = None
         """Set by the runtime: ``(kind, text)`` of what the robot or the backend wants users to know."""
+
+    @property
+    def catching_up(self) -> bool:
+        """True while the cycle runs for a package a newer one already follows (``ur``, after the loop
+        was held up): the runtime then ticks the controller only, sends and publishes nothing."""
+        return False
 
     @abc.abstractmethod
     async def run(self, on_cycle: Callable[[], None]) -> None:

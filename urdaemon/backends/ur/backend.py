@@ -411,25 +411,19 @@ class UrBackend(Backend):
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
-        rtde = self._rtde
-        if rtde is not None and rtde.catching_up:  # a newer package of the same read follows
-            self._late += 1
-            self.catching_up = True
-            try:
-                self._on_cycle()  # the controller keeps the robot's time; nothing is sent or published
-            except Exception:
-                log.exception("[%s] the cycle failed", self.name)
-            finally:
-                self.catching_up = False
-            return
         self._command_sent = False
         try:
-            self._on_cycle()  # the runtime's tick calls send_command() before it publishes anything
+            # the runtime's tick calls send_command() before it publishes anything; while catching up
+            # (a newer package of the same read follows) it only keeps the controller's time
+            self._on_cycle()
         except Exception:  # a bug above must not cost the RTDE link: hold still this cycle, say so once
             self.command.mode = CommandMode.IDLE
             if not self._cycle_error_logged:
                 self._cycle_error_logged = True
                 log.exception("[%s] the cycle failed; holding still", self.name)
+        if self.catching_up:
+            self._late += 1
+            return
         if not self._command_sent:
             self.send_command()
         if (
@@ -443,6 +437,12 @@ class UrBackend(Backend):
             and state.lifecycle is Lifecycle.RUNNING
         ):
             self._send_program(force=False)
+
+    @property
+    def catching_up(self) -> bool:
+        """The RTDE link is delivering a package that a newer one of the same read follows."""
+        rtde = self._rtde
+        return rtde is not None and rtde.catching_up
 
     def send_command(self) -> None:
         """This cycle's frame on the reverse socket, at once: publishing the state can wait, the robot
