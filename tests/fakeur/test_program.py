@@ -608,6 +608,31 @@ async def test_extrapolating_between_frames_never_outruns_the_joint_speed_limit(
         assert await rig.result() == REASON_STOPPED
 
 
+def test_a_frame_that_corrects_an_extrapolation_is_not_taken_for_the_arms_speed() -> None:
+    """Frames bunched by a late daemon: the rate is the stream's, frame to frame over the cycles between."""
+    runner = ProgramRunner(make_arm(), "def p():\nend", step_time=DT)
+    speed = 0.5
+    runner._set_servo_setpoint(j0(0.0))
+    runner._servo_step(DT)
+    runner._set_servo_setpoint(j0(speed * DT))
+    runner._servo_step(DT)
+    for _ in range(10):  # no frame: the setpoint goes on at the stream's 0.5 rad/s
+        runner._servo_step(DT)
+    assert runner._servo_q[0] == pytest.approx(HOME[0] + 11 * speed * DT, abs=1e-12)
+    # the next frame, 11 cycles on, says the trajectory stopped where the last frame was
+    runner._set_servo_setpoint(j0(speed * DT))
+    runner._servo_step(DT)
+    assert runner._servo_q[0] == pytest.approx(HOME[0] + speed * DT, abs=1e-12)
+    for _ in range(20):  # and no frame again: the stream's rate over those 11 cycles was zero
+        runner._servo_step(DT)
+    assert runner._servo_q[0] == pytest.approx(HOME[0] + speed * DT, abs=1e-12), "no drift"
+    # a frame after a gap that continues a moving stream: its rate is the distance over the gap
+    runner._set_servo_setpoint(j0(speed * DT + 21 * 0.25 * DT))
+    for _ in range(4):
+        runner._servo_step(DT)
+    assert runner._servo_q[0] == pytest.approx(HOME[0] + speed * DT + 24 * 0.25 * DT, abs=1e-12)
+
+
 async def test_a_frame_sent_the_moment_the_reverse_socket_connects_is_not_lost() -> None:
     """The daemon may write before the program's first read (and, polled, before reading is paused)."""
     codec = ReverseConnection(Side.DAEMON)

@@ -625,6 +625,10 @@ class ProgramRunner:
         self._servo_state = _Servo.UNINITIALIZED
         self._servo_q = list(arm.q)
         self._servo_qd = [0.0] * JOINTS
+        self._servo_frame = list(arm.q)
+        """The last accepted setpoint as the daemon sent it (never an extrapolated one)."""
+        self._servo_cycles = 0
+        """Servo cycles run since that setpoint came."""
         """rad/s: the setpoint's rate, at which a missing setpoint is extrapolated."""
         # trajectory thread and its socket buffer
         self._trajectory: _Execution | None = None
@@ -962,6 +966,8 @@ class ProgramRunner:
             self._stopj()  # the old motion thread is joined; it ends with stopj
         if new == ControlMode.SERVOJ:
             self._servo_q = list(self.arm.q)  # the new setpoint's rate is measured from here
+            self._servo_frame = list(self.arm.q)
+            self._servo_cycles = 0
         elif new == ControlMode.FORWARD:
             self._stopj()
         elif new in _UNSIMULATED_MODES:
@@ -986,9 +992,15 @@ class ProgramRunner:
         if self._target_within_limits(self._servo_q, positions, step) or self._target_within_limits(
             self.arm.q, positions, step
         ):
-            previous = self._servo_q
+            # The rate of the setpoint stream, from the previous setpoint the daemon sent over the
+            # cycles since (not from the extrapolated setpoint: a frame that corrects an extrapolation
+            # would read as a speed spike). A real arm's target speed, which the script extrapolates
+            # with, follows the stream smoothly through servoj's lookahead filter.
+            previous, span = self._servo_frame, max(1, self._servo_cycles) * step
             self._servo_q = list(positions)
-            self._servo_qd = [(b - a) / step for a, b in zip(previous, self._servo_q, strict=True)]
+            self._servo_frame = list(positions)
+            self._servo_qd = [(b - a) / span for a, b in zip(previous, positions, strict=True)]
+            self._servo_cycles = 0
 
     def _target_within_limits(self, start: Sequence[float], end: Sequence[float], duration: float) -> bool:
         """targetWithinLimits (§5.4): refuse > 20 rad/s; popup once, log every 5 s, note the recovery."""
@@ -1200,13 +1212,13 @@ class ProgramRunner:
         if state == _Servo.UNINITIALIZED:
             return  # sync(): nothing commanded before the first setpoint
         q = self._servo_q
+        self._servo_cycles += 1
         if state == _Servo.IDLE:
             # The script extrapolates at get_target_joint_speeds(). While servoj tracks a setpoint stream
-            # that is the stream's own rate, which we use directly: the fake arm reaches each setpoint
-            # in one cycle, so its measured speed would turn every late frame into a speed spike.
-            # A real arm's target speed never exceeds its joint limits: the rate is clipped to them, or
-            # a frame that corrects an extrapolation (a steep rate) followed by more missing frames
-            # would extrapolate ever further (it grew without bound at 16 robots on two cores).
+            # that is the stream's own rate (measured frame to frame in _set_servo_setpoint), which we
+            # use directly: the fake arm reaches each setpoint in one cycle, so its measured speed would
+            # turn every late frame into a speed spike. A real arm's target speed never exceeds its
+            # joint limits: the rate is clipped to them.
             qd, vmax = self._servo_qd, self.arm.max_velocity
             for joint in range(JOINTS):
                 rate, limit = qd[joint], vmax[joint]
