@@ -625,11 +625,11 @@ class ProgramRunner:
         self._servo_state = _Servo.UNINITIALIZED
         self._servo_q = list(arm.q)
         self._servo_qd = [0.0] * JOINTS
+        """rad/s: the setpoint's rate, at which a missing setpoint is extrapolated."""
         self._servo_frame = list(arm.q)
         """The last accepted setpoint as the daemon sent it (never an extrapolated one)."""
         self._servo_cycles = 0
         """Servo cycles run since that setpoint came."""
-        """rad/s: the setpoint's rate, at which a missing setpoint is extrapolated."""
         # trajectory thread and its socket buffer
         self._trajectory: _Execution | None = None
         self._trajectory_codec = TrajectoryPointConnection(Side.ROBOT)
