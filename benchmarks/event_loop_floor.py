@@ -82,7 +82,7 @@ class Publishers:
     def __init__(self, transport: str, robots: int, seconds: float = ZENOH_START_S + WINDOW_S + 2.0) -> None:
         import zenoh
 
-        from urdaemon.publish.node import zenoh_config
+        from urdaemon.publish.node import declare_state_publisher, zenoh_config
 
         self.sockets = tempfile.mkdtemp(prefix="loop-floor-")
         fast = transport != TRANSPORTS[0]
@@ -95,13 +95,7 @@ class Publishers:
             probe.close()
         self.session: Any = zenoh.open(zenoh_config("peer", [endpoint], [], low_latency=fast))
         self.publishers: list[Any] = [
-            self.session.declare_publisher(
-                f"bench/{index}/state",
-                congestion_control=zenoh.CongestionControl.DROP,
-                priority=zenoh.Priority.REAL_TIME,
-                express=True,
-            )
-            for index in range(robots)
+            declare_state_publisher(self.session, f"bench/{index}/state") for index in range(robots)
         ]
         script = str(Path(__file__).with_name("zenoh_put.py"))  # its subscriber: counts samples
         flag = str(int(fast))

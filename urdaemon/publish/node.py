@@ -19,9 +19,20 @@ import zenoh
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import UrDaemonError
 
-__all__ = ["Matching", "ZenohNode", "zenoh_config"]
+__all__ = ["Matching", "ZenohNode", "declare_state_publisher", "zenoh_config"]
 
 log = logging.getLogger(__name__)
+
+
+def declare_state_publisher(session: Any, key: str) -> Any:
+    """A publisher with the state streams' settings: express (no batching), real-time priority, and
+    a sample dropped rather than the caller blocked when the network is congested."""
+    return session.declare_publisher(
+        key,
+        congestion_control=zenoh.CongestionControl.DROP,
+        priority=zenoh.Priority.REAL_TIME,
+        express=True,
+    )
 
 
 def zenoh_config(
@@ -91,12 +102,7 @@ class ZenohNode:
         (goal results) can also be asked for with a query.
         """
         if realtime:
-            pub = self.session.declare_publisher(
-                key,
-                congestion_control=zenoh.CongestionControl.DROP,
-                priority=zenoh.Priority.REAL_TIME,
-                express=True,
-            )
+            pub = declare_state_publisher(self.session, key)
         else:
             pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP)
         self._entities.append(pub)
