@@ -1,16 +1,32 @@
-"""Shared test helpers: free loopback ports and fake-robot addresses, waiting on a subprocess's log lines."""
+"""Shared test helpers: free loopback ports and fake-robot addresses, the ``urdaemon`` command run
+in-process, waiting on a subprocess's log lines."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import io
+import logging
 import secrets
 import socket
 import subprocess
+import sys
+import threading
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import TextIO
 
-__all__ = ["UR_PORTS", "drain_in_background", "fake_address", "free_tcp_port", "wait_for_line"]
+__all__ = [
+    "UR_PORTS",
+    "CliRun",
+    "drain_in_background",
+    "fake_address",
+    "free_tcp_port",
+    "run_cli",
+    "run_cli_in_thread",
+    "wait_for_line",
+]
 
 
 _HANDED_OUT: set[int] = set()
@@ -76,6 +92,132 @@ def fake_address() -> str:
     raise RuntimeError("no free fake-robot address in 10000 tries")
 
 
+@dataclass(frozen=True)
+class CliRun:
+    """What one ``urdaemon`` command did: its exit code and what it wrote."""
+
+    code: int
+    stdout: str
+    stderr: str
+
+
+class _PerThreadStream(io.TextIOBase):
+    """Stands in for ``sys.stdout``/``sys.stderr``: what a thread running a command writes goes to that
+    command's buffer, everything else to the stream that was there before (pytest's capture)."""
+
+    def __init__(self, fallback: TextIO, attribute: str) -> None:
+        super().__init__()
+        self.fallback = fallback
+        self._attribute = attribute
+
+    def _target(self) -> TextIO:
+        target: TextIO | None = getattr(_CAPTURE, self._attribute, None)
+        return self.fallback if target is None else target
+
+    def write(self, text: str) -> int:
+        return self._target().write(text)
+
+    def flush(self) -> None:
+        self._target().flush()
+
+    def isatty(self) -> bool:
+        return False
+
+
+_CAPTURE = threading.local()
+_CAPTURE_LOCK = threading.Lock()
+_CAPTURE_USERS = 0
+
+
+@contextlib.contextmanager
+def _captured() -> Iterator[tuple[io.StringIO, io.StringIO]]:
+    """Route this thread's writes to ``sys.stdout``/``sys.stderr`` (and its log records, formatted as
+    ``urdaemon.cli.main`` configures them) into two buffers; other threads write where they did."""
+    global _CAPTURE_USERS
+    out, err = io.StringIO(), io.StringIO()
+    with _CAPTURE_LOCK:
+        if _CAPTURE_USERS == 0:
+            sys.stdout = _PerThreadStream(sys.stdout, "stdout")
+            sys.stderr = _PerThreadStream(sys.stderr, "stderr")
+        _CAPTURE_USERS += 1
+    _CAPTURE.stdout, _CAPTURE.stderr = out, err
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    thread = threading.get_ident()
+    handler = logging.StreamHandler(err)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    handler.addFilter(lambda record: record.thread == thread)
+    root.addHandler(handler)
+    root.setLevel(min(level, logging.INFO))  # what the command's logging.basicConfig would set
+    try:
+        yield out, err
+    finally:
+        root.handlers[:] = handlers  # whatever the command installed goes with it
+        root.setLevel(level)
+        _CAPTURE.stdout = _CAPTURE.stderr = None
+        with _CAPTURE_LOCK:
+            _CAPTURE_USERS -= 1
+            if _CAPTURE_USERS == 0:
+                for name in ("stdout", "stderr"):
+                    stream = getattr(sys, name)
+                    if isinstance(stream, _PerThreadStream):
+                        setattr(sys, name, stream.fallback)
+
+
+def run_cli(*args: str) -> CliRun:
+    """Run ``urdaemon ARGS`` in this thread, as ``urdaemon.cli.main`` (no new interpreter).
+
+    For commands that start their own event loop call it where no loop runs, or use
+    ``run_cli_in_thread`` from a test's loop.
+    """
+    from urdaemon.cli import main
+
+    with _captured() as (out, err):
+        try:
+            code = main(list(args))
+        except SystemExit as exit_:  # argparse's usage errors and --version
+            if isinstance(exit_.code, str):
+                print(exit_.code, file=sys.stderr)
+                code = 1
+            else:
+                code = exit_.code or 0
+    return CliRun(code, out.getvalue(), err.getvalue())
+
+
+async def run_cli_in_thread(*args: str, timeout: float = 60.0) -> CliRun:
+    """``run_cli`` in a thread of its own, so the test's loop (and a daemon in it) keeps running.
+
+    The thread is a daemon thread: a command that hangs fails the test after ``timeout`` seconds
+    and cannot hold up the interpreter's exit.
+    """
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[CliRun] = loop.create_future()
+
+    def work() -> None:
+        try:
+            result = run_cli(*args)
+        except BaseException as err:  # handed to the test, which raises it
+            loop.call_soon_threadsafe(_settle, done, None, err)
+        else:
+            loop.call_soon_threadsafe(_settle, done, result, None)
+
+    threading.Thread(target=work, name=f"urdaemon {' '.join(args[:1])}", daemon=True).start()
+    try:
+        return await asyncio.wait_for(asyncio.shield(done), timeout)
+    except TimeoutError:
+        raise AssertionError(f"urdaemon {' '.join(args)} did not finish within {timeout} s") from None
+
+
+def _settle(future: asyncio.Future[CliRun], result: CliRun | None, err: BaseException | None) -> None:
+    if future.done():
+        return
+    if err is not None:
+        future.set_exception(err)
+    else:
+        assert result is not None
+        future.set_result(result)
+
+
 async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: float) -> list[str]:
     """Read the process's stderr until a line contains ``text``; returns the lines read."""
     assert proc.stderr is not None
@@ -99,8 +241,6 @@ async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: floa
 
 def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:
     """Keep reading the process's stderr into ``sink`` so its pipe never fills up."""
-    import threading
-
     assert proc.stderr is not None
     stream = proc.stderr
 
