@@ -298,7 +298,7 @@ REPLIES: list[tuple[Command, bytes, Event]] = [
             "Command is not allowed due to safety reasons, please switch robot to Remote Control mode",
         ),
     ),
-    (Raw("fly"), b"Could not understand: 'fly'\n", RawReply(Raw("fly"), "Could not understand: 'fly'")),
+    (Raw("fly"), b"could not understand: 'fly'\n", RawReply(Raw("fly"), "could not understand: 'fly'")),
 ]
 
 ACTIONS = typing.get_args(ActionCommand)
@@ -551,7 +551,7 @@ def test_robot_reports_lines_it_does_not_understand(line: bytes) -> None:
     assert conn.receive_data(line) == [UnknownCommand(text)]
     assert conn.replies_owed == 1
     conn.send(ReplyLine(unknown_command_text(text)))
-    assert conn.data_to_send() == f"Could not understand: '{text}'\n".encode()
+    assert conn.data_to_send() == f"could not understand: '{text}'\n".encode()
     assert conn.replies_owed == 0
 
 
@@ -920,7 +920,7 @@ def test_bring_up_conversation() -> None:
             ProgramStateReply(ProgramState.PLAYING, "external_control.urp", "PLAYING external_control.urp"),
         ),
         (IsRunning(), RunningReply(True, "Program running: true")),
-        (Raw("get robot color"), RawReply(Raw("get robot color"), "Could not understand: 'get robot color'")),
+        (Raw("get robot color"), RawReply(Raw("get robot color"), "could not understand: 'get robot color'")),
     ]
     for command, expected in steps:
         daemon_side.send(command)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import asyncio
-import itertools
 from typing import Any
 
 import pytest
 
-from tests.helpers import free_tcp_port
+from tests.helpers import fake_address, free_tcp_port
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.protocols import dashboard as dash
@@ -17,8 +16,6 @@ from urdaemon.protocols import reverse, script_command, script_sender
 from urdaemon.protocols._buffer import Side
 
 pytestmark = pytest.mark.timeout(60)
-
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(140))
 
 
 class Hooks:
@@ -70,7 +67,7 @@ def _connected(hooks: Hooks, names: set[str]) -> bool:
 
 
 async def test_a_headless_program_connects_back_and_the_daemon_drives_the_arm() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), powered=True)
+    fake = FakeController("ur10e", address=fake_address(), powered=True)
     await fake.start()
     hooks = Hooks()
     ports = _ports()
@@ -107,10 +104,13 @@ async def test_a_headless_program_connects_back_and_the_daemon_drives_the_arm() 
         await fake.close()
 
 
-async def test_connections_from_another_address_are_refused_and_a_newer_one_replaces_the_older() -> None:
+async def test_connections_from_another_address_are_refused_and_a_live_link_is_kept() -> None:
+    """A stranger is closed at once; a second connection from the robot's address while the first is
+    live is refused too (it would take the program's link over), unless a new program was started."""
+    robot = fake_address()
     hooks = Hooks()
     ports = _ports()
-    servers = CallbackServers("127.0.0.77", ports, hooks)
+    servers = CallbackServers(robot, ports, hooks)
     await servers.start("127.0.0.1")
     try:
         reader, writer = await asyncio.open_connection("127.0.0.1", ports["reverse"])
@@ -118,13 +118,19 @@ async def test_connections_from_another_address_are_refused_and_a_newer_one_repl
         writer.close()
         assert servers.reverse.refused == 1
         assert hooks.links == []
-        _, w1 = await asyncio.open_connection("127.0.0.1", ports["reverse"], local_addr=("127.0.0.77", 0))
+        _, w1 = await asyncio.open_connection("127.0.0.1", ports["reverse"], local_addr=(robot, 0))
         await hooks.wait_for(lambda: servers.reverse.connected)
         first_link = servers.reverse.link
-        _, w2 = await asyncio.open_connection("127.0.0.1", ports["reverse"], local_addr=("127.0.0.77", 0))
-        await hooks.wait_for(lambda: servers.reverse.link is not first_link and servers.reverse.connected)
-        assert servers.reverse.refused == 1, "the newer connection was accepted"
+        r2, w2 = await asyncio.open_connection("127.0.0.1", ports["reverse"], local_addr=(robot, 0))
+        assert await asyncio.wait_for(r2.read(10), 5.0) == b"", "the second connection is closed"
+        assert servers.reverse.refused == 2
+        assert servers.reverse.link is first_link
         w2.close()
+        servers.expect_program()  # a new program may replace the old one's link
+        _, w3 = await asyncio.open_connection("127.0.0.1", ports["reverse"], local_addr=(robot, 0))
+        await hooks.wait_for(lambda: servers.reverse.link is not first_link and servers.reverse.connected)
+        assert servers.reverse.refused == 2, "the new program's connection was accepted"
+        w3.close()
         await hooks.wait_for(lambda: not servers.reverse.connected)
         w1.close()
     finally:
@@ -135,7 +141,7 @@ async def test_urcap_mode_play_fetches_the_program_from_the_script_sender() -> N
     hooks = Hooks()
     ports = _ports()
     hooks.program = _program(ports)
-    address = next(ADDRESSES)
+    address = fake_address()
     servers = CallbackServers(address, ports, hooks)
     hooks.servers = servers
     await servers.start("127.0.0.1")

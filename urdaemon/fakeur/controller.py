@@ -132,6 +132,7 @@ class FakeController:
         powered: bool = False,
         urcap: tuple[str, int] | None = None,
         faults: FaultInjector | None = None,
+        rtde_versions: tuple[int, ...] = (1, 2),
     ) -> None:
         self.model = load_ur_model(model) if isinstance(model, str) else model
         self.address = address
@@ -143,6 +144,9 @@ class FakeController:
         self.rate_hz = 125.0 if controller_version[0] < 5 else 500.0
         self.step_time = 1.0 / self.rate_hz
         self.faults = faults or FaultInjector()
+        self.rtde_versions = rtde_versions
+        """RTDE protocol versions it accepts: ``(1,)`` is a controller that speaks only v1 (no output
+        frequency, no recipe ids), which a client must fall back to when v2 is refused."""
         self.urcap = urcap
         """Where a loaded External Control program fetches its script: the daemon's script sender."""
         self.loaded_program: str | None = DEFAULT_URCAP_PROGRAM if urcap else None
@@ -368,7 +372,7 @@ class FakeController:
     def _on_rtde(self, client: _RtdeClient, event: Any) -> None:
         conn = client.conn
         if isinstance(event, rtde.ProtocolVersionRequested):
-            conn.send(rtde.ProtocolVersionAccept(event.version in (1, 2)))
+            conn.send(rtde.ProtocolVersionAccept(event.version in self.rtde_versions))
         elif isinstance(event, rtde.ControllerVersionRequested):
             conn.send(rtde.ControllerVersionReply(*self.controller_version))
         elif isinstance(event, rtde.SetupOutputsRequested):

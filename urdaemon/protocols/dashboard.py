@@ -40,8 +40,8 @@ Decisions where the reference is silent or unverified:
   is unverified: the daemon's typed commands always carry the exact keywords of §3.2, so this
   leniency can only hide a miscased ``Raw`` line. A line that names no known command, or a known
   one with an invalid argument, becomes ``UnknownCommand``; ``unknown_command_text`` gives the
-  answer our fake sends, ``Could not understand: '<line>'`` (the real wording is unverified;
-  §3.2 quotes only "could not understand…").
+  answer our fake sends, ``could not understand: '<line>'`` (§3.2 quotes "could not understand…";
+  the quoted line after it is unverified).
 * **Ambiguous commands.** ``load installation x`` is ``LoadInstallation("x")`` on the server, so
   ``send(Load("installation x"))`` is refused: ``send`` refuses every typed command whose line the
   server would read as a different command.
@@ -914,8 +914,9 @@ def user_role_text(role: UserRole) -> str:
 
 
 def unknown_command_text(line: str) -> str:
-    """What our fake answers to a line it does not understand (real wording unverified)."""
-    return f"Could not understand: '{line}'"
+    """What a server answers to a line it does not understand: ``could not understand: '<line>'``,
+    lower-case as §3.2 quotes it (the daemon reads any reply that starts so as a refusal)."""
+    return f"could not understand: '{line}'"
 
 
 # --- the connection -------------------------------------------------------------------------------

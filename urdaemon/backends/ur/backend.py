@@ -13,19 +13,27 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
 from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
-from urdaemon.backends.ur.servers import CallbackServers
+from urdaemon.backends.ur.servers import REPLACED, CallbackServers
 from urdaemon.cell.config import Robot, UrOptions
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrDaemonError, UrTimeoutError
-from urdaemon.model import CommandMode, Lifecycle, RobotMode
+from urdaemon.errors import (
+    BackendError,
+    ConnectionLostError,
+    LocalProtocolError,
+    RobotFaultError,
+    UrDaemonError,
+    UrTimeoutError,
+)
+from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
@@ -101,6 +109,17 @@ class UrBackend(Backend):
         self._handed_back = False
         """After hand_back_control the program is not sent again until resend_program or startup."""
         self._runs = 0
+        self._program_lock = asyncio.Lock()
+        """Held by startup and resend_program: a second call while one is under way is refused."""
+        self._program_links_up_at = -1e9
+        """When the program last held all its links (a program sent after this is still connecting)."""
+        self._tool_contact_armed = False
+        self._startup_problem = ""
+        """Why the last start-up failed (kept in the status until one succeeds)."""
+        self._program_ended = ""
+        """What the controller said when our program last ended (a runtime error, a stop)."""
+        self._lost_link = ""
+        """The program link that dropped while the others stayed up (the program is being restarted)."""
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -116,9 +135,9 @@ class UrBackend(Backend):
         else:  # a link was lost: reconnecting, motion resumes only from a new command
             state.lifecycle = Lifecycle.RECOVERING
             state.lifecycle_reason = f"reconnecting to {self.address}"
+        _forget_robot(state)  # nothing is known about the robot until RTDE streams again
         if self.on_change is not None:
             self.on_change()  # no cycle runs until RTDE streams again: say it now
-        state.program_running = False
         read_only = self.options.read_only
         if not self._servers_started and not read_only:
             await self.servers.start(self.options.listen_address)
@@ -154,7 +173,7 @@ class UrBackend(Backend):
                 if self.options.startup:
                     try:
                         await self.startup()
-                    except (RobotFaultError, UrTimeoutError, BackendError) as err:
+                    except UrDaemonError as err:
                         # e.g. an emergency stop: report it and keep the links; the status shows why
                         log.warning("[%s] start-up failed: %s", self.name, err)
                         self.notice("startup_failed", str(err))
@@ -165,7 +184,7 @@ class UrBackend(Backend):
                     await primary_task
         finally:
             self._close_links()
-            state.program_running = False
+            _forget_robot(state)  # the last package's RUNNING/NORMAL say nothing about the robot now
             if state.lifecycle not in (Lifecycle.CONNECTING, Lifecycle.RECOVERING):
                 state.lifecycle = Lifecycle.DISCONNECTED
 
@@ -221,8 +240,10 @@ class UrBackend(Backend):
     async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
         """Set the payload through the script command socket (or a secondary program without one)."""
         self._check_commanding()
+        if not all(math.isfinite(v) for v in (mass, *cog)):
+            raise BackendError(f"payload mass and centre of gravity must be finite, got {mass!r}, {cog!r}")
         if self.servers.script_command.connected:
-            self.servers.script_command.send(script_command.SetPayload(mass, cog))
+            self._script_command(script_command.SetPayload(mass, cog), "the payload")
             return
         if self._primary is None:
             raise BackendError("not connected to the robot")
@@ -242,27 +263,47 @@ class UrBackend(Backend):
         except UrTimeoutError:
             self._drop_dashboard()  # its late reply would be read as the next command's answer
             raise
+        text = str(getattr(reply, "text", ""))
         success = getattr(reply, "success", None)
-        if success is None:  # a query: it succeeded if it could be read
+        if isinstance(reply, dash.RawReply):  # a line the codec does not type: the robot's words decide
+            success = not _is_refusal(text)
+        elif success is None:  # a query: it succeeded if it could be read
             success = all(getattr(reply, f, "") is not None for f in ("mode", "state", "running", "remote"))
-        return bool(success), str(getattr(reply, "text", ""))
+        return bool(success), text
 
     async def zero_ft_sensor(self) -> None:
         """Zero the force/torque sensor (script command)."""
-        if not self.servers.script_command.send(script_command.ZeroFtSensor()):
-            raise BackendError("the control program is not connected")
+        self._script_command(script_command.ZeroFtSensor(), "zero_ft_sensor")
 
     async def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (script command)."""
         if volts not in (0, 12, 24):
             raise BackendError(f"tool voltage must be 0, 12 or 24 V, got {volts!r}")
-        if not self.servers.script_command.send(script_command.SetToolVoltage(volts)):
-            raise BackendError("the control program is not connected")
+        self._script_command(script_command.SetToolVoltage(volts), "the tool voltage")
 
     async def startup(self) -> None:
-        """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
+        """Power on, release the brakes, and start the control program (headless) or play it (URCap).
+
+        Without a dashboard (PolyScope X, or it refused the connection) power-on and brake release go
+        over the primary interface as controller commands, as urcl does; a URCap program can then only
+        be started on the pendant. Refused while a start-up or program restart is under way.
+        """
         self._check_commanding()
-        board = await self._dashboard_link()
+        async with self._exclusive("start-up"):
+            try:
+                await self._startup()
+            except UrDaemonError as err:
+                self._startup_problem = f"start-up failed: {err}"
+                raise
+            self._startup_problem = ""
+
+    async def _startup(self) -> None:
+        board: DashboardLink | None
+        try:
+            board = await self._dashboard_link()
+        except UrDaemonError as err:
+            board = None
+            log.info("[%s] start-up without the dashboard (%s): using the primary interface", self.name, err)
         self._handed_back = False
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         try:  # decide on fresh state, not on what the last connection left behind
@@ -270,36 +311,73 @@ class UrBackend(Backend):
         except TimeoutError as err:
             raise UrTimeoutError("no RTDE data to start up from") from err
         if self.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
-            reply = await board.command(dash.PowerOn())
-            if not reply.success:
-                raise RobotFaultError(f"power on refused: {reply.text}")
+            await self._power_step(board, dash.PowerOn(), prim.ControllerCommand.POWER_ON, "power on")
             await self._wait_mode((RobotMode.IDLE, RobotMode.RUNNING), deadline)
         if self.state.robot_mode is not RobotMode.RUNNING:
-            reply = await board.command(dash.BrakeRelease())
-            if not reply.success:
-                raise RobotFaultError(f"brake release refused: {reply.text}")
+            await self._power_step(
+                board, dash.BrakeRelease(), prim.ControllerCommand.BRAKE_RELEASE, "brake release"
+            )
             await self._wait_mode((RobotMode.RUNNING,), deadline)
         if self.robot.headless:
             # the cycle may already have sent it the moment the brakes came off: a second program
             # would replace the first while it is still connecting back
             self._send_program(force=False)
         elif not self.servers.reverse.connected:
+            if board is None:
+                raise BackendError(
+                    "no dashboard to play the External Control program (PolyScope X, or the dashboard "
+                    "refused the connection): press play on the pendant, or run headless"
+                )
+            self.servers.expect_program()
             reply = await board.command(dash.Play())
             if not reply.success:
                 raise RobotFaultError(f"play refused: {reply.text}")
 
-    async def resend_program(self) -> None:
-        """Send the control program again (headless) or play the loaded one (URCap)."""
-        self._check_commanding()
-        self._handed_back = False
-        if self.robot.headless:
-            if self._primary is None:
-                raise BackendError("not connected to the robot")
-            self._send_program(force=True)
-        else:
-            reply = await (await self._dashboard_link()).command(dash.Play())
+    async def _power_step(
+        self, board: DashboardLink | None, command: Any, fallback: prim.ControllerCommand, what: str
+    ) -> None:
+        """One power-on step: on the dashboard, or as a controller command on the primary interface."""
+        if board is not None:
+            reply = await board.command(command)
             if not reply.success:
-                raise BackendError(f"play refused: {reply.text}")
+                raise RobotFaultError(f"{what} refused: {reply.text}")
+            return
+        if self._primary is None:
+            raise BackendError("not connected to the robot")
+        self._primary.send_script(str(fallback))
+
+    async def resend_program(self) -> None:
+        """Send the control program again (headless) or play the loaded one (URCap).
+
+        Refused while a start-up or restart is under way, and while the program sent last is still
+        connecting back (a second program would only replace it)."""
+        self._check_commanding()
+        async with self._exclusive("program restart"):
+            if self.robot.headless:
+                if self._primary is None:
+                    raise BackendError("not connected to the robot")
+                pending = time.monotonic() - self._program_sent_at
+                if self._program_sent_at > self._program_links_up_at and pending < PROGRAM_RESEND_S:
+                    raise BackendError(
+                        f"the control program sent {pending:.2f} s ago is still connecting back: "
+                        "not sending another"
+                    )
+                self._handed_back = False
+                self._send_program(force=True)
+            else:
+                self._handed_back = False
+                self.servers.expect_program()
+                reply = await (await self._dashboard_link()).command(dash.Play())
+                if not reply.success:
+                    raise BackendError(f"play refused: {reply.text}")
+
+    @contextlib.asynccontextmanager
+    async def _exclusive(self, what: str) -> AsyncIterator[None]:
+        """Run a start-up or program restart alone: refuse (BackendError) while one is under way."""
+        if self._program_lock.locked():
+            raise BackendError(f"a start-up or program restart is already under way: {what} refused")
+        async with self._program_lock:
+            yield
 
     async def hand_back_control(self) -> None:
         """End the control program's loop (a STOPPED frame); in URCap mode the pendant program continues."""
@@ -376,14 +454,14 @@ class UrBackend(Backend):
     async def force_mode(self, start: object | None) -> None:
         """Start force mode (a ``StartForceMode`` script command) or end it (None)."""
         message = script_command.EndForceMode() if start is None else start
-        if not self.servers.script_command.send(message):
-            raise BackendError("the control program is not connected")
+        self._script_command(message, "force mode")
 
     async def tool_contact(self, start: bool) -> None:
         """Arm tool-contact detection, or end it; the result comes back as a ``tool_contact`` notice."""
         message = script_command.StartToolContact() if start else script_command.EndToolContact()
-        if not self.servers.script_command.send(message):
-            raise BackendError("the control program is not connected")
+        self._script_command(message, "tool contact")
+        if start:  # ending it leaves it armed: the robot answers CANCELED (or a contact crossed the end)
+            self._tool_contact_armed = True
 
     # ---- the cycle ---------------------------------------------------------------------------------------
 
@@ -396,18 +474,18 @@ class UrBackend(Backend):
         if gap > 1.5 * self.period and previous > 0.0:
             self._missed += round(gap / self.period) - 1
             self._late += 1
-        reverse_server = self.servers.reverse
-        state.program_running = state.program_running and reverse_server.connected
-        if state.lifecycle is Lifecycle.RUNNING and not reverse_server.connected:
-            state.lifecycle_reason = (
-                "read-only (ur.read_only: true): watching, not commanding"
-                if self.options.read_only
-                else "control handed back to the robot"
-                if self._handed_back
-                else "waiting for the control program to connect"
-            )
-        else:
+        servers = self.servers
+        links_up = (
+            servers.reverse.link is not None
+            and servers.trajectory.link is not None
+            and servers.script_command.link is not None
+        )
+        # ready only while the program holds every link it uses (reverse, trajectory, script command)
+        state.program_running = state.program_running and links_up
+        if state.program_running and state.lifecycle is Lifecycle.RUNNING:
             state.lifecycle_reason = ""
+        else:
+            state.lifecycle_reason = self._not_running_reason(state)
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
@@ -427,14 +505,22 @@ class UrBackend(Backend):
         if not self._command_sent:
             self.send_command()
         if (
-            not self._program_reads_frames()
+            not links_up
             and self.robot.headless
             and not self.options.read_only
             and not self._handed_back
-            and not self.servers.trajectory.connected
-            and not self.servers.script_command.connected
             and state.robot_mode is RobotMode.RUNNING
             and state.lifecycle is Lifecycle.RUNNING
+            and (
+                # no program: send one
+                (
+                    not self._program_reads_frames()
+                    and not servers.trajectory.connected
+                    and not servers.script_command.connected
+                )
+                # the program runs but lost a link: a new program brings every link back
+                or (servers.reverse.connected and self._lost_link)
+            )
         ):
             self._send_program(force=False)
 
@@ -489,6 +575,7 @@ class UrBackend(Backend):
         if self._primary is None or (not force and now - self._program_sent_at < PROGRAM_RESEND_S):
             return
         self._program_sent_at = now
+        self.servers.expect_program()  # its links may replace the old program's
         self._primary.send_script(prim.headless_program(self._program_text()))
         log.info("[%s] control program sent (headless, connecting back to %s)", self.name, self._host_ip)
 
@@ -522,11 +609,36 @@ class UrBackend(Backend):
     def on_link(self, name: str, connected: bool, reason: str) -> None:
         """A callback server's connection came or went."""
         log.info("[%s] %s", self.name, reason)
-        if not connected and name == "reverse":
+        if connected:
+            if not self.servers.missing():
+                self._program_links_up_at = time.monotonic()
+                self._lost_link = ""
+                self._program_ended = ""
+            return
+        if name == "reverse":
             self._freedrive_on = False  # the program ended: so did its freedrive
             self._swallow_result = False
-        if not connected and name in ("reverse", "trajectory"):
+        if name in ("reverse", "trajectory"):
             self._end_passthrough(int(trajectory_point.TrajectoryResultCode.FAILURE))
+        if name == "script_command":
+            self._tool_contact_armed = False  # its result can no longer come
+        if name == "script_sender" or reason.endswith(REPLACED) or self._rtde is None:
+            return  # a new program's link takes this one's place at once; or the daemon closes them
+        others = [s.name for s in self.servers.program_links if s.name != name and s.link is not None]
+        # (a lost reverse link ends the program: it closes the others itself and is sent again)
+        if name != "reverse" and others and not self._lost_link and not self._handed_back:
+            # the program runs on without this link: not ready from now, and repaired (headless)
+            self._lost_link = name
+            log.warning(
+                "[%s] the control program lost its %s link (%s still connected): %s",
+                self.name,
+                name,
+                ", ".join(others),
+                "restarting the program" if self.robot.headless else "not ready until it is restarted",
+            )
+        self.state.program_running = False
+        if self.on_change is not None:
+            self.on_change()  # say it now, not at the next cycle or status tick
 
     def _end_passthrough(self, code: int) -> None:
         """The running passthrough goal (if any) ends with this trajectory result code."""
@@ -544,6 +656,10 @@ class UrBackend(Backend):
             self._end_passthrough(int(event.result))
             return
         if isinstance(event, script_command.ToolContactResult):
+            if not self._tool_contact_armed:  # nobody asked: not a tool-contact event
+                log.warning("[%s] ignored a tool-contact result nobody armed: %s", self.name, event)
+                return
+            self._tool_contact_armed = False
             outcome = "contact" if event.code == script_command.ToolContactResultCode.SUCCESS else "canceled"
             self.notice("tool_contact", outcome)
             return
@@ -553,6 +669,7 @@ class UrBackend(Backend):
             sockname = link.transport.get_extra_info("sockname") if link and link.transport else None
             self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "")
         if isinstance(event, script_sender.ProgramRequested):
+            self.servers.expect_program()  # the URCap runs it next: its links may replace the old ones
             self.servers.script_sender.send(script_sender.Program(self._program_text()))
             log.info("[%s] control program sent to the External Control URCap", self.name)
 
@@ -561,9 +678,11 @@ class UrBackend(Backend):
         if isinstance(message, prim.RuntimeExceptionMessage):
             text = f"runtime exception at {message.line}:{message.column}: {message.text}"
             log.warning("[%s] %s", self.name, text)
+            self._program_ended = text
         elif isinstance(message, prim.ErrorCodeMessage):
             text = f"error C{message.code}A{message.argument}: {message.text}"
             log.warning("[%s] %s", self.name, text)
+            self._program_ended = text
         elif isinstance(message, prim.TextMessage | prim.KeyMessage):
             text = (
                 message.text if isinstance(message, prim.TextMessage) else f"{message.title}: {message.text}"
@@ -605,6 +724,56 @@ class UrBackend(Backend):
             values.append(float(value) if name in _DOUBLE_INPUTS else int(value))
         rtde.send_inputs(values)
 
+    def _script_command(self, message: Any, what: str) -> None:
+        """Send a script command; BackendError (never a traceback) if it cannot be sent or encoded."""
+        try:
+            sent = self.servers.script_command.send(message)
+        except LocalProtocolError as err:  # e.g. a value beyond what the wire's int32 can carry
+            raise BackendError(f"cannot send {what} to the robot: {err}") from None
+        if not sent:
+            raise BackendError("the control program is not connected (no script command link)")
+
+    def _not_running_reason(self, state: RobotState) -> str:
+        """Why the robot cannot take motion now, and what to do about it (runs only while not ready)."""
+        lifecycle = state.lifecycle
+        problem = f"; {self._startup_problem}" if self._startup_problem else ""
+        if lifecycle is Lifecycle.EMERGENCY_STOP:
+            return f"emergency stop ({state.safety_mode.name}): release it, then start up again{problem}"
+        if lifecycle is Lifecycle.PROTECTIVE_STOP:
+            return (
+                f"safety mode {state.safety_mode.name}: unlock the protective stop (dashboard "
+                f"'unlock protective stop' or the pendant), then resend the program{problem}"
+            )
+        if lifecycle is Lifecycle.IDLE:
+            mode = state.robot_mode
+            if mode is RobotMode.POWER_OFF:
+                return f"the robot is powered off: call startup, or power it on on the pendant{problem}"
+            if mode is RobotMode.IDLE:
+                return f"the brakes are engaged: call startup, or release them on the pendant{problem}"
+            return f"robot mode {mode.name}{problem}"
+        if lifecycle is Lifecycle.PAUSED:
+            return "the program is paused on the controller: resume it (play)"
+        if lifecycle is not Lifecycle.RUNNING:
+            return state.lifecycle_reason
+        if self.options.read_only:
+            return "read-only (ur.read_only: true): watching, not commanding"
+        if self._handed_back:
+            return "control handed back to the robot (hand_back_control): call resend_program to take it"
+        if self._lost_link:
+            return f"the control program lost its {self._lost_link} link: " + (
+                "restarting the program" if self.robot.headless else "restart it (resend_program or play)"
+            )
+        missing = self.servers.missing()
+        if missing and len(missing) < len(self.servers.program_links):
+            return f"the control program is connecting back (waiting for: {', '.join(missing)})"
+        if self._program_ended:
+            return f"the control program ended: {self._program_ended}{problem}"
+        if problem:
+            return problem[2:]
+        if not self.robot.headless:
+            return "waiting for the control program: play it on the pendant or call resend_program"
+        return "waiting for the control program to connect"
+
     def _check_commanding(self) -> None:
         if self.options.read_only:
             raise BackendError("read-only robot (ur.read_only: true): it is watched, not commanded")
@@ -643,6 +812,23 @@ class UrBackend(Backend):
             if server.link is not None:
                 server.link.close()
         self._rtde = self._primary = self._dashboard = None
+        self._lost_link = ""
+
+
+def _forget_robot(state: RobotState) -> None:
+    """Say nothing is known about the robot (its link is down): modes unknown, no program."""
+    state.robot_mode = RobotMode.DISCONNECTED
+    state.safety_mode = SafetyMode.UNDEFINED_SAFETY_MODE
+    state.program_running = False
+
+
+_REFUSALS = ("could not understand", "failed to execute", "error")
+
+
+def _is_refusal(text: str) -> bool:
+    """Whether a dashboard reply to a line the codec does not type says it was refused."""
+    lowered = text.strip().lower()
+    return not lowered or lowered.startswith(_REFUSALS)
 
 
 _DOUBLE_INPUTS = {"speed_slider_fraction", "standard_analog_output_0", "standard_analog_output_1"}

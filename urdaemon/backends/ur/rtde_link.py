@@ -130,7 +130,9 @@ class RtdeLink(asyncio.Protocol):
         *,
         frequency: float | None = None,
     ) -> rtde.OutputsConfigured:
-        """Negotiate v2 (v1 if refused), learn the version, set up outputs (and inputs); not started yet."""
+        """Negotiate v2 (v1 if refused), learn the version, set up outputs (and inputs); not started yet.
+
+        Under v1 ``frequency`` is ignored: the controller streams at its full rate (§1.4)."""
         reply = await self._request(rtde.RequestProtocolVersion(2), rtde.ProtocolVersionReply)
         if not reply.accepted:
             reply = await self._request(rtde.RequestProtocolVersion(1), rtde.ProtocolVersionReply)
@@ -138,10 +140,14 @@ class RtdeLink(asyncio.Protocol):
                 raise RemoteProtocolError("rtde: the controller accepts neither protocol version 2 nor 1")
         self.controller_version = await self._request(rtde.GetControllerVersion(), rtde.ControllerVersion)
         top = rtde.max_frequency(self.controller_version.major)
-        self.frequency = top if frequency is None else min(frequency, top)
-        configured = await self._request(
-            rtde.SetupOutputs(self.frequency, tuple(outputs)), rtde.OutputsConfigured
-        )
+        if self.conn.protocol_version == 1:
+            # v1's SETUP_OUTPUTS carries no frequency: the controller streams at its own rate
+            self.frequency = top
+            setup = rtde.SetupOutputs(None, tuple(outputs))
+        else:
+            self.frequency = top if frequency is None else min(frequency, top)
+            setup = rtde.SetupOutputs(self.frequency, tuple(outputs))
+        configured = await self._request(setup, rtde.OutputsConfigured)
         if configured.not_found:
             raise RemoteProtocolError(
                 f"rtde: the controller does not know output(s) {', '.join(configured.not_found)}"

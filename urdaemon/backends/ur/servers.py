@@ -1,29 +1,62 @@
 """The servers the robot's control program dials: reverse, script sender, trajectory, script command.
 
-Each listens on one of the robot's configured host ports, accepts only the robot's own address and
-keeps one connection (a newer one from the robot replaces an older one: a new program replaced the
-old), and wraps the daemon
-side of its sans-IO codec. ``send`` writes at once (one write per frame: the script reads fixed-size
-frames); events and connect/disconnect reach the owner through callbacks on the loop.
+Each listens on one of the robot's configured host ports, accepts only the robot's own address,
+keeps one connection, and wraps the daemon side of its sans-IO codec. ``send`` writes at once (one
+write per frame: the script reads fixed-size frames); events and connect/disconnect reach the owner
+through callbacks on the loop.
+
+Who may connect (the callback-link rules, docs/ursim.md):
+
+* Only the robot's address; anything else is closed at once and counted (logged the first time and
+  then every ``REFUSAL_LOG_EVERY``-th time, with the count).
+* One connection per port, as urcl's reverse interface allows one client. While the program's link
+  is up, a second connection is refused, even from the robot's address: it must not take over a
+  live link (it would get the program's frames, and its own bytes would be read as the program's).
+* A replacement is accepted only after the daemon started a new program (``expect_program``: it
+  sent one headless, played one, or handed one out on the script-sender port): a new program
+  connects while the old one's close may still be on its way. That permission lasts
+  ``PROGRAM_CONNECT_WINDOW_S`` and is used up by the first connection on each port.
+* The script-sender port is a request/response with no stream to steal: there a newer connection
+  from the robot replaces an older one (a URCap that gave up must not lock the port).
+* Only the current link's messages reach the owner: bytes from a link that was replaced or refused
+  are dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import ipaddress
 import logging
 import socket
+import time
 from collections.abc import Callable
 from typing import Any, Protocol, cast
 
-from urdaemon.errors import ProtocolError
+from urdaemon.errors import BackendError, ProtocolError
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 from urdaemon.protocols._buffer import Side
 
-__all__ = ["CallbackLink", "CallbackServer", "CallbackServers", "ServerHooks"]
+__all__ = [
+    "PROGRAM_CONNECT_WINDOW_S",
+    "REFUSAL_LOG_EVERY",
+    "REPLACED",
+    "CallbackLink",
+    "CallbackServer",
+    "CallbackServers",
+    "ServerHooks",
+]
 
 log = logging.getLogger("urdaemon.ur")
+
+PROGRAM_CONNECT_WINDOW_S = 15.0
+"""After the daemon starts a program, how long its connections may replace the old program's links
+(the script dials each port up to 5 times 0.2 s apart; a URCap first fetches the script)."""
+REPLACED = "replaced by the new program's connection"
+"""The end of the reason ``on_link`` gets when a new program's connection replaced the old one."""
+REFUSAL_LOG_EVERY = 100
+"""Refused connections are logged the first time and then every this many times (with the count)."""
 
 
 class _Codec(Protocol):
@@ -63,6 +96,8 @@ class CallbackLink(asyncio.Protocol):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
 
     def data_received(self, data: bytes) -> None:
+        if self.server.link is not self:  # replaced or refused: its bytes are nobody's messages
+            return
         try:
             events = self.codec.receive_data(data)
         except ProtocolError as err:
@@ -106,34 +141,66 @@ class CallbackServer:
         self.hooks = hooks
         self.link: CallbackLink | None = None
         self.refused = 0
+        self.replaceable = False
+        """A newer connection from the robot replaces the live one at any time (the script sender)."""
+        self._replace_until = 0.0
         self._server: asyncio.Server | None = None
 
     async def start(self, host: str) -> None:
-        """Listen on ``host``:port."""
+        """Listen on ``host``:port; BackendError (one line, naming the port) if it cannot."""
         loop = asyncio.get_running_loop()
-        self._server = await loop.create_server(
-            lambda: CallbackLink(self), host, self.port, reuse_address=True
-        )
+        try:
+            self._server = await loop.create_server(
+                lambda: CallbackLink(self), host, self.port, reuse_address=True
+            )
+        except OSError as err:
+            if err.errno == errno.EADDRINUSE:
+                why = (
+                    "is in use: another program listens there (another urdaemon, a ROS driver, or "
+                    "another robot's callback port); free it or set this robot's ports: in the cell file"
+                )
+            elif err.errno == errno.EADDRNOTAVAIL:
+                why = "cannot be opened: this machine has no such address (check ur.listen_address)"
+            else:
+                why = f"cannot be opened: {err.strerror or err}"
+            raise BackendError(f"the {self.name} callback port {host}:{self.port} {why}") from None
+
+    def expect_program(self, window: float = PROGRAM_CONNECT_WINDOW_S) -> None:
+        """A new program was started: its connection may replace the live one for ``window`` s."""
+        self._replace_until = time.monotonic() + window
 
     def admit(self, link: CallbackLink) -> bool:
-        """Accept the robot's own address, one connection at a time."""
+        """Accept the robot's own address, one connection at a time (see the module's rules)."""
         if not _same_host(link.peer, self.robot_address):
-            self.refused += 1
-            log.warning(
-                "%s: refused a connection from %s (the robot is %s)", self.name, link.peer, self.robot_address
-            )
+            self._refuse(link, f"it is not the robot ({self.robot_address})")
             return False
         old = self.link
         if old is not None:
-            # the robot runs one program at a time: a new connection means a new program replaced the
-            # old one, whose connection is dead even if its close has not reached us yet
+            if not self.replaceable and time.monotonic() > self._replace_until:
+                self._refuse(link, "the control program's link is live and no new program was started")
+                return False
+            # a new program replaced the old one, whose connection is dead even if its close has not
+            # reached us yet
             log.info("%s: a new connection from %s replaces the previous one", self.name, link.peer)
             self.link = None
             old.close()
-            self.hooks.on_link(self.name, False, f"{self.name}: replaced by a new connection")
+            self.hooks.on_link(self.name, False, f"{self.name}: {REPLACED}")
+        self._replace_until = 0.0  # the new program's connection came: the permission is used up
         self.link = link
         self.hooks.on_link(self.name, True, f"{self.name}: connected from {link.peer}")
         return True
+
+    def _refuse(self, link: CallbackLink, why: str) -> None:
+        self.refused += 1
+        if self.refused == 1 or self.refused % REFUSAL_LOG_EVERY == 0:
+            log.warning(
+                "%s: refused a connection from %s: %s (%d refused so far; logged every %dth)",
+                self.name,
+                link.peer,
+                why,
+                self.refused,
+                REFUSAL_LOG_EVERY,
+            )
 
     def lost(self, link: CallbackLink, reason: str) -> None:
         """Forget ``link`` if it is the current one and tell the owner."""
@@ -186,6 +253,7 @@ class CallbackServers:
             lambda: script_sender.ScriptSenderConnection(Side.DAEMON),
             hooks,
         )
+        self.script_sender.replaceable = True
         self.trajectory = CallbackServer(
             "trajectory",
             ports["trajectory"],
@@ -201,6 +269,18 @@ class CallbackServers:
             hooks,
         )
         self.all = (self.reverse, self.script_sender, self.trajectory, self.script_command)
+        self.program_links = (self.reverse, self.trajectory, self.script_command)
+        """The links the control program holds while it runs (it dials them in the order
+        trajectory, script command, reverse)."""
+
+    def expect_program(self) -> None:
+        """The daemon started a new program: its connections may replace the old program's."""
+        for server in self.program_links:
+            server.expect_program()
+
+    def missing(self) -> list[str]:
+        """The program's links that are not connected (empty while the program holds them all)."""
+        return [server.name for server in self.program_links if server.link is None]
 
     def set_robot_address(self, address: str) -> None:
         """Accept connections from ``address`` (the robot's resolved IP)."""
@@ -212,7 +292,7 @@ class CallbackServers:
         try:
             for server in self.all:
                 await server.start(host)
-        except OSError:
+        except BackendError:
             await self.close()
             raise
 
