@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.helpers import drain_in_background, wait_for_line
+from tests.helpers import drain_in_background, fake_address, wait_for_line
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.protocols import dashboard as dash
@@ -50,11 +50,12 @@ async def _serve(args: list[str], expect: str) -> subprocess.Popen[str]:
 
 
 async def test_fake_robot_from_a_cell_file_serves_every_ur_robot_at_its_address(tmp_path: Path) -> None:
+    alice, bob = fake_address(), fake_address()
     cell = {
         "cell": "fakecell",
         "robots": [
-            {"name": "alice", "model": "ur10e", "backend": "ur", "address": "127.0.0.91"},
-            {"name": "bob", "model": "ur3e", "backend": "ur", "address": "127.0.0.92"},
+            {"name": "alice", "model": "ur10e", "backend": "ur", "address": alice},
+            {"name": "bob", "model": "ur3e", "backend": "ur", "address": bob},
             {"name": "carol", "model": "ur5e", "backend": "mock"},
         ],
     }
@@ -62,7 +63,7 @@ async def test_fake_robot_from_a_cell_file_serves_every_ur_robot_at_its_address(
     path.write_text(yaml.safe_dump(cell))
     proc = await _serve(["--config", str(path), "--phases", "spread"], "serving 2 fake robot(s)")
     try:
-        for address, model in (("127.0.0.91", "UR10"), ("127.0.0.92", "UR3")):
+        for address, model in ((alice, "UR10"), (bob, "UR3")):
             # both tick on the process's one shared clock: each streams its own robot state
             state = await _first(prim.PrimaryConnection(Side.DAEMON), address, 30001, prim.RobotState)
             assert isinstance(state, prim.RobotState)
@@ -92,11 +93,12 @@ async def test_fake_robot_with_a_calibration_reports_its_kinematics(tmp_path: Pa
     }
     path = tmp_path / "calibration.yaml"
     path.write_text(yaml.safe_dump({"model": "ur5e", "dh_delta": delta}))
+    address = fake_address()
     proc = await _serve(
-        ["--model", "ur5e", "--address", "127.0.0.93", "--calibration", str(path)], "serving 1 fake robot(s)"
+        ["--model", "ur5e", "--address", address, "--calibration", str(path)], "serving 1 fake robot(s)"
     )
     try:
-        state = await _first(prim.PrimaryConnection(Side.DAEMON), "127.0.0.93", 30001, prim.RobotState)
+        state = await _first(prim.PrimaryConnection(Side.DAEMON), address, 30001, prim.RobotState)
         assert isinstance(state, prim.RobotState)
         kin = state.get(prim.KinematicsInfo)
         assert kin is not None

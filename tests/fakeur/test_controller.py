@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from tests.helpers import fake_address
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.controller import FakeController, FakePorts
 from urdaemon.fakeur.faults import FaultInjector
@@ -23,15 +24,14 @@ from urdaemon.protocols.kinematics_hash import kinematics_hash
 
 pytestmark = pytest.mark.timeout(60)
 
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(20))
 OUTPUTS = tuple(resource_path("rtde", "output_recipe.txt").read_text().split())
 INPUTS = tuple(resource_path("rtde", "input_recipe.txt").read_text().split())
 
 
 @contextlib.asynccontextmanager
 async def fake(**kwargs: Any) -> AsyncIterator[FakeController]:
-    """A started fake on a fresh 127.0.0.x address with the standard ports."""
-    controller = FakeController(kwargs.pop("model", "ur10e"), address=next(ADDRESSES), **kwargs)
+    """A started fake on a run-specific address (``fake_address``) with the standard ports."""
+    controller = FakeController(kwargs.pop("model", "ur10e"), address=fake_address(), **kwargs)
     await controller.start()
     try:
         yield controller

@@ -6,6 +6,7 @@ import asyncio
 
 import pytest
 
+from tests.helpers import fake_address
 from urdaemon.fakeur.cli import share_clock
 from urdaemon.fakeur.controller import FakeController, SharedClock
 
@@ -51,7 +52,7 @@ async def test_spread_clock_ticks_one_slot_per_sub_period() -> None:
 
 
 def test_share_clock_gives_each_fake_a_slot_and_refuses_mixed_rates() -> None:
-    fakes = [FakeController("ur10e", address=f"127.0.0.{5 + i}") for i in range(3)]
+    fakes = [FakeController("ur10e", address=fake_address()) for i in range(3)]
     spread = share_clock(fakes, "spread")
     assert spread is not None
     assert len(spread.slots) == 3
@@ -60,7 +61,7 @@ def test_share_clock_gives_each_fake_a_slot_and_refuses_mixed_rates() -> None:
     assert aligned is not None
     assert len(aligned.slots) == 1
     assert share_clock(fakes[:1], "spread") is None  # one fake keeps its own clock
-    cb3 = FakeController("ur10", controller_version=(3, 15, 7, 0))
+    cb3 = FakeController("ur10", address=fake_address(), controller_version=(3, 15, 7, 0))
     with pytest.raises(ValueError, match="cannot tick"):
         cb3.use_clock(aligned, 0)
     with pytest.raises(ValueError, match="slots"):

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from tests.helpers import drain_in_background
+from tests.helpers import drain_in_background, fake_address
 from urdaemon.model import RobotMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, rtde
@@ -29,11 +29,9 @@ dashboard_client = pytest.importorskip("dashboard_client")
 
 pytestmark = pytest.mark.timeout(120)
 
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(60))
-
 
 def _start_fake(*flags: str) -> tuple[subprocess.Popen[str], str]:
-    address = next(ADDRESSES)
+    address = fake_address()
     proc = subprocess.Popen(
         [sys.executable, "-m", "urdaemon", "fake-robot", "--model", "ur10e", "--address", address, *flags],
         stdout=subprocess.DEVNULL,

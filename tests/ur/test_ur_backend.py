@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import asyncio
-import itertools
 import sys
 from typing import Any
 
 import pytest
 
-from tests.helpers import free_tcp_port
+from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.description.urmodels import load_ur_model
@@ -19,7 +18,6 @@ from urdaemon.model import RobotMode
 
 pytestmark = pytest.mark.timeout(90)
 
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(160))
 HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
 
 
@@ -52,7 +50,7 @@ async def _until(client: Client, key: str, predicate: Any, limit: int = 400) -> 
 
 
 async def test_startup_from_powered_off_headless_then_a_move_succeeds() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME)
     await fake.start()
     try:
         assert fake.arm.robot_mode is RobotMode.POWER_OFF
@@ -84,7 +82,7 @@ async def test_startup_from_powered_off_headless_then_a_move_succeeds() -> None:
 
 
 async def test_urcap_mode_plays_the_program_which_fetches_the_script() -> None:
-    address = next(ADDRESSES)
+    address = fake_address()
     text = _cell(address, headless=False)
     script_sender = int(text.split("script_sender: ")[1].split(",")[0])
     fake = FakeController(
@@ -103,7 +101,7 @@ async def test_urcap_mode_plays_the_program_which_fetches_the_script() -> None:
 
 
 async def test_dashboard_and_program_services_and_robot_messages_over_zenoh() -> None:
-    address = next(ADDRESSES)
+    address = fake_address()
     nominal = load_ur_model("ur10e").dh
     calibrated = type(nominal)(
         theta=nominal.theta, a=nominal.a, d=tuple(v + 1e-4 for v in nominal.d), alpha=nominal.alpha
@@ -147,7 +145,7 @@ async def test_dashboard_and_program_services_and_robot_messages_over_zenoh() ->
 
 
 async def test_a_calibration_mismatch_is_published_on_the_events_key() -> None:
-    address = next(ADDRESSES)
+    address = fake_address()
     nominal = load_ur_model("ur10e").dh
     calibrated = type(nominal)(
         theta=nominal.theta, a=nominal.a, d=tuple(v + 2e-4 for v in nominal.d), alpha=nominal.alpha
@@ -200,8 +198,8 @@ PASSTHROUGH_POINTS = [
 
 
 async def test_alice_servos_a_trajectory_while_bob_runs_a_passthrough_trajectory() -> None:
-    fake_a = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
-    fake_b = FakeController("ur3e", address=next(ADDRESSES), initial_positions=HOME)
+    fake_a = FakeController("ur10e", address=fake_address(), initial_positions=HOME)
+    fake_b = FakeController("ur3e", address=fake_address(), initial_positions=HOME)
     await fake_a.start()
     await fake_b.start()
     try:
@@ -249,7 +247,7 @@ async def test_passthrough_on_a_mock_robot_is_refused_with_the_reason() -> None:
 
 async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
     """ur.read_only: state published; no inputs claimed, no program, no callback server, commands refused."""
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME, powered=True)
+    fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME, powered=True)
     await fake.start()
     text = _cell(fake.address, startup=False).replace(
         "ur: {startup: false,", "ur: {read_only: true, startup: false,"

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import free_tcp_port
+from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.client import Client, GoalHandle, RobotClient
@@ -28,8 +28,6 @@ from urdaemon.model import RobotMode, SafetyMode
 
 pytestmark = pytest.mark.timeout(120)
 
-ALICE_ADDRESS = "127.0.0.5"
-BOB_ADDRESS = "127.0.0.6"
 HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
 ALICE_TARGET = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
 BOB_TARGET = [-0.3, -1.7, 1.7, -1.6, -1.5, -0.2]
@@ -40,14 +38,14 @@ def _ports_yaml() -> str:
     return f"{{reverse: {p[0]}, script_sender: {p[1]}, trajectory: {p[2]}, script_command: {p[3]}}}"
 
 
-def _cell_text() -> str:
+def _cell_text(alice_address: str, bob_address: str) -> str:
     return f"""
 cell: urcell
 robots:
   - name: alice
     model: ur10e
     backend: ur
-    address: {ALICE_ADDRESS}
+    address: {alice_address}
     headless: true
     pose: {{xyz: [0.6, 0.0, 0.0]}}
     ports: {_ports_yaml()}
@@ -55,7 +53,7 @@ robots:
   - name: bob
     model: ur3e
     backend: ur
-    address: {BOB_ADDRESS}
+    address: {bob_address}
     headless: true
     pose: {{xyz: [-0.6, 0.0, 0.0]}}
     ports: {_ports_yaml()}
@@ -84,12 +82,12 @@ async def _cell(
     caplog: pytest.LogCaptureFixture, alice_dh: DhParameters | None = None
 ) -> AsyncIterator[Cell]:
     caplog.set_level(logging.INFO, logger="urdaemon.ur")
-    fake_alice = FakeController("ur10e", address=ALICE_ADDRESS, initial_positions=HOME, dh=alice_dh)
-    fake_bob = FakeController("ur3e", address=BOB_ADDRESS, initial_positions=HOME)
+    fake_alice = FakeController("ur10e", address=fake_address(), initial_positions=HOME, dh=alice_dh)
+    fake_bob = FakeController("ur3e", address=fake_address(), initial_positions=HOME)
     async with fake_alice, fake_bob:
         assert fake_alice.arm.robot_mode is RobotMode.POWER_OFF
         assert fake_bob.arm.robot_mode is RobotMode.POWER_OFF
-        async with running_daemon(_cell_text()) as (daemon, client):
+        async with running_daemon(_cell_text(fake_alice.address, fake_bob.address)) as (daemon, client):
             alice, bob = await client.robot("alice"), await client.robot("bob")
             cell = Cell(daemon, client, fake_alice, fake_bob, alice, bob, caplog)
             yield cell

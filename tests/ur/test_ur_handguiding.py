@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import itertools
 from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 
+from tests.helpers import fake_address
 from tests.integration.conftest import running_daemon
 from tests.ur.test_ur_backend import HOME, _cell, _until
 from urdaemon.client import Client, RobotClient
@@ -19,13 +19,11 @@ from urdaemon.fakeur.controller import FakeController
 
 pytestmark = pytest.mark.timeout(90)
 
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(200))
-
 
 @contextlib.asynccontextmanager
 async def _ready_alice() -> AsyncIterator[tuple[FakeController, Daemon, Client, RobotClient]]:
     """A fake UR10e at HOME and a daemon driving it as alice, once alice is ready; both closed after."""
-    fake = FakeController("ur10e", address=next(ADDRESSES), initial_positions=HOME)
+    fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME)
     await fake.start()
     try:
         async with running_daemon(_cell(fake.address)) as (daemon, client):
