@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import os
-import sys
 import time
 from pathlib import Path
 
@@ -14,6 +12,7 @@ import pytest
 import yaml
 
 from tests.description.support import quat_matrix
+from tests.helpers import fake_address, run_cli_in_thread
 from urdaemon.calibration_tool import (
     ControllerCalibration,
     calibration_document,
@@ -52,25 +51,9 @@ FAKE_DH = _calibrated(UR10E.dh)
 
 
 async def _run_cli(*args: str, timeout: float = 60.0) -> tuple[int, str]:
-    """Run ``python -m urdaemon calibration ARGS``; its exit code and stderr."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "urdaemon",
-        "calibration",
-        *args,
-        stdout=asyncio.subprocess.DEVNULL,
-        stderr=asyncio.subprocess.PIPE,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        _, stderr = await asyncio.wait_for(proc.communicate(), timeout)
-    except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
-    assert proc.returncode is not None
-    return proc.returncode, stderr.decode()
+    """Run ``urdaemon calibration ARGS`` (in-process, in a thread of its own); its exit code and stderr."""
+    run = await run_cli_in_thread("calibration", *args, timeout=timeout)
+    return run.code, run.stderr
 
 
 # --- the document -----------------------------------------------------------------------------------
@@ -143,12 +126,13 @@ def test_header_comment_cannot_be_broken_by_controller_text() -> None:
 
 async def test_calibration_of_a_fake_ur10e_builds_a_urdf_with_its_kinematics(tmp_path: Path) -> None:
     output = tmp_path / "alice_calibration.yaml"
-    async with FakeController("ur10e", address="127.0.0.96", dh=FAKE_DH):
-        code, stderr = await _run_cli("--address", "127.0.0.96", "--output", str(output), "--timeout", "20")
+    address = fake_address()
+    async with FakeController("ur10e", address=address, dh=FAKE_DH):
+        code, stderr = await _run_cli("--address", address, "--output", str(output), "--timeout", "20")
     assert code == 0, stderr
     text = output.read_text()
     assert text.startswith("#")
-    assert "127.0.0.96:30001" in text
+    assert f"{address}:30001" in text
     assert "URControl 5.15.0" in text
     calibration = load_calibration(output, UR10E)
     assert calibration.dh == FAKE_DH  # every float to the last bit
@@ -178,8 +162,9 @@ async def test_calibration_of_a_fake_ur10e_builds_a_urdf_with_its_kinematics(tmp
 
 
 async def test_read_calibration_reports_version_and_configuration() -> None:
-    async with FakeController("ur10e", address="127.0.0.96", controller_version=(5, 21, 3, 7), dh=FAKE_DH):
-        reading = await read_calibration("127.0.0.96", 30001, 10.0)
+    address = fake_address()
+    async with FakeController("ur10e", address=address, controller_version=(5, 21, 3, 7), dh=FAKE_DH):
+        reading = await read_calibration(address, 30001, 10.0)
     assert reading.version is not None
     assert (reading.version.major_version, reading.version.minor_version) == (5, 21)
     assert reading.configuration is not None
@@ -188,12 +173,11 @@ async def test_read_calibration_reports_version_and_configuration() -> None:
 
 
 async def test_no_robot_at_the_address_exits_1(tmp_path: Path) -> None:
-    start = time.monotonic()
+    address = fake_address()  # nothing listens there
     output = tmp_path / "cal.yaml"
-    code, stderr = await _run_cli("--address", "127.0.0.97", "--output", str(output), "--timeout", "3")
+    code, stderr = await _run_cli("--address", address, "--output", str(output), "--timeout", "3")
     assert code == 1
-    assert "cannot connect to 127.0.0.97:30001" in stderr
-    assert time.monotonic() - start < 30.0
+    assert f"cannot connect to {address}:30001" in stderr
     assert not output.exists()
 
 
@@ -209,19 +193,20 @@ async def test_a_silent_server_times_out_with_exit_1(tmp_path: Path) -> None:
         await reader.read()  # until the client goes
         writer.close()
 
-    server = await asyncio.start_server(serve, "127.0.0.98", 0)
+    address = fake_address()
+    server = await asyncio.start_server(serve, address, 0)
     port = server.sockets[0].getsockname()[1]
     output = tmp_path / "cal.yaml"
     async with server:
         start = time.monotonic()
         code, stderr = await _run_cli(
-            "--address", "127.0.0.98", "--port", str(port), "--output", str(output), "--timeout", "1.5"
+            "--address", address, "--port", str(port), "--output", str(output), "--timeout", "1.5"
         )
         elapsed = time.monotonic() - start
     assert connected.is_set()
     assert code == 1, stderr
     assert "no KINEMATICS_INFO within 1.5 s" in stderr
-    assert elapsed >= 1.5
+    assert elapsed >= 1.5  # a lower bound: a busy machine only makes it longer
     assert not output.exists()
 
 
@@ -229,11 +214,12 @@ async def test_read_calibration_raises_on_a_server_that_closes() -> None:
     async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         writer.close()
 
-    server = await asyncio.start_server(serve, "127.0.0.98", 0)
+    address = fake_address()
+    server = await asyncio.start_server(serve, address, 0)
     async with server:
         port = server.sockets[0].getsockname()[1]
         with pytest.raises(UrDaemonError, match="closed the connection before sending KINEMATICS_INFO"):
-            await read_calibration("127.0.0.98", port, 5.0)
+            await read_calibration(address, port, 5.0)
 
 
 async def test_read_calibration_times_out_on_a_server_that_never_writes() -> None:
@@ -241,11 +227,12 @@ async def test_read_calibration_times_out_on_a_server_that_never_writes() -> Non
         await reader.read()
         writer.close()
 
-    server = await asyncio.start_server(serve, "127.0.0.98", 0)
+    address = fake_address()
+    server = await asyncio.start_server(serve, address, 0)
     async with server:
         port = server.sockets[0].getsockname()[1]
         with pytest.raises(UrTimeoutError, match=r"no KINEMATICS_INFO within 0\.3 s"):
-            await read_calibration("127.0.0.98", port, 0.3)
+            await read_calibration(address, port, 0.3)
 
 
 @pytest.mark.parametrize(
@@ -261,12 +248,12 @@ async def test_read_calibration_times_out_on_a_server_that_never_writes() -> Non
 )
 async def test_bad_arguments_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
     argv = [arg.replace("{tmp}", str(tmp_path)) for arg in args]
-    code, stderr = await _run_cli("--address", "127.0.0.97", *argv)
+    code, stderr = await _run_cli("--address", fake_address(), *argv)
     assert code == 2, stderr
     assert message in stderr
 
 
 async def test_missing_output_argument_exits_2() -> None:
-    code, stderr = await _run_cli("--address", "127.0.0.97")
+    code, stderr = await _run_cli("--address", fake_address())
     assert code == 2
     assert "--output" in stderr
