@@ -13,8 +13,9 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TextIO
 
 __all__ = [
@@ -23,8 +24,11 @@ __all__ = [
     "drain_in_background",
     "fake_address",
     "free_tcp_port",
+    "in_thread",
+    "run_captured",
     "run_cli",
     "run_cli_in_thread",
+    "run_script",
     "wait_for_line",
 ]
 
@@ -172,10 +176,15 @@ def run_cli(*args: str) -> CliRun:
     """
     from urdaemon.cli import main
 
+    return run_captured(lambda: main(list(args)))
+
+
+def run_captured(entry: Callable[[], int | None]) -> CliRun:
+    """Call a command's entry point in this thread; what it returned or exited with, and wrote."""
     with _captured() as (out, err):
         try:
-            code = main(list(args))
-        except SystemExit as exit_:  # argparse's usage errors and --version
+            code = entry() or 0
+        except SystemExit as exit_:  # argparse's usage errors and --version, a script's exit
             if isinstance(exit_.code, str):
                 print(exit_.code, file=sys.stderr)
                 code = 1
@@ -184,28 +193,48 @@ def run_cli(*args: str) -> CliRun:
     return CliRun(code, out.getvalue(), err.getvalue())
 
 
+def run_script(path: Path, *args: str) -> CliRun:
+    """Run the Python script ``path ARGS`` as ``__main__`` in this thread, as ``python path ARGS`` would."""
+    import runpy
+
+    def entry() -> None:
+        saved = sys.argv
+        sys.argv = [str(path), *args]
+        try:
+            runpy.run_path(str(path), run_name="__main__")
+        finally:
+            sys.argv = saved
+
+    return run_captured(entry)
+
+
 async def run_cli_in_thread(*args: str, timeout: float = 60.0) -> CliRun:
     """``run_cli`` in a thread of its own, so the test's loop (and a daemon in it) keeps running.
 
     The thread is a daemon thread: a command that hangs fails the test after ``timeout`` seconds
     and cannot hold up the interpreter's exit.
     """
+    return await in_thread(lambda: run_cli(*args), f"urdaemon {' '.join(args)}", timeout)
+
+
+async def in_thread(call: Callable[[], CliRun], name: str, timeout: float) -> CliRun:
+    """Run ``call`` in a daemon thread of its own and wait (on this loop) at most ``timeout`` s for it."""
     loop = asyncio.get_running_loop()
     done: asyncio.Future[CliRun] = loop.create_future()
 
     def work() -> None:
         try:
-            result = run_cli(*args)
+            result = call()
         except BaseException as err:  # handed to the test, which raises it
             loop.call_soon_threadsafe(_settle, done, None, err)
         else:
             loop.call_soon_threadsafe(_settle, done, result, None)
 
-    threading.Thread(target=work, name=f"urdaemon {' '.join(args[:1])}", daemon=True).start()
+    threading.Thread(target=work, name=name, daemon=True).start()
     try:
         return await asyncio.wait_for(asyncio.shield(done), timeout)
     except TimeoutError:
-        raise AssertionError(f"urdaemon {' '.join(args)} did not finish within {timeout} s") from None
+        raise AssertionError(f"{name} did not finish within {timeout} s") from None
 
 
 def _settle(future: asyncio.Future[CliRun], result: CliRun | None, err: BaseException | None) -> None:

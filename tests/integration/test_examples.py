@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import asyncio
-import sys
-
 import pytest
 
+from tests.helpers import in_thread, run_script
 from tests.integration.conftest import ROOT, running_daemon
 from urdaemon.daemon import Daemon
 
@@ -14,19 +12,12 @@ pytestmark = pytest.mark.timeout(120)
 
 
 async def _run_example(name: str, daemon: Daemon, *args: str) -> tuple[int, str]:
+    """Run ``python examples/NAME --connect ENDPOINT ARGS`` in-process, in a thread of its own (the
+    daemon in this loop keeps serving); its exit code and output."""
     endpoint = daemon.listen_endpoints[0]
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        str(ROOT / "examples" / name),
-        "--connect",
-        endpoint,
-        *args,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.STDOUT,
-    )
-    out, _ = await asyncio.wait_for(proc.communicate(), 90.0)
-    assert proc.returncode is not None
-    return proc.returncode, out.decode()
+    path = ROOT / "examples" / name
+    run = await in_thread(lambda: run_script(path, "--connect", endpoint, *args), name, 90.0)
+    return run.code, run.stdout + run.stderr
 
 
 async def test_dual_arm_example_moves_both_arms_and_succeeds() -> None:
