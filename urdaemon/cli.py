@@ -1,12 +1,14 @@
-"""The ``urdaemon`` command: serve, check, urdf, echo, move.
+"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, service, dashboard.
 
-Exit codes: 0 success; 1 a command failed (goal aborted, no answer); 2 bad input (config, arguments).
+Exit codes: 0 success; 1 a command failed (goal aborted, no answer); 2 bad input (config, arguments);
+130 ``move`` interrupted by Ctrl-C (its goal canceled first).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import logging
 import math
@@ -23,6 +25,44 @@ __all__ = ["main"]
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+"""``move`` interrupted by Ctrl-C (after it canceled its goal), as shells report SIGINT."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""Each stops ``serve`` and ``fake-robot`` cleanly; a repeated one while stopping is only logged."""
+
+
+def _count_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {value}")
+    return value
+
+
+def _seconds_arg(allow_zero: bool) -> Any:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+            bound = ">= 0" if allow_zero else "> 0"
+            raise argparse.ArgumentTypeError(f"must be a finite number of seconds {bound}, got {text}")
+        return value
+
+    return parse
+
+
+def _port_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a port number, got {text!r}") from None
+    if not 0 < value < 65536:
+        raise argparse.ArgumentTypeError(f"must be within 1..65535, got {value}")
+    return value
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -60,8 +100,10 @@ def _parser() -> argparse.ArgumentParser:
     fake.add_argument(
         "--split", action="append", default=[], metavar="SERVICE", help="split every write of a service"
     )
-    fake.add_argument("--delay", type=float, default=0.0, help="delay every write by S seconds")
-    fake.add_argument("--late-start", type=float, default=0.0, help="start listening only after S seconds")
+    fake.add_argument("--delay", type=_seconds_arg(True), default=0.0, help="delay every write by S seconds")
+    fake.add_argument(
+        "--late-start", type=_seconds_arg(True), default=0.0, help="start listening only after S seconds"
+    )
     fake.add_argument(
         "--phases",
         choices=("aligned", "spread"),
@@ -78,8 +120,13 @@ def _parser() -> argparse.ArgumentParser:
 
     echo = sub.add_parser("echo", help="print samples of a key expression as JSON lines")
     echo.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
-    echo.add_argument("--count", type=int, default=0, help="stop after N samples (0: until Ctrl-C)")
-    echo.add_argument("--timeout", type=float, default=0.0, help="give up after S seconds without a sample")
+    echo.add_argument("--count", type=_count_arg, default=0, help="stop after N samples (0: until Ctrl-C)")
+    echo.add_argument(
+        "--timeout",
+        type=_seconds_arg(True),
+        default=0.0,
+        help="give up after S seconds without a sample (0: never)",
+    )
     _connect_arg(echo)
 
     call = sub.add_parser(
@@ -97,7 +144,7 @@ def _parser() -> argparse.ArgumentParser:
         help='request as JSON, e.g. \'{"kind": "digital", "pin": 3, "value": true}\'',
     )
     call.add_argument("--cell", default=None)
-    call.add_argument("--timeout", type=float, default=60.0)
+    call.add_argument("--timeout", type=_seconds_arg(False), default=60.0, help="seconds (default 60)")
     _connect_arg(call)
 
     board = sub.add_parser("dashboard", help="send a dashboard command to a robot and print the reply")
@@ -113,21 +160,33 @@ def _parser() -> argparse.ArgumentParser:
     move.add_argument(
         "--joints", required=True, help="comma-separated joint positions (rad), controller order"
     )
-    move.add_argument("--duration", type=float, default=None, help="seconds (default: time-optimal)")
+    move.add_argument(
+        "--duration", type=_seconds_arg(False), default=None, help="seconds (default: time-optimal)"
+    )
     move.add_argument(
         "--cell", default=None, help="cell name (default: found from the robot's liveliness token)"
     )
-    move.add_argument("--velocity-scale", type=float, default=1.0)
+    move.add_argument("--velocity-scale", type=float, default=1.0, help="within (0, 1], default 1")
     _connect_arg(move)
+
+    cancel = sub.add_parser("cancel", help="cancel a robot's goal (default: the active one)")
+    cancel.add_argument("robot")
+    cancel.add_argument(
+        "--goal", default=None, metavar="ID", help="the goal to cancel (default: the active one)"
+    )
+    cancel.add_argument("--cell", default=None)
+    _connect_arg(cancel)
 
     calibration = sub.add_parser(
         "calibration", help="read a UR controller's kinematics calibration into a calibration file"
     )
     calibration.add_argument("--address", required=True, help="the controller's address")
     calibration.add_argument("--output", required=True, help="calibration file to write (YAML)")
-    calibration.add_argument("--port", type=int, default=30001, help="primary interface port (default 30001)")
     calibration.add_argument(
-        "--timeout", type=float, default=10.0, help="give up after S seconds (default 10)"
+        "--port", type=_port_arg, default=30001, help="primary interface port (default 30001)"
+    )
+    calibration.add_argument(
+        "--timeout", type=_seconds_arg(False), default=10.0, help="give up after S seconds (default 10)"
     )
     return parser
 
@@ -142,12 +201,18 @@ def _connect_arg(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
+    from urdaemon.logs import setup_logging, shutdown_logging
+
     args = _parser().parse_args(_join_option_values(sys.argv[1:] if argv is None else list(argv)))
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.INFO,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
+    installed = setup_logging(args.verbose)  # a bounded queue to stderr: never blocks the loop
+    try:
+        return _dispatch(args)
+    finally:
+        if installed is not None:
+            shutdown_logging()
+
+
+def _dispatch(args: argparse.Namespace) -> int:
     try:
         if args.command == "check":
             return _check(args.config)
@@ -161,6 +226,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
         if args.command == "move":
             return asyncio.run(_move(args))
+        if args.command == "cancel":
+            return asyncio.run(_cancel(args))
         if args.command == "dashboard":
             return asyncio.run(_dashboard(args))
         if args.command == "service":
@@ -198,6 +265,27 @@ def _bad_endpoint(endpoint: str) -> str | None:
     if not re.match(ENDPOINT_PATTERN, endpoint):
         return f"--connect {endpoint!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"
     return None
+
+
+def _bad_target(args: argparse.Namespace) -> str | None:
+    """Why the endpoint, robot or cell name of a client command cannot be used (None when fine)."""
+    import re
+
+    from urdaemon.cell.config import CELL_NAME_PATTERN, NAME_PATTERN
+
+    problem = _bad_endpoint(args.connect)
+    if problem is None and not re.match(NAME_PATTERN, args.robot):
+        problem = f"{args.robot!r} is not a robot name (lower-case letters, digits, '_')"
+    if problem is None and args.cell is not None and not re.match(CELL_NAME_PATTERN, args.cell):
+        problem = f"--cell {args.cell!r} is not a cell name"
+    return problem
+
+
+def _fail(err: BaseException, prefix: str = "") -> int:
+    from urdaemon.client import zenoh_message
+
+    print(f"{prefix}error: {zenoh_message(err)}", file=sys.stderr)
+    return EXIT_FAILED
 
 
 def _fake_robot(args: argparse.Namespace) -> int:
@@ -244,17 +332,55 @@ def _serve(path: str, listen: list[str] | None) -> int:
 
     async def run() -> None:
         stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
+        stop_on_signals(stop, f"cell {cell.cell!r}")
         await daemon.run(stop)
 
     try:
         _run_loop(run())
     except UrDaemonError as err:
-        print(f"error: {err}", file=sys.stderr)
+        return _fail(err)
+    except OSError as err:  # e.g. a port in use: say which, no traceback
+        print(f"error: {err.strerror or err}", file=sys.stderr)
         return EXIT_FAILED
+    except Exception as err:
+        import zenoh
+
+        if isinstance(err, zenoh.ZError):  # e.g. the listen endpoint is taken
+            return _fail(err, "Zenoh ")
+        raise
     return EXIT_OK
+
+
+def stop_on_signals(stop: asyncio.Event, what: str) -> None:
+    """SIGINT, SIGTERM and SIGHUP set ``stop`` (a clean stop: every goal ends with a result).
+
+    A repeated signal while stopping is logged and otherwise ignored, so it cannot cut the clean stop
+    short; the handlers stay after the loop has ended, so a signal during the process's exit is
+    ignored too (asyncio's own handlers fall back to the default, which kills the process). Call it
+    on the running loop, in the main thread (elsewhere it does nothing).
+    """
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    loop = asyncio.get_running_loop()
+    log = logging.getLogger("urdaemon")
+
+    def deliver(signum: int) -> None:
+        name = signal.Signals(signum).name
+        if stop.is_set():
+            log.warning("%s: %s is already stopping cleanly (SIGKILL would skip that)", name, what)
+            return
+        log.info("%s: stopping %s", name, what)
+        stop.set()
+
+    def handler(signum: int, frame: object) -> None:
+        # RuntimeError: the loop has ended: the clean stop is done and the process exits
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(deliver, signum)
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, handler)
 
 
 def _run_loop(main: Coroutine[Any, Any, None]) -> None:
@@ -279,21 +405,20 @@ def _run_loop(main: Coroutine[Any, Any, None]) -> None:
 async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
     import zenoh
 
-    from urdaemon.client import Client
+    from urdaemon.client import Client, zenoh_message
 
     problem = _bad_endpoint(endpoint)
     try:
         zenoh.KeyExpr(key)
     except zenoh.ZError as err:
-        problem = f"{key!r} is not a valid key expression: {err}"
+        problem = f"{key!r} is not a valid key expression: {zenoh_message(err)}"
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         client = await Client.connect(endpoint)
     except UrDaemonError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_FAILED
+        return _fail(err)
     async with client:
         sub = client.subscribe(key)
         received = 0
@@ -301,8 +426,7 @@ async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
             try:
                 sample_key, payload = await sub.get(timeout if timeout > 0 else None)
             except UrDaemonError as err:
-                print(f"error: {err}", file=sys.stderr)
-                return EXIT_FAILED
+                return _fail(err)
             try:
                 value: object = json.loads(payload)
             except (UnicodeDecodeError, json.JSONDecodeError):
@@ -320,7 +444,7 @@ async def _call_service(args: argparse.Namespace) -> int:
 
     from urdaemon.client import Client
 
-    problem = _bad_endpoint(args.connect)
+    problem = _bad_target(args)
     if problem is None and not re.match(SERVICE_NAME, args.name):
         problem = f"{args.name!r} is not a service name"
     body: object = None
@@ -337,10 +461,9 @@ async def _call_service(args: argparse.Namespace) -> int:
     try:
         async with await Client.connect(args.connect) as client:
             robot = await client.robot(args.robot, cell=args.cell)
-            reply = await client.request(robot.keys.service(args.name), body, timeout=args.timeout)
+            reply = await robot.call(args.name, body, timeout=args.timeout)
     except UrDaemonError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_FAILED
+        return _fail(err)
     print(json.dumps(reply))
     return EXIT_OK if reply.get("ok") else EXIT_FAILED
 
@@ -348,7 +471,7 @@ async def _call_service(args: argparse.Namespace) -> int:
 async def _dashboard(args: argparse.Namespace) -> int:
     from urdaemon.client import Client
 
-    problem = _bad_endpoint(args.connect)
+    problem = _bad_target(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -357,8 +480,7 @@ async def _dashboard(args: argparse.Namespace) -> int:
             robot = await client.robot(args.robot, cell=args.cell)
             reply = await robot.dashboard(" ".join(args.words))
     except UrDaemonError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_FAILED
+        return _fail(err)
     if "reply" in reply:
         print(reply["reply"])
     else:
@@ -366,32 +488,46 @@ async def _dashboard(args: argparse.Namespace) -> int:
     return EXIT_OK if reply.get("ok") else EXIT_FAILED
 
 
-async def _move(args: argparse.Namespace) -> int:
+async def _cancel(args: argparse.Namespace) -> int:
     from urdaemon.client import Client
 
+    problem = _bad_target(args)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        async with await Client.connect(args.connect) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            reply = await robot.cancel(args.goal)
+    except UrDaemonError as err:
+        return _fail(err)
+    print(json.dumps(reply))
+    return EXIT_OK if reply.get("canceled") else EXIT_FAILED
+
+
+def _move_problem(args: argparse.Namespace) -> tuple[list[float], str | None]:
     try:
         joints = [float(v) for v in args.joints.split(",")]
     except ValueError:
-        print(f"error: --joints must be comma-separated numbers, got {args.joints!r}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return [], f"--joints must be comma-separated numbers, got {args.joints!r}"
     if not all(math.isfinite(v) for v in joints):
-        print("error: --joints must be finite numbers", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        print(f"error: --duration must be a number of seconds > 0, got {args.duration}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return [], "--joints must be finite numbers"
     if not (math.isfinite(args.velocity_scale) and 0 < args.velocity_scale <= 1):
-        print(f"error: --velocity-scale must be within (0, 1], got {args.velocity_scale}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    problem = _bad_endpoint(args.connect)
+        return [], f"--velocity-scale must be within (0, 1], got {args.velocity_scale}"
+    return joints, _bad_target(args)
+
+
+async def _move(args: argparse.Namespace) -> int:
+    from urdaemon.client import Client
+
+    joints, problem = _move_problem(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         client = await Client.connect(args.connect)
     except UrDaemonError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_FAILED
+        return _fail(err)
     async with client:
         try:
             robot = await client.robot(args.robot, cell=args.cell)
@@ -400,20 +536,75 @@ async def _move(args: argparse.Namespace) -> int:
             print(f"rejected: {err.reason}", file=sys.stderr)
             return EXIT_FAILED
         except UrDaemonError as err:
-            print(f"error: {err}", file=sys.stderr)
-            return EXIT_FAILED
+            return _fail(err)
         print(f"goal {goal.goal_id} accepted, planned {goal.duration:.2f} s", file=sys.stderr)
         try:
-            async for feedback in goal.feedback():
-                progress = 100.0 * float(feedback["progress"])
-                print(f"\r  {progress:5.1f} %", end="", file=sys.stderr, flush=True)
-            result = await goal.result()
-        except UrDaemonError as err:
-            print(f"\nerror: {err}", file=sys.stderr)
-            return EXIT_FAILED
-        print(file=sys.stderr)
-        print(json.dumps(result))
-        return EXIT_OK if result.get("status") == "succeeded" else EXIT_FAILED
+            return await _follow(goal)
+        except asyncio.CancelledError:  # Ctrl-C: asyncio cancels this task; the robot must stop too
+            return await _cancel_on_interrupt(goal)
+
+
+async def _follow(goal: Any) -> int:
+    """Show progress (on a terminal only) until the result; print it; the exit code."""
+    bar = _ProgressBar(sys.stderr)
+    try:
+        async for feedback in goal.feedback():
+            bar.show(float(feedback["progress"]))
+        result = await goal.result()
+    except UrDaemonError as err:
+        bar.end()
+        return _fail(err)
+    succeeded = result.get("status") == "succeeded"
+    if succeeded:
+        bar.show(1.0)
+    bar.end()
+    print(json.dumps(result))
+    return EXIT_OK if succeeded else EXIT_FAILED
+
+
+async def _cancel_on_interrupt(goal: Any) -> int:
+    """Cancel ``goal`` after Ctrl-C and wait (briefly) for its result."""
+    task = asyncio.current_task()
+    if task is not None:
+        task.uncancel()
+    print(f"\ninterrupted: canceling goal {goal.goal_id}", file=sys.stderr)
+    try:
+        reply = await goal.robot.cancel(goal.goal_id)
+    except UrDaemonError as err:
+        _fail(err, f"goal {goal.goal_id} may still be running: cancel failed: ")
+        return EXIT_INTERRUPTED
+    if not reply.get("canceled"):
+        print(f"goal {goal.goal_id} not canceled: {reply.get('reason', 'no reason')}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    try:
+        result = await goal.result(timeout=5.0)
+    except UrDaemonError as err:
+        _fail(err, f"goal {goal.goal_id} canceled, but its result did not come: ")
+        return EXIT_INTERRUPTED
+    print(f"goal {goal.goal_id} canceled: the robot stops", file=sys.stderr)
+    print(json.dumps(result))
+    return EXIT_INTERRUPTED
+
+
+class _ProgressBar:
+    """``\r``-rewritten progress, only when the stream is a terminal (never into a log or a pipe)."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+        self._active = bool(getattr(stream, "isatty", lambda: False)())
+        self._shown = False
+
+    def show(self, fraction: float) -> None:
+        if self._active:
+            self._stream.write(f"\r  {100.0 * fraction:5.1f} %")
+            self._stream.flush()
+            self._shown = True
+
+    def end(self) -> None:
+        if self._shown:
+            self._stream.write("\n")
+            self._stream.flush()
+            self._shown = False
 
 
 def _calibration(args: argparse.Namespace) -> int:
@@ -421,12 +612,6 @@ def _calibration(args: argparse.Namespace) -> int:
 
     from urdaemon.calibration_tool import calibration_yaml, read_calibration
 
-    if not (math.isfinite(args.timeout) and args.timeout > 0):
-        print(f"error: --timeout must be a number of seconds > 0, got {args.timeout}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    if not 0 < args.port < 65536:
-        print(f"error: --port must be within 1..65535, got {args.port}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     output = Path(args.output)
     if not output.parent.is_dir():
         print(

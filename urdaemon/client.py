@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import re
 from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any
 
@@ -25,12 +26,63 @@ from urdaemon.publish.codec import SCHEMA_VERSION
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
 
-__all__ = ["DEFAULT_ENDPOINT", "Client", "GoalHandle", "RobotClient", "Subscription"]
+__all__ = [
+    "DEFAULT_ENDPOINT",
+    "SERVICES",
+    "Client",
+    "GoalHandle",
+    "NoSuchRobot",
+    "NoSuchService",
+    "RobotClient",
+    "Subscription",
+    "zenoh_message",
+]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 QUERY_TIMEOUT_S = 5.0
 RESULT_POLL_S = 0.5
 """While waiting for a result, ask the daemon for it this often (covers a missed publication)."""
+LOST_GRACE_S = 1.0
+"""When a robot's liveliness token disappears, how long a waiting goal still listens and asks for its
+result before it fails (the token's deletion can overtake the result's publication)."""
+PEER_WAIT_S = 0.05
+SERVICES = (
+    "set_io",
+    "set_payload",
+    "set_speed_slider",
+    "set_tool_voltage",
+    "stop",
+    "cycle_stats",
+    "dashboard",
+    "startup",
+    "resend_program",
+    "hand_back_control",
+    "zero_ft_sensor",
+    "start_force_mode",
+    "end_force_mode",
+    "start_tool_contact",
+    "end_tool_contact",
+)
+"""The services every robot serves (docs/keys.md)."""
+
+_RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
+
+
+def zenoh_message(err: BaseException) -> str:
+    """A Zenoh error's text without the Rust source location it carries (``at /root/.cargo/...rs:1``)."""
+    return _RUST_LOCATION.sub("", str(err)).strip()
+
+
+class NoSuchRobot(UrDaemonError):
+    """No daemon reachable from this client serves a robot of that name; ``robots`` lists what is served."""
+
+    def __init__(self, message: str, robots: Sequence[tuple[str, str]] = ()) -> None:
+        super().__init__(message)
+        self.robots = list(robots)
+
+
+class NoSuchService(UrDaemonError):
+    """Nothing answers the key: the daemon serves no such service (or goal key) for that robot."""
 
 
 def _encode(body: dict[str, Any]) -> bytes:
@@ -89,8 +141,12 @@ class Subscription:
 class Client:
     """A Zenoh session connected to a urdaemon cell."""
 
-    def __init__(self, session: Any, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(
+        self, session: Any, loop: asyncio.AbstractEventLoop, endpoint: str = DEFAULT_ENDPOINT
+    ) -> None:
         self.session = session
+        self.endpoint = endpoint
+        """Where this client connected (named in error messages)."""
         self._loop = loop
         self._subscriptions: list[Subscription] = []
         self._tasks: list[asyncio.Task[None]] = []
@@ -102,15 +158,27 @@ class Client:
     ) -> Client:
         """Open a Zenoh session connected to ``endpoint`` (no multicast scouting); ``low_latency``
         to match a daemon whose cell sets ``zenoh: {low_latency: true}`` (half the CPU per sample
-        for both; without it the client still works)."""
+        for both; without it the client still works).
+
+        Raises ``UrDaemonError`` naming ``endpoint`` when nothing answers there within ``timeout`` s.
+        """
         loop = asyncio.get_running_loop()
         try:
             conf = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
             conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
             session = await loop.run_in_executor(None, zenoh.open, conf)
         except zenoh.ZError as err:
-            raise UrDaemonError(f"cannot connect to {endpoint}: {err}") from err
-        return cls(session, loop)
+            raise UrDaemonError(f"cannot connect to {endpoint}: {zenoh_message(err)}") from err
+        deadline = loop.time() + timeout
+        while not _has_peer(session):  # a peer session opens even when nobody listens there
+            if loop.time() >= deadline:
+                await loop.run_in_executor(None, session.close)
+                raise UrDaemonError(
+                    f"cannot connect to {endpoint}: nothing answered within {timeout:g} s "
+                    "(is the daemon running and listening there?)"
+                )
+            await asyncio.sleep(PEER_WAIT_S)
+        return cls(session, loop, endpoint)
 
     async def __aenter__(self) -> Client:
         return self
@@ -143,7 +211,7 @@ class Client:
         try:
             sub = Subscription(self.session, key_expr, self._loop, maxsize)
         except zenoh.ZError as err:
-            raise UrDaemonError(f"cannot subscribe to {key_expr!r}: {err}") from err
+            raise UrDaemonError(f"cannot subscribe to {key_expr!r}: {zenoh_message(err)}") from err
         self._subscriptions.append(sub)
         return sub
 
@@ -157,16 +225,31 @@ class Client:
             replies = self.session.get(key, payload=payload, timeout=timeout)
             return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
 
-        return await self._loop.run_in_executor(None, ask)
+        try:
+            return await self._loop.run_in_executor(None, ask)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot ask {key!r} at {self.endpoint}: {zenoh_message(err)}") from err
 
     async def request(
         self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S
     ) -> dict[str, Any]:
-        """Ask a queryable that must answer once; raises ``UrTimeoutError`` when nobody answers."""
+        """Ask a queryable that must answer once.
+
+        Raises ``NoSuchService`` when the query ends at once without a reply (nobody serves ``key``),
+        ``UrTimeoutError`` when nobody answers within ``timeout`` s.
+        """
+        start = self._loop.time()
         replies = await self.query(key, body, timeout=timeout)
         if not replies:
-            raise UrTimeoutError(f"no answer on {key} within {timeout} s (is the daemon running?)")
-        data: dict[str, Any] = json.loads(replies[0])
+            if self._loop.time() - start < min(0.5 * timeout, 1.0):
+                raise NoSuchService(f"nothing at {self.endpoint} serves {key}")
+            raise UrTimeoutError(f"no answer on {key} from {self.endpoint} within {timeout:g} s")
+        try:
+            data = json.loads(replies[0])
+        except ValueError as err:
+            raise UrDaemonError(f"the answer on {key} is not JSON: {err}") from err
+        if not isinstance(data, dict):
+            raise UrDaemonError(f"the answer on {key} is not a JSON object")
         return data
 
     async def robots(self, *, timeout: float = 2.0) -> list[tuple[str, str]]:
@@ -179,7 +262,10 @@ class Client:
                 if r.ok
             ]
 
-        keys = await self._loop.run_in_executor(None, ask)
+        try:
+            keys = await self._loop.run_in_executor(None, ask)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot list robots at {self.endpoint}: {zenoh_message(err)}") from err
         found = []
         for key in keys:
             parts = key.split("/")
@@ -188,29 +274,52 @@ class Client:
         return sorted(found)
 
     async def robot(self, name: str, *, cell: str | None = None, timeout: float = 5.0) -> RobotClient:
-        """A handle on robot ``name``; finds its cell from the liveliness tokens unless given."""
-        if cell is None:
-            deadline = self._loop.time() + timeout
-            while True:
-                cells = sorted({c for c, r in await self.robots() if r == name})
-                if len(cells) == 1:
-                    cell = cells[0]
-                    break
-                if len(cells) > 1:
-                    raise UrDaemonError(
-                        f"robot {name!r} is served in several cells ({', '.join(cells)}); name one"
-                    )
-                if self._loop.time() > deadline:
-                    raise UrTimeoutError(f"no robot {name!r} found within {timeout} s")
-                await asyncio.sleep(0.1)
-        return RobotClient(self, RobotKeys(cell, name))
+        """A handle on robot ``name``; finds its cell from the liveliness tokens unless given.
+
+        Raises ``NoSuchRobot`` (listing the robots served) when robots are served but none is
+        ``name`` (in ``cell``); waits up to ``timeout`` s only while no robot at all is served (a
+        daemon starting up).
+        """
+        deadline = self._loop.time() + timeout
+        misses = 0
+        while True:
+            served = await self.robots()
+            cells = sorted({c for c, r in served if r == name and cell in (None, c)})
+            if len(cells) == 1:
+                return RobotClient(self, RobotKeys(cells[0], name))
+            if len(cells) > 1:
+                raise UrDaemonError(
+                    f"robot {name!r} is served in several cells ({', '.join(cells)}); name one"
+                )
+            if served:
+                misses += 1  # tokens of one daemon arrive together; allow one late arrival
+                if misses >= 3:
+                    raise NoSuchRobot(_no_such_robot(name, cell, served, self.endpoint), served)
+            if self._loop.time() > deadline:
+                if served:
+                    raise NoSuchRobot(_no_such_robot(name, cell, served, self.endpoint), served)
+                raise UrTimeoutError(
+                    f"no robot is served at {self.endpoint} (waited {timeout:g} s for {name!r})"
+                )
+            await asyncio.sleep(0.1)
 
     async def robot_description(self, cell: str, *, timeout: float = QUERY_TIMEOUT_S) -> str:
         """The cell URDF."""
         replies = await self.query(CellKeys(cell).robot_description, timeout=timeout)
         if not replies:
-            raise UrTimeoutError(f"no robot_description from cell {cell!r}")
+            raise UrTimeoutError(f"no robot_description from cell {cell!r} at {self.endpoint}")
         return replies[0].decode()
+
+
+def _has_peer(session: Any) -> bool:
+    info = session.info
+    return bool(list(info.peers_zid()) or list(info.routers_zid()))
+
+
+def _no_such_robot(name: str, cell: str | None, served: Sequence[tuple[str, str]], endpoint: str) -> str:
+    where = f"{cell}/{name}" if cell is not None else repr(name)
+    listed = ", ".join(f"{c}/{r}" for c, r in served)
+    return f"no robot {where} at {endpoint}; served: {listed}"
 
 
 class GoalHandle:
@@ -276,9 +385,11 @@ class GoalHandle:
                 await self._poll_result()
         return self._result.result()
 
-    async def _poll_result(self) -> None:
+    async def _poll_result(self, timeout: float = 1.0) -> None:
         try:
-            replies = await self.robot.client.query(self.robot.keys.goal_result(self.goal_id), timeout=1.0)
+            replies = await self.robot.client.query(
+                self.robot.keys.goal_result(self.goal_id), timeout=timeout
+            )
         except UrDaemonError:
             return
         for payload in replies:
@@ -311,6 +422,7 @@ class RobotClient:
         self._goal_sub: Subscription | None = None
         self._pump: asyncio.Task[None] | None = None
         self._alive_sub: Any = None
+        self._lost: asyncio.Task[None] | None = None
 
     @property
     def name(self) -> str:
@@ -373,6 +485,20 @@ class RobotClient:
         if joint_names is not None:
             body["joint_names"] = list(joint_names)
         return await self._send_goal(self.keys.goal_move, body)
+
+    async def call(
+        self, service: str, body: dict[str, Any] | None = None, *, timeout: float = 60.0
+    ) -> dict[str, Any]:
+        """Call service ``service``; the reply (``ok`` and a ``reason`` when not).
+
+        Raises ``NoSuchService`` listing ``SERVICES`` when the robot serves no such service.
+        """
+        try:
+            return await self.client.request(self.keys.service(service), body or {}, timeout=timeout)
+        except NoSuchService as err:
+            raise NoSuchService(
+                f"{err}: robot {self.keys.base} has no service {service!r}; services: {', '.join(SERVICES)}"
+            ) from err
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
         """Cancel a goal (default: the active one)."""
@@ -513,10 +639,28 @@ class RobotClient:
         self.client._closers.append(self._alive_sub.undeclare)
 
     def _on_lost(self) -> None:
-        error = ConnectionLostError(f"the daemon stopped serving robot {self.name!r}")
-        for handle in list(self._goals.values()):
-            handle._fail(error)
-        self._goals.clear()
+        if self._goals and (self._lost is None or self._lost.done()):
+            self._lost = asyncio.get_running_loop().create_task(self._settle_lost())
+            self.client._tasks.append(self._lost)
+
+    async def _settle_lost(self) -> None:
+        """The token is gone: a result published just before may still be on its way (or only be
+        answerable), so take what was received, ask for each waiting goal's result, and fail only
+        the goals whose result is still unknown after ``LOST_GRACE_S``."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + LOST_GRACE_S
+        waiting = list(self._goals.values())
+        await asyncio.gather(*(handle._poll_result(timeout=LOST_GRACE_S) for handle in waiting))
+        pending = [handle._result for handle in waiting if not handle._result.done()]
+        if pending:
+            await asyncio.wait(pending, timeout=max(0.0, deadline - loop.time()))
+        error = ConnectionLostError(
+            f"the daemon at {self.client.endpoint} stopped serving robot {self.name!r} before the goal ended"
+        )
+        for handle in waiting:
+            if not handle._result.done():
+                handle._fail(error)
+                self._forget(handle.goal_id)
 
     async def _pump_goals(self, sub: Subscription) -> None:
         async for key, payload in sub:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import signal
 import sys
 
 from urdaemon.cell import load_cell
@@ -100,10 +99,10 @@ def run_fakes(args: argparse.Namespace) -> int:
     share_clock(fakes, args.phases)
 
     async def serve() -> None:
+        from urdaemon.cli import stop_on_signals  # SIGINT, SIGTERM, SIGHUP; a repeat is only logged
+
         stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
+        stop_on_signals(stop, f"{len(fakes)} fake robot(s)")
         if args.late_start > 0:
             try:
                 await asyncio.wait_for(stop.wait(), args.late_start)
