@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -163,7 +164,8 @@ class Daemon:
                 except RealtimeUnavailable as err:
                     log.warning("serving at normal priority: %s", err)
             self._build(node)
-            node.queryable(self.keys.robot_description, self._on_description)
+            node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)
+            node.cell_queryable(self.keys.any_robot, self._on_any_robot)
             tf_pub = node.publisher(self.keys.tf)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
@@ -211,6 +213,35 @@ class Daemon:
             query.reply(self.keys.robot_description, self.description.urdf.encode())
         finally:
             query.drop()
+
+    def _on_any_robot(self, query: Any) -> None:
+        """Answer a query on a robot this cell does not serve, or on a service a robot does not
+        have, naming what there is; every other query is someone else's to answer (or nobody's)."""
+        try:
+            key = str(query.key_expr)
+            parts = key.split("/")
+            if "*" in key or len(parts) < 2 or parts[1] in self.keys.cell_level:
+                return
+            robots = {runtime.robot.name: runtime for runtime in self.runtimes}
+            runtime = robots.get(parts[1])
+            if runtime is None:
+                reason = (
+                    f"no robot {codec.client_text(parts[1])!r} in cell {self.cell.cell!r}; "
+                    f"its robots: {', '.join(sorted(robots))}"
+                )
+            elif len(parts) == 4 and parts[2] == "service" and parts[3] not in runtime.service_names:
+                reason = (
+                    f"robot {parts[1]!r} has no service {codec.client_text(parts[3])!r}; "
+                    f"its services: {', '.join(sorted(runtime.service_names))}"
+                )
+            else:
+                return
+            query.reply(query.key_expr, codec.encode({"ok": False, "accepted": False, "reason": reason}))
+        except Exception as err:  # the querier may have gone; this must never take the cell down
+            log.debug("answering %s failed: %s", codec.client_text(str(query.key_expr), 80), err)
+        finally:
+            with contextlib.suppress(Exception):
+                query.drop()
 
     async def _publish_tf(self, publisher: Any, wanted: Matching) -> None:
         period = 1.0 / self.cell.publish.tf_rate_hz

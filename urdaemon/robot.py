@@ -12,9 +12,10 @@ import contextlib
 import itertools
 import logging
 import secrets
+import sys
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -25,26 +26,46 @@ from urdaemon.control import (
     GoalStatus,
     MotionController,
     Tolerances,
+    TrajectoryPoint,
 )
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
-from urdaemon.publish.codec import ToleranceMessage
+from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage, TrajectoryGoalMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
 
 RESTART_BACKOFF_S = (0.1, 0.5, 1.0, 2.0, 5.0)
 """Delays before restarting a failed backend; the last one repeats."""
-HEALTHY_RUN_S = 30.0
-"""A backend that ran this long before failing restarts with the first, shortest delay again."""
+HEALTHY_CYCLES_S = 1.0
+"""A backend that ran this many seconds' worth of cycles (at its rate) before failing restarts with
+the first, shortest delay again: it was healthy, so this is a new fault, not the same one again."""
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries."""
 PLANNING_SLICE_S = 0.0005
-"""Longest stretch of trajectory planning between two turns of the event loop (a cycle is 2 ms)."""
+"""Longest stretch of trajectory decoding or planning between two turns of the event loop (a cycle
+is 2 ms)."""
+INLINE_PREPARE_POINTS = 16
+"""Trajectories of at most this many points are checked on the loop (well under a slice); longer
+ones in a worker thread, see ``_short_gil_slices``."""
+GIL_SLICE_S = 0.0002
+"""The interpreter's switch interval while a worker thread checks a trajectory: the longest the
+loop waits for the GIL (Python's default, 5 ms, would be 2.5 cycles)."""
+PAYLOADLESS_SERVICES = (
+    "startup",
+    "resend_program",
+    "hand_back_control",
+    "zero_ft_sensor",
+    "end_force_mode",
+    "start_tool_contact",
+    "end_tool_contact",
+)
+"""Services without arguments: only nothing, an empty payload, ``{}`` or ``{"v": 1}`` is accepted."""
 
 
 class _RobotLog(logging.LoggerAdapter[logging.Logger]):
@@ -84,6 +105,9 @@ class RobotRuntime:
         self._io_signature: tuple[Any, ...] = ()
         self._tasks: set[asyncio.Task[None]] = set()
         self._planning: str | None = None
+        self._running_services: set[str] = set()
+        self.service_names: frozenset[str] = frozenset()
+        """The services this robot answers (once declared)."""
         self._external_goal: str | None = None
         self._restarts = 0
         self._stream_rejections = 0
@@ -109,29 +133,52 @@ class RobotRuntime:
         self._pub_status = node.publisher(keys.status)
         self._pub_io = node.publisher(keys.io)
         self._pub_events = node.publisher(keys.events)
-        node.queryable(keys.goal_trajectory, self._on_trajectory_goal)
-        node.queryable(keys.goal_move, self._on_move_goal)
-        node.queryable(keys.goal_cancel, self._on_cancel)
-        node.queryable(keys.goal_results, self._on_result_query)
-        node.queryable(keys.service("set_io"), self._on_set_io)
-        node.queryable(keys.service("set_payload"), self._on_set_payload)
-        node.queryable(keys.service("set_speed_slider"), self._on_set_speed_slider)
-        node.queryable(keys.service("stop"), self._on_stop)
+        # every queryable and subscriber acts on its exact key only and refuses oversized messages
+        # before reading them (publish/node.py)
+        node.queryable(
+            keys.goal_trajectory, self._on_trajectory_goal, max_bytes=MAX_MESSAGE_BYTES, answer="accepted"
+        )
+        node.queryable(keys.goal_move, self._on_move_goal, answer="accepted")
+        node.queryable(keys.goal_cancel, self._on_cancel, answer="canceled")
+        node.queryable(keys.goal_results, self._on_result_query, any_id=True)
+        node.queryable(keys.service("stop"), self._on_stop, max_bytes=None)  # never refused for its payload
         node.queryable(keys.service("cycle_stats"), self._on_cycle_stats)
         node.queryable(keys.service("dashboard"), self._on_dashboard)
-        for name in ("startup", "resend_program", "hand_back_control", "zero_ft_sensor"):
-            node.queryable(keys.service(name), self._on_simple_service(name))
-        node.queryable(keys.service("set_tool_voltage"), self._on_tool_voltage)
-        node.queryable(keys.service("start_force_mode"), self._on_start_force_mode)
-        node.queryable(keys.service("end_force_mode"), self._on_end_force_mode)
-        node.queryable(keys.service("start_tool_contact"), self._on_tool_contact(True))
-        node.queryable(keys.service("end_tool_contact"), self._on_tool_contact(False))
-        node.subscriber(f"{keys.base}/command/freedrive", self._on_freedrive)
+        for name, act in self._services().items():
+            node.queryable(keys.service(name), self._on_service(name, act))
+        self.service_names = frozenset({"stop", "cycle_stats", "dashboard", *self._services()})
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self._publish_status
-        node.subscriber(keys.command_joint_position, self._on_stream_position)
-        node.subscriber(keys.command_joint_velocity, self._on_stream_velocity)
+        for key, handler in (
+            (keys.command_joint_position, self._on_stream_position),
+            (keys.command_joint_velocity, self._on_stream_velocity),
+            (f"{keys.base}/command/freedrive", self._on_freedrive),
+        ):
+            node.subscriber(key, handler, refused=self._on_refused_command)
         node.liveliness_token(keys.alive)
+
+    def _services(self) -> dict[str, Callable[[bytes | None], Awaitable[None]]]:
+        """Every service run through ``_service``: name → what it does with the request's payload."""
+        backend = self.backend
+        services: dict[str, Callable[[bytes | None], Awaitable[None]]] = {
+            "set_io": self._set_io,
+            "set_payload": self._set_payload,
+            "set_speed_slider": self._set_speed_slider,
+            "set_tool_voltage": self._set_tool_voltage,
+            "start_force_mode": self._start_force_mode,
+        }
+        actions: dict[str, Callable[[], Awaitable[None]]] = {
+            "startup": backend.startup,
+            "resend_program": backend.resend_program,
+            "hand_back_control": backend.hand_back_control,
+            "zero_ft_sensor": backend.zero_ft_sensor,
+            "end_force_mode": lambda: backend.force_mode(None),
+            "start_tool_contact": lambda: backend.tool_contact(True),
+            "end_tool_contact": lambda: backend.tool_contact(False),
+        }
+        for name in PAYLOADLESS_SERVICES:
+            services[name] = _without_arguments(name, actions[name])
+        return services
 
     async def run(self) -> None:
         """Run the backend, restarting it with backoff after any failure; also the status/IO timers."""
@@ -150,7 +197,7 @@ class RobotRuntime:
     async def _supervise(self) -> None:
         attempt = 0
         while True:
-            started = time.monotonic()
+            cycles_before = self.backend.statistics().cycles
             try:
                 await self.backend.run(self._on_cycle)
                 reason = "backend stopped"
@@ -166,8 +213,8 @@ class RobotRuntime:
             state.lifecycle = Lifecycle.DISCONNECTED
             state.lifecycle_reason = reason
             self._publish_status()
-            if time.monotonic() - started >= HEALTHY_RUN_S:
-                attempt = 0  # a long healthy run earns a fresh, short backoff
+            if self.backend.statistics().cycles - cycles_before >= HEALTHY_CYCLES_S * self.backend.rate_hz:
+                attempt = 0  # a healthy run earns a fresh, short backoff: this is a new fault
             delay = RESTART_BACKOFF_S[min(attempt, len(RESTART_BACKOFF_S) - 1)]
             attempt += 1
             self.log.info("restarting backend in %.1f s", delay)
@@ -352,62 +399,74 @@ class RobotRuntime:
         )
 
     def _on_trajectory_goal(self, query: Any) -> None:
-        state = self.backend.state
+        if self._planning is not None:  # refused before reading a byte of it
+            self._reject_goal(
+                query, "trajectory", GoalRejected(f"busy: still planning trajectory {self._planning}")
+            )
+            return
+        self._planning = "being decoded"
+        self._spawn(self._trajectory_goal(query))
+
+    async def _trajectory_goal(self, query: Any) -> None:
+        """Decode, check, plan and start a trajectory goal, all in slices between robot cycles."""
         try:
-            goal = codec.decode_trajectory_goal(_payload(query))
+            goal = await _decode_sliced(TrajectoryGoalDecoder(_payload(query)))
             names = self._joint_names(goal.joint_names)
             tolerances = self._tolerances(goal.tolerances, names)
-            if self._planning is not None:
-                raise GoalRejected(f"busy: still planning trajectory {self._planning}")
             self._check_not_freedrive()
             if goal.passthrough:
                 problem = self.backend.passthrough_problem()
                 if problem is not None:
                     raise GoalRejected(f"passthrough: {problem}")
-            self.controller.check_can_start(state, time.monotonic(), goal.preempt)
-            planner = self.controller.prepare_trajectory(names, goal.points, state)
+            self.controller.check_can_start(self.backend.state, time.monotonic(), goal.preempt)
+            self._planning = f"of {len(goal.points)} points"
+            planner = await self._prepare(names, goal.points)
+            await _plan_tail(planner)
+            goal_id = self._new_goal_id()
+            duration = self._start_trajectory(goal_id, goal, names, tolerances, planner)
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
+        except asyncio.CancelledError:
+            _reply(query, {"accepted": False, "reason": "daemon shutting down"})
+            raise
         except Exception as err:  # a bug must still answer the client, once
             self._fail_goal(query, "trajectory", err)
             return
+        finally:
+            self._planning = None
+        kind = "passthrough trajectory" if goal.passthrough else "trajectory"
+        self._accept_goal(query, kind, goal_id, duration)
 
-        label = f"of {len(goal.points)} points"
-        self._planning = label
+    async def _prepare(self, names: tuple[str, ...], points: Sequence[TrajectoryPoint]) -> TrajectoryPlanner:
+        """The controller's check of every point (~5 µs a point, pure Python): a long trajectory's in a
+        worker thread that hands the GIL back to the loop every ``GIL_SLICE_S``."""
+        state = self.backend.state
+        if len(points) <= INLINE_PREPARE_POINTS:
+            return self.controller.prepare_trajectory(names, points, state)
+        with _short_gil_slices():
+            return await asyncio.to_thread(self.controller.prepare_trajectory, names, points, state)
 
-        async def plan_then_start() -> None:
-            try:
-                await _plan_tail(planner)
-                goal_id = self._new_goal_id()
-                if goal.passthrough:
-                    duration = self._start_passthrough(goal_id, planner, tolerances)
-                    self._accept_goal(query, "passthrough trajectory", goal_id, duration)
-                    return
-                duration = self.controller.accept_trajectory(
-                    goal_id,
-                    names,
-                    goal.points,
-                    self.backend.state,
-                    time.monotonic(),
-                    tolerances=tolerances,
-                    preempt=goal.preempt,
-                    planner=planner,
-                )
-            except GoalRejected as err:
-                self._reject_goal(query, "trajectory", err)
-                return
-            except asyncio.CancelledError:
-                _reply(query, {"accepted": False, "reason": "daemon shutting down"})
-                raise
-            except Exception as err:  # a bug must still answer the client, once
-                self._fail_goal(query, "trajectory", err)
-                return
-            finally:
-                self._planning = None
-            self._accept_goal(query, "trajectory", goal_id, duration)
-
-        self._spawn(plan_then_start())
+    def _start_trajectory(
+        self,
+        goal_id: str,
+        goal: TrajectoryGoalMessage,
+        names: tuple[str, ...],
+        tolerances: Tolerances | None,
+        planner: TrajectoryPlanner,
+    ) -> float:
+        if goal.passthrough:
+            return self._start_passthrough(goal_id, planner, tolerances)
+        return self.controller.accept_trajectory(
+            goal_id,
+            names,
+            goal.points,
+            self.backend.state,
+            time.monotonic(),
+            tolerances=tolerances,
+            preempt=goal.preempt,
+            planner=planner,
+        )
 
     def _on_move_goal(self, query: Any) -> None:
         try:
@@ -545,6 +604,10 @@ class RobotRuntime:
             self.log.exception("streaming command failed")
             self._reject_stream(key, GoalRejected(_internal_error(err)))
 
+    def _on_refused_command(self, key: str, reason: str) -> None:
+        """A command put on a wildcard key expression, or too large to read: it did nothing."""
+        self._reject_stream(key, GoalRejected(reason))
+
     def _reject_stream(self, key: str, err: UrDaemonError) -> None:
         self._stream_rejections += 1
         reason = err.reason if isinstance(err, GoalRejected) else str(err)
@@ -560,15 +623,6 @@ class RobotRuntime:
             )
 
     # ---- services ----------------------------------------------------------------------------------------
-
-    def _on_set_io(self, query: Any) -> None:
-        self._service(query, "set_io", self._set_io(_payload(query)))
-
-    def _on_set_payload(self, query: Any) -> None:
-        self._service(query, "set_payload", self._set_payload(_payload(query)))
-
-    def _on_set_speed_slider(self, query: Any) -> None:
-        self._service(query, "set_speed_slider", self._set_speed_slider(_payload(query)))
 
     def _on_stop(self, query: Any) -> None:
         if self.controller.external_goal_id is not None:
@@ -598,12 +652,6 @@ class RobotRuntime:
         if reset:
             backend.turnaround.reset()
 
-    def _on_simple_service(self, name: str) -> Any:
-        def handle(query: Any) -> None:
-            self._service(query, name, getattr(self.backend, name)())
-
-        return handle
-
     def _check_not_freedrive(self) -> None:
         if self.backend.freedrive_active:
             raise GoalRejected(
@@ -622,32 +670,6 @@ class RobotRuntime:
             self._reject_stream(key, err)
         except BackendError as err:
             self._reject_stream(key, GoalRejected(str(err)))
-
-    def _on_start_force_mode(self, query: Any) -> None:
-        async def work() -> None:
-            from urdaemon.protocols.script_command import StartForceMode
-
-            fields = codec.decode_force_mode(_payload(query))
-            await self.backend.force_mode(StartForceMode(**fields))
-
-        self._service(query, "start_force_mode", work())
-
-    def _on_end_force_mode(self, query: Any) -> None:
-        self._service(query, "end_force_mode", self.backend.force_mode(None))
-
-    def _on_tool_contact(self, start: bool) -> Any:
-        def handle(query: Any) -> None:
-            name = "start_tool_contact" if start else "end_tool_contact"
-            self._service(query, name, self.backend.tool_contact(start))
-
-        return handle
-
-    def _on_tool_voltage(self, query: Any) -> None:
-        async def work() -> None:
-            volts = codec.decode_tool_voltage(_payload(query))
-            await self.backend.set_tool_voltage(volts)
-
-        self._service(query, "set_tool_voltage", work())
 
     def _on_dashboard(self, query: Any) -> None:
         async def serve() -> None:
@@ -686,10 +708,36 @@ class RobotRuntime:
         fraction = codec.decode_speed_slider(payload)
         await self.backend.set_speed_slider(fraction)
 
-    def _service(self, query: Any, name: str, work: Any) -> None:
+    async def _set_tool_voltage(self, payload: bytes | None) -> None:
+        volts = codec.decode_tool_voltage(payload)
+        await self.backend.set_tool_voltage(volts)
+
+    async def _start_force_mode(self, payload: bytes | None) -> None:
+        from urdaemon.protocols.script_command import StartForceMode
+
+        fields = codec.decode_force_mode(payload)
+        await self.backend.force_mode(StartForceMode(**fields))
+
+    def _on_service(self, name: str, act: Callable[[bytes | None], Awaitable[None]]) -> Callable[[Any], None]:
+        def handle(query: Any) -> None:
+            self._service(query, name, act)
+
+        return handle
+
+    def _service(self, query: Any, name: str, act: Callable[[bytes | None], Awaitable[None]]) -> None:
+        """Run service ``name`` with the query's payload and answer once; a second call while it runs
+        is refused, so a burst of requests never acts more than once at a time."""
+        if name in self._running_services:
+            _reply(
+                query, {"ok": False, "reason": f"busy: {name} is still running; ask again once it answered"}
+            )
+            return
+        self._running_services.add(name)
+        payload = _payload(query)
+
         async def serve() -> None:
             try:
-                await work
+                await act(payload)
             except asyncio.CancelledError:
                 _reply(query, {"ok": False, "reason": "daemon shutting down"})
                 raise
@@ -698,9 +746,11 @@ class RobotRuntime:
                 _reply(query, {"ok": False, "reason": str(err)})
             except Exception as err:  # a backend bug must still answer the client
                 self.log.exception("%s failed", name)
-                _reply(query, {"ok": False, "reason": f"{type(err).__name__}: {err}"})
+                _reply(query, {"ok": False, "reason": _internal_error(err)})
             else:
                 _reply(query, {"ok": True})
+            finally:
+                self._running_services.discard(name)
 
         self._spawn(serve())
 
@@ -713,6 +763,47 @@ class RobotRuntime:
     def state(self) -> RobotState:
         """The robot's latest state."""
         return self.backend.state
+
+
+def _without_arguments(
+    name: str, action: Callable[[], Awaitable[None]]
+) -> Callable[[bytes | None], Awaitable[None]]:
+    """A service that takes no arguments: its request is checked (garbage never acts), then it acts."""
+
+    async def act(payload: bytes | None) -> None:
+        codec.decode_empty(payload, name)
+        await action()
+
+    return act
+
+
+async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:
+    """Decode a goal in slices of PLANNING_SLICE_S, letting every robot's cycle run between."""
+    while True:
+        if not decoder.step(time.perf_counter() + PLANNING_SLICE_S):
+            return decoder.result()
+        await asyncio.sleep(0)
+
+
+_gil_users = 0
+_switch_interval = 0.0
+
+
+@contextlib.contextmanager
+def _short_gil_slices() -> Iterator[None]:
+    """While a worker thread runs pure Python, have the interpreter hand the GIL back every
+    ``GIL_SLICE_S``: the event loop never waits longer than that for it."""
+    global _gil_users, _switch_interval
+    if _gil_users == 0:
+        _switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(GIL_SLICE_S)
+    _gil_users += 1
+    try:
+        yield
+    finally:
+        _gil_users -= 1
+        if _gil_users == 0:
+            sys.setswitchinterval(_switch_interval)
 
 
 async def _plan_tail(planner: TrajectoryPlanner) -> None:

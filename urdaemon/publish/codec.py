@@ -8,6 +8,7 @@ controller, which rejects with its own reasons; here only the shape and types ar
 from __future__ import annotations
 
 import contextlib
+import heapq
 import json
 import math
 from collections.abc import Sequence
@@ -19,14 +20,18 @@ from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
 
 __all__ = [
+    "MAX_MESSAGE_BYTES",
     "SCHEMA_VERSION",
+    "SMALL_MESSAGE_BYTES",
     "JointStateEncoder",
     "MoveGoalMessage",
     "StreamMessage",
     "ToleranceMessage",
     "TrajectoryGoalMessage",
+    "client_text",
     "decode_cancel",
     "decode_dashboard",
+    "decode_empty",
     "decode_force_mode",
     "decode_freedrive",
     "decode_message",
@@ -44,11 +49,30 @@ __all__ = [
 ]
 
 SCHEMA_VERSION = 1
+SMALL_MESSAGE_BYTES = 64 * 1024
+"""Largest message on every key but the trajectory goal's (moves, stream commands, services): the
+largest valid one is well under 1 KiB, and JSON this size decodes in well under a cycle."""
 MAX_MESSAGE_BYTES = 2 * 1024 * 1024
-"""Largest client message accepted (5 000 points with positions, velocities and accelerations: ~1.9 MB)."""
+"""Largest trajectory goal (5 000 points with positions, velocities and accelerations: ~1.9 MB); it is
+decoded and checked in slices between robot cycles (``TrajectoryGoalDecoder``)."""
 MAX_TRAJECTORY_POINTS = 5_000
-"""Planning is sliced between cycles, but decoding and checking a goal (~25 µs a point) is not yet:
-5 000 points keep that one-off stall near 0.1 s (docs/keys.md)."""
+"""Most points of a trajectory goal (planning and checking are sliced, but each point costs ~60 µs)."""
+MAX_JOINTS = 64
+"""Longest list of joint values or names a message may carry (no robot has more joints)."""
+MAX_NAME_CHARS = 128
+"""Longest joint name accepted."""
+MAX_GOAL_TIME_S = 7200.0
+"""The longest goal, and so the largest goal-time tolerance and move duration (control's limit)."""
+MAX_JOINT_TOLERANCE = 2 * math.pi
+"""Largest path or goal tolerance of a joint (rad): one turn; more would switch the check off."""
+MAX_PAYLOAD_KG = 35.0
+"""Largest payload mass accepted: above every UR arm's rated payload (UR30: 30 kg)."""
+MAX_COG_M = 1.0
+"""Largest distance of the payload's centre of gravity from the tool flange along any axis (m)."""
+MAX_FORCE_MODE = {"wrench": 1000.0, "limits": 10.0, "task_frame": 10.0}
+"""Bounds of force mode's vectors: wrench (N, Nm), limits (m/s, rad/s or m, rad), task frame (m, rad)."""
+CLIENT_TEXT_CHARS = 40
+"""Longest piece of a client's text (a field name, a key) echoed in a reply or a log line."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,44 +137,79 @@ def _finite_or_null(value: Any) -> Any:
     return value
 
 
-def decode_message(payload: bytes | bytearray | memoryview | None, what: str) -> dict[str, Any]:
-    """Parse a client message into a dict, checking size, JSON syntax, object shape and version."""
+def client_text(text: str, limit: int = CLIENT_TEXT_CHARS) -> str:
+    """A client's text made safe to echo: control characters escaped, at most ``limit`` characters
+    (then ``…``), so no client can make a reply or a log line long or forge a line of its own."""
+    short = text[: limit + 1]
+    safe = "".join(c if c.isprintable() else repr(c)[1:-1] for c in short)
+    return safe[:limit] + "…" if len(safe) > limit else safe
+
+
+def decode_message(
+    payload: bytes | bytearray | memoryview | None, what: str, *, max_bytes: int = SMALL_MESSAGE_BYTES
+) -> dict[str, Any]:
+    """Parse a client message into a dict, checking size (before decoding), JSON syntax, object
+    shape and version."""
     if payload is None or len(payload) == 0:
         raise MessageError(f"{what}: empty message; expected a JSON object")
-    if len(payload) > MAX_MESSAGE_BYTES:
-        raise MessageError(f"{what}: message of {len(payload)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    if len(payload) > max_bytes:
+        raise MessageError(f"{what}: message of {len(payload)} bytes exceeds the limit of {max_bytes} bytes")
     try:
         data = json.loads(bytes(payload))
     except (ValueError, RecursionError) as err:  # JSONDecodeError, UnicodeDecodeError, huge integers
-        raise MessageError(f"{what}: not valid JSON: {err}") from err
+        raise MessageError(f"{what}: not valid JSON: {client_text(str(err), 120)}") from err
     if not isinstance(data, dict):
         raise MessageError(f"{what}: expected a JSON object, got {type(data).__name__}")
-    version = data.get("v", SCHEMA_VERSION)
-    if isinstance(version, bool) or version != SCHEMA_VERSION:
-        raise MessageError(
-            f"{what}: unsupported schema version {version!r}; this daemon speaks {SCHEMA_VERSION}"
-        )
+    _check_version(data, what)
     return data
 
 
+def _check_version(data: dict[str, Any], what: str) -> None:
+    version = data.get("v", SCHEMA_VERSION)
+    if isinstance(version, bool) or version != SCHEMA_VERSION:
+        shown = client_text(repr(version))
+        raise MessageError(f"{what}: unsupported schema version {shown}; this daemon speaks {SCHEMA_VERSION}")
+
+
+def _shown(value: Any) -> str:
+    """A client's JSON value, shortened and escaped, to say what was wrong with it."""
+    try:
+        return client_text(json.dumps(value)[: CLIENT_TEXT_CHARS + 1])
+    except (ValueError, RecursionError):
+        return type(value).__name__
+
+
 def _allowed(data: dict[str, Any], what: str, keys: set[str]) -> None:
-    unknown = sorted(set(data) - keys - {"v"})
+    """Refuse unknown fields, naming at most three of them, each shortened and escaped."""
+    unknown = [k for k in data if k not in keys and k != "v"]
     if unknown:
-        raise MessageError(f"{what}: unknown field(s) {', '.join(unknown)}")
+        shown = ", ".join(client_text(k) for k in heapq.nsmallest(3, unknown))
+        more = f" and {len(unknown) - 3} more" if len(unknown) > 3 else ""
+        raise MessageError(f"{what}: unknown field(s) {shown}{more}")
 
 
 def _number(value: Any, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise MessageError(f"{field}: expected a number, got {json.dumps(value)[:40]}")
+        raise MessageError(f"{field}: expected a number, got {_shown(value)}")
     try:
         return float(value)
     except OverflowError as err:
         raise MessageError(f"{field}: number out of range") from err
 
 
-def _numbers(value: Any, field: str) -> tuple[float, ...]:
+def _within(value: float, field: str, low: float, high: float, *, open_low: bool = False) -> float:
+    """``value`` if it lies in [low, high] (or (low, high]); else a refusal naming the range."""
+    if not (value > low if open_low else value >= low) or not value <= high:
+        allowed = f"> {low:g} and ≤ {high:g}" if open_low else f"within {low:g}..{high:g}"
+        raise MessageError(f"{field}: must be {allowed}, got {value:g}")
+    return value
+
+
+def _numbers(value: Any, field: str, max_len: int = MAX_JOINTS) -> tuple[float, ...]:
     if not isinstance(value, list):
         raise MessageError(f"{field}: expected a list of numbers, got {type(value).__name__}")
+    if len(value) > max_len:
+        raise MessageError(f"{field}: {len(value)} values; at most {max_len} are accepted")
     return tuple(_number(v, f"{field}[{i}]") for i, v in enumerate(value))
 
 
@@ -159,6 +218,14 @@ def _names(value: Any, field: str) -> tuple[str, ...] | None:
         return None
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise MessageError(f"{field}: expected a list of joint name strings")
+    if len(value) > MAX_JOINTS:
+        raise MessageError(f"{field}: {len(value)} names; at most {MAX_JOINTS} are accepted")
+    for i, name in enumerate(value):
+        if len(name) > MAX_NAME_CHARS or not name.isprintable():
+            raise MessageError(
+                f"{field}[{i}]: {client_text(name)!r} is not a joint name "
+                f"(at most {MAX_NAME_CHARS} printable characters)"
+            )
     return tuple(value)
 
 
@@ -184,56 +251,68 @@ def _tolerances(value: Any, what: str) -> ToleranceMessage:
     for key in ("path", "goal"):
         item = value.get(key)
         field = f"{what}.tolerances.{key}"
-        parsed[key] = (
-            None
-            if item is None
-            else _numbers(item, field)
-            if isinstance(item, list)
-            else _number(item, field)
-        )
+        if item is None:
+            parsed[key] = None
+        elif isinstance(item, list):
+            numbers = _numbers(item, field)
+            parsed[key] = tuple(
+                _within(v, f"{field}[{i}]", 0.0, MAX_JOINT_TOLERANCE, open_low=True)
+                for i, v in enumerate(numbers)
+            )
+        else:
+            parsed[key] = _within(_number(item, field), field, 0.0, MAX_JOINT_TOLERANCE, open_low=True)
     goal_time = value.get("goal_time")
+    field = f"{what}.tolerances.goal_time"
     return ToleranceMessage(
         path=parsed["path"],
         goal=parsed["goal"],
-        goal_time=None if goal_time is None else _number(goal_time, f"{what}.tolerances.goal_time"),
+        goal_time=None
+        if goal_time is None
+        else _within(_number(goal_time, field), field, 0.0, MAX_GOAL_TIME_S),
     )
 
 
 def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
-    """Decode a trajectory goal: points [{positions, velocities?, accelerations?, time_from_start}]."""
+    """Decode a trajectory goal at once (the daemon uses ``TrajectoryGoalDecoder``, in slices)."""
+    from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
+
+    decoder = TrajectoryGoalDecoder(payload)
+    while decoder.step(math.inf):
+        pass
+    return decoder.result()
+
+
+def trajectory_point(raw: Any, field: str) -> TrajectoryPoint:
+    """One decoded point of a trajectory goal: {positions, velocities?, accelerations?, time_from_start}."""
+    if not isinstance(raw, dict):
+        raise MessageError(f"{field}: expected an object")
+    _allowed(raw, field, {"positions", "velocities", "accelerations", "time_from_start"})
+    if "positions" not in raw:
+        raise MessageError(f"{field}.positions: missing")
+    if "time_from_start" not in raw:
+        raise MessageError(f"{field}.time_from_start: missing")
+    velocities = raw.get("velocities")
+    accelerations = raw.get("accelerations")
+    return TrajectoryPoint(
+        positions=_numbers(raw["positions"], f"{field}.positions"),
+        time_from_start=_number(raw["time_from_start"], f"{field}.time_from_start"),
+        velocities=None if velocities is None else _numbers(velocities, f"{field}.velocities"),
+        accelerations=None if accelerations is None else _numbers(accelerations, f"{field}.accelerations"),
+    )
+
+
+TRAJECTORY_FIELDS = frozenset({"joint_names", "points", "tolerances", "preempt", "passthrough"})
+"""The fields of a trajectory goal."""
+
+
+def trajectory_goal(data: dict[str, Any], points: tuple[TrajectoryPoint, ...]) -> TrajectoryGoalMessage:
+    """The goal from its decoded top-level fields (``points`` already decoded and checked)."""
     what = "trajectory goal"
-    data = decode_message(payload, what)
-    _allowed(data, what, {"joint_names", "points", "tolerances", "preempt", "passthrough"})
-    raw_points = data.get("points")
-    if not isinstance(raw_points, list):
-        raise MessageError(f"{what}.points: expected a list of points")
-    if len(raw_points) > MAX_TRAJECTORY_POINTS:
-        raise MessageError(f"{what}.points: {len(raw_points)} points exceed {MAX_TRAJECTORY_POINTS}")
-    points = []
-    for i, raw in enumerate(raw_points):
-        field = f"{what}.points[{i}]"
-        if not isinstance(raw, dict):
-            raise MessageError(f"{field}: expected an object")
-        _allowed(raw, field, {"positions", "velocities", "accelerations", "time_from_start"})
-        if "positions" not in raw:
-            raise MessageError(f"{field}.positions: missing")
-        if "time_from_start" not in raw:
-            raise MessageError(f"{field}.time_from_start: missing")
-        velocities = raw.get("velocities")
-        accelerations = raw.get("accelerations")
-        points.append(
-            TrajectoryPoint(
-                positions=_numbers(raw["positions"], f"{field}.positions"),
-                time_from_start=_number(raw["time_from_start"], f"{field}.time_from_start"),
-                velocities=None if velocities is None else _numbers(velocities, f"{field}.velocities"),
-                accelerations=None
-                if accelerations is None
-                else _numbers(accelerations, f"{field}.accelerations"),
-            )
-        )
+    _check_version(data, what)
+    _allowed(data, what, set(TRAJECTORY_FIELDS))
     return TrajectoryGoalMessage(
         joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
-        points=tuple(points),
+        points=points,
         tolerances=_tolerances(data.get("tolerances"), what),
         preempt=_bool(data, "preempt", what),
         passthrough=_bool(data, "passthrough", what),
@@ -261,10 +340,16 @@ def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
         raise MessageError(f"{what}.positions: missing")
     velocity_scale = _optional_number(data, "velocity_scale", what)
     acceleration_scale = _optional_number(data, "acceleration_scale", what)
+    for key, scale in (("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)):
+        if scale is not None:
+            _within(scale, f"{what}.{key}", 0.0, 1.0, open_low=True)
+    duration = _optional_number(data, "duration", what)
+    if duration is not None:
+        _within(duration, f"{what}.duration", 0.0, MAX_GOAL_TIME_S, open_low=True)
     return MoveGoalMessage(
         joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
         positions=_numbers(data["positions"], f"{what}.positions"),
-        duration=_optional_number(data, "duration", what),
+        duration=duration,
         velocity_scale=1.0 if velocity_scale is None else velocity_scale,
         acceleration_scale=1.0 if acceleration_scale is None else acceleration_scale,
         tolerances=_tolerances(data.get("tolerances"), what),
@@ -282,7 +367,18 @@ def decode_cancel(payload: bytes | None) -> str | None:
     goal_id = data.get("goal_id")
     if goal_id is not None and not isinstance(goal_id, str):
         raise MessageError(f"{what}.goal_id: expected a string")
+    if goal_id is not None and (len(goal_id) > 200 or not goal_id.isprintable()):
+        raise MessageError(f"{what}.goal_id: {client_text(goal_id)!r} is not a goal id")
     return goal_id
+
+
+def decode_empty(payload: bytes | None, what: str) -> None:
+    """Check the request of a service that takes no arguments: nothing, an empty payload, ``{}`` or
+    ``{"v": 1}``; anything else is refused, so garbage never acts."""
+    if payload is None or len(payload) == 0:
+        return
+    data = decode_message(payload, what)
+    _allowed(data, f"{what} takes no arguments, but got", set())
 
 
 def decode_stream_position(payload: bytes | None) -> StreamMessage:
@@ -337,9 +433,12 @@ def decode_set_payload(payload: bytes | None) -> tuple[float, tuple[float, float
     mass = _number(data.get("mass"), f"{what}.mass")
     if not math.isfinite(mass) or mass < 0:
         raise MessageError(f"{what}.mass: must be a finite number ≥ 0, got {mass}")
+    _within(mass, f"{what}.mass (kg)", 0.0, MAX_PAYLOAD_KG)
     cog = _numbers(data.get("cog", [0.0, 0.0, 0.0]), f"{what}.cog")
     if len(cog) != 3 or not all(math.isfinite(c) for c in cog):
         raise MessageError(f"{what}.cog: expected three finite numbers")
+    for i, c in enumerate(cog):
+        _within(c, f"{what}.cog[{i}] (m)", -MAX_COG_M, MAX_COG_M)
     return mass, (cog[0], cog[1], cog[2])
 
 
@@ -351,8 +450,8 @@ def decode_dashboard(payload: bytes | None) -> str:
     command = data.get("command")
     if not isinstance(command, str) or not command.strip():
         raise MessageError(f'{what}.command: expected a dashboard command line, e.g. "power on"')
-    if "\n" in command or "\r" in command or len(command) > 1024:
-        raise MessageError(f"{what}.command: must be one line of at most 1024 characters")
+    if not command.isprintable() or len(command) > 1024:
+        raise MessageError(f"{what}.command: must be one line of at most 1024 printable characters")
     return command.strip()
 
 
@@ -385,6 +484,10 @@ def decode_force_mode(payload: bytes | None) -> dict[str, Any]:
         values = _numbers(data.get(key), f"{what}.{key}")
         if len(values) != 6 or not all(math.isfinite(v) for v in values):
             raise MessageError(f"{what}.{key}: expected six finite numbers")
+        bound = MAX_FORCE_MODE[key]
+        low = 0.0 if key == "limits" else -bound
+        for i, v in enumerate(values):
+            _within(v, f"{what}.{key}[{i}]", low, bound)
         fields[key] = values
     selection = data.get("selection")
     if (
@@ -400,10 +503,7 @@ def decode_force_mode(payload: bytes | None) -> dict[str, Any]:
     fields["force_type"] = int(force_type)
     for key, low, high, default in (("damping", 0.0, 1.0, 0.025), ("gain_scaling", 0.0, 2.0, 0.5)):
         value = data.get(key, default)
-        value = _number(value, f"{what}.{key}")
-        if not low <= value <= high:
-            raise MessageError(f"{what}.{key}: must be within {low}..{high}")
-        fields[key] = value
+        fields[key] = _within(_number(value, f"{what}.{key}"), f"{what}.{key}", low, high)
     return fields
 
 
@@ -412,10 +512,7 @@ def decode_speed_slider(payload: bytes | None) -> float:
     what = "set_speed_slider"
     data = decode_message(payload, what)
     _allowed(data, what, {"fraction"})
-    fraction = _number(data.get("fraction"), f"{what}.fraction")
-    if not 0.0 <= fraction <= 1.0:
-        raise MessageError(f"{what}.fraction: must be within 0..1, got {fraction}")
-    return fraction
+    return _within(_number(data.get("fraction"), f"{what}.fraction"), f"{what}.fraction", 0.0, 1.0)
 
 
 def decode_cycle_stats(payload: bytes | None) -> bool:

@@ -23,6 +23,16 @@ class CellKeys:
         """The cell URDF (queryable)."""
         return f"{self.cell}/robot_description"
 
+    @property
+    def any_robot(self) -> str:
+        """Every key under any robot's name (the daemon answers queries on robots it does not serve)."""
+        return f"{self.cell}/*/**"
+
+    @property
+    def cell_level(self) -> frozenset[str]:
+        """The chunks after ``<cell>/`` that name a key of the cell, not a robot."""
+        return frozenset({"tf", "robot_description"})
+
     def robot(self, name: str) -> RobotKeys:
         """The keys of one robot."""
         return RobotKeys(self.cell, name)

@@ -18,8 +18,16 @@ import zenoh
 
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import UrDaemonError
+from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
 
-__all__ = ["Matching", "ZenohNode", "declare_state_publisher", "zenoh_config"]
+__all__ = [
+    "Matching",
+    "ZenohNode",
+    "declare_state_publisher",
+    "size_refusal",
+    "wildcard_refusal",
+    "zenoh_config",
+]
 
 log = logging.getLogger(__name__)
 
@@ -121,19 +129,78 @@ class ZenohNode:
         if not self._closed:
             self.session.put(key, payload, congestion_control=zenoh.CongestionControl.DROP)
 
-    def queryable(self, key: str, handler: Callable[[Any], None]) -> None:
-        """Declare a queryable whose ``handler(query)`` runs on the loop; it must reply."""
+    def queryable(
+        self,
+        key: str,
+        handler: Callable[[Any], None],
+        *,
+        max_bytes: int | None = SMALL_MESSAGE_BYTES,
+        answer: str = "ok",
+        any_id: bool = False,
+    ) -> None:
+        """Declare a queryable whose ``handler(query)`` runs on the loop; it must reply.
+
+        Only a query on exactly ``key`` reaches the handler: one whose key expression merely
+        intersects it (``<cell>/**``, ``**``, ``<cell>/*/goal/move``) is answered with an error reply
+        naming the key to ask, on Zenoh's thread, and never acts. With ``any_id`` (a key with one
+        ``*`` chunk, the goal results) any concrete key matching it is handled and a wildcard query is
+        not answered. A payload larger than ``max_bytes`` is refused before anyone reads it, with
+        ``{answer: false, "reason": ...}``.
+        """
 
         def on_query(query: Any) -> None:
+            asked = str(query.key_expr)
+            if asked != key and (not any_id or "*" in asked):
+                if not any_id:
+                    _refuse_query(query, wildcard_refusal(asked, key), error=True, answer=answer)
+                else:
+                    _drop(query)
+                return
+            payload = query.payload
+            size = 0 if payload is None else len(payload)
+            if max_bytes is not None and size > max_bytes:
+                _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
+                return
             self._to_loop(handler, query)
 
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
 
-    def subscriber(self, key: str, handler: Callable[[str, bytes], None]) -> None:
-        """Declare a subscriber whose ``handler(key, payload)`` runs on the loop."""
+    def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
+        """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
+        ``handler(query)`` runs on the loop for every query; the handler decides whether to reply."""
+
+        def on_query(query: Any) -> None:
+            self._to_loop(handler, query)
+
+        self._entities.append(self.session.declare_queryable(key, on_query, complete=False))
+
+    def subscriber(
+        self,
+        key: str,
+        handler: Callable[[str, bytes], None],
+        *,
+        max_bytes: int = SMALL_MESSAGE_BYTES,
+        refused: Callable[[str, str], None] | None = None,
+    ) -> None:
+        """Declare a subscriber whose ``handler(key, payload)`` runs on the loop.
+
+        Only a sample put on exactly ``key`` is handled: a put on a wildcard expression that covers
+        it (``<cell>/*/command/joint_position``) never acts. Such a sample, or one larger than
+        ``max_bytes``, is not copied; ``refused(key expression, reason)`` hears of it on the loop.
+        """
 
         def on_sample(sample: Any) -> None:
-            self._to_loop(handler, str(sample.key_expr), sample.payload.to_bytes())
+            put_on = str(sample.key_expr)
+            size = len(sample.payload)
+            if put_on != key:
+                reason = wildcard_refusal(put_on, key)
+            elif size > max_bytes:
+                reason = size_refusal(key, size, max_bytes)
+            else:
+                self._to_loop(handler, put_on, sample.payload.to_bytes())
+                return
+            if refused is not None:
+                self._to_loop(refused, client_text(put_on, 80), reason)
 
         self._entities.append(self.session.declare_subscriber(key, on_sample))
 
@@ -159,3 +226,33 @@ class ZenohNode:
             return
         with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh was delivering
             self._loop.call_soon_threadsafe(handler, *args)
+
+
+def wildcard_refusal(asked: str, key: str) -> str:
+    """Why a query or put on a key expression that only covers ``key`` did nothing."""
+    return (
+        f"{client_text(asked, 80)} is not {key}: services, goals and commands act on their exact key "
+        f"only, never on a wildcard; ask {key}"
+    )
+
+
+def size_refusal(key: str, size: int, limit: int) -> str:
+    """Why a message too large to read was refused."""
+    return f"{key}: message of {size} bytes exceeds the limit of {limit} bytes for this key"
+
+
+def _refuse_query(query: Any, reason: str, *, error: bool, answer: str) -> None:
+    """Answer ``query`` with a refusal on Zenoh's thread: an error reply (no key, so it can never
+    pass for a real answer) for a wildcard, else a normal reply on the query's key."""
+    body = encode({answer: False, "reason": reason})
+    with contextlib.suppress(Exception):  # the querier may have timed out and gone
+        if error:
+            query.reply_err(body)
+        else:
+            query.reply(query.key_expr, body)
+    _drop(query)
+
+
+def _drop(query: Any) -> None:
+    with contextlib.suppress(Exception):
+        query.drop()
