@@ -11,6 +11,7 @@ halted, and the goals running then were aborted.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
 import subprocess
@@ -115,10 +116,8 @@ async def _flood(client: Client, robot: RobotClient, paused: asyncio.Event) -> i
     sent = 0
     body: dict[str, Any] = {"positions": HOME, FLOOD_FIELD: 1}
     while not paused.is_set() and sent < 20_000:
-        try:
+        with contextlib.suppress(UrDaemonError):
             await client.query(robot.keys.goal_move, body, timeout=1.0)
-        except UrDaemonError:
-            pass
         sent += 1
     return sent
 
