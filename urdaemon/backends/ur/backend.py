@@ -120,6 +120,7 @@ class UrBackend(Backend):
         """What the controller said when our program last ended (a runtime error, a stop)."""
         self._lost_link = ""
         """The program link that dropped while the others stayed up (the program is being restarted)."""
+        self._program_started_at = -1e9
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -328,7 +329,7 @@ class UrBackend(Backend):
                     "no dashboard to play the External Control program (PolyScope X, or the dashboard "
                     "refused the connection): press play on the pendant, or run headless"
                 )
-            self.servers.expect_program()
+            self._expect_program()
             reply = await board.command(dash.Play())
             if not reply.success:
                 raise RobotFaultError(f"play refused: {reply.text}")
@@ -366,7 +367,7 @@ class UrBackend(Backend):
                 self._send_program(force=True)
             else:
                 self._handed_back = False
-                self.servers.expect_program()
+                self._expect_program()
                 reply = await (await self._dashboard_link()).command(dash.Play())
                 if not reply.success:
                     raise BackendError(f"play refused: {reply.text}")
@@ -575,7 +576,7 @@ class UrBackend(Backend):
         if self._primary is None or (not force and now - self._program_sent_at < PROGRAM_RESEND_S):
             return
         self._program_sent_at = now
-        self.servers.expect_program()  # its links may replace the old program's
+        self._expect_program()
         self._primary.send_script(prim.headless_program(self._program_text()))
         log.info("[%s] control program sent (headless, connecting back to %s)", self.name, self._host_ip)
 
@@ -618,12 +619,20 @@ class UrBackend(Backend):
         if name == "reverse":
             self._freedrive_on = False  # the program ended: so did its freedrive
             self._swallow_result = False
+            self._lost_link = ""  # the whole program ended (its other links close with it)
         if name in ("reverse", "trajectory"):
             self._end_passthrough(int(trajectory_point.TrajectoryResultCode.FAILURE))
         if name == "script_command":
             self._tool_contact_armed = False  # its result can no longer come
-        if name == "script_sender" or reason.endswith(REPLACED) or self._rtde is None:
-            return  # a new program's link takes this one's place at once; or the daemon closes them
+        if (
+            name == "script_sender"
+            or reason.endswith(REPLACED)
+            or self._rtde is None
+            or any(s.connected_at < self._program_started_at for s in self.servers.program_links)
+        ):
+            # a new program's link takes this one's place (the old program's links close while the
+            # new one connects), or the daemon closes them
+            return
         others = [s.name for s in self.servers.program_links if s.name != name and s.link is not None]
         # (a lost reverse link ends the program: it closes the others itself and is sent again)
         if name != "reverse" and others and not self._lost_link and not self._handed_back:
@@ -669,7 +678,7 @@ class UrBackend(Backend):
             sockname = link.transport.get_extra_info("sockname") if link and link.transport else None
             self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "")
         if isinstance(event, script_sender.ProgramRequested):
-            self.servers.expect_program()  # the URCap runs it next: its links may replace the old ones
+            self._expect_program()  # the URCap runs it next
             self.servers.script_sender.send(script_sender.Program(self._program_text()))
             log.info("[%s] control program sent to the External Control URCap", self.name)
 
@@ -723,6 +732,12 @@ class UrBackend(Backend):
             value = fields.get(name, 0)
             values.append(float(value) if name in _DOUBLE_INPUTS else int(value))
         rtde.send_inputs(values)
+
+    def _expect_program(self) -> None:
+        """A new program is starting: its links may replace the old program's, whose closing links
+        are not a loss."""
+        self._program_started_at = time.monotonic()
+        self.servers.expect_program()
 
     def _script_command(self, message: Any, what: str) -> None:
         """Send a script command; BackendError (never a traceback) if it cannot be sent or encoded."""

@@ -143,11 +143,11 @@ class RtdeLink(asyncio.Protocol):
         if self.conn.protocol_version == 1:
             # v1's SETUP_OUTPUTS carries no frequency: the controller streams at its own rate
             self.frequency = top
-            setup = rtde.SetupOutputs(None, tuple(outputs))
+            request = rtde.SetupOutputs(None, tuple(outputs))
         else:
             self.frequency = top if frequency is None else min(frequency, top)
-            setup = rtde.SetupOutputs(self.frequency, tuple(outputs))
-        configured = await self._request(setup, rtde.OutputsConfigured)
+            request = rtde.SetupOutputs(self.frequency, tuple(outputs))
+        configured = await self._request(request, rtde.OutputsConfigured)
         if configured.not_found:
             raise RemoteProtocolError(
                 f"rtde: the controller does not know output(s) {', '.join(configured.not_found)}"

@@ -144,6 +144,8 @@ class CallbackServer:
         self.replaceable = False
         """A newer connection from the robot replaces the live one at any time (the script sender)."""
         self._replace_until = 0.0
+        self.connected_at = -1e9
+        """When the current (or last) link was accepted (``time.monotonic()``)."""
         self._server: asyncio.Server | None = None
 
     async def start(self, host: str) -> None:
@@ -187,6 +189,7 @@ class CallbackServer:
             self.hooks.on_link(self.name, False, f"{self.name}: {REPLACED}")
         self._replace_until = 0.0  # the new program's connection came: the permission is used up
         self.link = link
+        self.connected_at = time.monotonic()
         self.hooks.on_link(self.name, True, f"{self.name}: connected from {link.peer}")
         return True
 
