@@ -242,18 +242,17 @@ async def test_dashboard_bring_up_with_refusals_like_a_real_controller() -> None
         assert (await link.next(dash.CommandReply)).success is False, "play while powered off is refused"
         await link.send(dash.PowerOn())
         assert (await link.next(dash.CommandReply)).success is True
-        for _ in range(200):
+        for _ in range(1000):  # bounded: 20 s even if a busy machine starves the fake's clock
             await link.send(dash.GetRobotMode())
             mode = (await link.next(dash.RobotModeReply)).mode
             if mode is RobotMode.IDLE:
                 break
-            await asyncio.sleep(
-                0.02
-            )  # the fake's boot takes 0.5 s of its own clock; poll like a client would
+            # the fake's boot takes 0.5 s of its own clock; poll like a client would
+            await asyncio.sleep(0.02)
         assert mode is RobotMode.IDLE
         await link.send(dash.BrakeRelease())
         assert (await link.next(dash.CommandReply)).success is True
-        for _ in range(200):
+        for _ in range(1000):  # bounded: 20 s even if a busy machine starves the fake's clock
             await link.send(dash.GetRobotMode())
             mode = (await link.next(dash.RobotModeReply)).mode
             if mode is RobotMode.RUNNING:
