@@ -184,15 +184,74 @@ class RobotState:
         )
 
     def not_ready_reason(self) -> str:
-        """Why ``ready_for_motion`` is false (empty when it is true)."""
+        """Why ``ready_for_motion`` is false, the robot and safety modes, and what to do (empty when ready).
+
+        The backend's ``lifecycle_reason`` says why and what to do when it knows; otherwise the advice
+        follows from the modes. Runs only when a motion is refused or aborted, never per cycle.
+        """
+        if self.ready_for_motion:
+            return ""
         if self.lifecycle is not Lifecycle.RUNNING:
-            reason = f"robot is {self.lifecycle.value}"
-            return f"{reason}: {self.lifecycle_reason}" if self.lifecycle_reason else reason
-        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
-            return f"robot safety mode is {self.safety_mode.name}"
-        if not self.program_running:
-            return "control program is not running"
-        return ""
+            head = f"robot is {self.lifecycle.value}"
+        elif self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+            head = f"robot safety mode is {self.safety_mode.name}"
+        else:
+            head = "control program is not running"
+        why = self.lifecycle_reason or _advice(self)
+        return f"{head} (robot mode {self.robot_mode.name}, safety mode {self.safety_mode.name}): {why}"
+
+
+_EMERGENCY_STOPS = frozenset(
+    {
+        SafetyMode.ROBOT_EMERGENCY_STOP,
+        SafetyMode.SYSTEM_EMERGENCY_STOP,
+        SafetyMode.IMMI_EMERGENCY_STOP,
+        SafetyMode.PROFISAFE_EMERGENCY_STOP,
+    }
+)
+_SAFEGUARD_STOPS = frozenset(
+    {
+        SafetyMode.SAFEGUARD_STOP,
+        SafetyMode.AUTOMATIC_MODE_SAFEGUARD_STOP,
+        SafetyMode.IMMI_SAFEGUARD_STOP,
+        SafetyMode.PROFISAFE_SAFEGUARD_STOP,
+        SafetyMode.PROFISAFE_AUTOMATIC_MODE_SAFEGUARD_STOP,
+        SafetyMode.SAFETY_API_SAFEGUARD_STOP,
+        SafetyMode.SYSTEM_THREE_POSITION_ENABLING_STOP,
+        SafetyMode.TP_THREE_POSITION_ENABLING_STOP,
+    }
+)
+
+
+def _advice(state: RobotState) -> str:
+    """What to do about a robot that is not ready, from its lifecycle and modes alone."""
+    lifecycle, safety, mode = state.lifecycle, state.safety_mode, state.robot_mode
+    if lifecycle in (Lifecycle.DISCONNECTED, Lifecycle.CONNECTING, Lifecycle.RECOVERING):
+        return (
+            "the daemon has no link to the robot; it keeps reconnecting (check the robot's network and power)"
+        )
+    if safety in _EMERGENCY_STOPS:
+        return "release the emergency stop, then call the startup service"
+    if safety is SafetyMode.PROTECTIVE_STOP:
+        return (
+            "unlock the protective stop (dashboard service 'unlock protective stop', or the pendant), "
+            "then call the resend_program service"
+        )
+    if safety in _SAFEGUARD_STOPS:
+        return (
+            "reset the safeguard stop (close the guard or release the enabling device), then resend_program"
+        )
+    if safety not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+        return f"clear the {safety.name} condition on the pendant, then call the startup service"
+    if mode is RobotMode.POWER_OFF:
+        return "the robot is powered off: call the startup service (or power it on on the pendant)"
+    if mode is RobotMode.IDLE:
+        return "the brakes are engaged: call the startup service (or release them on the pendant)"
+    if lifecycle is Lifecycle.PAUSED:
+        return "the program is paused on the controller: resume it (dashboard 'play' or the pendant)"
+    if mode is not RobotMode.RUNNING:
+        return f"the robot is in {mode.name} mode: call the startup service once it has finished"
+    return "call the resend_program service (or startup) to start the control program"
 
 
 @dataclass(slots=True)

@@ -275,7 +275,7 @@ def test_not_ready_aborts_then_new_motion_seeds_from_measured_pose() -> None:
     robot.step()
     (result,) = robot.results()
     assert result.status is GoalStatus.ABORTED
-    assert result.reason == "control program is not running"
+    assert result.reason.startswith("control program is not running (robot mode ")
     assert robot.commands[-1][0] is CommandMode.IDLE
     assert controller.mode == "idle"
     # While not ready, new goals are refused with the robot's own reason.
@@ -310,7 +310,7 @@ def test_not_ready_reasons_are_passed_through(change: dict[str, object], reason:
     robot.step()
     (result,) = robot.results()
     assert result.status is GoalStatus.ABORTED
-    assert result.reason == reason
+    assert result.reason.startswith(f"{reason} (robot mode ")
 
 
 def test_move_goal_timing_and_scales() -> None:

@@ -9,14 +9,17 @@ Everything happens on the event loop thread; ``on_cycle`` must not block.
 from __future__ import annotations
 
 import abc
+import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from urdaemon.backends.timing import Histogram
+from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
 from urdaemon.model import JointCommand, RobotState
 
 __all__ = ["IO_KINDS", "Backend", "BackendStatistics"]
+
+log = logging.getLogger("urdaemon.backends")
 
 IO_KINDS = ("digital", "configurable", "tool", "analog")
 """Output kinds a ``set_io`` request may name."""
@@ -49,6 +52,8 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
+        self.lag_log = LagLog(f"robot {name!r} ({self.kind} backend)", log)
+        """Rate-limited warning of missed and late cycles; ``report_lag`` feeds it once per cycle."""
         self.turnaround = Histogram()
         """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
         receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""
@@ -151,6 +156,11 @@ class Backend(abc.ABC):
     async def close(self) -> None:
         """Release what outlives one ``run`` (listening sockets); the daemon is stopping."""
         return  # nothing by default: mock and servo hold nothing between runs
+
+    def report_lag(self) -> None:
+        """Warn (rate-limited) about cycles missed or late since the last warning; call once per cycle
+        after updating the counts of missed and late cycles."""
+        self.lag_log.update(self._missed, self._late)
 
     def statistics(self) -> BackendStatistics:
         """Counters since start."""

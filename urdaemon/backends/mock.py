@@ -87,6 +87,7 @@ class MockBackend(Backend):
         self._missed = self._clock.missed
         self._late = self._clock.late
         self._max_lateness = self._clock.max_lateness
+        self.report_lag()
 
     async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
         """Set an output; the state shows it from the next cycle on."""

@@ -1,8 +1,19 @@
-"""A fixed-bin histogram of durations, cheap enough to record one value per cycle at 500 Hz."""
+"""Cycle timing: a fixed-bin histogram of durations, and a rate-limited warning of missed cycles.
+
+Both are cheap enough to run once per cycle at 500 Hz.
+"""
 
 from __future__ import annotations
 
-__all__ = ["Histogram"]
+import logging
+import math
+import time
+from collections.abc import Callable
+
+__all__ = ["LAG_LOG_INTERVAL_S", "Histogram", "LagLog"]
+
+LAG_LOG_INTERVAL_S = 5.0
+"""At most one missed/late-cycles warning per backend in this many seconds."""
 
 BIN_NS = 1_000
 """Resolution: 1 µs."""
@@ -56,3 +67,58 @@ class Histogram:
             "p999_us": self.percentile_us(0.999),
             "max_us": self.max_ns / 1_000.0,
         }
+
+
+class LagLog:
+    """Warns, at most once every ``interval_s``, that cycles were missed or late since the last warning.
+
+    ``update(missed, late)`` takes the backend's running totals once per cycle: two integer
+    comparisons while nothing changed; the first change is logged at once, later ones when the
+    interval since the last line has passed (on the first cycle after it, even if no new cycle was
+    missed then, so nothing counted stays unsaid).
+    """
+
+    __slots__ = ("_logged_late", "_logged_missed", "_next", "_since", "clock", "interval_s", "logger", "what")
+
+    def __init__(
+        self,
+        what: str,
+        logger: logging.Logger,
+        *,
+        interval_s: float = LAG_LOG_INTERVAL_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.what = what
+        self.logger = logger
+        self.interval_s = interval_s
+        self.clock = clock
+        """The time source (seconds); tests inject their own."""
+        self._logged_missed = 0
+        self._logged_late = 0
+        self._next = -math.inf
+        self._since: float | None = None
+
+    def update(self, missed: int, late: int) -> None:
+        """Take the totals of missed and late cycles; log a warning if due."""
+        if missed == self._logged_missed and late == self._logged_late:
+            return
+        now = self.clock()
+        if now < self._next:
+            return
+        new_missed = missed - self._logged_missed
+        new_late = late - self._logged_late
+        window = "" if self._since is None else f" in the last {now - self._since:.3g} s"
+        self.logger.warning(
+            "%s: %d cycles missed and %d late%s (%d missed, %d late in all): the machine or the event "
+            "loop is too busy for this robot's rate",
+            self.what,
+            new_missed,
+            new_late,
+            window,
+            missed,
+            late,
+        )
+        self._logged_missed = missed
+        self._logged_late = late
+        self._since = now
+        self._next = now + self.interval_s

@@ -50,6 +50,7 @@ from urdaemon.control.limits import (
     stopping_distance,
 )
 from urdaemon.control.trajectory import (
+    MAX_GOAL_TIME_S,
     RUCKIG_ERRORS,
     PlannedTrajectory,
     TrajectoryPlanner,
@@ -60,7 +61,7 @@ from urdaemon.control.trajectory import (
 from urdaemon.errors import GoalRejected
 from urdaemon.model import CommandMode, JointCommand, JointLimits, RobotState
 
-__all__ = ["ControllerStatistics", "MotionController"]
+__all__ = ["MAX_JOINT_TOLERANCE", "ControllerStatistics", "MotionController"]
 
 _WORKING = Result.Working
 _FINISHED = Result.Finished
@@ -74,6 +75,8 @@ _MIN_SEED_SCALING = 0.05
 _END_EPS = 1e-9
 _EXTREMA_EPS = 1e-9
 _PERM_CACHE_SIZE = 32
+MAX_JOINT_TOLERANCE = 2.0 * math.pi
+"""Largest finite path or goal tolerance of a joint (rad): one turn; infinity switches the check off."""
 
 
 class _Mode(enum.Enum):
@@ -784,6 +787,11 @@ class MotionController:
                 # Infinity is allowed: it switches the check off for that joint.
                 if not (value > 0.0):
                     raise GoalRejected(f"{label} tolerance of {name} must be > 0, got {value}")
+                if MAX_JOINT_TOLERANCE < value < math.inf:
+                    raise GoalRejected(
+                        f"{label} tolerance of {name} is {value:.6g}, more than one turn "
+                        f"({MAX_JOINT_TOLERANCE:.6g} rad); leave it out for the default"
+                    )
             if label == "path":
                 path = tuple(float(v) for v in given)
             else:
@@ -791,6 +799,11 @@ class MotionController:
         if tolerances.goal_time is not None:
             if not (tolerances.goal_time >= 0.0):
                 raise GoalRejected(f"goal_time tolerance must be >= 0, got {tolerances.goal_time}")
+            if MAX_GOAL_TIME_S < tolerances.goal_time < math.inf:
+                raise GoalRejected(
+                    f"goal_time tolerance is {tolerances.goal_time:.6g} s, more than the longest goal "
+                    f"({MAX_GOAL_TIME_S:.6g} s)"
+                )
             goal_time = float(tolerances.goal_time)
         return path, goal, goal_time
 

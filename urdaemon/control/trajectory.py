@@ -8,6 +8,7 @@ build also ignores position limits, so every segment's position extrema are reco
 from __future__ import annotations
 
 import math
+import re
 from bisect import bisect_right
 from collections.abc import Sequence
 from typing import Any
@@ -34,6 +35,8 @@ __all__ = [
     "plan_move",
     "plan_trajectory",
     "position_extrema",
+    "ruckig_failure_reason",
+    "ruckig_result_reason",
 ]
 
 TIMING_SLACK = 1e-3
@@ -153,17 +156,58 @@ def run_robustly(call: Any, inp: Any) -> Any:
         raise first
 
 
+RUCKIG_RESULTS: dict[int, str] = {
+    0: "still working (0)",
+    1: "finished (1)",
+    -1: "an unclassified ruckig error (-1)",
+    -100: "its input is invalid (-100)",
+    -101: "it would last longer than ruckig's numerical time range, about 7 600 s (-101)",
+    -102: "it would leave the position limits (-102)",
+    -103: "the joints cannot be phase-synchronized (-103)",
+    -104: "a limit of zero makes it impossible (-104)",
+    -110: "the minimum-time calculation (step 1) failed: the limits or states are numerically extreme (-110)",
+    -111: "synchronizing the joints (step 2) failed: the limits or states are numerically extreme (-111)",
+}
+"""Every result code ruckig (0.19, and the codes later versions added) can return, as a reason."""
+
+_UNKNOWN_CODE = re.compile(r"(-?\d+) is not a valid")
+_MAX_DETAIL = 160
+
+
+def ruckig_result_reason(code: int) -> str:
+    """A clear reason for a ruckig result code, including codes this table does not know."""
+    return RUCKIG_RESULTS.get(code, f"ruckig returned the unknown result code {code}")
+
+
+def ruckig_failure_reason(exc: BaseException) -> str:
+    """A clear reason for what a ruckig call threw (its error, or the binding's unknown-code ValueError)."""
+    text = str(exc).strip()
+    unknown = _UNKNOWN_CODE.search(text)
+    if unknown is not None:
+        return ruckig_result_reason(int(unknown.group(1)))
+    # ruckig appends its whole input to the message; the first line is the reason
+    first = text.splitlines()[0].strip() if text else ""
+    first = first.removeprefix("[ruckig]").strip()
+    if "error in step 1" in first:
+        return RUCKIG_RESULTS[-110]
+    if "error in step 2" in first:
+        return RUCKIG_RESULTS[-111]
+    if not first:
+        return RUCKIG_RESULTS[-1]
+    if len(first) > _MAX_DETAIL:
+        first = first[:_MAX_DETAIL] + "…"
+    return f"its input is invalid: {first} (-100)"
+
+
 def _calculate(otg: Any, inp: Any, what: str) -> Any:
     """Run the offline solver; ruckig's own refusals become GoalRejected naming ``what``."""
     traj = Trajectory(inp.degrees_of_freedom)
     try:
         result = run_robustly(lambda: otg.calculate(inp, traj), inp)
     except RUCKIG_ERRORS as exc:
-        # ruckig appends its whole input to the message; the first line is the reason
-        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else "error"
-        raise GoalRejected(f"{what}: ruckig could not plan it: {first_line}") from exc
+        raise GoalRejected(f"{what}: ruckig could not plan it: {ruckig_failure_reason(exc)}") from exc
     if result not in (Result.Working, Result.Finished):
-        raise GoalRejected(f"{what}: ruckig could not plan it ({result.name})")
+        raise GoalRejected(f"{what}: ruckig could not plan it: {ruckig_result_reason(int(result))}")
     return traj
 
 
@@ -463,6 +507,7 @@ def plan_move(
         raise GoalRejected(f"target has {len(target)} values for {n} joints")
     check_finite("target", target, limits.names)
     check_positions_within(limits, target, "target")
+    _check_move_time(limits, start_pos, target, velocity_scale, acceleration_scale)
     otg = Ruckig(n)
     inp = _new_input(limits, velocity_scale, acceleration_scale)
     zeros = [0.0] * n
@@ -482,5 +527,36 @@ def plan_move(
             f"move: exactly {_fmt(duration)} s is not feasible from the current velocity (the fastest is "
             f"{_fmt(fastest)} s, the next feasible above is {_fmt(traj.duration)} s)"
         )
+    if traj.duration > MAX_GOAL_TIME_S:
+        raise GoalRejected(
+            f"move would take {_fmt(traj.duration)} s, longer than the longest goal, "
+            f"{_fmt(MAX_GOAL_TIME_S)} s"
+        )
     _check_extrema(limits, traj, start_pos, "move")
     return PlannedTrajectory([traj], [0.0])
+
+
+def _check_move_time(
+    limits: JointLimits,
+    start: Sequence[float],
+    target: Sequence[float],
+    velocity_scale: float,
+    acceleration_scale: float,
+) -> None:
+    """Refuse a move whose scaled limits make it last longer than the longest goal (before ruckig,
+    whose time range ends near 7 600 s and whose solver fails on numerically extreme limits)."""
+    for i, name in enumerate(limits.names):
+        distance = abs(target[i] - start[i])
+        if distance == 0.0:
+            continue
+        # Lower bounds of a rest-to-rest move's time: at top speed all the way, or accelerating all the way.
+        least = max(
+            distance / (limits.max_velocity[i] * velocity_scale),
+            2.0 * math.sqrt(distance / (limits.max_acceleration[i] * acceleration_scale)),
+        )
+        if least > MAX_GOAL_TIME_S:
+            raise GoalRejected(
+                f"move: at velocity_scale {_fmt(velocity_scale)} and acceleration_scale "
+                f"{_fmt(acceleration_scale)} {name} would need at least {_fmt(least)} s, longer than the "
+                f"longest goal, {_fmt(MAX_GOAL_TIME_S)} s"
+            )
