@@ -168,10 +168,10 @@ class RobotRuntime:
             "start_force_mode": self._start_force_mode,
         }
         actions: dict[str, Callable[[], Awaitable[None]]] = {
-            "startup": backend.startup,
-            "resend_program": backend.resend_program,
-            "hand_back_control": backend.hand_back_control,
-            "zero_ft_sensor": backend.zero_ft_sensor,
+            "startup": lambda: backend.startup(),
+            "resend_program": lambda: backend.resend_program(),
+            "hand_back_control": lambda: backend.hand_back_control(),
+            "zero_ft_sensor": lambda: backend.zero_ft_sensor(),
             "end_force_mode": lambda: backend.force_mode(None),
             "start_tool_contact": lambda: backend.tool_contact(True),
             "end_tool_contact": lambda: backend.tool_contact(False),
