@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import asyncio
-import sys
 from typing import Any
 
 import pytest
 
-from tests.helpers import fake_address, free_tcp_port
+from tests.helpers import fake_address, free_tcp_port, run_cli_in_thread
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.description.urmodels import load_ur_model
@@ -124,21 +123,9 @@ async def test_dashboard_and_program_services_and_robot_messages_over_zenoh() ->
             # the fake's DH differs from the nominal one the cell expects: a mismatch is published
             assert daemon.runtimes[0].backend.calibration_ok is False  # type: ignore[attr-defined]
             endpoint = daemon.listen_endpoints[0]
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable,
-                "-m",
-                "urdaemon",
-                "dashboard",
-                "alice",
-                "robotmode",
-                "--connect",
-                endpoint,
-                stdout=asyncio.subprocess.PIPE,
-                stderr=asyncio.subprocess.PIPE,
-            )
-            out, err = await asyncio.wait_for(proc.communicate(), 60.0)
-            assert proc.returncode == 0, err
-            assert out.decode().strip() == "Robotmode: RUNNING"
+            run = await run_cli_in_thread("dashboard", "alice", "robotmode", "--connect", endpoint)
+            assert run.code == 0, run.stderr
+            assert run.stdout.strip() == "Robotmode: RUNNING"
             events.close()
     finally:
         await fake.close()
