@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.helpers import drain_in_background, fake_address, wait_for_line
+from tests.helpers import drain_in_background, fake_address, run_cli, wait_for_line
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.protocols import dashboard as dash
@@ -115,14 +115,11 @@ async def test_fake_robot_with_a_calibration_reports_its_kinematics(tmp_path: Pa
 
 
 def test_fake_robot_refuses_bad_arguments() -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "urdaemon", "fake-robot", "--model", "ur10e", "--controller-version", "five"],
-        capture_output=True,
-        text=True,
-        timeout=60,
+    run = run_cli(
+        "fake-robot", "--model", "ur10e", "--address", fake_address(), "--controller-version", "five"
     )
-    assert done.returncode == 2
-    assert "--controller-version 'five'" in done.stderr
+    assert run.code == 2
+    assert "--controller-version 'five'" in run.stderr
 
 
 def test_split_pieces_join_to_the_data_and_garble_flips_exactly_one_byte() -> None:
