@@ -3,8 +3,7 @@
 Client commands run in-process (``urdaemon.cli.main`` in a thread of its own, ``run_cli_in_thread``)
 against a daemon that runs in the test's own event loop, so the daemon keeps cycling while the test
 waits for the command. Every client command is given ``--connect`` pointing at that daemon (never the
-default 7447). ``serve`` and the console script run as real processes: signals and the installed entry
-point are what those tests are about.
+default 7447). ``serve`` runs as a real process: a signal to it is what that test is about.
 """
 
 from __future__ import annotations
@@ -212,7 +211,7 @@ async def test_move_of_an_unknown_robot_exits_1(served: Served) -> None:
 async def test_move_with_a_negative_first_joint_as_the_readme_types_it(served: Served) -> None:
     target = [-0.5, -1.3, 1.4, -1.6, -1.5, 0.0]
     run = await urdaemon(
-        "move", "bob", "--joints", _joints(target), "--duration", "2.0", "--connect", served.endpoint
+        "move", "bob", "--joints", _joints(target), "--duration", "1.0", "--connect", served.endpoint
     )
     assert run.code == 0, run.stderr
     assert _last_json_line(run.stdout)["status"] == "succeeded"
