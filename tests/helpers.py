@@ -8,6 +8,7 @@ import contextlib
 import io
 import logging
 import secrets
+import signal
 import socket
 import subprocess
 import sys
@@ -168,6 +169,22 @@ def _captured() -> Iterator[tuple[io.StringIO, io.StringIO]]:
                         setattr(sys, name, stream.fallback)
 
 
+@contextlib.contextmanager
+def _signal_handlers_kept() -> Iterator[None]:
+    """Put back the process's signal handlers afterwards: a command run in the main thread may install
+    its own (``serve`` keeps them past its loop, as a process that is about to exit may)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    kept = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in kept.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+
+
 def run_cli(*args: str) -> CliRun:
     """Run ``urdaemon ARGS`` in this thread, as ``urdaemon.cli.main`` (no new interpreter).
 
@@ -181,7 +198,7 @@ def run_cli(*args: str) -> CliRun:
 
 def run_captured(entry: Callable[[], int | None]) -> CliRun:
     """Call a command's entry point in this thread; what it returned or exited with, and wrote."""
-    with _captured() as (out, err):
+    with _captured() as (out, err), _signal_handlers_kept():
         try:
             code = entry() or 0
         except SystemExit as exit_:  # argparse's usage errors and --version, a script's exit
