@@ -137,6 +137,7 @@ async def ur_run(
     address = fake_address()
     robot = robot_config(address, headless=headless, startup=startup)
     urcap = None if headless else ("127.0.0.1", robot.ports.script_sender)
+    options: dict[str, Any] = {} if rtde_versions == (1, 2) else {"rtde_versions": rtde_versions}
     fake = FakeController(
         "ur10e",
         address=address,
@@ -144,7 +145,7 @@ async def ur_run(
         powered=powered,
         urcap=urcap,
         faults=faults,
-        rtde_versions=rtde_versions,
+        **options,
     )
     await fake.start()
     backend = UrBackend(robot, JOINTS, expected_hash=None)
@@ -160,7 +161,10 @@ async def ur_run(
 
 def program_is_running(run: UrRun) -> bool:
     """The fake runs a program and the backend holds all of its links."""
-    return run.ready and not run.backend.servers.missing()
+    servers = run.backend.servers
+    return run.ready and all(
+        s.link is not None for s in (servers.reverse, servers.trajectory, servers.script_command)
+    )
 
 
 def controller_command(run: UrRun, command: prim.ControllerCommand) -> None:
