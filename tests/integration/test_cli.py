@@ -205,7 +205,7 @@ async def test_move_of_an_unknown_robot_exits_1(served: Served) -> None:
         assert "carol" in run.stderr
         assert "Traceback" not in run.stderr
         assert run.stdout == ""
-    assert "no robot 'carol' found" in discovered.stderr
+    assert "no robot 'carol'" in discovered.stderr
 
 
 async def test_move_with_a_negative_first_joint_as_the_readme_types_it(served: Served) -> None:
