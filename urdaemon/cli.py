@@ -348,6 +348,8 @@ def _serve(path: str, listen: list[str] | None) -> int:
         if isinstance(err, zenoh.ZError):  # e.g. the listen endpoint is taken
             return _fail(err, "Zenoh ")
         raise
+    finally:
+        ignore_stop_signals()
     return EXIT_OK
 
 
@@ -381,6 +383,16 @@ def stop_on_signals(stop: asyncio.Event, what: str) -> None:
 
     for sig in STOP_SIGNALS:
         signal.signal(sig, handler)
+
+
+def ignore_stop_signals() -> None:
+    """After a clean stop: ignore the stop signals for the rest of the process's exit (Python resets
+    its own handlers to the default, fatal one while it finalizes; an ignored signal stays ignored)."""
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
 
 
 def _run_loop(main: Coroutine[Any, Any, None]) -> None:

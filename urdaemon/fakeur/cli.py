@@ -121,9 +121,13 @@ def run_fakes(args: argparse.Namespace) -> int:
             for fake in started:
                 await fake.close()
 
+    from urdaemon.cli import ignore_stop_signals
+
     try:
         asyncio.run(serve())
     except OSError as err:
         print(f"error: cannot listen: {err}", file=sys.stderr)
         return 1
+    finally:
+        ignore_stop_signals()  # stopped cleanly: a late signal must not turn the exit into -15
     return 0

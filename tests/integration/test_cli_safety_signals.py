@@ -1,0 +1,136 @@
+"""Signals on real processes: Ctrl-C on ``urdaemon move``, SIGHUP and a repeated SIGTERM on
+``urdaemon serve`` (issue 13, findings 6 and 7).
+
+Reproductions on the code before the fix: Ctrl-C on ``move`` exited at once and left the goal running
+(the robot kept moving); SIGHUP killed the daemon outright (no result for the running goal, no clean
+stop); a SIGTERM that came while the daemon was already stopping could kill it with -15.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import signal
+import subprocess
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import drain_in_background, free_tcp_port, wait_for_line
+from tests.integration.conftest import TWO_MOCKS, running_daemon
+from urdaemon.client import Client, RobotClient
+
+pytestmark = pytest.mark.timeout(120)
+
+ROOT = Path(__file__).resolve().parents[2]
+AWAY = [0.2, -1.4, 1.4, -1.5, -1.6, 0.1]
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _urdaemon(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "urdaemon", *args],
+        cwd=ROOT,
+        env=_env(),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+async def _wait(proc: subprocess.Popen[str], timeout: float = 60.0) -> int:
+    return await asyncio.get_running_loop().run_in_executor(None, proc.wait, timeout)
+
+
+async def test_ctrl_c_on_move_cancels_its_goal_before_exiting() -> None:
+    async with running_daemon(TWO_MOCKS) as (daemon, client):
+        endpoint = daemon.listen_endpoints[0]
+        joints = ",".join(repr(v) for v in AWAY)
+        proc = _urdaemon("move", "alice", "--joints", joints, "--duration", "30", "--connect", endpoint)
+        try:
+            lines = await wait_for_line(proc, "accepted", timeout=60.0)
+            match = re.search(r"goal (\S+) accepted", lines[-1])
+            assert match, lines
+            goal_id = match.group(1)
+            proc.send_signal(signal.SIGINT)
+            code = await _wait(proc)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.stderr is not None
+        assert proc.stdout is not None
+        rest = proc.stderr.read()
+        assert code == 130, rest
+        assert f"goal {goal_id} canceled" in rest, rest
+        alice = await client.robot("alice")
+        replies = await client.query(alice.keys.goal_result(goal_id), timeout=5.0)
+        assert replies, "the goal is still running: Ctrl-C left the robot moving"
+        assert b'"canceled"' in replies[0], replies
+        assert '"canceled"' in proc.stdout.read()
+
+
+async def _ready(client: Client, robot: RobotClient) -> None:
+    sub = client.subscribe(robot.keys.status, 100)
+    try:
+        for _ in range(1000):
+            if (await sub.get_json(timeout=30.0)).get("ready"):
+                return
+        raise AssertionError(f"{robot.name} never became ready")
+    finally:
+        client.unsubscribe(sub)
+
+
+@asynccontextmanager
+async def _serve(tmp_path: Path) -> AsyncIterator[tuple[subprocess.Popen[str], Client, list[str]]]:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    config = tmp_path / "cell.yaml"
+    config.write_text(TWO_MOCKS, encoding="utf-8")
+    proc = _urdaemon("serve", "--config", str(config), "--listen", endpoint)
+    log: list[str] = []
+    drain_in_background(proc, log)
+    try:
+        async with await Client.connect(endpoint, timeout=30.0) as client:
+            for name in ("alice", "bob"):
+                await _ready(client, await client.robot(name, timeout=30.0))
+            yield proc, client, log
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+
+
+async def test_sighup_stops_the_daemon_cleanly_and_the_goal_gets_its_result(tmp_path: Path) -> None:
+    async with _serve(tmp_path) as (proc, client, log):
+        alice = await client.robot("alice")
+        goal = await alice.move(AWAY, duration=30.0)
+        proc.send_signal(signal.SIGHUP)
+        result = await goal.result(timeout=30.0)  # ConnectionLostError when killed outright
+        assert result["goal_id"] == goal.goal_id
+        assert result["status"] != "succeeded", result
+        assert await _wait(proc) == 0, "".join(log)
+        assert any("SIGHUP: stopping" in line for line in log), "".join(log)
+        assert any("stopped" in line for line in log), "".join(log)
+
+
+async def test_repeated_sigterm_while_stopping_still_exits_normally(tmp_path: Path) -> None:
+    async with _serve(tmp_path) as (proc, _client, log):
+        sent = 0
+        while proc.poll() is None and sent < 3000:  # again and again until it has exited
+            proc.send_signal(signal.SIGTERM)
+            sent += 1
+            await asyncio.sleep(0.002)  # paces the signals; nothing is timed
+        code = await _wait(proc)
+        assert sent > 1
+        assert code == 0, f"exit {code} after {sent} SIGTERMs\n{''.join(log)}"
+        assert any("already stopping" in line for line in log), "".join(log)
