@@ -68,6 +68,17 @@ _FINISHED = Result.Finished
 _POSITION = ControlInterface.Position
 _VELOCITY = ControlInterface.Velocity
 
+SLIDER_ACCELERATION_RESERVE = 0.05
+"""Fraction of each joint's max_acceleration goals are not planned with: kept so the speed scaling can
+change while a goal runs (the chain rule adds p'·s' to the commanded acceleration)."""
+SLIDER_JERK_RESERVE = 0.10
+"""Fraction of each joint's max_jerk goals are not planned with, for the terms 3·p''·s·s' + p'·s''."""
+# The time scaling settles on its target once within these of it (the jump is far below a limit's worth).
+_SCALING_SNAP = 1e-9
+_SCALING_RATE_SNAP = 1e-7
+# Near its target the scaling converges at this rate (1/s) instead of along the braking curve.
+_SCALING_GAIN = 25.0
+
 # Converting a real-time setpoint into trajectory time divides by the speed scaling; below this floor
 # the division would only produce huge values that ruckig then brakes anyway.
 _MIN_SEED_SCALING = 0.05
@@ -169,6 +180,8 @@ class MotionController:
                 raise ValueError(f"MotionController: {label} must be >= 0, got {value}")
         n = limits.dof
         self.limits = limits
+        self.plan_limits = _planning_limits(limits)
+        """The limits goals are planned with: ``limits`` less the reserves the speed scaling needs."""
         self.joint_names: tuple[str, ...] = limits.names
         self._n = n
         self._period = period
@@ -198,7 +211,13 @@ class MotionController:
         # The goal's sample in trajectory time units (velocity/acceleration before speed scaling).
         self._pvel = [0.0] * n
         self._pacc = [0.0] * n
-        self._goal_scaling = 1.0
+        # The time scaling applied to the goal (s = dτ/dt) and its rate s'; s follows the robot's
+        # speed_scaling along a path that keeps the commanded motion within the limits (_advance_scaling).
+        self._scaling = 1.0
+        self._scaling_rate = 0.0
+        self._scaling_amax = list(self.plan_limits.max_acceleration)
+        self._scaling_jmax = list(self.plan_limits.max_jerk)
+        self._scaling_kappa = _scaling_kappa(limits, self.plan_limits)
         self._meas = [0.0] * n
         self._zeros = [0.0] * n
 
@@ -293,8 +312,9 @@ class MotionController:
             )
             for k, pt in enumerate(points)
         ]
+        self._check_point_accelerations(mapped)
         seed_p, _, _ = self._goal_seed(state)
-        return TrajectoryPlanner(mapped, self.limits, seed_p)
+        return TrajectoryPlanner(mapped, self.plan_limits, seed_p)
 
     def accept_trajectory(
         self,
@@ -315,7 +335,7 @@ class MotionController:
         self._check_can_start(goal_id, state, now, preempt)
         if planner is None:
             planner = self.prepare_trajectory(joint_names, points, state)
-        elif planner.limits is not self.limits:
+        elif planner.limits is not self.plan_limits:
             raise ValueError("the planner was prepared by another controller")
         path_tol, goal_tol, goal_time = self._resolve_tolerances(tolerances)
         seed_p, seed_v, seed_a = self._goal_seed(state)
@@ -341,7 +361,7 @@ class MotionController:
             active = self._goal.goal_id if self._goal is not None else self._mode.value
             raise GoalRejected(f"busy: {active} is running; a passthrough trajectory starts from rest")
         self._check_can_start(goal_id, state, now, False)
-        if planner.limits is not self.limits:
+        if planner.limits is not self.plan_limits:
             raise ValueError("the planner was prepared by another controller")
         path_tol, goal_tol, goal_time = self._resolve_tolerances(tolerances)
         zeros = [0.0] * self._n
@@ -411,7 +431,7 @@ class MotionController:
             seed_v,
             seed_a,
             target,
-            self.limits,
+            self.plan_limits,
             duration=duration,
             velocity_scale=velocity_scale,
             acceleration_scale=acceleration_scale,
@@ -632,14 +652,17 @@ class MotionController:
                 return
             # Holding the final point: the setpoint stays as it is.
         else:
-            s = state.speed_scaling
-            t = goal.t + self._period * s
+            s = self._scaling
+            if s == state.speed_scaling and self._scaling_rate == 0.0:
+                t = goal.t + self._period * s
+            else:
+                t = goal.t + self._advance_scaling(state.speed_scaling)
+                s = self._scaling
             if t >= goal.duration - _END_EPS:
                 t = goal.duration
                 goal.end_now = now
             goal.t = t
             goal.plan.sample(t, pos, self._pvel, self._pacc)
-            self._goal_scaling = s
             if s == 1.0:
                 self._vel[:] = self._pvel
             else:
@@ -650,6 +673,86 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = pos
         command.velocities[:] = self._vel
+
+    def _advance_scaling(self, target: float) -> float:
+        """Move the goal's time scaling s one cycle toward ``target``; the trajectory time it advanced.
+
+        Commanding p(τ) with dτ/dt = s gives v = p'·s, a = p''·s² + p'·s' and
+        j = p'''·s³ + 3·p''·s·s' + p'·s''. Goals are planned with |p''| ≤ â = (1 − reserve)·amax and
+        |p'''| ≤ ĵ, and |p'| ≤ vmax, so for ANY goal and any point of it, a stays within amax while
+        |s'| ≤ (amax − â·s²)/vmax, and j within jmax while |s''| ≤ (jmax − ĵ·s³ − 3·â·s·|s'|)/vmax
+        (per joint; the smallest counts). s follows the target along a braking curve within both
+        bounds: it never steps, and it reaches its target at rest. s'' is constant over the cycle and
+        integrated exactly.
+        """
+        target = _clamp_scaling(target)
+        dt = self._period
+        s = self._scaling
+        r = self._scaling_rate
+        error = target - s
+        if -_SCALING_SNAP < error < _SCALING_SNAP and -_SCALING_RATE_SNAP < r < _SCALING_RATE_SNAP:
+            self._scaling = target
+            self._scaling_rate = 0.0
+            return dt * target
+        rate_cap, change_cap = self._scaling_caps(s, abs(r))
+        # Braking is planned with half of what the far end of the way still allows.
+        brake = 0.5 * self._scaling_caps(max(s, target), abs(r))[1]
+        size = abs(error)
+        want = min(rate_cap, math.sqrt(2.0 * brake * size), _SCALING_GAIN * size)
+        if error < 0.0:
+            want = -want
+        u = (want - r) / dt
+        if u > change_cap:
+            u = change_cap
+        elif u < -change_cap:
+            u = -change_cap
+        step = dt * (s + dt * (0.5 * r + dt * u / 6.0))
+        s += dt * (r + 0.5 * dt * u)
+        r += dt * u
+        if s >= 1.0:
+            s, r = 1.0, min(r, 0.0)
+        elif s <= 0.0:
+            s, r = 0.0, max(r, 0.0)
+        self._scaling = s
+        self._scaling_rate = r
+        return step if step > 0.0 else 0.0
+
+    def _scaling_caps(self, s: float, rate: float) -> tuple[float, float]:
+        """The largest |s'| at scaling ``s``, and the largest |s''| at ``s`` and |s'| = ``rate``."""
+        a_hat = self._scaling_amax
+        j_hat = self._scaling_jmax
+        kappa = self._scaling_kappa
+        amax = self._amax
+        jmax = self._jmax
+        vmax = self._vmax
+        s2 = s * s
+        s3 = s2 * s
+        rate_cap = math.inf
+        change_cap = math.inf
+        for i in range(self._n):
+            v = vmax[i]
+            room = kappa[i] * (amax[i] - a_hat[i] * s2) / v
+            if room < rate_cap:
+                rate_cap = room
+            room = (jmax[i] - j_hat[i] * s3 - 3.0 * a_hat[i] * s * rate) / v
+            if room < change_cap:
+                change_cap = room
+        return (rate_cap if rate_cap > 0.0 else 0.0), (change_cap if change_cap > 0.0 else 0.0)
+
+    def _check_point_accelerations(self, points: Sequence[TrajectoryPoint]) -> None:
+        """Refuse client accelerations within a limit but inside the reserve kept for the speed scaling."""
+        planned = self.plan_limits.max_acceleration
+        share = 100.0 * (1.0 - SLIDER_ACCELERATION_RESERVE)
+        for k, pt in enumerate(points):
+            if pt.accelerations is None:
+                continue
+            for i, a in enumerate(pt.accelerations):
+                if planned[i] < abs(a) <= self._amax[i] * (1.0 + 1e-9):
+                    raise GoalRejected(
+                        f"point {k}: {self.joint_names[i]} acceleration {a:.6g} exceeds {planned[i]:.6g}, "
+                        f"{share:.0f} % of its limit {self._amax[i]:.6g}: the rest is kept so the speed "
+                        "scaling can change smoothly while a goal runs"
+                    )
 
     def _tick_stopping(self, state: RobotState, command: JointCommand) -> None:
         result = self._online_step()
@@ -847,7 +950,16 @@ class MotionController:
             self._acc[:] = self._zeros
         self._pvel[:] = seed_v
         self._pacc[:] = seed_a
-        self._goal_scaling = max(state.speed_scaling, _MIN_SEED_SCALING)
+        if self._mode is _Mode.IDLE:
+            self._scaling = _clamp_scaling(state.speed_scaling)
+            self._scaling_rate = 0.0
+        elif self._mode is not _Mode.GOAL:
+            # a stream or stop: the seed was converted into trajectory time at this scaling
+            self._scaling = max(_clamp_scaling(state.speed_scaling), _MIN_SEED_SCALING)
+            self._scaling_rate = 0.0
+        # (a goal preempting a goal continues its time scaling, so the motion stays smooth)
+        amax = self.plan_limits.max_acceleration
+        self._scaling_amax[:] = [max(amax[i], abs(seed_a[i])) for i in range(self._n)]
         self._goal = _Goal(goal_id, plan, path_tol, goal_tol, goal_time)
         self._mode = _Mode.GOAL
         self._last_stream_now = -math.inf
@@ -897,10 +1009,11 @@ class MotionController:
         if mode is _Mode.IDLE or mode is _Mode.STOPPING:
             return
         if mode is _Mode.GOAL:
-            s = self._goal_scaling
+            s = self._scaling
+            r = self._scaling_rate
             for i in range(self._n):
                 self._vel[i] = self._pvel[i] * s
-                self._acc[i] = self._pacc[i] * s * s
+                self._acc[i] = self._pacc[i] * s * s + self._pvel[i] * r
         self._seed_online()
         inp = self._inp
         inp.control_interface = _VELOCITY
@@ -1041,3 +1154,48 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = self._pos
         command.velocities[:] = self._vel
+
+
+def _clamp_scaling(value: float) -> float:
+    """The robot's speed scaling as a target for the time scaling: within [0, 1] (NaN: 0)."""
+    if value >= 1.0:
+        return 1.0
+    if value > 0.0:
+        return value
+    return 0.0
+
+
+def _planning_limits(limits: JointLimits) -> JointLimits:
+    """``limits`` with the acceleration and jerk reserves of the speed scaling taken off."""
+    return JointLimits(
+        names=limits.names,
+        min_position=limits.min_position,
+        max_position=limits.max_position,
+        max_velocity=limits.max_velocity,
+        max_acceleration=tuple(a * (1.0 - SLIDER_ACCELERATION_RESERVE) for a in limits.max_acceleration),
+        max_jerk=tuple(j * (1.0 - SLIDER_JERK_RESERVE) for j in limits.max_jerk),
+        max_effort=limits.max_effort,
+    )
+
+
+def _scaling_kappa(limits: JointLimits, planned: JointLimits) -> list[float]:
+    """Per joint, the fraction κ ≤ 1 of the acceleration room the scaling's rate may use: at any s and
+    |s'| ≤ κ·(amax − â·s²)/vmax, at least half the jerk room stays for s'' (to brake)."""
+    out: list[float] = []
+    for v, a, j, a_hat, j_hat in zip(
+        limits.max_velocity,
+        limits.max_acceleration,
+        limits.max_jerk,
+        planned.max_acceleration,
+        planned.max_jerk,
+        strict=True,
+    ):
+        kappa = 1.0
+        for k in range(1, 101):
+            s = k / 100.0
+            room = 0.5 * (j - j_hat * s**3)  # the jerk room the rate's term 3·â·s·|s'| may take
+            use = 3.0 * a_hat * s * (a - a_hat * s * s) / v
+            if use > room:
+                kappa = min(kappa, room / use)
+        out.append(kappa)
+    return out
