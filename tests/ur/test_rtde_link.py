@@ -54,7 +54,7 @@ async def test_handshake_streams_the_standard_recipe_and_maps_it_into_the_state(
         assert state.lifecycle is Lifecycle.RUNNING
         assert state.program_running is False
         assert state.ready_for_motion is False, "brakes released but no control program: not ready"
-        assert state.not_ready_reason() == "control program is not running"
+        assert state.not_ready_reason().startswith("control program is not running")
         fake.protective_stop()
         for _ in range(100):
             await asyncio.sleep(0.01)

@@ -645,7 +645,9 @@ class UrBackend(Backend):
                 ", ".join(others),
                 "restarting the program" if self.robot.headless else "not ready until it is restarted",
             )
-        self.state.program_running = False
+        state = self.state
+        state.program_running = False
+        state.lifecycle_reason = self._not_running_reason(state)
         if self.on_change is not None:
             self.on_change()  # say it now, not at the next cycle or status tick
 
@@ -773,7 +775,7 @@ class UrBackend(Backend):
         if self.options.read_only:
             return "read-only (ur.read_only: true): watching, not commanding"
         if self._handed_back:
-            return "control handed back to the robot (hand_back_control): call resend_program to take it"
+            return "control handed back to the robot"  # (resend_program takes it back)
         if self._lost_link:
             return f"the control program lost its {self._lost_link} link: " + (
                 "restarting the program" if self.robot.headless else "restart it (resend_program or play)"
