@@ -295,7 +295,7 @@ def _fake_robot(args: argparse.Namespace) -> int:
 
 
 def _check(path: str) -> int:
-    from urdaemon.cell import load_cell, summarize
+    from urdaemon.cell import busy_ports, load_cell, summarize
     from urdaemon.daemon import describe_cell, make_backend
 
     try:
@@ -303,6 +303,9 @@ def _check(path: str) -> int:
         description = describe_cell(cell)
         for robot in cell.robots:  # what `serve` would refuse, `check` refuses too
             make_backend(robot, description.limits[robot.name], None, cell.cell)
+        busy = busy_ports(cell, path)  # serve would retry these forever
+        if busy:
+            raise ConfigError("\n".join(busy), errors=busy)
     except ConfigError as err:
         print(f"{len(err.errors)} error(s):", file=sys.stderr)
         for line in err.errors:

@@ -6,7 +6,9 @@ Relative paths in the file are resolved against the file's folder (validation co
 
 from __future__ import annotations
 
+import ipaddress
 import math
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -49,6 +51,33 @@ DEFAULT_PORT_BASE = 50001
 """UR's reverse port; the first robot gets 50001..50004 like UR's own driver."""
 DEFAULT_PORT_STRIDE = 10
 """Each further robot's default ports are 10 higher, so defaults never clash."""
+HOST_NAME_PATTERN = r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*\.?$"
+
+
+def check_host(value: str, what: str) -> str:
+    """``value`` if it is an IP address or a host name (no port, no scheme), else ValueError."""
+    try:
+        ipaddress.ip_address(value)
+    except ValueError:
+        pass
+    else:
+        return value
+    if re.match(HOST_NAME_PATTERN, value):
+        return value
+    host, colon, port = value.rpartition(":")
+    if colon and port.isdigit():
+        raise ValueError(
+            f"{value!r}: give the {what} without a port ({host!r}); UR's ports are fixed "
+            "(dashboard 29999, primary 30001, RTDE 30004) and the callback ports go in 'ports'"
+        )
+    raise ValueError(f"{value!r} is not an IP address or host name")
+
+
+def endpoint_port(endpoint: str) -> int | None:
+    """The TCP port of a Zenoh ``tcp/HOST:PORT`` endpoint (None for other protocols)."""
+    match = re.match(r"^tcp/.*:(\d{1,5})(#.*)?$", endpoint)
+    return int(match.group(1)) if match else None
+
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -204,6 +233,11 @@ class UrOptions(_Frozen):
     dashboard; no RTDE inputs are claimed, no program is sent, no callback server listens, and goals
     and services that would command the robot are refused. For a robot another program drives."""
 
+    @field_validator("reverse_ip", "listen_address")
+    @classmethod
+    def _host(cls, value: str | None, info: ValidationInfo) -> str | None:
+        return None if value is None else check_host(value, str(info.field_name))
+
     @model_validator(mode="after")
     def _read_only_does_not_start(self) -> UrOptions:
         if self.read_only and self.startup:
@@ -327,6 +361,16 @@ class Robot(_Frozen):
     def _calibration_exists(cls, value: str | None, info: ValidationInfo) -> str | None:
         return None if value is None else _resolve_file(value, info)
 
+    @field_validator("address")
+    @classmethod
+    def _address(cls, value: str | None) -> str | None:
+        return None if value is None else check_host(value, "address")
+
+    @property
+    def listens(self) -> bool:
+        """True when the daemon listens on this robot's callback ports (a ``ur`` robot that commands)."""
+        return self.backend == "ur" and not (self.ur is not None and self.ur.read_only)
+
     @field_validator("model")
     @classmethod
     def _known_model(cls, value: str) -> str:
@@ -434,6 +478,8 @@ class Cell(_Frozen):
                         f"clashes with {owner[port]}"
                     )
                 owner[port] = f"robot {robot.name!r} {role} port"
+        self._one_robot_per_controller(where)
+        self._zenoh_ports_free(owner)
         mounted_on: dict[str, str] = {}
         for robot in self.robots:
             parent = robot.pose.parent
@@ -457,6 +503,35 @@ class Cell(_Frozen):
                 if len(chain) > len(self.robots) + 1:
                     break
         return self
+
+    def _one_robot_per_controller(self, where: dict[str, str]) -> None:
+        controllers: dict[str, str] = {}
+        for robot in self.robots:
+            if robot.backend != "ur" or robot.address is None:
+                continue
+            other = controllers.get(robot.address.lower())
+            if other is not None:
+                raise ValueError(
+                    f"{where[robot.name]}.address: {robot.address} is also robot {other!r}'s address; "
+                    "one controller drives one arm (its dashboard, primary and RTDE ports are fixed)"
+                )
+            controllers[robot.address.lower()] = robot.name
+
+    def _zenoh_ports_free(self, owner: dict[int, str]) -> None:
+        listening = {
+            port: text
+            for robot in self.robots
+            if robot.listens
+            for port, text in owner.items()
+            if text.startswith(f"robot {robot.name!r} ")
+        }
+        for i, endpoint in enumerate(self.zenoh.listen):
+            port = endpoint_port(endpoint)
+            if port is not None and port in listening:
+                raise ValueError(
+                    f"zenoh.listen[{i}]: {endpoint} uses port {port}, the {listening[port]}; "
+                    "the daemon would listen on it twice"
+                )
 
     def robot(self, name: str) -> Robot:
         """The robot called ``name``."""
