@@ -10,6 +10,7 @@ import argparse
 import asyncio
 
 from urdaemon.client import DEFAULT_ENDPOINT, Client, GoalHandle
+from urdaemon.errors import UrDaemonError
 
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
 
@@ -38,7 +39,11 @@ async def main(endpoint: str) -> int:
             ]
         )
         bob_goal = await bob.move([-0.6, -1.2, 1.1, -1.4, -1.6, 0.5], duration=3.0)
-        statuses = list(await asyncio.gather(report("alice", alice_goal), report("bob", bob_goal)))
+        try:
+            statuses = list(await asyncio.gather(report("alice", alice_goal), report("bob", bob_goal)))
+        except asyncio.CancelledError:  # Ctrl-C: stop both arms before leaving
+            await asyncio.gather(alice.cancel(alice_goal.goal_id), bob.cancel(bob_goal.goal_id))
+            raise
         homes = await asyncio.gather(alice.move(HOME), bob.move(HOME))
         statuses += await asyncio.gather(
             *(report(f"{n} home", g) for n, g in zip(("alice", "bob"), homes, strict=True))
@@ -49,4 +54,7 @@ async def main(endpoint: str) -> int:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--connect", default=DEFAULT_ENDPOINT)
-    raise SystemExit(asyncio.run(main(parser.parse_args().connect)))
+    try:
+        raise SystemExit(asyncio.run(main(parser.parse_args().connect)))
+    except UrDaemonError as err:  # e.g. no daemon at --connect, or no robot 'alice': say which
+        raise SystemExit(f"error: {err}") from None
