@@ -121,6 +121,8 @@ class UrBackend(Backend):
         self._lost_link = ""
         """The program link that dropped while the others stayed up (the program is being restarted)."""
         self._program_started_at = -1e9
+        self._reason_key: tuple[Any, ...] = ()
+        self._reason = ""
 
     # ---- Backend interface ---------------------------------------------------------------------------
 
@@ -485,8 +487,23 @@ class UrBackend(Backend):
         state.program_running = state.program_running and links_up
         if state.program_running and state.lifecycle is Lifecycle.RUNNING:
             state.lifecycle_reason = ""
-        else:
-            state.lifecycle_reason = self._not_running_reason(state)
+        else:  # worded again only when something it depends on changed
+            key = (
+                state.lifecycle,
+                state.robot_mode,
+                state.safety_mode,
+                servers.reverse.link,
+                servers.trajectory.link,
+                servers.script_command.link,
+                self._handed_back,
+                self._lost_link,
+                self._program_ended,
+                self._startup_problem,
+            )
+            if key != self._reason_key:
+                self._reason_key = key
+                self._reason = self._not_running_reason(state)
+            state.lifecycle_reason = self._reason
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
