@@ -8,14 +8,13 @@ from typing import Any
 
 import pytest
 
+from tests.helpers import fake_address
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.errors import ConnectionLostError, RemoteProtocolError
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.model import UR_JOINTS, Lifecycle, RobotMode, RobotState, SafetyMode
 
 pytestmark = pytest.mark.timeout(60)
-
-ADDRESSES = (f"127.0.0.{n}" for n in itertools.count(120))
 
 
 def _lifecycle(state: RobotState) -> Lifecycle:
@@ -24,7 +23,7 @@ def _lifecycle(state: RobotState) -> Lifecycle:
 
 
 async def test_handshake_streams_the_standard_recipe_and_maps_it_into_the_state() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), powered=True)
+    fake = FakeController("ur10e", address=fake_address(), powered=True)
     await fake.start()
     try:
         state = RobotState.zeros(UR_JOINTS)
@@ -84,7 +83,7 @@ async def test_handshake_streams_the_standard_recipe_and_maps_it_into_the_state(
 
 
 async def test_a_cb3_controller_streams_at_125_hz() -> None:
-    fake = FakeController("ur5", address=next(ADDRESSES), controller_version=(3, 15, 7, 0))
+    fake = FakeController("ur5", address=fake_address(), controller_version=(3, 15, 7, 0))
     await fake.start()
     try:
         link = await RtdeLink.connect(fake.address, lambda values: None)
@@ -96,7 +95,7 @@ async def test_a_cb3_controller_streams_at_125_hz() -> None:
 
 
 async def test_unknown_outputs_and_a_vanishing_robot_are_errors_with_reasons() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES))
+    fake = FakeController("ur10e", address=fake_address())
     await fake.start()
     try:
         link = await RtdeLink.connect(fake.address, lambda values: None)
@@ -116,7 +115,7 @@ async def test_unknown_outputs_and_a_vanishing_robot_are_errors_with_reasons() -
 
 
 async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest_catching_up() -> None:
-    fake = FakeController("ur10e", address=next(ADDRESSES), powered=True)
+    fake = FakeController("ur10e", address=fake_address(), powered=True)
     await fake.start()
     try:
         state = RobotState.zeros(UR_JOINTS)
@@ -160,5 +159,33 @@ async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest
         assert all(flags[:burst])
         assert link.superseded == burst
         assert link.catching_up is False
+    finally:
+        await fake.close()
+
+
+async def test_a_controller_that_speaks_only_protocol_v1_streams_at_its_own_rate() -> None:
+    """Reproduction: a controller that refuses RTDE v2 (the fake with ``rtde_versions=(1,)``). The
+    handshake fell back to v1 but still put a frequency into SETUP_OUTPUTS, which v1 has no room for:
+    the codec refused to send it and the link never came up."""
+    fake = FakeController("ur10e", address=fake_address(), powered=True, rtde_versions=(1,))
+    await fake.start()
+    try:
+        count = 0
+        fifty = asyncio.Event()
+
+        def on_package(values: tuple[Any, ...]) -> None:
+            nonlocal count
+            count += 1
+            if count == 50:
+                fifty.set()
+
+        link = await RtdeLink.connect(fake.address, on_package)
+        configured = await link.handshake(output_recipe(), input_recipe(), frequency=125.0)
+        assert link.conn.protocol_version == 1
+        assert link.frequency == 500.0, "v1 streams at the controller's rate, whatever was asked"
+        assert configured.recipe_id is None  # v1 has no recipe ids
+        await link.start()
+        await asyncio.wait_for(fifty.wait(), 10.0)
+        link.close()
     finally:
         await fake.close()
