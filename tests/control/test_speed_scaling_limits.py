@@ -16,9 +16,8 @@ from urdaemon.model import UR_JOINTS, CommandMode, JointLimits
 
 from .sim import PERIOD, THREE_LIMITS, UR10E_LIMITS, SimRobot
 
-TOLERANCE = 1e-3
-"""Relative slack for float round-off in the finite differences (the limits are not approached closer
-than ~3 % here, so this is numerical only)."""
+TOLERANCE = 1e-6
+"""Relative slack for float round-off in the finite differences (stops run at the limits exactly)."""
 
 UR_POINTS = [
     TrajectoryPoint((0.5, -0.5, 1.0, 0.2, -0.3, 1.5), 2.0),

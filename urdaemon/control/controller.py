@@ -14,7 +14,9 @@ Policies (documented contracts):
   compared with (the robot lags one cycle), so ``error`` is the tracking error the path check sees.
 * A path-tolerance violation or a robot that stops being ready aborts to IDLE at once, without a stop
   ramp: the robot is not following the setpoint, so ramping it down would command a pose it is not at.
-* Streams are not slowed by ``speed_scaling`` (the client owns their timing); goals are.
+* Streams are not slowed by ``speed_scaling`` (the client owns their timing); goals are: their time
+  scaling follows it smoothly within the joint limits (``control/scaling.py``), so goals are planned
+  with a reserve of acceleration and jerk (``plan_limits``) and a step of the slider takes ~1-3 s.
 * A goal whose last point has a non-zero velocity gets its result when it reaches the goal tolerance,
   then a jerk-limited stop continues from that motion.
 """
@@ -49,6 +51,12 @@ from urdaemon.control.limits import (
     joint_permutation,
     stopping_distance,
 )
+from urdaemon.control.scaling import (
+    SLIDER_ACCELERATION_RESERVE,
+    TimeScaling,
+    clamp_scaling,
+    planning_limits,
+)
 from urdaemon.control.trajectory import (
     MAX_GOAL_TIME_S,
     RUCKIG_ERRORS,
@@ -67,17 +75,6 @@ _WORKING = Result.Working
 _FINISHED = Result.Finished
 _POSITION = ControlInterface.Position
 _VELOCITY = ControlInterface.Velocity
-
-SLIDER_ACCELERATION_RESERVE = 0.05
-"""Fraction of each joint's max_acceleration goals are not planned with: kept so the speed scaling can
-change while a goal runs (the chain rule adds p'·s' to the commanded acceleration)."""
-SLIDER_JERK_RESERVE = 0.10
-"""Fraction of each joint's max_jerk goals are not planned with, for the terms 3·p''·s·s' + p'·s''."""
-# The time scaling settles on its target once within these of it (the jump is far below a limit's worth).
-_SCALING_SNAP = 1e-9
-_SCALING_RATE_SNAP = 1e-7
-# Near its target the scaling converges at this rate (1/s) instead of along the braking curve.
-_SCALING_GAIN = 25.0
 
 # Converting a real-time setpoint into trajectory time divides by the speed scaling; below this floor
 # the division would only produce huge values that ruckig then brakes anyway.
@@ -180,7 +177,7 @@ class MotionController:
                 raise ValueError(f"MotionController: {label} must be >= 0, got {value}")
         n = limits.dof
         self.limits = limits
-        self.plan_limits = _planning_limits(limits)
+        self.plan_limits = planning_limits(limits)
         """The limits goals are planned with: ``limits`` less the reserves the speed scaling needs."""
         self.joint_names: tuple[str, ...] = limits.names
         self._n = n
@@ -211,13 +208,8 @@ class MotionController:
         # The goal's sample in trajectory time units (velocity/acceleration before speed scaling).
         self._pvel = [0.0] * n
         self._pacc = [0.0] * n
-        # The time scaling applied to the goal (s = dτ/dt) and its rate s'; s follows the robot's
-        # speed_scaling along a path that keeps the commanded motion within the limits (_advance_scaling).
-        self._scaling = 1.0
-        self._scaling_rate = 0.0
-        self._scaling_amax = list(self.plan_limits.max_acceleration)
-        self._scaling_jmax = list(self.plan_limits.max_jerk)
-        self._scaling_kappa = _scaling_kappa(limits, self.plan_limits)
+        # The goal's time scaling: follows the robot's speed_scaling within the joint limits.
+        self._scaling = TimeScaling(limits, self.plan_limits, period)
         self._meas = [0.0] * n
         self._zeros = [0.0] * n
 
@@ -652,12 +644,13 @@ class MotionController:
                 return
             # Holding the final point: the setpoint stays as it is.
         else:
-            s = self._scaling
-            if s == state.speed_scaling and self._scaling_rate == 0.0:
+            scaling = self._scaling
+            s = scaling.value
+            if s == state.speed_scaling and scaling.rate == 0.0:
                 t = goal.t + self._period * s
             else:
-                t = goal.t + self._advance_scaling(state.speed_scaling)
-                s = self._scaling
+                t = goal.t + scaling.advance(state.speed_scaling)
+                s = scaling.value
             if t >= goal.duration - _END_EPS:
                 t = goal.duration
                 goal.end_now = now
@@ -673,71 +666,6 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = pos
         command.velocities[:] = self._vel
-
-    def _advance_scaling(self, target: float) -> float:
-        """Move the goal's time scaling s one cycle toward ``target``; the trajectory time it advanced.
-
-        Commanding p(τ) with dτ/dt = s gives v = p'·s, a = p''·s² + p'·s' and
-        j = p'''·s³ + 3·p''·s·s' + p'·s''. Goals are planned with |p''| ≤ â = (1 − reserve)·amax and
-        |p'''| ≤ ĵ, and |p'| ≤ vmax, so for ANY goal and any point of it, a stays within amax while
-        |s'| ≤ (amax − â·s²)/vmax, and j within jmax while |s''| ≤ (jmax − ĵ·s³ − 3·â·s·|s'|)/vmax
-        (per joint; the smallest counts). s follows the target along a braking curve within both
-        bounds: it never steps, and it reaches its target at rest. s'' is constant over the cycle and
-        integrated exactly.
-        """
-        target = _clamp_scaling(target)
-        dt = self._period
-        s = self._scaling
-        r = self._scaling_rate
-        error = target - s
-        if -_SCALING_SNAP < error < _SCALING_SNAP and -_SCALING_RATE_SNAP < r < _SCALING_RATE_SNAP:
-            self._scaling = target
-            self._scaling_rate = 0.0
-            return dt * target
-        rate_cap, change_cap = self._scaling_caps(s, abs(r))
-        # Braking is planned with half of what the far end of the way still allows.
-        brake = 0.5 * self._scaling_caps(max(s, target), abs(r))[1]
-        size = abs(error)
-        want = min(rate_cap, math.sqrt(2.0 * brake * size), _SCALING_GAIN * size)
-        if error < 0.0:
-            want = -want
-        u = (want - r) / dt
-        if u > change_cap:
-            u = change_cap
-        elif u < -change_cap:
-            u = -change_cap
-        step = dt * (s + dt * (0.5 * r + dt * u / 6.0))
-        s += dt * (r + 0.5 * dt * u)
-        r += dt * u
-        if s >= 1.0:
-            s, r = 1.0, min(r, 0.0)
-        elif s <= 0.0:
-            s, r = 0.0, max(r, 0.0)
-        self._scaling = s
-        self._scaling_rate = r
-        return step if step > 0.0 else 0.0
-
-    def _scaling_caps(self, s: float, rate: float) -> tuple[float, float]:
-        """The largest |s'| at scaling ``s``, and the largest |s''| at ``s`` and |s'| = ``rate``."""
-        a_hat = self._scaling_amax
-        j_hat = self._scaling_jmax
-        kappa = self._scaling_kappa
-        amax = self._amax
-        jmax = self._jmax
-        vmax = self._vmax
-        s2 = s * s
-        s3 = s2 * s
-        rate_cap = math.inf
-        change_cap = math.inf
-        for i in range(self._n):
-            v = vmax[i]
-            room = kappa[i] * (amax[i] - a_hat[i] * s2) / v
-            if room < rate_cap:
-                rate_cap = room
-            room = (jmax[i] - j_hat[i] * s3 - 3.0 * a_hat[i] * s * rate) / v
-            if room < change_cap:
-                change_cap = room
-        return (rate_cap if rate_cap > 0.0 else 0.0), (change_cap if change_cap > 0.0 else 0.0)
 
     def _check_point_accelerations(self, points: Sequence[TrajectoryPoint]) -> None:
         """Refuse client accelerations within a limit but inside the reserve kept for the speed scaling."""
@@ -951,15 +879,12 @@ class MotionController:
         self._pvel[:] = seed_v
         self._pacc[:] = seed_a
         if self._mode is _Mode.IDLE:
-            self._scaling = _clamp_scaling(state.speed_scaling)
-            self._scaling_rate = 0.0
-        elif self._mode is not _Mode.GOAL:
+            self._scaling.start(clamp_scaling(state.speed_scaling), seed_a)
+        elif self._mode is _Mode.GOAL:
+            self._scaling.start(None, seed_a)  # continues the pace of the goal it preempts: no jolt
+        else:
             # a stream or stop: the seed was converted into trajectory time at this scaling
-            self._scaling = max(_clamp_scaling(state.speed_scaling), _MIN_SEED_SCALING)
-            self._scaling_rate = 0.0
-        # (a goal preempting a goal continues its time scaling, so the motion stays smooth)
-        amax = self.plan_limits.max_acceleration
-        self._scaling_amax[:] = [max(amax[i], abs(seed_a[i])) for i in range(self._n)]
+            self._scaling.start(max(clamp_scaling(state.speed_scaling), _MIN_SEED_SCALING), seed_a)
         self._goal = _Goal(goal_id, plan, path_tol, goal_tol, goal_time)
         self._mode = _Mode.GOAL
         self._last_stream_now = -math.inf
@@ -1009,8 +934,8 @@ class MotionController:
         if mode is _Mode.IDLE or mode is _Mode.STOPPING:
             return
         if mode is _Mode.GOAL:
-            s = self._scaling
-            r = self._scaling_rate
+            s = self._scaling.value
+            r = self._scaling.rate
             for i in range(self._n):
                 self._vel[i] = self._pvel[i] * s
                 self._acc[i] = self._pacc[i] * s * s + self._pvel[i] * r
@@ -1154,48 +1079,3 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = self._pos
         command.velocities[:] = self._vel
-
-
-def _clamp_scaling(value: float) -> float:
-    """The robot's speed scaling as a target for the time scaling: within [0, 1] (NaN: 0)."""
-    if value >= 1.0:
-        return 1.0
-    if value > 0.0:
-        return value
-    return 0.0
-
-
-def _planning_limits(limits: JointLimits) -> JointLimits:
-    """``limits`` with the acceleration and jerk reserves of the speed scaling taken off."""
-    return JointLimits(
-        names=limits.names,
-        min_position=limits.min_position,
-        max_position=limits.max_position,
-        max_velocity=limits.max_velocity,
-        max_acceleration=tuple(a * (1.0 - SLIDER_ACCELERATION_RESERVE) for a in limits.max_acceleration),
-        max_jerk=tuple(j * (1.0 - SLIDER_JERK_RESERVE) for j in limits.max_jerk),
-        max_effort=limits.max_effort,
-    )
-
-
-def _scaling_kappa(limits: JointLimits, planned: JointLimits) -> list[float]:
-    """Per joint, the fraction κ ≤ 1 of the acceleration room the scaling's rate may use: at any s and
-    |s'| ≤ κ·(amax − â·s²)/vmax, at least half the jerk room stays for s'' (to brake)."""
-    out: list[float] = []
-    for v, a, j, a_hat, j_hat in zip(
-        limits.max_velocity,
-        limits.max_acceleration,
-        limits.max_jerk,
-        planned.max_acceleration,
-        planned.max_jerk,
-        strict=True,
-    ):
-        kappa = 1.0
-        for k in range(1, 101):
-            s = k / 100.0
-            room = 0.5 * (j - j_hat * s**3)  # the jerk room the rate's term 3·â·s·|s'| may take
-            use = 3.0 * a_hat * s * (a - a_hat * s * s) / v
-            if use > room:
-                kappa = min(kappa, room / use)
-        out.append(kappa)
-    return out
