@@ -67,7 +67,8 @@ async def test_a_second_startup_while_one_is_under_way_is_refused() -> None:
 
 async def test_absurd_payload_and_force_numbers_are_clear_refusals() -> None:
     """Reproduction: ``set_payload`` with mass 1e9 or cog 1e6, and force mode with a 1e9 wrench, raised
-    an internal error (the script-command codec cannot scale them into int32) with a traceback."""
+    an internal error (the script-command codec cannot scale them into int32) with a traceback; a
+    passthrough point of 1e9 rad failed the same way after START had gone out."""
     async with ur_run() as run:
         await run.until(lambda: program_is_running(run), what="ready")
         backend = run.backend
@@ -86,6 +87,11 @@ async def test_absurd_payload_and_force_numbers_are_clear_refusals() -> None:
         )
         with pytest.raises(BackendError, match="force mode"):
             await backend.force_mode(wrench)
+        huge = ((1e9, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0,) * 6, None, 1.0)
+        results: list[tuple[str, int]] = []
+        with pytest.raises(BackendError, match="trajectory"):
+            backend.start_passthrough("g1", [huge], lambda goal, code: results.append((goal, code)))
+        assert backend.passthrough_problem() is None, "no START went out: no passthrough is running"
         await run.cycles_pass(10)
         assert program_is_running(run), "the links survived the refusals"
 

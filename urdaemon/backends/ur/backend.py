@@ -37,6 +37,7 @@ from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, Safety
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
+from urdaemon.protocols._buffer import Side
 
 __all__ = ["UR_IO_SIZES", "UrBackend"]
 
@@ -408,14 +409,19 @@ class UrBackend(Backend):
         problem = self.passthrough_problem()
         if problem is not None:
             raise BackendError(problem)
+        # every point encoded before START: a value the wire cannot carry is refused before the robot
+        # waits for points that would never come
+        batch = trajectory_point.TrajectoryPointConnection(Side.DAEMON)
+        try:
+            for positions, velocities, accelerations, segment_time in points:
+                batch.send(trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time))
+        except LocalProtocolError as err:
+            raise BackendError(f"cannot send the trajectory to the robot: {err}") from None
         self._passthrough = (goal_id, on_result)
         self.servers.reverse.send(
             reverse.TrajectoryControl(reverse.TrajectoryAction.START, len(points), PASSTHROUGH_TIMEOUT_S)
         )
-        for positions, velocities, accelerations, segment_time in points:
-            self.servers.trajectory.send(
-                trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time)
-            )
+        self.servers.trajectory.write(batch.data_to_send())
 
     def cancel_passthrough(self) -> None:
         """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
