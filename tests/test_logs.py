@@ -118,6 +118,21 @@ def test_rate_limit_per_call_site_then_one_summary() -> None:
     assert limit.filter(record(1))  # a new interval, a new budget
 
 
+def test_rate_limit_budgets_are_per_robot() -> None:
+    """One robot's flood must not silence another robot's lines from the same call site."""
+    limit = RateLimit(burst=2, interval=10.0, clock=lambda: 0.0)
+
+    def record(line: int, msg: str, *args: object) -> logging.LogRecord:
+        return logging.LogRecord("urdaemon.robot", logging.WARNING, "r.py", line, msg, args, None)
+
+    # a logger adapter's literal prefix (robot.py), and the name as the first argument (backends)
+    assert [limit.filter(record(7, "[alice] refused %s", "x")) for _ in range(5)].count(True) == 2
+    assert limit.filter(record(7, "[bob] refused %s", "x"))
+    assert [limit.filter(record(9, "[%s] not ready", "alice")) for _ in range(5)].count(True) == 2
+    assert limit.filter(record(9, "[%s] not ready", "bob"))
+    assert not limit.filter(record(9, "[%s] not ready", "alice"))
+
+
 def test_setup_logging_installs_the_rate_limited_queue_in_a_fresh_process() -> None:
     """What ``urdaemon serve`` installs: 100 warnings from one call site print 20 and one summary."""
     code = (

@@ -5,7 +5,8 @@ queue and writes them to stderr. When stderr blocks (a pipe whose reader pauses:
 log driver, a terminal in flow control) the writer waits there, the queue fills, and further records
 are dropped and counted; once the writer moves again it says how many were lost.
 
-Before a record is queued it is rate limited per call site (logger, file and line): at most
+Before a record is queued it is rate limited per call site (logger, file and line) and robot (a
+``[name]`` prefix): at most
 ``burst`` records per ``interval`` seconds, then one ``suppressed K similar messages`` line when the
 interval ends. The message (template and arguments) has its control characters escaped, so client
 text can never forge a log line or drive the terminal; a traceback is kept as it is.
@@ -59,6 +60,18 @@ def escape_control(text: str) -> str:
     return _CONTROL.sub(_escape_one, text)
 
 
+def _subject(record: logging.LogRecord) -> str:
+    """The robot a message is about, from its ``[name]`` prefix (literal or a first ``%s``
+    argument), so that one robot's flood does not use up another's budget."""
+    msg = record.msg
+    if not isinstance(msg, str) or not msg.startswith("["):
+        return ""
+    if msg.startswith("[%s]") and isinstance(record.args, tuple) and record.args:
+        return str(record.args[0])[:40]
+    end = msg.find("]", 1, 42)
+    return msg[1:end] if end > 0 else ""
+
+
 @dataclass
 class _Site:
     start: float
@@ -85,12 +98,12 @@ class RateLimit(logging.Filter):
         self.burst = burst
         self.interval = interval
         self._clock = clock
-        self._sites: dict[tuple[str, str, int], _Site] = {}
+        self._sites: dict[tuple[str, str, int, str], _Site] = {}
         self._ended: list[_Site] = []
         self._lock = threading.Lock()
 
     def filter(self, record: logging.LogRecord) -> bool:
-        key = (record.name, record.pathname, record.lineno)
+        key = (record.name, record.pathname, record.lineno, _subject(record))
         now = self._clock()
         with self._lock:
             site = self._sites.get(key)
