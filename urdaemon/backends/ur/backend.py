@@ -21,6 +21,7 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.primary_link import PrimaryLink
+from urdaemon.backends.ur.readiness import ProgramFacts, not_ready_reason
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.backends.ur.servers import REPLACED, CallbackServers
 from urdaemon.cell.config import Robot, UrOptions
@@ -774,45 +775,18 @@ class UrBackend(Backend):
             raise BackendError("the control program is not connected (no script command link)")
 
     def _not_running_reason(self, state: RobotState) -> str:
-        """Why the robot cannot take motion now, and what to do about it (runs only while not ready)."""
-        lifecycle = state.lifecycle
-        problem = f"; {self._startup_problem}" if self._startup_problem else ""
-        if lifecycle is Lifecycle.EMERGENCY_STOP:
-            return f"emergency stop ({state.safety_mode.name}): release it, then start up again{problem}"
-        if lifecycle is Lifecycle.PROTECTIVE_STOP:
-            return (
-                f"safety mode {state.safety_mode.name}: unlock the protective stop (dashboard "
-                f"'unlock protective stop' or the pendant), then resend the program{problem}"
-            )
-        if lifecycle is Lifecycle.IDLE:
-            mode = state.robot_mode
-            if mode is RobotMode.POWER_OFF:
-                return f"the robot is powered off: call startup, or power it on on the pendant{problem}"
-            if mode is RobotMode.IDLE:
-                return f"the brakes are engaged: call startup, or release them on the pendant{problem}"
-            return f"robot mode {mode.name}{problem}"
-        if lifecycle is Lifecycle.PAUSED:
-            return "the program is paused on the controller: resume it (play)"
-        if lifecycle is not Lifecycle.RUNNING:
-            return state.lifecycle_reason
-        if self.options.read_only:
-            return "read-only (ur.read_only: true): watching, not commanding"
-        if self._handed_back:
-            return "control handed back to the robot"  # (resend_program takes it back)
-        if self._lost_link:
-            return f"the control program lost its {self._lost_link} link: " + (
-                "restarting the program" if self.robot.headless else "restart it (resend_program or play)"
-            )
-        missing = self.servers.missing()
-        if missing and len(missing) < len(self.servers.program_links):
-            return f"the control program is connecting back (waiting for: {', '.join(missing)})"
-        if self._program_ended:
-            return f"the control program ended: {self._program_ended}{problem}"
-        if problem:
-            return problem[2:]
-        if not self.robot.headless:
-            return "waiting for the control program: play it on the pendant or call resend_program"
-        return "waiting for the control program to connect"
+        """Why the robot cannot take motion now, and what to do about it (only while not ready)."""
+        facts = ProgramFacts(
+            read_only=self.options.read_only,
+            headless=self.robot.headless,
+            handed_back=self._handed_back,
+            lost_link=self._lost_link,
+            missing=tuple(self.servers.missing()),
+            links=len(self.servers.program_links),
+            program_ended=self._program_ended,
+            startup_problem=self._startup_problem,
+        )
+        return not_ready_reason(state, facts)
 
     def _check_commanding(self) -> None:
         if self.options.read_only:
