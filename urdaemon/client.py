@@ -28,7 +28,6 @@ from urdaemon.publish.node import zenoh_config
 
 __all__ = [
     "DEFAULT_ENDPOINT",
-    "SERVICES",
     "Client",
     "GoalHandle",
     "NoSuchRobot",
@@ -46,24 +45,6 @@ LOST_GRACE_S = 1.0
 """When a robot's liveliness token disappears, how long a waiting goal still listens and asks for its
 result before it fails (the token's deletion can overtake the result's publication)."""
 PEER_WAIT_S = 0.05
-SERVICES = (
-    "set_io",
-    "set_payload",
-    "set_speed_slider",
-    "set_tool_voltage",
-    "stop",
-    "cycle_stats",
-    "dashboard",
-    "startup",
-    "resend_program",
-    "hand_back_control",
-    "zero_ft_sensor",
-    "start_force_mode",
-    "end_force_mode",
-    "start_tool_contact",
-    "end_tool_contact",
-)
-"""The services every robot serves (docs/keys.md)."""
 
 _RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
 
@@ -489,16 +470,12 @@ class RobotClient:
     async def call(
         self, service: str, body: dict[str, Any] | None = None, *, timeout: float = 60.0
     ) -> dict[str, Any]:
-        """Call service ``service``; the reply (``ok`` and a ``reason`` when not).
+        """Call service ``service``; the reply (``ok``, and a ``reason`` when not: an unknown service's
+        reason lists the robot's services).
 
-        Raises ``NoSuchService`` listing ``SERVICES`` when the robot serves no such service.
+        Raises ``NoSuchService`` when nothing answers at all (no daemon serves this robot's cell).
         """
-        try:
-            return await self.client.request(self.keys.service(service), body or {}, timeout=timeout)
-        except NoSuchService as err:
-            raise NoSuchService(
-                f"{err}: robot {self.keys.base} has no service {service!r}; services: {', '.join(SERVICES)}"
-            ) from err
+        return await self.client.request(self.keys.service(service), body or {}, timeout=timeout)
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
         """Cancel a goal (default: the active one)."""
