@@ -12,10 +12,9 @@ import contextlib
 import itertools
 import logging
 import secrets
-import sys
 import time
 from collections import OrderedDict
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -36,6 +35,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage, TrajectoryGoalMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.publish.slices import SlicedCall
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
@@ -51,11 +51,8 @@ PLANNING_SLICE_S = 0.0005
 """Longest stretch of trajectory decoding or planning between two turns of the event loop (a cycle
 is 2 ms)."""
 INLINE_PREPARE_POINTS = 16
-"""Trajectories of at most this many points are checked on the loop (well under a slice); longer
-ones in a worker thread, see ``_short_gil_slices``."""
-GIL_SLICE_S = 0.0002
-"""The interpreter's switch interval while a worker thread checks a trajectory: the longest the
-loop waits for the GIL (Python's default, 5 ms, would be 2.5 cycles)."""
+"""Trajectories of at most this many points are checked at once (well under a slice); longer ones
+in slices (``SlicedCall``)."""
 PAYLOADLESS_SERVICES = (
     "startup",
     "resend_program",
@@ -439,13 +436,19 @@ class RobotRuntime:
         self._accept_goal(query, kind, goal_id, duration)
 
     async def _prepare(self, names: tuple[str, ...], points: Sequence[TrajectoryPoint]) -> TrajectoryPlanner:
-        """The controller's check of every point (~5 µs a point, pure Python): a long trajectory's in a
-        worker thread that hands the GIL back to the loop every ``GIL_SLICE_S``."""
+        """The controller's check of every point (~10 µs a point, one call that cannot yield) in
+        slices of PLANNING_SLICE_S between robot cycles (``SlicedCall``)."""
         state = self.backend.state
         if len(points) <= INLINE_PREPARE_POINTS:
             return self.controller.prepare_trajectory(names, points, state)
-        with _short_gil_slices():
-            return await asyncio.to_thread(self.controller.prepare_trajectory, names, points, state)
+        call = SlicedCall(self.controller.prepare_trajectory, names, points, state)
+        try:
+            while True:
+                if not call.step(PLANNING_SLICE_S):
+                    return call.result()
+                await asyncio.sleep(0)
+        finally:
+            call.close()
 
     def _start_trajectory(
         self,
@@ -783,27 +786,6 @@ async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessag
         if not decoder.step(time.perf_counter() + PLANNING_SLICE_S):
             return decoder.result()
         await asyncio.sleep(0)
-
-
-_gil_users = 0
-_switch_interval = 0.0
-
-
-@contextlib.contextmanager
-def _short_gil_slices() -> Iterator[None]:
-    """While a worker thread runs pure Python, have the interpreter hand the GIL back every
-    ``GIL_SLICE_S``: the event loop never waits longer than that for it."""
-    global _gil_users, _switch_interval
-    if _gil_users == 0:
-        _switch_interval = sys.getswitchinterval()
-        sys.setswitchinterval(GIL_SLICE_S)
-    _gil_users += 1
-    try:
-        yield
-    finally:
-        _gil_users -= 1
-        if _gil_users == 0:
-            sys.setswitchinterval(_switch_interval)
 
 
 async def _plan_tail(planner: TrajectoryPlanner) -> None:

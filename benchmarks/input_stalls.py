@@ -1,0 +1,286 @@
+"""The longest the daemon's event loop is held by one client message, for each kind of bad or big input.
+
+    python benchmarks/input_stalls.py            # every input 3 times, the full sizes
+    python benchmarks/input_stalls.py --repeat 5
+
+A daemon serving two mock robots runs in this process; a client process connected over loopback TCP
+sends the inputs (its own encoding and sending are not counted).
+A probe task turns the loop as fast as it can (``await asyncio.sleep(0)``) and records the longest
+gap between two of its turns: the longest any one callback (or a thread holding the GIL) kept every
+robot's cycle waiting. Each input is sent ``--repeat`` times; for each send the worst gap while it
+is received, answered and fully processed (a query: until its reply; a put: 50 ms after) is taken.
+The table gives the least of these (the stall the input causes every time; on a busy machine a
+send's worst gap also holds the moments the OS ran another process) and the greatest, against the
+same for windows with no input (the baseline). Every robot cycle is 2 ms at 500 Hz: a stall must
+stay well below that.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from urdaemon.cell import parse_cell
+from urdaemon.client import Client
+from urdaemon.daemon import Daemon
+
+ROOT = Path(__file__).resolve().parents[1]
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+CELL = """
+cell: stalls
+robots:
+  - name: alice
+    model: ur10e
+    backend: mock
+    mock: {initial_positions: [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]}
+  - name: bob
+    model: ur10e
+    backend: mock
+    pose: {xyz: [1.0, 0.0, 0.0]}
+    mock: {initial_positions: [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]}
+"""
+PUT_SETTLE_S = 0.05
+BASELINE_WINDOW_S = 0.3
+"""Length of a window with no input (as long as the longest input takes to be processed)."""
+
+
+@dataclass(frozen=True)
+class Input:
+    """One kind of input: a query (``get``) or a put on ``key`` with ``payload``."""
+
+    name: str
+    key: str
+    payload: bytes
+    put: bool = False
+
+
+def trajectory(points: int) -> bytes:
+    """A valid trajectory goal of ``points`` points with velocities and accelerations, 10 ms apart."""
+    body = []
+    for k in range(points):
+        t = (k + 1) * 0.01
+        last = k == points - 1
+        body.append(
+            {
+                "positions": [round(h + 0.1 * math.sin(t), 6) for h in HOME],
+                "velocities": [0.0] * 6 if last else [round(0.1 * math.cos(t), 6)] * 6,
+                "accelerations": [0.0] * 6 if last else [round(-0.1 * math.sin(t), 6)] * 6,
+                "time_from_start": round(t, 6),
+            }
+        )
+    return json.dumps({"points": body}, separators=(",", ":")).encode()
+
+
+def inputs(scale: float = 1.0) -> list[Input]:
+    """Every kind of input measured; ``scale`` shrinks the big ones (1.0: the full sizes)."""
+    base = "stalls/alice"
+
+    def n(count: int) -> int:
+        return max(1, int(count * scale))
+
+    return [
+        Input("1 MB garbage move", f"{base}/goal/move", b"x" * n(1_000_000)),
+        Input("64 KiB garbage move (largest read)", f"{base}/goal/move", b"[" + b"1," * n(32_700) + b"1]"),
+        Input("64 KiB move of 9 000 positions", f"{base}/goal/move", _numbers("positions", n(9_000))),
+        Input(
+            f"valid {n(5000)}-point trajectory (pos, vel, acc)",
+            f"{base}/goal/trajectory",
+            trajectory(n(5000)),
+        ),
+        Input("2 MiB trajectory, one huge point", f"{base}/goal/trajectory", _one_huge_point(n(2_000_000))),
+        Input(
+            "2 MiB of whitespace and garbage",
+            f"{base}/goal/trajectory",
+            b'{"points": [' + b" " * n(2_000_000),
+        ),
+        Input(
+            "200 000-value stream command",
+            f"{base}/command/joint_position",
+            _numbers("positions", n(200_000)),
+            put=True,
+        ),
+        Input(
+            "64 KiB stream command (9 000 values)",
+            f"{base}/command/joint_position",
+            _numbers("positions", n(9_000)),
+            put=True,
+        ),
+        Input("64 KiB deeply nested JSON (service)", f"{base}/service/set_payload", _nested(n(30_000))),
+        Input("64 KiB of unknown fields (service)", f"{base}/service/startup", _fields(n(5_000))),
+        Input("wildcard get ** (every queryable)", "**", b""),
+    ]
+
+
+def _numbers(field: str, count: int) -> bytes:
+    return json.dumps({field: [0.123456] * count}, separators=(",", ":")).encode()
+
+
+def _one_huge_point(size: int) -> bytes:
+    values = ",".join(["0.1"] * (size // 4))
+    return f'{{"points":[{{"positions":[{values}],"time_from_start":1}}]}}'.encode()
+
+
+def _nested(depth: int) -> bytes:
+    return b'{"mass":' + b"[" * depth + b"]" * depth + b"}"
+
+
+def _fields(count: int) -> bytes:
+    return json.dumps({f"field_{i}": i for i in range(count)}, separators=(",", ":")).encode()
+
+
+class Probe:
+    """Turns the loop as fast as it can; ``worst`` is the longest gap between two turns since ``reset``."""
+
+    def __init__(self) -> None:
+        self.worst = 0.0
+        self._task: asyncio.Task[None] | None = None
+
+    def reset(self) -> None:
+        self.worst = 0.0
+
+    async def _run(self) -> None:
+        last = time.perf_counter()
+        while True:
+            await asyncio.sleep(0)
+            now = time.perf_counter()
+            self.worst = max(self.worst, now - last)
+            last = now
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._run())
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            await asyncio.gather(self._task, return_exceptions=True)
+
+
+def sender(endpoint: str, scale: float) -> None:
+    """The client, in a process of its own (its own encoding and sending must not count): reads the
+    index of an input on stdin, sends it, waits for the reply (a put: ``PUT_SETTLE_S``), cancels any
+    goal it started, and prints ``done``."""
+    import sys
+
+    import zenoh
+
+    from urdaemon.publish.node import zenoh_config
+
+    items = inputs(scale)
+    session = zenoh.open(zenoh_config("peer", [], [endpoint]))
+    try:
+        print("ready", flush=True)
+        for line in sys.stdin:
+            item = items[int(line)]
+            if item.put:
+                session.put(item.key, item.payload)
+                time.sleep(PUT_SETTLE_S)
+            else:
+                list(session.get(item.key, payload=item.payload or None, timeout=10.0))
+                list(
+                    session.get("stalls/alice/goal/cancel", timeout=10.0)
+                )  # an accepted goal must not run on
+            print("done", flush=True)
+    finally:
+        session.close()
+
+
+async def measure(
+    scale: float = 1.0,
+    repeat: int = 3,
+    on_row: Callable[[str, float, float], None] | None = None,
+) -> dict[str, float]:
+    """Run the daemon and the probe here, the sender in a subprocess; for each input (and
+    ``baseline``) the worst stall (s) it caused in every one of ``repeat`` sends (the least of the
+    sends' worst stalls: what the machine's own hiccups add to a send is not in it)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    daemon = Daemon(parse_cell(CELL, base_dir=ROOT / "configs"), listen=(endpoint,))
+    stop = asyncio.Event()
+    serving = asyncio.create_task(daemon.run(stop))
+    results: dict[str, float] = {}
+    probe = Probe()
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        __file__,
+        "--sender",
+        endpoint,
+        "--scale",
+        str(scale),
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+    )
+    assert proc.stdin is not None
+    assert proc.stdout is not None
+    try:
+        if (await asyncio.wait_for(proc.stdout.readline(), 30.0)).strip() != b"ready":
+            raise RuntimeError("the sender did not start")
+        client = await Client.connect(endpoint)
+        try:
+            for name in ("alice", "bob"):
+                await client.robot(name, timeout=10.0)
+        finally:
+            await client.close()
+        items = inputs(scale)  # before the probe starts: encoding them here is not what is measured
+        probe.start()
+        windows = []
+        for _ in range(repeat):
+            probe.reset()
+            await asyncio.sleep(BASELINE_WINDOW_S)
+            windows.append(probe.worst)
+        results["baseline"] = min(windows)
+        if on_row is not None:
+            on_row("baseline (no input)", min(windows), max(windows))
+        for index, item in enumerate(items):
+            windows = []
+            for _ in range(repeat):
+                probe.reset()
+                proc.stdin.write(f"{index}\n".encode())
+                await proc.stdin.drain()
+                if (await asyncio.wait_for(proc.stdout.readline(), 60.0)).strip() != b"done":
+                    raise RuntimeError(f"the sender failed on {item.name}")
+                windows.append(probe.worst)
+            results[item.name] = min(windows)
+            if on_row is not None:
+                on_row(item.name, min(windows), max(windows))
+    finally:
+        await probe.stop()
+        proc.stdin.close()
+        await asyncio.wait_for(proc.wait(), 30.0)
+        stop.set()
+        await asyncio.wait_for(serving, 20.0)
+    return results
+
+
+def main() -> None:
+    """Measure every input and print a table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0] if __doc__ else None)
+    parser.add_argument("--repeat", type=int, default=5, help="times each input is sent")
+    parser.add_argument("--scale", type=float, default=1.0, help="size of the big inputs (1: full)")
+    parser.add_argument("--sender", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.sender:
+        sender(args.sender, args.scale)
+        return
+    items = inputs(args.scale)
+    print(f"{'input':<48} {'bytes':>10} {'stall, every send':>18} {'worst send':>11}")
+
+    sizes: dict[str, int] = {item.name: len(item.payload) for item in items}
+
+    def row(name: str, every: float, worst: float) -> None:
+        size = f"{sizes[name]:,}" if name in sizes else ""
+        print(f"{name:<48} {size:>10} {every * 1e3:>15.2f} ms {worst * 1e3:>8.2f} ms", flush=True)
+
+    asyncio.run(measure(args.scale, args.repeat, on_row=row))
+
+
+if __name__ == "__main__":
+    main()
