@@ -183,3 +183,36 @@ async def test_unread_stderr_for_10_s_halts_no_program_and_loses_no_goal(
     assert code == 0, log[-3000:]
     assert "suppressed" in log, log[-3000:]  # the flood was rate limited, and said so
     assert FLOOD_FIELD not in log or log.count(FLOOD_FIELD) <= 40
+
+
+async def test_a_client_field_name_cannot_forge_a_daemon_log_line(tmp_path: Path) -> None:
+    """Reproduction: a goal whose unknown field name holds ``\\n`` and a fake log line; the daemon's
+    rejection warning echoed it raw, and its stderr showed the forged line as a line of its own."""
+    from tests.integration.conftest import TWO_MOCKS
+
+    listen = f"tcp/127.0.0.1:{free_tcp_port()}"
+    config = tmp_path / "cell.yaml"
+    config.write_text(TWO_MOCKS, encoding="utf-8")
+    forged = "FORGED ERROR"  # short: the daemon may shorten echoed client text
+    daemon = subprocess.Popen(
+        [sys.executable, "-m", "urdaemon", "serve", "--config", str(config), "--listen", listen],
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    stderr: list[str] = []
+    drain_in_background(daemon, stderr)
+    try:
+        async with await Client.connect(listen, timeout=30.0) as client:
+            alice = await client.robot("alice", timeout=30.0)
+            reply = await client.request(alice.keys.goal_move, {"positions": HOME, f"x\n{forged}\r": 1})
+            assert reply["accepted"] is False
+    finally:
+        daemon.send_signal(signal.SIGTERM)
+        code = await asyncio.get_running_loop().run_in_executor(None, daemon.wait, 60)
+    log = "".join(stderr)
+    assert code == 0, log
+    assert "FORGED" in log, log  # the warning was written, with the client's text in it
+    assert not any(line.startswith(forged) for line in log.splitlines()), log
