@@ -294,5 +294,6 @@ def shutdown_logging() -> None:
     global _installed
     handler, _installed = _installed, None
     if handler is not None:
+        logging.captureWarnings(False)
         logging.getLogger().removeHandler(handler)
         handler.close()
