@@ -27,6 +27,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from urdaemon.cell import parse_cell
 from urdaemon.client import Client
@@ -174,7 +175,7 @@ def sender(endpoint: str, scale: float) -> None:
     from urdaemon.publish.node import zenoh_config
 
     items = inputs(scale)
-    session = zenoh.open(zenoh_config("peer", [], [endpoint]))
+    session: Any = zenoh.open(zenoh_config("peer", [], [endpoint]))
     try:
         print("ready", flush=True)
         for line in sys.stdin:
@@ -184,9 +185,8 @@ def sender(endpoint: str, scale: float) -> None:
                 time.sleep(PUT_SETTLE_S)
             else:
                 list(session.get(item.key, payload=item.payload or None, timeout=10.0))
-                list(
-                    session.get("stalls/alice/goal/cancel", timeout=10.0)
-                )  # an accepted goal must not run on
+                # an accepted goal must not run on
+                list(session.get("stalls/alice/goal/cancel", timeout=10.0))
             print("done", flush=True)
     finally:
         session.close()

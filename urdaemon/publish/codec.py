@@ -59,7 +59,7 @@ MAX_TRAJECTORY_POINTS = 5_000
 """Most points of a trajectory goal (planning and checking are sliced, but each point costs ~60 µs)."""
 MAX_JOINTS = 64
 """Longest list of joint values or names a message may carry (no robot has more joints)."""
-MAX_NAME_CHARS = 128
+MAX_NAME_CHARS = 64
 """Longest joint name accepted."""
 MAX_GOAL_TIME_S = 7200.0
 """The longest goal, and so the largest goal-time tolerance and move duration (control's limit)."""

@@ -1,0 +1,57 @@
+"""benchmarks/input_stalls.py stays runnable: its inputs are what they say, and a tiny run measures
+every one of them (the figures are for docs/performance.md, never asserted here)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from urdaemon.publish.codec import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES, decode_trajectory_goal
+
+pytestmark = pytest.mark.timeout(120)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bench() -> ModuleType:
+    spec = importlib.util.spec_from_file_location(
+        "bench_input_stalls", ROOT / "benchmarks" / "input_stalls.py"
+    )
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_inputs_are_the_worst_of_each_kind(bench: ModuleType) -> None:
+    items = {item.name: item for item in bench.inputs()}
+    assert len(items["1 MB garbage move"].payload) == 1_000_000
+    assert (
+        SMALL_MESSAGE_BYTES - 200
+        < len(items["64 KiB garbage move (largest read)"].payload)
+        <= SMALL_MESSAGE_BYTES
+    )
+    trajectory = items["valid 5000-point trajectory (pos, vel, acc)"].payload
+    assert len(trajectory) < MAX_MESSAGE_BYTES
+    goal = decode_trajectory_goal(trajectory)
+    assert len(goal.points) == 5000
+    assert all(p.velocities is not None and p.accelerations is not None for p in goal.points)
+    assert len(json.loads(items["200 000-value stream command"].payload)["positions"]) == 200_000
+    assert items["200 000-value stream command"].put
+
+
+async def test_a_tiny_run_measures_every_input(bench: ModuleType) -> None:
+    rows: list[tuple[str, float, float]] = []
+    results = await bench.measure(scale=0.001, repeat=1, on_row=lambda *row: rows.append(row))
+    names = ["baseline", *(item.name for item in bench.inputs(0.001))]
+    assert list(results) == names
+    assert len(rows) == len(names)
+    assert all(0.0 < every <= worst for _, every, worst in rows), rows
