@@ -635,7 +635,9 @@ class UrBackend(Backend):
         """A callback server's connection came or went."""
         log.info("[%s] %s", self.name, reason)
         if connected:
-            if not self.servers.missing():
+            started = self._program_started_at
+            if all(s.link is not None and s.connected_at >= started for s in self.servers.program_links):
+                # the program started last holds every link (not a mix of the old one's and the new one's)
                 self._program_links_up_at = time.monotonic()
                 self._lost_link = ""
                 self._program_ended = ""
