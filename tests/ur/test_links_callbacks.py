@@ -76,7 +76,7 @@ async def test_the_loss_of_one_link_is_noticed_at_once_and_repaired(port: str) -
         assert port in state.lifecycle_reason, state.lifecycle_reason
         # repaired: a new program brings every link back
         await run.until(lambda: program_is_running(run), what="the links are back")
-        assert run.programs_sent == programs + 1
+        assert run.programs_sent > programs, "the program was sent again"
         assert run.backend.state.lifecycle_reason == ""
 
 
