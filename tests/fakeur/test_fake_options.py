@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+from typing import Any
 
 import pytest
 
@@ -17,7 +18,7 @@ pytestmark = pytest.mark.timeout(30)
 
 
 async def _exchange(
-    reader: asyncio.StreamReader, writer: asyncio.StreamWriter, conn: rtde.RtdeConnection, message: object
+    reader: asyncio.StreamReader, writer: asyncio.StreamWriter, conn: rtde.RtdeConnection, message: Any
 ) -> object:
     conn.send(message)
     writer.write(conn.data_to_send())
@@ -53,7 +54,9 @@ async def test_a_v1_only_fake_refuses_v2_and_streams_v1_outputs_at_its_rate() ->
                 while len(stamps) < 10:
                     for event in conn.receive_data(await reader.read(65536)):
                         if isinstance(event, rtde.DataPackage):
-                            stamps.append(event.values[0])
+                            stamp = event.values[0]
+                            assert isinstance(stamp, float)
+                            stamps.append(stamp)
             steps = {round(b - a, 6) for a, b in itertools.pairwise(stamps)}
             assert steps == {0.002}, "every controller cycle: v1 streams at the controller's rate"
         finally:
