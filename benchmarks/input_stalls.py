@@ -64,19 +64,24 @@ class Input:
 
 
 def trajectory(points: int) -> bytes:
-    """A valid trajectory goal of ``points`` points with velocities and accelerations, 10 ms apart."""
-    body = []
-    for k in range(points):
-        t = (k + 1) * 0.01
-        last = k == points - 1
+    """A valid trajectory goal of ``points`` points with velocities and accelerations, 10 ms apart (a
+    slow swing of 0.05 rad from rest), its last point at rest a second after the one before."""
+    body: list[dict[str, object]] = []
+    for k in range(points - 1):
+        t = 0.5 + k * 0.01
         body.append(
             {
-                "positions": [round(h + 0.1 * math.sin(t), 6) for h in HOME],
-                "velocities": [0.0] * 6 if last else [round(0.1 * math.cos(t), 6)] * 6,
-                "accelerations": [0.0] * 6 if last else [round(-0.1 * math.sin(t), 6)] * 6,
+                "positions": [round(h + 0.05 * (1 - math.cos(t)), 6) for h in HOME],
+                "velocities": [round(0.05 * math.sin(t), 6)] * 6,
+                "accelerations": [round(0.05 * math.cos(t), 6)] * 6,
                 "time_from_start": round(t, 6),
             }
         )
+    end = round(0.5 + (points - 2) * 0.01 + 1.0, 6)
+    rest = body[-1]["positions"] if body else HOME
+    body.append(
+        {"positions": rest, "velocities": [0.0] * 6, "accelerations": [0.0] * 6, "time_from_start": end}
+    )
     return json.dumps({"points": body}, separators=(",", ":")).encode()
 
 
@@ -90,7 +95,7 @@ def inputs(scale: float = 1.0) -> list[Input]:
     return [
         Input("1 MB garbage move", f"{base}/goal/move", b"x" * n(1_000_000)),
         Input("64 KiB garbage move (largest read)", f"{base}/goal/move", b"[" + b"1," * n(32_700) + b"1]"),
-        Input("64 KiB move of 9 000 positions", f"{base}/goal/move", _numbers("positions", n(9_000))),
+        Input("64 KiB move of 7 000 positions", f"{base}/goal/move", _numbers("positions", n(7_000))),
         Input(
             f"valid {n(5000)}-point trajectory (pos, vel, acc)",
             f"{base}/goal/trajectory",
@@ -109,9 +114,9 @@ def inputs(scale: float = 1.0) -> list[Input]:
             put=True,
         ),
         Input(
-            "64 KiB stream command (9 000 values)",
+            "64 KiB stream command (7 000 values)",
             f"{base}/command/joint_position",
-            _numbers("positions", n(9_000)),
+            _numbers("positions", n(7_000)),
             put=True,
         ),
         Input("64 KiB deeply nested JSON (service)", f"{base}/service/set_payload", _nested(n(30_000))),

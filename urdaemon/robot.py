@@ -50,6 +50,9 @@ KEPT_RESULTS = 256
 PLANNING_SLICE_S = 0.0005
 """Longest stretch of trajectory decoding or planning between two turns of the event loop (a cycle
 is 2 ms)."""
+THREAD_SLICE_S = 0.0003
+"""A slice of a check run in a worker thread (``SlicedCall``): shorter, as handing the baton to the
+thread and back adds up to a few tenths of a millisecond on a busy machine."""
 INLINE_PREPARE_POINTS = 16
 """Trajectories of at most this many points are checked at once (well under a slice); longer ones
 in slices (``SlicedCall``)."""
@@ -418,9 +421,13 @@ class RobotRuntime:
             self.controller.check_can_start(self.backend.state, time.monotonic(), goal.preempt)
             self._planning = f"of {len(goal.points)} points"
             planner = await self._prepare(names, goal.points)
+            passthrough, preempt = goal.passthrough, goal.preempt
+            del goal  # the planner has its own copy of the points: free the message in a turn of its own
+            await asyncio.sleep(0)
             await _plan_tail(planner)
+            await asyncio.sleep(0)  # the last planning slice and accepting are two turns
             goal_id = self._new_goal_id()
-            duration = self._start_trajectory(goal_id, goal, names, tolerances, planner)
+            duration = self._start_trajectory(goal_id, passthrough, preempt, tolerances, planner)
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
@@ -432,8 +439,7 @@ class RobotRuntime:
             return
         finally:
             self._planning = None
-        kind = "passthrough trajectory" if goal.passthrough else "trajectory"
-        self._accept_goal(query, kind, goal_id, duration)
+        self._accept_goal(query, "passthrough trajectory" if passthrough else "trajectory", goal_id, duration)
 
     async def _prepare(self, names: tuple[str, ...], points: Sequence[TrajectoryPoint]) -> TrajectoryPlanner:
         """The controller's check of every point (~10 µs a point, one call that cannot yield) in
@@ -444,7 +450,7 @@ class RobotRuntime:
         call = SlicedCall(self.controller.prepare_trajectory, names, points, state)
         try:
             while True:
-                if not call.step(PLANNING_SLICE_S):
+                if not call.step(THREAD_SLICE_S):
                     return call.result()
                 await asyncio.sleep(0)
         finally:
@@ -453,21 +459,21 @@ class RobotRuntime:
     def _start_trajectory(
         self,
         goal_id: str,
-        goal: TrajectoryGoalMessage,
-        names: tuple[str, ...],
+        passthrough: bool,
+        preempt: bool,
         tolerances: Tolerances | None,
         planner: TrajectoryPlanner,
     ) -> float:
-        if goal.passthrough:
+        if passthrough:
             return self._start_passthrough(goal_id, planner, tolerances)
         return self.controller.accept_trajectory(
             goal_id,
-            names,
-            goal.points,
+            self.controller.joint_names,  # the planner's points are in the controller's joint order
+            planner.points,
             self.backend.state,
             time.monotonic(),
             tolerances=tolerances,
-            preempt=goal.preempt,
+            preempt=preempt,
             planner=planner,
         )
 
