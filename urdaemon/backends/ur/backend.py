@@ -514,6 +514,7 @@ class UrBackend(Backend):
         self._cycles += 1
         self._last_package = time.monotonic()
         self._first_package.set()
+        self.report_lag()  # packages missed or late since the last warning, at most every few seconds
         self._command_sent = False
         try:
             # the runtime's tick calls send_command() before it publishes anything; while catching up
