@@ -284,7 +284,7 @@ def _bad_target(args: argparse.Namespace) -> str | None:
 def _fail(err: BaseException, prefix: str = "") -> int:
     from urdaemon.client import zenoh_message
 
-    print(f"{prefix}error: {zenoh_message(err)}", file=sys.stderr)
+    print(f"error: {prefix}{zenoh_message(err)}", file=sys.stderr)
     return EXIT_FAILED
 
 
@@ -349,7 +349,7 @@ def _serve(path: str, listen: list[str] | None) -> int:
         import zenoh
 
         if isinstance(err, zenoh.ZError):  # e.g. the listen endpoint is taken
-            return _fail(err, "Zenoh ")
+            return _fail(err, "Zenoh: ")
         raise
     finally:
         ignore_stop_signals()
@@ -553,15 +553,16 @@ async def _move(args: argparse.Namespace) -> int:
         except UrDaemonError as err:
             return _fail(err)
         print(f"goal {goal.goal_id} accepted, planned {goal.duration:.2f} s", file=sys.stderr)
+        bar = _ProgressBar(sys.stderr)
         try:
-            return await _follow(goal)
+            return await _follow(goal, bar)
         except asyncio.CancelledError:  # Ctrl-C: asyncio cancels this task; the robot must stop too
+            bar.end()
             return await _cancel_on_interrupt(goal)
 
 
-async def _follow(goal: Any) -> int:
+async def _follow(goal: Any, bar: _ProgressBar) -> int:
     """Show progress (on a terminal only) until the result; print it; the exit code."""
-    bar = _ProgressBar(sys.stderr)
     try:
         async for feedback in goal.feedback():
             bar.show(float(feedback["progress"]))
@@ -582,7 +583,7 @@ async def _cancel_on_interrupt(goal: Any) -> int:
     task = asyncio.current_task()
     if task is not None:
         task.uncancel()
-    print(f"\ninterrupted: canceling goal {goal.goal_id}", file=sys.stderr)
+    print(f"interrupted: canceling goal {goal.goal_id}", file=sys.stderr)
     try:
         reply = await goal.robot.cancel(goal.goal_id)
     except UrDaemonError as err:

@@ -159,14 +159,11 @@ class _FakeGoal:
         return {"status": "succeeded", "goal_id": self.goal_id}
 
 
-async def test_move_progress_on_a_terminal_ends_at_100_percent(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
+async def test_move_progress_on_a_terminal_ends_at_100_percent(capsys: pytest.CaptureFixture[str]) -> None:
     from urdaemon import cli
 
     tty = _Tty()
-    monkeypatch.setattr("sys.stderr", tty)
-    assert await cli._follow(_FakeGoal()) == 0
+    assert await cli._follow(_FakeGoal(), cli._ProgressBar(tty)) == 0
     shown = tty.getvalue()
     assert shown.endswith("\r  100.0 %\n"), repr(shown)
     assert json.loads(capsys.readouterr().out)["status"] == "succeeded"
