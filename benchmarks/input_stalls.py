@@ -120,7 +120,7 @@ def inputs(scale: float = 1.0) -> list[Input]:
             put=True,
         ),
         Input("64 KiB deeply nested JSON (service)", f"{base}/service/set_payload", _nested(n(30_000))),
-        Input("64 KiB of unknown fields (service)", f"{base}/service/startup", _fields(n(5_000))),
+        Input("64 KiB of unknown fields (service)", f"{base}/service/startup", _fields(n(3_500))),
         Input("wildcard get ** (every queryable)", "**", b""),
     ]
 

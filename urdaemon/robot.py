@@ -12,6 +12,7 @@ import contextlib
 import itertools
 import logging
 import secrets
+import sys
 import time
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable, Sequence
@@ -440,6 +441,7 @@ class RobotRuntime:
         finally:
             self._planning = None
         self._accept_goal(query, "passthrough trajectory" if passthrough else "trajectory", goal_id, duration)
+        await _release(planner)
 
     async def _prepare(self, names: tuple[str, ...], points: Sequence[TrajectoryPoint]) -> TrajectoryPlanner:
         """The controller's check of every point (~10 µs a point, one call that cannot yield) in
@@ -784,6 +786,17 @@ def _without_arguments(
         await action()
 
     return act
+
+
+async def _release(obj: object) -> None:
+    """Free a large object (a planner: its own copy of every point, ~1 ms to free at once) one
+    attribute per turn of the loop, unless someone else still holds it."""
+    attributes = getattr(obj, "__dict__", None)
+    if attributes is None or sys.getrefcount(obj) > 3:  # the caller's name, ``obj`` and the call's
+        return
+    for name in list(attributes):
+        attributes.pop(name, None)
+        await asyncio.sleep(0)
 
 
 async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:
