@@ -94,6 +94,9 @@ def inputs(scale: float = 1.0) -> list[Input]:
 
     return [
         Input("1 MB garbage move", f"{base}/goal/move", b"x" * n(1_000_000)),
+        Input(
+            "1 MB move of 250 000 positions", f"{base}/goal/move", _numbers("positions", n(250_000), "0.1")
+        ),
         Input("64 KiB garbage move (largest read)", f"{base}/goal/move", b"[" + b"1," * n(32_700) + b"1]"),
         Input("64 KiB move of 7 000 positions", f"{base}/goal/move", _numbers("positions", n(7_000))),
         Input(
@@ -125,8 +128,8 @@ def inputs(scale: float = 1.0) -> list[Input]:
     ]
 
 
-def _numbers(field: str, count: int) -> bytes:
-    return json.dumps({field: [0.123456] * count}, separators=(",", ":")).encode()
+def _numbers(field: str, count: int, text: str = "0.123456") -> bytes:
+    return f'{{"{field}":[{",".join([text] * count)}]}}'.encode()
 
 
 def _one_huge_point(size: int) -> bytes:
