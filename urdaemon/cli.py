@@ -15,9 +15,13 @@ import math
 import signal
 import sys
 from collections.abc import Coroutine, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from urdaemon import __version__
+
+if TYPE_CHECKING:
+    from urdaemon.cell.config import Cell
+
 from urdaemon.errors import ConfigError, DescriptionError, GoalRejected, UrDaemonError
 
 __all__ = ["main"]
@@ -295,7 +299,7 @@ def _fake_robot(args: argparse.Namespace) -> int:
 
 
 def _check(path: str) -> int:
-    from urdaemon.cell import busy_ports, load_cell, summarize
+    from urdaemon.cell import load_cell, summarize
     from urdaemon.daemon import describe_cell, make_backend
 
     try:
@@ -303,7 +307,7 @@ def _check(path: str) -> int:
         description = describe_cell(cell)
         for robot in cell.robots:  # what `serve` would refuse, `check` refuses too
             make_backend(robot, description.limits[robot.name], None, cell.cell)
-        busy = busy_ports(cell, path)  # serve would retry these forever
+        busy = _busy_ports(cell, path)  # serve would retry these forever
         if busy:
             raise ConfigError("\n".join(busy), errors=busy)
     except ConfigError as err:
@@ -316,6 +320,31 @@ def _check(path: str) -> int:
         print(f"  {name}: {limits.dof} joints: {', '.join(limits.names)}")
     print("ok")
     return EXIT_OK
+
+
+def _busy_ports(cell: Cell, source: str) -> list[str]:
+    """Callback ports ``serve`` would listen on (robots that command) that something else holds now
+    (each bound and released at once). ``serve`` fails at once when its Zenoh port is taken, but
+    would retry a taken callback port forever."""
+    import socket
+
+    wanted: list[tuple[str, str, int]] = []
+    for i, robot in enumerate(cell.robots):
+        if not robot.listens:
+            continue
+        host = robot.ur.listen_address if robot.ur is not None else "0.0.0.0"
+        for role, port in robot.ports.as_dict().items():
+            wanted.append((f"robots[{i}] ({robot.name}).ports.{role}", host, port))
+    problems = []
+    for where, host, port in wanted:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as sock:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers do
+                sock.bind((host, port))
+        except OSError as err:
+            problems.append(f"{source}: {where}: cannot listen on {host}:{port}: {err.strerror or err}")
+    return problems
 
 
 def _urdf(path: str) -> int:

@@ -3,6 +3,6 @@
 from __future__ import annotations
 
 from urdaemon.cell.config import Cell, Robot, ur_models
-from urdaemon.cell.load import busy_ports, load_cell, parse_cell, summarize
+from urdaemon.cell.load import load_cell, parse_cell, summarize
 
-__all__ = ["Cell", "Robot", "busy_ports", "load_cell", "parse_cell", "summarize", "ur_models"]
+__all__ = ["Cell", "Robot", "load_cell", "parse_cell", "summarize", "ur_models"]

@@ -11,7 +11,7 @@ from pydantic import ValidationError
 from urdaemon.cell.config import Cell
 from urdaemon.errors import ConfigError
 
-__all__ = ["busy_ports", "format_location", "load_cell", "parse_cell", "summarize"]
+__all__ = ["format_location", "load_cell", "parse_cell", "summarize"]
 
 
 def load_cell(path: str | Path) -> Cell:
@@ -135,28 +135,3 @@ def summarize(cell: Cell) -> str:
         extra = f" calibration={r.calibration}" if r.calibration else ""
         lines.append(f"  {r.name}: {r.model} backend={r.backend}{where} ports={port_text} {pose}{extra}")
     return "\n".join(lines)
-
-
-def busy_ports(cell: Cell, source: str) -> list[str]:
-    """Callback ports ``serve`` would listen on (robots that command) that something else holds now
-    (each bound and released at once). ``serve`` fails at once when its Zenoh port is taken, but
-    would retry a taken callback port forever."""
-    import socket
-
-    wanted: list[tuple[str, str, int]] = []
-    for i, robot in enumerate(cell.robots):
-        if not robot.listens:
-            continue
-        host = robot.ur.listen_address if robot.ur is not None else "0.0.0.0"
-        for role, port in robot.ports.as_dict().items():
-            wanted.append((f"robots[{i}] ({robot.name}).ports.{role}", host, port))
-    problems = []
-    for where, host, port in wanted:
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        try:
-            with socket.socket(family, socket.SOCK_STREAM) as sock:
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers do
-                sock.bind((host, port))
-        except OSError as err:
-            problems.append(f"{source}: {where}: cannot listen on {host}:{port}: {err.strerror or err}")
-    return problems
