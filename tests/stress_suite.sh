@@ -43,6 +43,9 @@ run_suite() {  # run_suite NAME DIR: the suite in DIR, log in $OUT/NAME.log, res
     set +e
     (
         cd "$dir"
+        # the clone's urdaemon also in the scripts the tests start (the shared virtualenv's editable
+        # install points at $REPO, and a script's own directory comes first on its sys.path)
+        export PYTHONPATH="$dir${PYTHONPATH:+:$PYTHONPATH}"
         "$PY" -c "import urdaemon; print('testing', urdaemon.__file__)"
         timeout "$RUN_TIMEOUT" "$PY" -m pytest -q -p no:randomly "${EXTRA[@]}"
     ) >"$OUT/$name.log" 2>&1
