@@ -26,9 +26,8 @@ from urdaemon.control import (
     GoalStatus,
     MotionController,
     Tolerances,
-    TrajectoryPoint,
 )
-from urdaemon.control.trajectory import TrajectoryPlanner
+from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
@@ -36,7 +35,6 @@ from urdaemon.publish import codec
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage, TrajectoryGoalMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching, ZenohNode
-from urdaemon.publish.slices import SlicedCall
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
@@ -51,12 +49,10 @@ KEPT_RESULTS = 256
 PLANNING_SLICE_S = 0.0005
 """Longest stretch of trajectory decoding or planning between two turns of the event loop (a cycle
 is 2 ms)."""
-THREAD_SLICE_S = 0.0003
-"""A slice of a check run in a worker thread (``SlicedCall``): shorter, as handing the baton to the
-thread and back adds up to a few tenths of a millisecond on a busy machine."""
-INLINE_PREPARE_POINTS = 16
-"""Trajectories of at most this many points are checked at once (well under a slice); longer ones
-in slices (``SlicedCall``)."""
+CHECK_STEPS = 16
+"""Steps of a trajectory's check (a point each, a few µs) between two looks at the clock."""
+RELEASE_ITEMS = 32
+"""Objects freed between two looks at the clock when a goal's big objects are freed in slices."""
 PAYLOADLESS_SERVICES = (
     "startup",
     "resend_program",
@@ -409,9 +405,17 @@ class RobotRuntime:
         self._spawn(self._trajectory_goal(query))
 
     async def _trajectory_goal(self, query: Any) -> None:
-        """Decode, check, plan and start a trajectory goal, all in slices between robot cycles."""
+        """Decode, check, plan and start a trajectory goal, all in slices between robot cycles; then
+        free what it decoded and planned in slices too (a 5 000-point goal's points take ~1 ms to
+        free at once)."""
+        held: list[object] = []
+        await self._handle_trajectory_goal(query, held)
+        await _release(held)
+
+    async def _handle_trajectory_goal(self, query: Any, held: list[object]) -> None:
         try:
             goal = await _decode_sliced(TrajectoryGoalDecoder(_payload(query)))
+            held.append(goal.points)
             names = self._joint_names(goal.joint_names)
             tolerances = self._tolerances(goal.tolerances, names)
             self._check_not_freedrive()
@@ -421,14 +425,13 @@ class RobotRuntime:
                     raise GoalRejected(f"passthrough: {problem}")
             self.controller.check_can_start(self.backend.state, time.monotonic(), goal.preempt)
             self._planning = f"of {len(goal.points)} points"
-            planner = await self._prepare(names, goal.points)
-            passthrough, preempt = goal.passthrough, goal.preempt
-            del goal  # the planner has its own copy of the points: free the message in a turn of its own
-            await asyncio.sleep(0)
+            check = self.controller.check_trajectory(names, goal.points, self.backend.state)
+            planner = await _check_sliced(check)
+            held.append(planner)
             await _plan_tail(planner)
             await asyncio.sleep(0)  # the last planning slice and accepting are two turns
             goal_id = self._new_goal_id()
-            duration = self._start_trajectory(goal_id, passthrough, preempt, tolerances, planner)
+            duration = self._start_trajectory(goal_id, goal.passthrough, goal.preempt, tolerances, planner)
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
@@ -440,23 +443,8 @@ class RobotRuntime:
             return
         finally:
             self._planning = None
-        self._accept_goal(query, "passthrough trajectory" if passthrough else "trajectory", goal_id, duration)
-        await _release(planner)
-
-    async def _prepare(self, names: tuple[str, ...], points: Sequence[TrajectoryPoint]) -> TrajectoryPlanner:
-        """The controller's check of every point (~10 µs a point, one call that cannot yield) in
-        slices of PLANNING_SLICE_S between robot cycles (``SlicedCall``)."""
-        state = self.backend.state
-        if len(points) <= INLINE_PREPARE_POINTS:
-            return self.controller.prepare_trajectory(names, points, state)
-        call = SlicedCall(self.controller.prepare_trajectory, names, points, state)
-        try:
-            while True:
-                if not call.step(THREAD_SLICE_S):
-                    return call.result()
-                await asyncio.sleep(0)
-        finally:
-            call.close()
+        kind = "passthrough trajectory" if goal.passthrough else "trajectory"
+        self._accept_goal(query, kind, goal_id, duration)
 
     def _start_trajectory(
         self,
@@ -788,15 +776,41 @@ def _without_arguments(
     return act
 
 
-async def _release(obj: object) -> None:
-    """Free a large object (a planner: its own copy of every point, ~1 ms to free at once) one
-    attribute per turn of the loop, unless someone else still holds it."""
-    attributes = getattr(obj, "__dict__", None)
-    if attributes is None or sys.getrefcount(obj) > 3:  # the caller's name, ``obj`` and the call's
-        return
-    for name in list(attributes):
-        attributes.pop(name, None)
-        await asyncio.sleep(0)
+async def _release(held: list[object]) -> None:
+    """Free big objects in slices of PLANNING_SLICE_S: a list or tuple item by item, a planner
+    attribute by attribute; an object someone else still holds only loses this reference."""
+    deadline = time.perf_counter() + PLANNING_SLICE_S
+    for count in itertools.count(1):
+        if not held:
+            return
+        obj = held.pop()
+        if sys.getrefcount(obj) == 2:  # ``obj`` and the call's: the last reference, freeing is ours
+            if isinstance(obj, list | tuple) and len(obj) > RELEASE_ITEMS:
+                held.extend(obj)
+            elif isinstance(obj, TrajectoryPlanner):
+                attributes = vars(obj)
+                held.extend(attributes.values())
+                attributes.clear()
+        del obj
+        if count % RELEASE_ITEMS == 0 and time.perf_counter() > deadline:
+            await asyncio.sleep(0)
+            deadline = time.perf_counter() + PLANNING_SLICE_S
+
+
+async def _check_sliced(check: TrajectoryCheck) -> TrajectoryPlanner:
+    """Check a trajectory's points in slices of PLANNING_SLICE_S, letting every robot's cycle run
+    between."""
+    try:
+        while True:
+            deadline = time.perf_counter() + PLANNING_SLICE_S
+            while check.step(CHECK_STEPS):
+                if time.perf_counter() > deadline:
+                    break
+            else:
+                return check.result()
+            await asyncio.sleep(0)
+    finally:
+        check.close()
 
 
 async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:

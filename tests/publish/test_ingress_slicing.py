@@ -1,11 +1,10 @@
 """The pieces that keep a client's message from holding the loop: the trajectory goal decoded a
-point at a time, a call that cannot yield run a slice at a time, and client text made safe."""
+point at a time, and client text made safe."""
 
 from __future__ import annotations
 
 import json
 import math
-import threading
 
 import pytest
 from hypothesis import given, settings
@@ -13,7 +12,6 @@ from hypothesis import strategies as st
 
 from urdaemon.errors import MessageError
 from urdaemon.publish.codec import client_text, decode_trajectory_goal
-from urdaemon.publish.slices import SlicedCall
 from urdaemon.publish.trajectory_json import POINT_CHARS, TrajectoryGoalDecoder
 
 
@@ -85,46 +83,6 @@ def test_what_is_too_long_or_not_json_is_refused_without_reading_on(payload: byt
     with pytest.raises(MessageError, match=r"^trajectory goal") as err:
         decode_trajectory_goal(payload)
     assert reason in str(err.value)
-
-
-def test_a_sliced_call_runs_a_slice_per_step_and_returns_or_raises() -> None:
-    def work(n: int) -> int:
-        total = 0
-        for i in range(n):
-            total += abs(-i)  # a function call per item: the profile hook's chance to pause
-        return total
-
-    call = SlicedCall(work, 200_000)
-    steps = 0
-    while call.step(0.0002):
-        steps += 1
-    assert call.result() == sum(range(200_000))
-    assert steps > 3
-
-    def fail() -> None:
-        raise ValueError("no")
-
-    failing = SlicedCall(fail)
-    while failing.step(0.001):
-        pass
-    with pytest.raises(ValueError, match="no"):
-        failing.result()
-
-
-def test_an_abandoned_sliced_call_ends_its_thread() -> None:
-    ended = threading.Event()
-
-    def work() -> None:
-        try:
-            while True:
-                abs(-1)
-        finally:
-            ended.set()
-
-    call = SlicedCall(work)
-    assert call.step(0.0005)
-    call.close()
-    assert ended.wait(5.0)
 
 
 @pytest.mark.parametrize(

@@ -26,7 +26,7 @@ from __future__ import annotations
 import enum
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,7 +61,9 @@ from urdaemon.control.trajectory import (
     MAX_GOAL_TIME_S,
     RUCKIG_ERRORS,
     PlannedTrajectory,
+    TrajectoryCheck,
     TrajectoryPlanner,
+    check_points,
     plan_move,
     position_extrema,
     run_robustly,
@@ -83,6 +85,9 @@ _MIN_SEED_SCALING = 0.05
 _END_EPS = 1e-9
 _EXTREMA_EPS = 1e-9
 _PERM_CACHE_SIZE = 32
+RELEASE_SEGMENTS = 64
+"""Segments of a finished goal's plan freed per tick (~20 µs): freeing a 5 000-point plan at once
+would hold the loop for ~1.5 ms."""
 MAX_JOINT_TOLERANCE = 2.0 * math.pi
 """Largest finite path or goal tolerance of a joint (rad): one turn; infinity switches the check off."""
 
@@ -232,6 +237,8 @@ class MotionController:
         self._last_stream_now = -math.inf
 
         self._events: list[GoalFeedback | GoalResult] = []
+        # Plans of ended goals, freed RELEASE_SEGMENTS a tick.
+        self._released: list[PlannedTrajectory] = []
         self._perm_cache: dict[tuple[str, ...], tuple[int, ...]] = {}
         self._ticks = 0
         self._goals_accepted = 0
@@ -280,33 +287,36 @@ class MotionController:
 
     # ------------------------------------------------------------------ goals
 
+    def check_trajectory(
+        self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint], state: RobotState
+    ) -> TrajectoryCheck:
+        """Validate a trajectory in steps (``step(count)``, a few µs a step, until False); its result is
+        the planner that can plan the tail (``plan_next()``) before accepting. The same refusals, in
+        the same order, as ``prepare_trajectory``; nothing changes in the controller."""
+        return TrajectoryCheck(self._check_steps(tuple(joint_names), points, state))
+
     def prepare_trajectory(
         self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint], state: RobotState
     ) -> TrajectoryPlanner:
-        """Validate a trajectory; its planner can plan the tail (``plan_next()``) before accepting."""
+        """Validate a trajectory at once; its planner can plan the tail (``plan_next()``) before accepting."""
+        return self.check_trajectory(joint_names, points, state).run()
+
+    def _check_steps(
+        self, joint_names: tuple[str, ...], points: Sequence[TrajectoryPoint], state: RobotState
+    ) -> Generator[None, None, TrajectoryPlanner]:
         perm = self._permutation(joint_names)
         if not points:
             raise GoalRejected("the trajectory has no points")
-        mapped = [
-            TrajectoryPoint(
-                positions=apply_permutation(perm, pt.positions, f"point {k} positions"),
-                time_from_start=float(pt.time_from_start),
-                velocities=(
-                    None
-                    if pt.velocities is None
-                    else apply_permutation(perm, pt.velocities, f"point {k} velocities")
-                ),
-                accelerations=(
-                    None
-                    if pt.accelerations is None
-                    else apply_permutation(perm, pt.accelerations, f"point {k} accelerations")
-                ),
-            )
-            for k, pt in enumerate(points)
-        ]
-        self._check_point_accelerations(mapped)
+        mapped: list[TrajectoryPoint] = []
+        for k, pt in enumerate(points):
+            mapped.append(_mapped_point(perm, k, pt))
+            yield
+        del points  # the caller may free the sender's points from here on
+        for k, pt in enumerate(mapped):
+            self._check_point_accelerations(k, pt)
+            yield
         seed_p, _, _ = self._goal_seed(state)
-        return TrajectoryPlanner(mapped, self.plan_limits, seed_p)
+        return (yield from check_points(mapped, self.plan_limits, seed_p))
 
     def accept_trajectory(
         self,
@@ -542,6 +552,8 @@ class MotionController:
     def tick(self, state: RobotState, command: JointCommand, now: float) -> None:
         """Advance one robot cycle and write this cycle's command into ``command``."""
         self._ticks += 1
+        if self._released:
+            self._release_plans()
         self._meas[:] = state.positions
         mode = self._mode
         if mode is _Mode.IDLE:
@@ -567,6 +579,12 @@ class MotionController:
             self._tick_stream_position(state, command)
         else:
             self._tick_stream_velocity(state, command)
+
+    def _release_plans(self) -> None:
+        """Free a few segments of an ended goal's plan (the last ended first)."""
+        released = self._released
+        if not released[-1].release(RELEASE_SEGMENTS):
+            released.pop()
 
     def _tick_external(self, state: RobotState, command: JointCommand, now: float) -> None:
         """The robot runs the trajectory: command nothing, estimate progress for feedback."""
@@ -667,20 +685,19 @@ class MotionController:
         command.positions[:] = pos
         command.velocities[:] = self._vel
 
-    def _check_point_accelerations(self, points: Sequence[TrajectoryPoint]) -> None:
+    def _check_point_accelerations(self, k: int, pt: TrajectoryPoint) -> None:
         """Refuse client accelerations within a limit but inside the reserve kept for the speed scaling."""
+        if pt.accelerations is None:
+            return
         planned = self.plan_limits.max_acceleration
-        share = 100.0 * (1.0 - SLIDER_ACCELERATION_RESERVE)
-        for k, pt in enumerate(points):
-            if pt.accelerations is None:
-                continue
-            for i, a in enumerate(pt.accelerations):
-                if planned[i] < abs(a) <= self._amax[i] * (1.0 + 1e-9):
-                    raise GoalRejected(
-                        f"point {k}: {self.joint_names[i]} acceleration {a:.6g} exceeds {planned[i]:.6g}, "
-                        f"{share:.0f} % of its limit {self._amax[i]:.6g}: the rest is kept so the speed "
-                        "scaling can change smoothly while a goal runs"
-                    )
+        for i, a in enumerate(pt.accelerations):
+            if planned[i] < abs(a) <= self._amax[i] * (1.0 + 1e-9):
+                share = 100.0 * (1.0 - SLIDER_ACCELERATION_RESERVE)
+                raise GoalRejected(
+                    f"point {k}: {self.joint_names[i]} acceleration {a:.6g} exceeds {planned[i]:.6g}, "
+                    f"{share:.0f} % of its limit {self._amax[i]:.6g}: the rest is kept so the speed "
+                    "scaling can change smoothly while a goal runs"
+                )
 
     def _tick_stopping(self, state: RobotState, command: JointCommand) -> None:
         result = self._online_step()
@@ -894,6 +911,8 @@ class MotionController:
         goal = self._goal
         assert goal is not None
         self._goal = None
+        if goal.plan.segment_count > RELEASE_SEGMENTS:
+            self._released.append(goal.plan)  # freed over the next ticks, not all at once here
         actual = tuple(measured)
         self._events.append(
             GoalResult(
@@ -1079,3 +1098,19 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = self._pos
         command.velocities[:] = self._vel
+
+
+def _mapped_point(perm: Sequence[int], k: int, pt: TrajectoryPoint) -> TrajectoryPoint:
+    """Point ``k`` in controller joint order; rejects a wrong length."""
+    return TrajectoryPoint(
+        positions=apply_permutation(perm, pt.positions, f"point {k} positions"),
+        time_from_start=float(pt.time_from_start),
+        velocities=(
+            None if pt.velocities is None else apply_permutation(perm, pt.velocities, f"point {k} velocities")
+        ),
+        accelerations=(
+            None
+            if pt.accelerations is None
+            else apply_permutation(perm, pt.accelerations, f"point {k} accelerations")
+        ),
+    )

@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 import re
 from bisect import bisect_right
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Generator, Sequence
+from typing import Any, TypeVar
 
 from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 
@@ -31,7 +31,9 @@ __all__ = [
     "TIMING_SLACK",
     "WAYPOINT_VELOCITY_FRACTION",
     "PlannedTrajectory",
+    "TrajectoryCheck",
     "TrajectoryPlanner",
+    "check_points",
     "plan_move",
     "plan_trajectory",
     "position_extrema",
@@ -49,22 +51,38 @@ WAYPOINT_VELOCITY_FRACTION = 0.9
 """Chosen waypoint velocities stay within this fraction of max_velocity, leaving room to correct."""
 
 _EXTREMA_EPS = 1e-9
+_T = TypeVar("_T")
 
 
 class PlannedTrajectory:
-    """A planned jerk-limited trajectory: a chain of ruckig segments sampled by trajectory time."""
+    """A planned jerk-limited trajectory: a chain of ruckig segments sampled by trajectory time.
 
-    __slots__ = ("_count", "_index", "_starts", "_trajs", "duration", "final_positions", "final_velocities")
+    Segment ``i`` starts at trajectory time ``starts[i] + shift``: a planner that knows the tail's
+    start times before segment 0 (and so the shift) hands its lists over as they are, without a copy
+    or a walk over them. The lists are owned by the plan from then on.
+    """
 
-    def __init__(self, segments: Sequence[Any], starts: Sequence[float]) -> None:
+    __slots__ = (
+        "_count",
+        "_index",
+        "_shift",
+        "_starts",
+        "_trajs",
+        "duration",
+        "final_positions",
+        "final_velocities",
+    )
+
+    def __init__(self, segments: list[Any], starts: list[float], shift: float = 0.0) -> None:
         if not segments or len(segments) != len(starts):
             raise ValueError("PlannedTrajectory needs one start time per segment, at least one segment")
-        self._trajs: list[Any] = list(segments)
-        self._starts: list[float] = list(starts)
-        self._count = len(self._trajs)
+        self._trajs = segments
+        self._starts = starts
+        self._shift = shift
+        self._count = len(segments)
         self._index = 0
-        last = self._trajs[-1]
-        self.duration: float = self._starts[-1] + float(last.duration)
+        last = segments[-1]
+        self.duration: float = shift + starts[-1] + float(last.duration)
         """Total trajectory time in seconds."""
         end_p, end_v, _ = last.at_time(float(last.duration))
         self.final_positions: tuple[float, ...] = tuple(end_p)
@@ -81,6 +99,7 @@ class PlannedTrajectory:
             t = 0.0
         elif t >= self.duration:
             t = self.duration
+        t -= self._shift
         starts = self._starts
         i = self._index
         if t < starts[i]:
@@ -96,6 +115,18 @@ class PlannedTrajectory:
         pos_out[:] = p
         vel_out[:] = v
         acc_out[:] = a
+
+    def release(self, count: int) -> bool:
+        """Drop up to ``count`` segments (the last first), so a long plan is freed a little at a time;
+        True while some remain. A plan being released must not be sampled again."""
+        trajs = self._trajs
+        for _ in range(min(count, len(trajs))):
+            trajs.pop()
+        if trajs:
+            return True
+        self._starts.clear()
+        self._count = 0
+        return False
 
 
 def _fmt(x: float) -> str:
@@ -285,79 +316,65 @@ def _check_extrema(limits: JointLimits, traj: Any, start: Sequence[float], what:
             )
 
 
-def _waypoint_velocities(
+def _boundary_states(
     limits: JointLimits, start_pos: Sequence[float], points: Sequence[TrajectoryPoint]
-) -> list[tuple[float, ...]]:
-    """Velocities at each point: the client's, else a monotone-preserving estimate, 0 at the last."""
+) -> Generator[None, None, tuple[list[tuple[float, ...]], list[tuple[float, ...]]]]:
+    """Velocity and acceleration at each point, one point a step: the client's, else for velocities
+    a monotone-preserving estimate (0 at the last), for accelerations 0."""
     n = limits.dof
-    out: list[tuple[float, ...]] = []
+    zeros = (0.0,) * n
+    velocities: list[tuple[float, ...]] = []
+    accelerations: list[tuple[float, ...]] = []
     last = len(points) - 1
     for k, pt in enumerate(points):
+        accelerations.append(zeros if pt.accelerations is None else tuple(pt.accelerations))
         if pt.velocities is not None:
-            out.append(tuple(pt.velocities))
-            continue
-        if k == last:
-            out.append((0.0,) * n)
-            continue
-        prev_pos = start_pos if k == 0 else points[k - 1].positions
-        prev_t = 0.0 if k == 0 else points[k - 1].time_from_start
-        nxt = points[k + 1]
-        dt_in = pt.time_from_start - prev_t
-        dt_out = nxt.time_from_start - pt.time_from_start
-        vel: list[float] = []
-        for i in range(n):
-            s_in = (pt.positions[i] - prev_pos[i]) / dt_in
-            s_out = (nxt.positions[i] - pt.positions[i]) / dt_out
-            if s_in * s_out <= 0.0:
-                # A turning point (or a flat side): stopping there cannot overshoot it.
-                vel.append(0.0)
-                continue
-            # Harmonic mean: leans toward the slower side, so a short slow segment is not overshot.
-            v = 2.0 * s_in * s_out / (s_in + s_out)
-            cap = WAYPOINT_VELOCITY_FRACTION * limits.max_velocity[i]
-            vel.append(max(-cap, min(cap, v)))
-        out.append(tuple(vel))
-    return out
+            velocities.append(tuple(pt.velocities))
+        elif k == last:
+            velocities.append(zeros)
+        else:
+            prev = None if k == 0 else points[k - 1]
+            velocities.append(_waypoint_velocity(limits, start_pos, prev, pt, points[k + 1]))
+        yield
+    return velocities, accelerations
 
 
-def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> None:
-    n = limits.dof
+def _waypoint_velocity(
+    limits: JointLimits,
+    start_pos: Sequence[float],
+    prev: TrajectoryPoint | None,
+    pt: TrajectoryPoint,
+    nxt: TrajectoryPoint,
+) -> tuple[float, ...]:
+    """A monotone-preserving velocity at ``pt`` between ``prev`` (None: the start) and ``nxt``."""
+    prev_pos = start_pos if prev is None else prev.positions
+    prev_t = 0.0 if prev is None else prev.time_from_start
+    dt_in = pt.time_from_start - prev_t
+    dt_out = nxt.time_from_start - pt.time_from_start
+    vel: list[float] = []
+    for i in range(limits.dof):
+        s_in = (pt.positions[i] - prev_pos[i]) / dt_in
+        s_out = (nxt.positions[i] - pt.positions[i]) / dt_out
+        if s_in * s_out <= 0.0:
+            # A turning point (or a flat side): stopping there cannot overshoot it.
+            vel.append(0.0)
+            continue
+        # Harmonic mean: leans toward the slower side, so a short slow segment is not overshot.
+        v = 2.0 * s_in * s_out / (s_in + s_out)
+        cap = WAYPOINT_VELOCITY_FRACTION * limits.max_velocity[i]
+        vel.append(max(-cap, min(cap, v)))
+    return tuple(vel)
+
+
+def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> Generator[None, None, None]:
+    """Check every point, one a step; GoalRejected names the first fault."""
     if not points:
         raise GoalRejected("the trajectory has no points")
     prev_t = 0.0
     for k, pt in enumerate(points):
-        what = f"point {k}"
-        if len(pt.positions) != n:
-            raise GoalRejected(f"{what}: positions has {len(pt.positions)} values for {n} joints")
-        check_finite(f"{what} positions", pt.positions, limits.names)
-        if not math.isfinite(pt.time_from_start):
-            raise GoalRejected(f"{what}: time_from_start is {pt.time_from_start}, not a finite number")
-        if pt.time_from_start > MAX_GOAL_TIME_S:
-            raise GoalRejected(
-                f"{what}: time_from_start {_fmt(pt.time_from_start)} s exceeds the longest goal, "
-                f"{_fmt(MAX_GOAL_TIME_S)} s"
-            )
-        if k == 0 and pt.time_from_start <= 0.0:
-            raise GoalRejected(
-                f"{what}: time_from_start must be > 0 (time from the goal's start), got {pt.time_from_start}"
-            )
-        if k > 0 and pt.time_from_start <= prev_t:
-            raise GoalRejected(
-                f"{what}: time_from_start {_fmt(pt.time_from_start)} s is not after point {k - 1}'s "
-                f"{_fmt(prev_t)} s; times must strictly increase"
-            )
+        _validate_point(limits, k, pt, prev_t)
         prev_t = pt.time_from_start
-        check_positions_within(limits, pt.positions, what)
-        if pt.velocities is not None:
-            if len(pt.velocities) != n:
-                raise GoalRejected(f"{what}: velocities has {len(pt.velocities)} values for {n} joints")
-            check_finite(f"{what} velocities", pt.velocities, limits.names)
-            check_velocities_within(limits, pt.velocities, what)
-        if pt.accelerations is not None:
-            if len(pt.accelerations) != n:
-                raise GoalRejected(f"{what}: accelerations has {len(pt.accelerations)} values for {n} joints")
-            check_finite(f"{what} accelerations", pt.accelerations, limits.names)
-            check_accelerations_within(limits, pt.accelerations, what)
+        yield
     last = points[-1]
     # A goal ends at rest: a final velocity would need an unplanned stop after the goal, which could
     # leave the joint limits and which a lagging robot would execute as stop-and-go.
@@ -368,29 +385,163 @@ def _validate_points(limits: JointLimits, points: Sequence[TrajectoryPoint]) -> 
             )
 
 
+def _validate_point(limits: JointLimits, k: int, pt: TrajectoryPoint, prev_t: float) -> None:
+    """Check point ``k`` (``prev_t``: the time_from_start of the point before it)."""
+    n = limits.dof
+    what = f"point {k}"
+    if len(pt.positions) != n:
+        raise GoalRejected(f"{what}: positions has {len(pt.positions)} values for {n} joints")
+    check_finite(f"{what} positions", pt.positions, limits.names)
+    if not math.isfinite(pt.time_from_start):
+        raise GoalRejected(f"{what}: time_from_start is {pt.time_from_start}, not a finite number")
+    if pt.time_from_start > MAX_GOAL_TIME_S:
+        raise GoalRejected(
+            f"{what}: time_from_start {_fmt(pt.time_from_start)} s exceeds the longest goal, "
+            f"{_fmt(MAX_GOAL_TIME_S)} s"
+        )
+    if k == 0 and pt.time_from_start <= 0.0:
+        raise GoalRejected(
+            f"{what}: time_from_start must be > 0 (time from the goal's start), got {pt.time_from_start}"
+        )
+    if k > 0 and pt.time_from_start <= prev_t:
+        raise GoalRejected(
+            f"{what}: time_from_start {_fmt(pt.time_from_start)} s is not after point {k - 1}'s "
+            f"{_fmt(prev_t)} s; times must strictly increase"
+        )
+    check_positions_within(limits, pt.positions, what)
+    if pt.velocities is not None:
+        if len(pt.velocities) != n:
+            raise GoalRejected(f"{what}: velocities has {len(pt.velocities)} values for {n} joints")
+        check_finite(f"{what} velocities", pt.velocities, limits.names)
+        check_velocities_within(limits, pt.velocities, what)
+    if pt.accelerations is not None:
+        if len(pt.accelerations) != n:
+            raise GoalRejected(f"{what}: accelerations has {len(pt.accelerations)} values for {n} joints")
+        check_finite(f"{what} accelerations", pt.accelerations, limits.names)
+        check_accelerations_within(limits, pt.accelerations, what)
+
+
+def check_points(
+    points: Sequence[TrajectoryPoint], limits: JointLimits, start_pos: Sequence[float]
+) -> Generator[None, None, TrajectoryPlanner]:
+    """Check a trajectory's points one step at a time (a few µs each); returns their planner.
+
+    Raises GoalRejected naming the first fault, as ``TrajectoryPlanner(points, ...)`` does at once.
+    """
+    points = tuple(points)
+    yield from _validate_points(limits, points)
+    velocities, accelerations = yield from _boundary_states(limits, start_pos, points)
+    return TrajectoryPlanner._checked(points, limits, velocities, accelerations)
+
+
+def _run(steps: Generator[None, None, _T]) -> _T:
+    """Every step at once; the return value."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
+
+
+class TrajectoryCheck:
+    """A check run in steps: ``step(count)`` until it returns False, then ``result()``.
+
+    Pure: no clock inside. The caller decides how many steps fit between two turns of its loop, as
+    with ``TrajectoryPlanner.plan_next``.
+    """
+
+    __slots__ = ("_result", "_steps")
+
+    def __init__(self, steps: Generator[None, None, TrajectoryPlanner]) -> None:
+        self._steps: Generator[None, None, TrajectoryPlanner] | None = steps
+        self._result: TrajectoryPlanner | None = None
+
+    def step(self, count: int = 1) -> bool:
+        """Run up to ``count`` steps; True while more remain. Raises GoalRejected (then it is done)."""
+        steps = self._steps
+        if steps is None:
+            return False
+        try:
+            for _ in range(count):
+                next(steps)
+        except StopIteration as stop:
+            self._result = stop.value
+            self._steps = None
+            return False
+        except BaseException:
+            self._steps = None
+            raise
+        return True
+
+    def run(self) -> TrajectoryPlanner:
+        """Run every step left at once; the result."""
+        while self.step(1024):
+            pass
+        return self.result()
+
+    def result(self) -> TrajectoryPlanner:
+        """The planner of the checked points."""
+        if self._result is None:
+            raise RuntimeError("the check has not finished")
+        return self._result
+
+    def close(self) -> None:
+        """Abandon an unfinished check."""
+        if self._steps is not None:
+            self._steps.close()
+            self._steps = None
+
+
 class TrajectoryPlanner:
     """Plans a multi-point trajectory in steps, so a long one never stalls the caller's loop.
 
     Segment k ≥ 1 starts exactly at point k−1's target state (position, chosen velocity,
     acceleration), so the whole tail can be planned ahead, one ``plan_next()`` at a time, before
-    the robot's live state is known; ``finish(start)`` then plans only segment 0 from it.
+    the robot's live state is known; ``finish(start)`` then plans only segment 0 from it. Each
+    tail segment's start time is kept as it is planned, counted from the end of segment 0, so
+    ``finish`` hands the plan over without walking the segments.
     """
 
     def __init__(
         self, points: Sequence[TrajectoryPoint], limits: JointLimits, start_pos: Sequence[float]
     ) -> None:
-        _validate_points(limits, points)
+        """Check the points at once (``check_points`` does it in steps); GoalRejected names a fault."""
+        points = tuple(points)
+        _run(_validate_points(limits, points))
+        velocities, accelerations = _run(_boundary_states(limits, start_pos, points))
+        self._init(points, limits, velocities, accelerations)
+
+    @classmethod
+    def _checked(
+        cls,
+        points: tuple[TrajectoryPoint, ...],
+        limits: JointLimits,
+        velocities: list[tuple[float, ...]],
+        accelerations: list[tuple[float, ...]],
+    ) -> TrajectoryPlanner:
+        planner = cls.__new__(cls)
+        planner._init(points, limits, velocities, accelerations)
+        return planner
+
+    def _init(
+        self,
+        points: tuple[TrajectoryPoint, ...],
+        limits: JointLimits,
+        velocities: list[tuple[float, ...]],
+        accelerations: list[tuple[float, ...]],
+    ) -> None:
         self.limits = limits
-        self.points = tuple(points)
-        self._velocities = _waypoint_velocities(limits, start_pos, self.points)
-        zeros = (0.0,) * limits.dof
-        self._accelerations = [
-            pt.accelerations if pt.accelerations is not None else zeros for pt in self.points
-        ]
+        self.points = points
+        self._velocities = velocities
+        self._accelerations = accelerations
         self._otg = Ruckig(limits.dof)
         self._inp = _new_input(limits)
-        self._tail: list[Any] = []
-        self._elapsed = self.points[0].time_from_start  # the tail aims at absolute times from point 0's
+        # Segment 0 goes first once finish() plans it; tail segment k starts at _starts[k] after
+        # the end of segment 0.
+        self._segments: list[Any] | None = [None]
+        self._starts: list[float] = [0.0]
+        self._tail_end = 0.0  # where the next tail segment starts, after the end of segment 0
+        self._elapsed = points[0].time_from_start  # the tail aims at absolute times from point 0's
 
     @property
     def velocities(self) -> list[tuple[float, ...]]:
@@ -400,35 +551,48 @@ class TrajectoryPlanner:
     @property
     def tail_done(self) -> bool:
         """True when every segment after the first is planned."""
-        return len(self._tail) == len(self.points) - 1
+        return self._segments is None or len(self._segments) == len(self.points)
 
     def plan_next(self) -> bool:
         """Plan the next tail segment; True while more remain. Raises GoalRejected."""
-        if self.tail_done:
+        segments = self._segments
+        if segments is None or len(segments) == len(self.points):
             return False
-        k = len(self._tail) + 1
+        k = len(segments)
         prev = self.points[k - 1]
         traj = self._segment(
             k, prev.positions, self._velocities[k - 1], self._accelerations[k - 1], self._elapsed
         )
-        self._tail.append(traj)
-        self._elapsed += traj.duration
-        return not self.tail_done
+        segments.append(traj)
+        self._starts.append(self._tail_end)
+        duration = float(traj.duration)
+        self._tail_end += duration
+        self._elapsed += duration
+        return len(segments) < len(self.points)
 
     def finish(
         self, start_pos: Sequence[float], start_vel: Sequence[float], start_acc: Sequence[float]
     ) -> PlannedTrajectory:
-        """Plan what is left and segment 0 from the given start state; the whole plan."""
+        """Plan what is left and segment 0 from the given start state; the whole plan.
+
+        With the tail planned this costs one segment, however long the trajectory. The planner hands
+        its segments to the plan: it can finish once.
+        """
         _check_start(self.limits, start_pos, start_vel, start_acc)
         while self.plan_next():
             pass
+        segments = self._segments
+        if segments is None:
+            raise RuntimeError("the planner has already finished its plan")
         zeros = [0.0] * self.limits.dof
         first = self._segment(0, start_pos, _snap(start_vel, zeros), _snap(start_acc, zeros), 0.0)
-        segments = [first, *self._tail]
-        starts = [0.0]
-        for traj in segments[:-1]:
-            starts.append(starts[-1] + traj.duration)
-        return PlannedTrajectory(segments, starts)
+        d0 = float(first.duration)
+        segments[0] = first
+        starts = self._starts
+        starts[0] = -d0
+        self._segments = None
+        self._starts = []
+        return PlannedTrajectory(segments, starts, d0)
 
     def _segment(
         self, k: int, pos: Sequence[float], vel: Sequence[float], acc: Sequence[float], elapsed: float
