@@ -46,12 +46,12 @@ HEALTHY_CYCLES_S = 1.0
 the first, shortest delay again: it was healthy, so this is a new fault, not the same one again."""
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries."""
-PLANNING_SLICE_S = 0.0005
-"""Longest stretch of trajectory decoding or planning between two turns of the event loop (a cycle
-is 2 ms)."""
-CHECK_STEPS = 16
+PLANNING_SLICE_S = 0.00025
+"""Longest stretch of trajectory decoding, checking, planning or freeing between two turns of the
+event loop (a cycle is 2 ms; a young-generation garbage collection inside a slice adds ~0.2 ms)."""
+CHECK_STEPS = 4
 """Steps of a trajectory's check (a point each, a few µs) between two looks at the clock."""
-RELEASE_ITEMS = 32
+RELEASE_ITEMS = 16
 """Objects freed between two looks at the clock when a goal's big objects are freed in slices."""
 PAYLOADLESS_SERVICES = (
     "startup",

@@ -10,7 +10,7 @@ from urdaemon.control.limits import (
     check_velocities_within,
     reorder,
 )
-from urdaemon.control.trajectory import PlannedTrajectory, plan_move, plan_trajectory
+from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, plan_move, plan_trajectory
 
 __all__ = [
     "ControllerStatistics",
@@ -20,6 +20,7 @@ __all__ = [
     "MotionController",
     "PlannedTrajectory",
     "Tolerances",
+    "TrajectoryCheck",
     "TrajectoryPoint",
     "check_finite",
     "check_positions_within",
