@@ -135,8 +135,8 @@ async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest
             if len(stamps) >= 5:
                 break
             await asyncio.sleep(0.005)
-        assert link.superseded == 0
-        assert not any(catching for _, catching in stamps)
+        # a busy machine may already have bunched some start-up packages: count this window only
+        superseded_before = link.superseded
         assert link.transport is not None
         link.transport.pause_reading()  # the loop is held up: packages queue in the socket
         queued_from = fake.cycles
@@ -157,7 +157,7 @@ async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest
         burst = flags.index(False)  # the newest package of the read that brought the backlog
         assert burst >= 9, "the queued packages came in one read, all but its newest catching up"
         assert all(flags[:burst])
-        assert link.superseded == burst
+        assert link.superseded - superseded_before == burst
         assert link.catching_up is False
     finally:
         await fake.close()

@@ -1,7 +1,8 @@
 """The fake UR controller: RTDE, primary, secondary and dashboard servers over one simulated arm.
 
 It serves the real protocols (the robot side of ``urdaemon.protocols``) on one address, so several
-fakes can use the standard ports side by side on 127.0.0.5, 127.0.0.6, … Its clock runs at the
+fakes can use the standard ports side by side on 127.0.0.5, 127.0.0.6, … (the address is always given:
+tests take theirs from a run-specific range, so two runs never meet on one). Its clock runs at the
 controller rate (500 Hz e-Series, 125 Hz CB3); every cycle it steps the running control program and
 the arm, then sends RTDE outputs to every client whose requested frequency is due (drift-free on the
 controller's own time grid); the primary and secondary interfaces get the robot state at 10 Hz.
@@ -124,7 +125,7 @@ class FakeController:
         self,
         model: str | UrModel,
         *,
-        address: str = "127.0.0.5",
+        address: str,
         ports: FakePorts | None = None,
         controller_version: tuple[int, int, int, int] = (5, 15, 0, 0),
         dh: DhParameters | None = None,
