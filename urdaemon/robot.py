@@ -281,7 +281,8 @@ class RobotRuntime:
             "backend": self.backend.kind,
             "model": self.robot.model,
             "lifecycle": state.lifecycle.value,
-            "reason": state.lifecycle_reason,
+            # never an empty reason while not ready, even before the backend worded its own
+            "reason": state.lifecycle_reason or state.not_ready_reason(),
             "robot_mode": state.robot_mode.name,
             "safety_mode": state.safety_mode.name,
             "speed_slider": state.speed_slider,

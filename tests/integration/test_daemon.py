@@ -67,6 +67,24 @@ async def test_goal_on_a_robot_that_is_not_ready_is_rejected_with_the_reason(
     assert (await goal.result(timeout=10))["status"] == "succeeded"
 
 
+async def test_a_status_that_is_not_ready_always_says_why(cell: tuple[Daemon, Client]) -> None:
+    """Reproduction (issue 13, found side by side under load): a status with ``ready: false`` went out
+    with an empty ``reason`` when the backend had not worded its own yet (the program stopped between
+    two packages). The status now falls back to the modes' reason and advice."""
+    daemon, _ = cell
+    runtime = daemon.runtimes[0]
+    state = runtime.backend.state
+    assert runtime.status_message()["reason"] == ""  # ready: nothing to explain
+    state.safety_mode = SafetyMode.PROTECTIVE_STOP
+    state.lifecycle_reason = ""
+    status = runtime.status_message()
+    assert status["ready"] is False
+    assert "PROTECTIVE_STOP" in status["reason"]
+    assert "unlock" in status["reason"]
+    state.safety_mode = SafetyMode.NORMAL
+    assert runtime.status_message()["reason"] == ""
+
+
 async def test_speed_slider_at_half_makes_a_trajectory_take_twice_as_long(
     cell: tuple[Daemon, Client],
 ) -> None:
