@@ -14,13 +14,14 @@ import logging
 import math
 import signal
 import sys
-from collections.abc import Coroutine, Sequence
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from typing import TYPE_CHECKING, Any
 
 from urdaemon import __version__
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell
+    from urdaemon.client import RobotClient
 
 from urdaemon.errors import ConfigError, DescriptionError, GoalRejected, UrDaemonError
 
@@ -486,8 +487,6 @@ SERVICE_NAME = r"^[a-z_]{1,40}$"
 async def _call_service(args: argparse.Namespace) -> int:
     import re
 
-    from urdaemon.client import Client
-
     problem = _bad_target(args)
     if problem is None and not re.match(SERVICE_NAME, args.name):
         problem = f"{args.name!r} is not a service name"
@@ -502,29 +501,37 @@ async def _call_service(args: argparse.Namespace) -> int:
     if problem is not None or not isinstance(body, dict):
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    try:
-        async with await Client.connect(args.connect) as client:
-            robot = await client.robot(args.robot, cell=args.cell)
-            reply = await robot.call(args.name, body, timeout=args.timeout)
-    except UrDaemonError as err:
-        return _fail(err)
+    request = body
+    reply = await _ask_robot(args, lambda robot: robot.call(args.name, request, timeout=args.timeout))
+    if isinstance(reply, int):
+        return reply
     print(json.dumps(reply))
     return EXIT_OK if reply.get("ok") else EXIT_FAILED
 
 
-async def _dashboard(args: argparse.Namespace) -> int:
+async def _ask_robot(
+    args: argparse.Namespace, ask: Callable[[RobotClient], Awaitable[dict[str, Any]]]
+) -> dict[str, Any] | int:
+    """Connect to ``--connect``, find ``args.robot`` and return ``ask(robot)``'s reply, or the exit
+    code after saying what failed (the endpoint, or the robots there)."""
     from urdaemon.client import Client
 
+    try:
+        async with await Client.connect(args.connect) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            return await ask(robot)
+    except UrDaemonError as err:
+        return _fail(err)
+
+
+async def _dashboard(args: argparse.Namespace) -> int:
     problem = _bad_target(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    try:
-        async with await Client.connect(args.connect) as client:
-            robot = await client.robot(args.robot, cell=args.cell)
-            reply = await robot.dashboard(" ".join(args.words))
-    except UrDaemonError as err:
-        return _fail(err)
+    reply = await _ask_robot(args, lambda robot: robot.dashboard(" ".join(args.words)))
+    if isinstance(reply, int):
+        return reply
     if "reply" in reply:
         print(reply["reply"])
     else:
@@ -533,18 +540,13 @@ async def _dashboard(args: argparse.Namespace) -> int:
 
 
 async def _cancel(args: argparse.Namespace) -> int:
-    from urdaemon.client import Client
-
     problem = _bad_target(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    try:
-        async with await Client.connect(args.connect) as client:
-            robot = await client.robot(args.robot, cell=args.cell)
-            reply = await robot.cancel(args.goal)
-    except UrDaemonError as err:
-        return _fail(err)
+    reply = await _ask_robot(args, lambda robot: robot.cancel(args.goal))
+    if isinstance(reply, int):
+        return reply
     print(json.dumps(reply))
     return EXIT_OK if reply.get("canceled") else EXIT_FAILED
 
