@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 
 import pytest
 
@@ -157,3 +158,74 @@ async def test_the_script_sender_hands_the_program_only_to_the_robot() -> None:
         assert await asyncio.wait_for(reader.read(100), 10.0) == b""
         writer.close()
         assert run.backend.servers.script_sender.refused == 1
+
+
+async def test_a_program_request_on_a_headless_robot_opens_no_way_to_take_over_a_link() -> None:
+    """Reproduction (review of issue 13): with the headless program holding every link, a process on
+    the robot's address sent ``request_program`` on the script-sender port, which opened the window
+    in which a new program's connections may replace the live ones; its next connection to the reverse
+    port then took the live link over and received the reverse frames."""
+    async with ur_run() as run:
+        await run.until(lambda: program_is_running(run), what="the program holds every link")
+        servers = run.backend.servers
+        live = servers.reverse.link
+        reader, writer = await asyncio.open_connection(
+            "127.0.0.1", servers.script_sender.port, local_addr=(run.fake.address, 0)
+        )
+        writer.write(b"request_program\n")
+        await writer.drain()
+        assert await asyncio.wait_for(reader.readuntil(b"end\n"), 10.0), "the script is handed out"
+        writer.close()
+        stray_reader, stray = await asyncio.open_connection(
+            "127.0.0.1", servers.reverse.port, local_addr=(run.fake.address, 0)
+        )
+        assert await asyncio.wait_for(stray_reader.read(100), 10.0) == b"", "the stray is closed"
+        stray.close()
+        await run.cycles_pass(20)
+        assert servers.reverse.refused == 1
+        assert servers.reverse.link is live
+        assert program_is_running(run)
+
+
+async def test_a_stray_that_connects_before_the_new_program_is_replaced_by_it() -> None:
+    """Reproduction (review of issue 13): right after the daemon sent a new program, a stray
+    connection from the robot's address reached the trajectory port first and used up the one
+    replacement the window allowed; the program's own connection was then refused and the robot
+    stayed without its trajectory link. Within the window the newest connection now wins, and the
+    window closes once the new program holds every link."""
+    async with ur_run() as run:
+        await run.until(lambda: program_is_running(run), what="the program holds every link")
+        servers = run.backend.servers
+        primary = run.backend._primary
+        assert primary is not None
+        send_script = primary.send_script
+        held: list[str] = []
+        primary.send_script = held.append  # type: ignore[method-assign,assignment]
+        program_link = servers.trajectory.link
+        sent_at = time.monotonic()
+        await run.backend.resend_program()
+        assert len(held) == 1
+        _, stray = await asyncio.open_connection(
+            "127.0.0.1", servers.trajectory.port, local_addr=(run.fake.address, 0)
+        )
+        await run.until(
+            lambda: servers.trajectory.link is not program_link, what="the stray holds the trajectory port"
+        )
+        stray_link = servers.trajectory.link
+        send_script(held[0])
+        await run.until(
+            lambda: run.backend._program_links_up_at > sent_at and program_is_running(run),
+            timeout=30.0,
+            what="the new program holds every link, the stray replaced",
+        )
+        assert servers.trajectory.link is not stray_link
+        stray.close()
+        # the window is closed: one more stray is refused
+        refused = servers.trajectory.refused
+        reader, late = await asyncio.open_connection(
+            "127.0.0.1", servers.trajectory.port, local_addr=(run.fake.address, 0)
+        )
+        assert await asyncio.wait_for(reader.read(100), 10.0) == b""
+        late.close()
+        assert servers.trajectory.refused == refused + 1
+        assert program_is_running(run)

@@ -642,6 +642,7 @@ class UrBackend(Backend):
                 self._program_links_up_at = time.monotonic()
                 self._lost_link = ""
                 self._program_ended = ""
+                self.servers.program_connected()  # from now on a second connection is a stray
             return
         if name == "reverse":
             self._freedrive_on = False  # the program ended: so did its freedrive
@@ -707,7 +708,10 @@ class UrBackend(Backend):
             sockname = link.transport.get_extra_info("sockname") if link and link.transport else None
             self._host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "")
         if isinstance(event, script_sender.ProgramRequested):
-            self._expect_program()  # the URCap runs it next
+            if not self.robot.headless and self.servers.reverse.link is None:
+                # the URCap runs it next; a request while a program holds the reverse link (or on a
+                # headless robot, whose program the daemon sends itself) opens no way to replace links
+                self._expect_program()
             self.servers.script_sender.send(script_sender.Program(self._program_text()))
             log.info("[%s] control program sent to the External Control URCap", self.name)
 

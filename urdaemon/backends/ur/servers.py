@@ -13,9 +13,11 @@ Who may connect (the callback-link rules, docs/ursim.md):
   is up, a second connection is refused, even from the robot's address: it must not take over a
   live link (it would get the program's frames, and its own bytes would be read as the program's).
 * A replacement is accepted only after the daemon started a new program (``expect_program``: it
-  sent one headless, played one, or handed one out on the script-sender port): a new program
-  connects while the old one's close may still be on its way. That permission lasts
-  ``PROGRAM_CONNECT_WINDOW_S`` and is used up by the first connection on each port.
+  sent one headless, played one, or handed one to a URCap whose previous program had ended): a new
+  program connects while the old one's close may still be on its way. That permission lasts
+  ``PROGRAM_CONNECT_WINDOW_S`` or until the new program holds all its links
+  (``CallbackServers.program_connected``), whichever comes first; within it the newest connection
+  from the robot wins, so a stray that got in first is replaced by the program's own.
 * The script-sender port is a request/response with no stream to steal: there a newer connection
   from the robot replaces an older one (a URCap that gave up must not lock the port).
 * Only the current link's messages reach the owner: bytes from a link that was replaced or refused
@@ -171,6 +173,10 @@ class CallbackServer:
         """A new program was started: its connection may replace the live one for ``window`` s."""
         self._replace_until = time.monotonic() + window
 
+    def end_replacements(self) -> None:
+        """The new program's connection is in: from now on a second connection is a stray."""
+        self._replace_until = 0.0
+
     def admit(self, link: CallbackLink) -> bool:
         """Accept the robot's own address, one connection at a time (see the module's rules)."""
         if not _same_host(link.peer, self.robot_address):
@@ -187,7 +193,6 @@ class CallbackServer:
             self.link = None
             old.close()
             self.hooks.on_link(self.name, False, f"{self.name}: {REPLACED}")
-        self._replace_until = 0.0  # the new program's connection came: the permission is used up
         self.link = link
         self.connected_at = time.monotonic()
         self.hooks.on_link(self.name, True, f"{self.name}: connected from {link.peer}")
@@ -280,6 +285,11 @@ class CallbackServers:
         """The daemon started a new program: its connections may replace the old program's."""
         for server in self.program_links:
             server.expect_program()
+
+    def program_connected(self) -> None:
+        """The program started last holds every link: no connection may replace them any more."""
+        for server in self.program_links:
+            server.end_replacements()
 
     def missing(self) -> list[str]:
         """The program's links that are not connected (empty while the program holds them all)."""
