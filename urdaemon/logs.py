@@ -72,12 +72,24 @@ def _subject(record: logging.LogRecord) -> str:
     return msg[1:end] if end > 0 else ""
 
 
-@dataclass
+@dataclass(slots=True)
 class _Site:
+    """One call site's interval: counts and what its summary line names. Not the first record
+    itself: that would keep its ``exc_info`` (traceback, frames and their locals) alive."""
+
     start: float
     count: int
     suppressed: int
-    record: logging.LogRecord
+    name: str
+    levelno: int
+    pathname: str
+    lineno: int
+    template: str
+
+    @classmethod
+    def first(cls, now: float, record: logging.LogRecord) -> _Site:
+        template = record.msg if isinstance(record.msg, str) else type(record.msg).__name__
+        return cls(now, 0, 0, record.name, record.levelno, record.pathname, record.lineno, template)
 
 
 class RateLimit(logging.Filter):
@@ -112,7 +124,7 @@ class RateLimit(logging.Filter):
                     self._ended.append(site)
                 if site is None and len(self._sites) >= self.MAX_SITES:
                     self._prune(now)
-                site = self._sites[key] = _Site(now, 0, 0, record)
+                site = self._sites[key] = _Site.first(now, record)
             site.count += 1
             if site.count <= self.burst:
                 return True
@@ -140,15 +152,13 @@ class RateLimit(logging.Filter):
         return [self._summary(site) for site in ended]
 
     def _summary(self, site: _Site) -> logging.LogRecord:
-        first = site.record
-        template = first.msg if isinstance(first.msg, str) else type(first.msg).__name__
         return logging.LogRecord(
-            first.name,
-            first.levelno,
-            first.pathname,
-            first.lineno,
+            site.name,
+            site.levelno,
+            site.pathname,
+            site.lineno,
             "suppressed %d similar messages in %.0f s (%s)",
-            (site.suppressed, self.interval, template),
+            (site.suppressed, self.interval, site.template),
             None,
         )
 
