@@ -15,7 +15,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from urdaemon.control.controller import MAX_JOINT_TOLERANCE
 from urdaemon.control.goals import GoalFeedback, GoalResult, TrajectoryPoint
+from urdaemon.control.trajectory import MAX_GOAL_TIME_S
 from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
 
@@ -61,10 +63,6 @@ MAX_JOINTS = 64
 """Longest list of joint values or names a message may carry (no robot has more joints)."""
 MAX_NAME_CHARS = 64
 """Longest joint name accepted."""
-MAX_GOAL_TIME_S = 7200.0
-"""The longest goal, and so the largest goal-time tolerance and move duration (control's limit)."""
-MAX_JOINT_TOLERANCE = 2 * math.pi
-"""Largest path or goal tolerance of a joint (rad): one turn; more would switch the check off."""
 MAX_PAYLOAD_KG = 35.0
 """Largest payload mass accepted: above every UR arm's rated payload (UR30: 30 kg)."""
 MAX_COG_M = 1.0
