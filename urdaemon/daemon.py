@@ -218,20 +218,21 @@ class Daemon:
         """Answer a query on a robot this cell does not serve, or on a service a robot does not
         have, naming what there is; every other query is someone else's to answer (or nobody's)."""
         try:
-            key = str(query.key_expr)
-            parts = key.split("/")
-            if "*" in key or len(parts) < 2 or parts[1] in self.keys.cell_level:
+            parsed = self.keys.parse(str(query.key_expr))
+            if parsed is None:
                 return
+            name, rest = parsed
             robots = {runtime.robot.name: runtime for runtime in self.runtimes}
-            runtime = robots.get(parts[1])
+            runtime = robots.get(name)
+            service = CellKeys.service_name(rest)
             if runtime is None:
                 reason = (
-                    f"no robot {codec.client_text(parts[1])!r} in cell {self.cell.cell!r}; "
+                    f"no robot {codec.client_text(name)!r} in cell {self.cell.cell!r}; "
                     f"its robots: {', '.join(sorted(robots))}"
                 )
-            elif len(parts) == 4 and parts[2] == "service" and parts[3] not in runtime.service_names:
+            elif service is not None and service not in runtime.service_names:
                 reason = (
-                    f"robot {parts[1]!r} has no service {codec.client_text(parts[3])!r}; "
+                    f"robot {name!r} has no service {codec.client_text(service)!r}; "
                     f"its services: {', '.join(sorted(runtime.service_names))}"
                 )
             else:

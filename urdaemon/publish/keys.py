@@ -37,6 +37,24 @@ class CellKeys:
         """The keys of one robot."""
         return RobotKeys(self.cell, name)
 
+    def parse(self, key: str) -> tuple[str, tuple[str, ...]] | None:
+        """The robot a concrete key of this cell is under and the chunks after its name
+        (``<cell>/alice/service/stop`` → ``("alice", ("service", "stop"))``); ``None`` for a key
+        with a wildcard, a key outside the cell, or a key of the cell itself (``tf``, ...)."""
+        prefix = f"{self.cell}/"
+        if "*" in key or not key.startswith(prefix):
+            return None
+        robot, *rest = key[len(prefix) :].split("/")
+        if not robot or robot in self.cell_level:
+            return None
+        return robot, tuple(rest)
+
+    @staticmethod
+    def service_name(rest: tuple[str, ...]) -> str | None:
+        """The service a robot's key names, from the chunks :meth:`parse` returns after the robot's
+        name (``("service", "stop")`` → ``"stop"``); ``None`` for any other key."""
+        return rest[1] if len(rest) == 2 and rest[0] == "service" else None
+
 
 @dataclass(frozen=True, slots=True)
 class RobotKeys:
