@@ -12,10 +12,10 @@ import contextlib
 import itertools
 import logging
 import secrets
-import sys
 import time
+import weakref
 from collections import OrderedDict
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -47,8 +47,10 @@ the first, shortest delay again: it was healthy, so this is a new fault, not the
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries."""
 PLANNING_SLICE_S = 0.00025
-"""Longest stretch of trajectory decoding, checking, planning or freeing between two turns of the
-event loop (a cycle is 2 ms; a young-generation garbage collection inside a slice adds ~0.2 ms)."""
+"""Longest stretch of trajectory decoding, checking, planning, encoding or freeing in one turn of the
+event loop, for the whole process: every robot's sliced work shares one budget (``_sliced``), so N
+robots receiving big goals at once still cost one slice per turn (a cycle is 2 ms; a young-generation
+garbage collection inside a slice adds ~0.2 ms)."""
 CHECK_STEPS = 4
 """Steps of a trajectory's check (a point each, a few µs) between two looks at the clock."""
 RELEASE_ITEMS = 16
@@ -63,6 +65,13 @@ PAYLOADLESS_SERVICES = (
     "end_tool_contact",
 )
 """Services without arguments: only nothing, an empty payload, ``{}`` or ``{"v": 1}`` is accepted."""
+SHUTTING_DOWN = "daemon shutting down"
+"""The reason every request gets once the daemon started to shut down."""
+STOPPED_WHILE_PLANNING = "stopped while it was being planned (stop, cancel, hand_back_control or freedrive)"
+"""The reason a trajectory goal is refused when something ended motion while it was being planned."""
+
+Service = Callable[[bytes | None], Awaitable[dict[str, Any] | None]]
+"""A service: the request's payload → what to add to its ``{"ok": true}`` reply (None: nothing)."""
 
 
 class _RobotLog(logging.LoggerAdapter[logging.Logger]):
@@ -102,6 +111,11 @@ class RobotRuntime:
         self._io_signature: tuple[Any, ...] = ()
         self._tasks: set[asyncio.Task[None]] = set()
         self._planning: str | None = None
+        self._generation = 0
+        """Counts what ends motion (stop, cancel, hand_back_control, freedrive on): a trajectory being
+        planned is accepted only if it is still the same as when its planning began."""
+        self._closing = False
+        """Set first when the runtime shuts down: every new request is answered ``SHUTTING_DOWN``."""
         self._running_services: set[str] = set()
         self.service_names: frozenset[str] = frozenset()
         """The services this robot answers (once declared)."""
@@ -139,11 +153,10 @@ class RobotRuntime:
         node.queryable(keys.goal_cancel, self._on_cancel, answer="canceled")
         node.queryable(keys.goal_results, self._on_result_query, any_id=True)
         node.queryable(keys.service("stop"), self._on_stop, max_bytes=None)  # never refused for its payload
-        node.queryable(keys.service("cycle_stats"), self._on_cycle_stats)
-        node.queryable(keys.service("dashboard"), self._on_dashboard)
-        for name, act in self._services().items():
+        services = self._services()
+        for name, act in services.items():
             node.queryable(keys.service(name), self._on_service(name, act))
-        self.service_names = frozenset({"stop", "cycle_stats", "dashboard", *self._services()})
+        self.service_names = frozenset({"stop", *services})
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self._publish_status
         for key, handler in (
@@ -154,10 +167,13 @@ class RobotRuntime:
             node.subscriber(key, handler, refused=self._on_refused_command)
         node.liveliness_token(keys.alive)
 
-    def _services(self) -> dict[str, Callable[[bytes | None], Awaitable[None]]]:
-        """Every service run through ``_service``: name → what it does with the request's payload."""
+    def _services(self) -> dict[str, Service]:
+        """Every service but ``stop`` (never refused) runs through ``_service`` (one reply, busy while
+        it runs): name → what it does with the request's payload (an optional reply body to add)."""
         backend = self.backend
-        services: dict[str, Callable[[bytes | None], Awaitable[None]]] = {
+        services: dict[str, Service] = {
+            "cycle_stats": self._cycle_stats,
+            "dashboard": self._dashboard,
             "set_io": self._set_io,
             "set_payload": self._set_payload,
             "set_speed_slider": self._set_speed_slider,
@@ -167,7 +183,7 @@ class RobotRuntime:
         actions: dict[str, Callable[[], Awaitable[None]]] = {
             "startup": lambda: backend.startup(),
             "resend_program": lambda: backend.resend_program(),
-            "hand_back_control": lambda: backend.hand_back_control(),
+            "hand_back_control": self._hand_back_control,
             "zero_ft_sensor": lambda: backend.zero_ft_sensor(),
             "end_force_mode": lambda: backend.force_mode(None),
             "start_tool_contact": lambda: backend.tool_contact(True),
@@ -184,7 +200,9 @@ class RobotRuntime:
                 group.create_task(self._periodic_status())
                 group.create_task(self._supervise())
         finally:
-            # requests still in progress answer "shutting down" before the session closes
+            # from now on every request answers "shutting down" (the daemon closes the backends after
+            # this: nothing may be accepted that no cycle would end); requests in progress answer it too
+            self._closing = True
             pending = list(self._tasks)
             for task in pending:
                 task.cancel()
@@ -199,7 +217,7 @@ class RobotRuntime:
                 await self.backend.run(self._on_cycle)
                 reason = "backend stopped"
             except asyncio.CancelledError:
-                self._end_motion("daemon shutting down")
+                self._end_motion(SHUTTING_DOWN)
                 raise
             except Exception as err:  # any failure of one robot is contained here
                 reason = f"backend failed: {type(err).__name__}: {err}"
@@ -397,29 +415,35 @@ class RobotRuntime:
         )
 
     def _on_trajectory_goal(self, query: Any) -> None:
+        if self._closing:
+            self._reject_goal(query, "trajectory", GoalRejected(SHUTTING_DOWN))
+            return
         if self._planning is not None:  # refused before reading a byte of it
             self._reject_goal(
                 query, "trajectory", GoalRejected(f"busy: still planning trajectory {self._planning}")
             )
             return
         self._planning = "being decoded"
-        self._spawn(self._trajectory_goal(query))
+        # what ended motion before this query counts as before it: recorded now, not when it starts
+        work = self._trajectory_goal(query, self._generation)
+        self._spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
 
-    async def _trajectory_goal(self, query: Any) -> None:
-        """Decode, check, plan and start a trajectory goal, all in slices between robot cycles; then
-        free what it decoded and planned in slices too (a 5 000-point goal's points take ~1 ms to
-        free at once)."""
-        held: list[object] = []
-        await self._handle_trajectory_goal(query, held)
-        await _release(held)
+    async def _trajectory_goal(self, query: Any, generation: int) -> None:
+        """Decode, check, plan (and for passthrough encode) a trajectory goal, all in slices between
+        robot cycles, then start it; then free what it decoded and planned in slices too (a 5 000-point
+        goal's points take ~1 ms to free at once)."""
+        owned: list[object] = []
+        await self._handle_trajectory_goal(query, generation, owned)
+        with contextlib.suppress(asyncio.CancelledError):  # answered already: shutting down frees it
+            await _release(owned)
 
-    async def _handle_trajectory_goal(self, query: Any, held: list[object]) -> None:
+    async def _handle_trajectory_goal(self, query: Any, generation: int, owned: list[object]) -> None:
         try:
             goal = await _decode_sliced(TrajectoryGoalDecoder(_payload(query)))
-            held.append(goal.points)
+            owned.append(goal.points)  # decoded here: nobody else holds the list
             names = self._joint_names(goal.joint_names)
             tolerances = self._tolerances(goal.tolerances, names)
-            self._check_not_freedrive()
+            self._check_still_wanted(generation)
             if goal.passthrough:
                 problem = self.backend.passthrough_problem()
                 if problem is not None:
@@ -428,35 +452,72 @@ class RobotRuntime:
             self._planning = f"of {len(goal.points)} points"
             check = self.controller.check_trajectory(names, goal.points, self.backend.state)
             planner = await _check_sliced(check)
-            held.append(planner)
+            owned.append(planner)  # the controller keeps the plan it finishes, never the planner
             await _plan_tail(planner)
-            await asyncio.sleep(0)  # the last planning slice and accepting are two turns
+            frames = await self._encode_passthrough(planner) if goal.passthrough else None
+            await asyncio.sleep(0)  # the last slice and accepting are two turns
+            self._check_still_wanted(generation)  # nothing ended motion while it was planned
             goal_id = self._new_goal_id()
-            duration = self._start_trajectory(goal_id, goal.passthrough, goal.preempt, tolerances, planner)
+            duration = self._start_trajectory(goal_id, goal.preempt, tolerances, planner, frames)
         except (MessageError, GoalRejected) as err:
             self._reject_goal(query, "trajectory", err)
             return
-        except asyncio.CancelledError:
-            _reply(query, {"accepted": False, "reason": "daemon shutting down"})
-            raise
         except Exception as err:  # a bug must still answer the client, once
             self._fail_goal(query, "trajectory", err)
             return
-        finally:
+        finally:  # cancelled (shutting down): the task's done-callback answers
             self._planning = None
         kind = "passthrough trajectory" if goal.passthrough else "trajectory"
         self._accept_goal(query, kind, goal_id, duration)
 
+    def _check_still_wanted(self, generation: int) -> None:
+        """Refuse a goal being planned if the daemon shuts down, or since ``generation`` something
+        ended motion (stop, cancel, hand_back_control, freedrive), or freedrive is on."""
+        if self._closing:
+            raise GoalRejected(SHUTTING_DOWN)
+        if generation != self._generation:
+            raise GoalRejected(STOPPED_WHILE_PLANNING)
+        self._check_not_freedrive()
+
+    def _interrupt_planning(self) -> str | None:
+        """Make the trajectory goal being planned (if any) be refused; what it was, for the reply."""
+        self._generation += 1
+        if self._planning is None:
+            return None
+        return f"the trajectory goal being planned ({self._planning}) is refused"
+
+    async def _encode_passthrough(self, planner: TrajectoryPlanner) -> tuple[bytes, int]:
+        """Every point as the robot receives it, encoded in slices before the goal is accepted: a
+        value the robot cannot carry (a segment over 2147 s) refuses the goal, nothing is in limbo."""
+        points, velocities = planner.points, planner.velocities
+        encode = self.backend.encode_passthrough_point
+        frames: list[bytes] = []
+
+        def step(deadline: float) -> bool:
+            for i in range(len(frames), len(points)):
+                point = points[i]
+                segment = point.time_from_start - (points[i - 1].time_from_start if i else 0.0)
+                frames.append(encode(point.positions, velocities[i], point.accelerations, segment))
+                if time.perf_counter() > deadline:
+                    return i + 1 < len(points)
+            return False
+
+        try:
+            await _sliced(step)
+        except BackendError as err:
+            raise GoalRejected(f"passthrough: {err}") from None
+        return b"".join(frames), len(frames)
+
     def _start_trajectory(
         self,
         goal_id: str,
-        passthrough: bool,
         preempt: bool,
         tolerances: Tolerances | None,
         planner: TrajectoryPlanner,
+        frames: tuple[bytes, int] | None,
     ) -> float:
-        if passthrough:
-            return self._start_passthrough(goal_id, planner, tolerances)
+        if frames is not None:
+            return self._start_passthrough(goal_id, planner, tolerances, frames)
         return self.controller.accept_trajectory(
             goal_id,
             self.controller.joint_names,  # the planner's points are in the controller's joint order
@@ -470,6 +531,8 @@ class RobotRuntime:
 
     def _on_move_goal(self, query: Any) -> None:
         try:
+            if self._closing:
+                raise GoalRejected(SHUTTING_DOWN)
             goal = codec.decode_move_goal(_payload(query))
             self._check_not_freedrive()
             names = self._joint_names(goal.joint_names)
@@ -511,23 +574,27 @@ class RobotRuntime:
         _reply(query, {"accepted": False, "reason": reason})
 
     def _start_passthrough(
-        self, goal_id: str, planner: TrajectoryPlanner, tolerances: Tolerances | None
+        self,
+        goal_id: str,
+        planner: TrajectoryPlanner,
+        tolerances: Tolerances | None,
+        frames: tuple[bytes, int],
     ) -> float:
-        """Accept a goal the robot interpolates itself and send it its points (no await in between)."""
+        """Accept a goal the robot interpolates itself and send it its pre-encoded points (one write,
+        no await in between). Everything that can refuse it ran before: accepting is the last step."""
         problem = self.backend.passthrough_problem()
         if problem is not None:
             raise GoalRejected(f"passthrough: {problem}")
+        state = self.backend.state
         duration = self.controller.accept_external(
-            goal_id, planner, self.backend.state, time.monotonic(), tolerances=tolerances
+            goal_id, planner, state, time.monotonic(), tolerances=tolerances
         )
-        points = planner.points
-        velocities = planner.velocities
-        previous = 0.0
-        spline = []
-        for point, velocity in zip(points, velocities, strict=True):
-            spline.append((point.positions, velocity, point.accelerations, point.time_from_start - previous))
-            previous = point.time_from_start
-        self.backend.start_passthrough(goal_id, spline, self._on_passthrough_result)
+        try:
+            self.backend.start_encoded_passthrough(goal_id, *frames, self._on_passthrough_result)
+        except Exception as err:  # a bug: the goal was accepted, so it ends with its one result now
+            self.log.exception("passthrough goal %s could not be sent", goal_id)
+            self.controller.finish_external(goal_id, GoalStatus.ABORTED, _internal_error(err), state)
+            return duration
         self._external_goal = goal_id
         return duration
 
@@ -554,7 +621,12 @@ class RobotRuntime:
         if canceled and external is not None and external == target:
             self.backend.cancel_passthrough()
         body: dict[str, Any] = {"canceled": canceled, "goal_id": target}
-        if not canceled:
+        # a goal being planned has no id yet: a cancel of no id, or of nothing active, cancels it
+        planned = self._interrupt_planning() if goal_id is None or not canceled else None
+        if planned is not None:
+            body["canceled"] = True
+            body["planned"] = planned
+        elif not canceled:
             body["reason"] = "no active goal" if target is None else f"goal {target} is not active"
         _reply(query, body)
         self._publish_events()
@@ -574,7 +646,7 @@ class RobotRuntime:
         state = self.backend.state
         try:
             message = codec.decode_stream_position(payload)
-            self._check_not_freedrive()
+            self._check_accepting()
             assert message.positions is not None
             self.controller.stream_positions(
                 self._joint_names(message.joint_names),
@@ -593,7 +665,7 @@ class RobotRuntime:
         state = self.backend.state
         try:
             message = codec.decode_stream_velocity(payload)
-            self._check_not_freedrive()
+            self._check_accepting()
             assert message.velocities is not None
             self.controller.stream_velocities(
                 self._joint_names(message.joint_names), message.velocities, state, time.monotonic()
@@ -625,32 +697,32 @@ class RobotRuntime:
     # ---- services ----------------------------------------------------------------------------------------
 
     def _on_stop(self, query: Any) -> None:
+        planned = self._interrupt_planning()
         if self.controller.external_goal_id is not None:
             self.backend.cancel_passthrough()
         self.controller.stop("stop requested", time.monotonic())
         self._publish_events()
-        _reply(query, {"ok": True})
+        _reply(query, {"ok": True} if planned is None else {"ok": True, "planned": planned})
 
-    def _on_cycle_stats(self, query: Any) -> None:
-        try:
-            reset = codec.decode_cycle_stats(_payload(query))
-        except MessageError as err:
-            _reply(query, {"ok": False, "reason": str(err)})
-            return
+    async def _cycle_stats(self, payload: bytes | None) -> dict[str, Any]:
+        reset = codec.decode_cycle_stats(payload)
         backend = self.backend
         stats = backend.statistics()
-        _reply(
-            query,
-            {
-                "ok": True,
-                "cycles": stats.cycles,
-                "missed_cycles": stats.missed_cycles,
-                "late_cycles": stats.late_cycles,
-                "turnaround": backend.turnaround.summary(),
-            },
-        )
+        body = {
+            "cycles": stats.cycles,
+            "missed_cycles": stats.missed_cycles,
+            "late_cycles": stats.late_cycles,
+            "turnaround": backend.turnaround.summary(),
+        }
         if reset:
             backend.turnaround.reset()
+        return body
+
+    def _check_accepting(self) -> None:
+        """Refuse a streaming command while shutting down or in freedrive."""
+        if self._closing:
+            raise GoalRejected(SHUTTING_DOWN)
+        self._check_not_freedrive()
 
     def _check_not_freedrive(self) -> None:
         if self.backend.freedrive_active:
@@ -661,72 +733,82 @@ class RobotRuntime:
     def _on_freedrive(self, key: str, payload: bytes) -> None:
         try:
             active = codec.decode_freedrive(payload)
-            if active and self.controller.mode != "idle":
-                raise GoalRejected(
-                    f"busy: the robot is {self.controller.mode.replace('_', ' ')}; freedrive starts at rest"
-                )
+            if active:
+                self._check_freedrive_can_start()
+                self._generation += 1  # a trajectory planned from now on was planned before freedrive
             self.backend.freedrive(active, self.robot.motion.stream_timeout)
         except (MessageError, GoalRejected) as err:
             self._reject_stream(key, err)
         except BackendError as err:
             self._reject_stream(key, GoalRejected(str(err)))
 
-    def _on_dashboard(self, query: Any) -> None:
-        async def serve() -> None:
-            try:
-                line = codec.decode_dashboard(_payload(query))
-                ok, text = await self.backend.dashboard(line)
-            except asyncio.CancelledError:
-                _reply(query, {"ok": False, "reason": "daemon shutting down"})
-                raise
-            except UrDaemonError as err:
-                _reply(query, {"ok": False, "reason": str(err)})
-                return
-            except Exception as err:  # a bug must still answer the client
-                self.log.exception("dashboard failed")
-                _reply(query, {"ok": False, "reason": f"{type(err).__name__}: {err}"})
-                return
-            _reply(query, {"ok": ok, "reply": text})
+    def _check_freedrive_can_start(self) -> None:
+        if self._closing:
+            raise GoalRejected(SHUTTING_DOWN)
+        if self.controller.mode != "idle":
+            raise GoalRejected(
+                f"busy: the robot is {self.controller.mode.replace('_', ' ')}; freedrive starts at rest"
+            )
+        if self._planning is not None:
+            raise GoalRejected(
+                f"busy: trajectory goal {self._planning} is being planned; freedrive starts at rest"
+                " (cancel it first)"
+            )
 
-        self._spawn(serve())
+    async def _dashboard(self, payload: bytes | None) -> dict[str, Any]:
+        line = codec.decode_dashboard(payload)
+        ok, text = await self.backend.dashboard(line)
+        return {"ok": ok, "reply": text}
+
+    async def _hand_back_control(self) -> None:
+        self._interrupt_planning()  # the pendant program continues: nothing planned may start
+        await self.backend.hand_back_control()
 
     def _publish_notice(self, kind: str, text: str) -> None:
         if self._pub_events is not None:
             self._pub_events.put(codec.encode({"robot": self.robot.name, "kind": kind, "text": text}))
 
-    async def _set_io(self, payload: bytes | None) -> None:
+    async def _set_io(self, payload: bytes | None) -> dict[str, Any] | None:
         kind, pin, value = codec.decode_set_io(payload)
         await self.backend.set_io(kind, pin, value)
         self._publish_io()
+        return None
 
-    async def _set_payload(self, payload: bytes | None) -> None:
+    async def _set_payload(self, payload: bytes | None) -> dict[str, Any] | None:
         mass, cog = codec.decode_set_payload(payload)
         await self.backend.set_payload(mass, cog)
         self._publish_io()
+        return None
 
-    async def _set_speed_slider(self, payload: bytes | None) -> None:
+    async def _set_speed_slider(self, payload: bytes | None) -> dict[str, Any] | None:
         fraction = codec.decode_speed_slider(payload)
         await self.backend.set_speed_slider(fraction)
+        return None
 
-    async def _set_tool_voltage(self, payload: bytes | None) -> None:
+    async def _set_tool_voltage(self, payload: bytes | None) -> dict[str, Any] | None:
         volts = codec.decode_tool_voltage(payload)
         await self.backend.set_tool_voltage(volts)
+        return None
 
-    async def _start_force_mode(self, payload: bytes | None) -> None:
+    async def _start_force_mode(self, payload: bytes | None) -> dict[str, Any] | None:
         from urdaemon.protocols.script_command import StartForceMode
 
         fields = codec.decode_force_mode(payload)
         await self.backend.force_mode(StartForceMode(**fields))
+        return None
 
-    def _on_service(self, name: str, act: Callable[[bytes | None], Awaitable[None]]) -> Callable[[Any], None]:
+    def _on_service(self, name: str, act: Service) -> Callable[[Any], None]:
         def handle(query: Any) -> None:
             self._service(query, name, act)
 
         return handle
 
-    def _service(self, query: Any, name: str, act: Callable[[bytes | None], Awaitable[None]]) -> None:
+    def _service(self, query: Any, name: str, act: Service) -> None:
         """Run service ``name`` with the query's payload and answer once; a second call while it runs
         is refused, so a burst of requests never acts more than once at a time."""
+        if self._closing:
+            _reply(query, {"ok": False, "reason": SHUTTING_DOWN})
+            return
         if name in self._running_services:
             _reply(
                 query, {"ok": False, "reason": f"busy: {name} is still running; ask again once it answered"}
@@ -737,10 +819,7 @@ class RobotRuntime:
 
         async def serve() -> None:
             try:
-                await act(payload)
-            except asyncio.CancelledError:
-                _reply(query, {"ok": False, "reason": "daemon shutting down"})
-                raise
+                extra = await act(payload)
             except (MessageError, BackendError) as err:
                 self.log.warning("%s refused: %s", name, err)
                 _reply(query, {"ok": False, "reason": str(err)})
@@ -748,16 +827,26 @@ class RobotRuntime:
                 self.log.exception("%s failed", name)
                 _reply(query, {"ok": False, "reason": _internal_error(err)})
             else:
-                _reply(query, {"ok": True})
-            finally:
-                self._running_services.discard(name)
+                _reply(query, {"ok": True, **(extra or {})})
 
-        self._spawn(serve())
+        task = self._spawn(serve(), query, {"ok": False, "reason": SHUTTING_DOWN})
+        task.add_done_callback(lambda _: self._running_services.discard(name))
 
-    def _spawn(self, work: Any) -> None:
+    def _spawn(
+        self, work: Coroutine[Any, Any, None], query: Any, cancelled: dict[str, Any]
+    ) -> asyncio.Task[None]:
+        """Run ``work`` (which answers ``query`` once); cancelled (shutting down), even before its first
+        step, the query is answered ``cancelled`` here instead, once."""
         task = asyncio.get_running_loop().create_task(work)
         self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+
+        def done(task: asyncio.Task[None]) -> None:
+            self._tasks.discard(task)
+            if task.cancelled():
+                _reply(query, cancelled)
+
+        task.add_done_callback(done)
+        return task
 
     @property
     def state(self) -> RobotState:
@@ -777,61 +866,87 @@ def _without_arguments(
     return act
 
 
-async def _release(held: list[object]) -> None:
-    """Free big objects in slices of PLANNING_SLICE_S: a list or tuple item by item, a planner
-    attribute by attribute; an object someone else still holds only loses this reference."""
-    deadline = time.perf_counter() + PLANNING_SLICE_S
-    for count in itertools.count(1):
-        if not held:
-            return
-        obj = held.pop()
-        if sys.getrefcount(obj) == 2:  # ``obj`` and the call's: the last reference, freeing is ours
-            if isinstance(obj, list | tuple) and len(obj) > RELEASE_ITEMS:
-                held.extend(obj)
-            elif isinstance(obj, TrajectoryPlanner):
-                attributes = vars(obj)
-                held.extend(attributes.values())
-                attributes.clear()
-        del obj
-        if count % RELEASE_ITEMS == 0 and time.perf_counter() > deadline:
-            await asyncio.sleep(0)
-            deadline = time.perf_counter() + PLANNING_SLICE_S
+_BATONS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Lock] = weakref.WeakKeyDictionary()
+"""One slicing baton per event loop, shared by every robot's sliced work."""
+
+
+async def _sliced(step: Callable[[float], bool]) -> None:
+    """Run ``step(deadline)`` until it returns False (done), one slice of PLANNING_SLICE_S per turn of
+    the event loop for the whole process: each slice holds the loop's baton until the next turn, so
+    however many robots slice at once, one turn runs one slice and every robot's cycle runs between."""
+    loop = asyncio.get_running_loop()
+    baton = _BATONS.get(loop)
+    if baton is None:
+        baton = _BATONS[loop] = asyncio.Lock()
+    while True:
+        async with baton:
+            if not step(time.perf_counter() + PLANNING_SLICE_S):
+                return
+            await asyncio.sleep(0)  # the next slice, anyone's, runs in a later turn
+
+
+async def _release(owned: list[object]) -> None:
+    """Free what the caller hands over in slices: it keeps no reference to the list's items, so a
+    planner among them is ours to take apart attribute by attribute. What they reach is only dropped
+    (a big list or tuple item by item, never changed): whoever else holds it keeps it intact."""
+    dropped: list[object] = []
+
+    def step(deadline: float) -> bool:
+        for count in itertools.count(1):
+            if owned:
+                obj = owned.pop()
+                if isinstance(obj, TrajectoryPlanner):
+                    attributes = vars(obj)
+                    dropped.extend(attributes.values())
+                    attributes.clear()
+                elif isinstance(obj, list | tuple):
+                    dropped.extend(obj)
+            elif dropped:
+                obj = dropped.pop()
+                if isinstance(obj, list | tuple) and len(obj) > RELEASE_ITEMS:
+                    dropped.extend(obj)
+            else:
+                return False
+            del obj
+            if count % RELEASE_ITEMS == 0 and time.perf_counter() > deadline:
+                return True
+        return False  # unreachable: itertools.count never ends
+
+    await _sliced(step)
 
 
 async def _check_sliced(check: TrajectoryCheck) -> TrajectoryPlanner:
-    """Check a trajectory's points in slices of PLANNING_SLICE_S, letting every robot's cycle run
-    between."""
+    """Check a trajectory's points in slices (``_sliced``), letting every robot's cycle run between."""
+
+    def step(deadline: float) -> bool:
+        while check.step(CHECK_STEPS):
+            if time.perf_counter() > deadline:
+                return True
+        return False
+
     try:
-        while True:
-            deadline = time.perf_counter() + PLANNING_SLICE_S
-            while check.step(CHECK_STEPS):
-                if time.perf_counter() > deadline:
-                    break
-            else:
-                return check.result()
-            await asyncio.sleep(0)
+        await _sliced(step)
+        return check.result()
     finally:
         check.close()
 
 
 async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:
-    """Decode a goal in slices of PLANNING_SLICE_S, letting every robot's cycle run between."""
-    while True:
-        if not decoder.step(time.perf_counter() + PLANNING_SLICE_S):
-            return decoder.result()
-        await asyncio.sleep(0)
+    """Decode a goal in slices (``_sliced``), letting every robot's cycle run between."""
+    await _sliced(decoder.step)
+    return decoder.result()
 
 
 async def _plan_tail(planner: TrajectoryPlanner) -> None:
-    """Plan a trajectory's tail in slices of PLANNING_SLICE_S, letting every robot's cycle run between."""
-    for _ in range(len(planner.points)):
-        deadline = time.perf_counter() + PLANNING_SLICE_S
+    """Plan a trajectory's tail in slices (``_sliced``), letting every robot's cycle run between."""
+
+    def step(deadline: float) -> bool:
         while planner.plan_next():
             if time.perf_counter() > deadline:
-                break
-        else:
-            return
-        await asyncio.sleep(0)
+                return True
+        return False
+
+    await _sliced(step)
 
 
 def _payload(query: Any) -> bytes | None:

@@ -121,6 +121,24 @@ class Backend(abc.ABC):
         """Send (positions, velocities, accelerations or None, segment time) points for the robot to run."""
         raise BackendError(self.passthrough_problem() or "passthrough unavailable")
 
+    def encode_passthrough_point(
+        self,
+        positions: tuple[float, ...],
+        velocities: tuple[float, ...],
+        accelerations: tuple[float, ...] | None,
+        segment_time: float,
+    ) -> bytes:
+        """One passthrough point as the robot receives it (a few µs: the runtime encodes a goal's
+        points in slices before accepting it); BackendError if the robot cannot carry it."""
+        raise BackendError(self.passthrough_problem() or "passthrough unavailable")
+
+    def start_encoded_passthrough(
+        self, goal_id: str, frames: bytes, count: int, on_result: Callable[[str, int], None]
+    ) -> None:
+        """Send ``count`` points encoded by ``encode_passthrough_point`` (joined) for the robot to run;
+        nothing is encoded here, so this costs one write whatever the goal's length."""
+        raise BackendError(self.passthrough_problem() or "passthrough unavailable")
+
     def send_command(self) -> None:
         """Send this cycle's command now, if the backend sends commands itself (``ur``: the reverse
         frame). The runtime calls it right after the controller's tick, before publishing the state;

@@ -38,7 +38,6 @@ from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, Safety
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
-from urdaemon.protocols._buffer import Side
 
 __all__ = ["UR_IO_SIZES", "UrBackend"]
 
@@ -407,22 +406,42 @@ class UrBackend(Backend):
         on_result: Callable[[str, int], None],
     ) -> None:
         """START(n) on the reverse socket, then the n spline points on the trajectory socket."""
+        frames = b"".join(self.encode_passthrough_point(*point) for point in points)
+        self.start_encoded_passthrough(goal_id, frames, len(points), on_result)
+
+    def encode_passthrough_point(
+        self,
+        positions: tuple[float, ...],
+        velocities: tuple[float, ...],
+        accelerations: tuple[float, ...] | None,
+        segment_time: float,
+    ) -> bytes:
+        """One spline point's 84-byte frame; BackendError for a value the wire cannot carry (a segment
+        longer than trajectory_point.MAX_DURATION_S, a non-finite or too large value)."""
+        try:
+            return trajectory_point.encode_point(
+                trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time)
+            )
+        except LocalProtocolError as err:
+            raise BackendError(f"cannot send the trajectory to the robot: {err}") from None
+
+    def start_encoded_passthrough(
+        self, goal_id: str, frames: bytes, count: int, on_result: Callable[[str, int], None]
+    ) -> None:
+        """START(count) on the reverse socket, then the pre-encoded points on the trajectory socket.
+
+        Every point was encoded before (``encode_passthrough_point``): a value the wire cannot carry is
+        refused before the robot waits for points that would never come, and this is one write."""
         problem = self.passthrough_problem()
         if problem is not None:
             raise BackendError(problem)
-        # every point encoded before START: a value the wire cannot carry is refused before the robot
-        # waits for points that would never come
-        batch = trajectory_point.TrajectoryPointConnection(Side.DAEMON)
-        try:
-            for positions, velocities, accelerations, segment_time in points:
-                batch.send(trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time))
-        except LocalProtocolError as err:
-            raise BackendError(f"cannot send the trajectory to the robot: {err}") from None
+        if count <= 0 or len(frames) != count * trajectory_point.FRAME_BYTES:
+            raise BackendError(f"{len(frames)} bytes are not {count} encoded trajectory points")
         self._passthrough = (goal_id, on_result)
         self.servers.reverse.send(
-            reverse.TrajectoryControl(reverse.TrajectoryAction.START, len(points), PASSTHROUGH_TIMEOUT_S)
+            reverse.TrajectoryControl(reverse.TrajectoryAction.START, count, PASSTHROUGH_TIMEOUT_S)
         )
-        self.servers.trajectory.write(batch.data_to_send())
+        self.servers.trajectory.write(frames)
 
     def cancel_passthrough(self) -> None:
         """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
