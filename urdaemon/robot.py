@@ -455,7 +455,6 @@ class RobotRuntime:
             owned.append(planner)  # the controller keeps the plan it finishes, never the planner
             await _plan_tail(planner)
             frames = await self._encode_passthrough(planner) if goal.passthrough else None
-            await asyncio.sleep(0)  # the last slice and accepting are two turns
             self._check_still_wanted(generation)  # nothing ended motion while it was planned
             goal_id = self._new_goal_id()
             duration = self._start_trajectory(goal_id, goal.preempt, tolerances, planner, frames)
@@ -878,11 +877,11 @@ async def _sliced(step: Callable[[float], bool]) -> None:
     baton = _BATONS.get(loop)
     if baton is None:
         baton = _BATONS[loop] = asyncio.Lock()
-    while True:
+    more = True
+    while more:
         async with baton:
-            if not step(time.perf_counter() + PLANNING_SLICE_S):
-                return
-            await asyncio.sleep(0)  # the next slice, anyone's, runs in a later turn
+            more = step(time.perf_counter() + PLANNING_SLICE_S)
+            await asyncio.sleep(0)  # the next slice, anyone's (the next stage's too), in a later turn
 
 
 async def _release(owned: list[object]) -> None:

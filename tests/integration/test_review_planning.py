@@ -74,6 +74,7 @@ class Node:
 
     def __init__(self) -> None:
         self.puts: list[tuple[str, bytes]] = []
+        self.handlers: dict[str, Callable[[Any], None]] = {}
 
     def put(self, key: str, payload: bytes) -> None:
         self.puts.append((key, payload))
@@ -87,7 +88,7 @@ class Node:
         return Matching(False)
 
     def queryable(self, key: str, handler: Any, **_: Any) -> None:
-        pass
+        self.handlers[key] = handler
 
     def subscriber(self, key: str, handler: Any, **_: Any) -> None:
         pass
