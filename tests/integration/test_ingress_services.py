@@ -130,8 +130,15 @@ async def test_a_running_service_refuses_a_second_call_of_itself(
         if len(busy) >= 13:
             break
     assert len(busy) == 13
-    assert all(r == {"v": 1, "ok": False, "reason": busy[0]["reason"]} for r in busy), busy
-    assert busy[0]["reason"].startswith("busy: resend_program is still running")
+    # refused as still running, or (the burst arriving faster than the loop reads it) as too many
+    # in flight on the key (publish/node.py); either way nothing more acts
+    reasons = Counter(r["reason"] for r in busy)
+    assert all(r == {"v": 1, "ok": False, "reason": r["reason"]} for r in busy), busy
+    assert set(reasons) <= {
+        "busy: resend_program is still running; ask again once it answered",
+        "busy: too many requests in flight on testcell/alice/service/resend_program (at most 4); ask again",
+    }, reasons
+    assert reasons["busy: resend_program is still running; ask again once it answered"] >= 1, reasons
     release.set()
     (last,) = asks
     assert (await last) == {"v": 1, "ok": True}

@@ -51,9 +51,12 @@ __all__ = [
 ]
 
 SCHEMA_VERSION = 1
-SMALL_MESSAGE_BYTES = 64 * 1024
-"""Largest message on every key but the trajectory goal's (moves, stream commands, services): the
-largest valid one is well under 1 KiB, and JSON this size decodes in well under a cycle."""
+SMALL_MESSAGE_BYTES = 16 * 1024
+"""Largest message on every key but the trajectory goal's (moves, stream commands, services). The
+largest valid one, a move of 64 joints with every field (64 names of 64 characters, 64 positions
+and 64 path and goal tolerances of 24-character numbers), is 8.7 KB as compact JSON, 10.0 KB
+indented; a joint position command with positions and velocities 7.7 KB. 16 KiB leaves ~1.6x room
+and bounds the loop time a message within the limit can cost (garbage this size: ~0.25 ms)."""
 MAX_MESSAGE_BYTES = 2 * 1024 * 1024
 """Largest trajectory goal (5 000 points with positions, velocities and accelerations: ~1.9 MB); it is
 decoded and checked in slices between robot cycles (``TrajectoryGoalDecoder``)."""

@@ -3,6 +3,13 @@
 Zenoh calls back on its own threads; every callback here only copies what it needs and hands it
 to the event loop with ``call_soon_threadsafe`` (measured: 5–15 µs more than the bare callback), so
 all daemon logic runs on one thread and never races.
+
+What is handed to the loop is bounded, so that no flood of messages, each within its size limit,
+can fill the loop's queue ahead of the robots' cycles: each queryable has at most
+``MAX_IN_FLIGHT`` queries handed over and not yet handled (the rest are refused, "busy", on Zenoh's
+thread), and each subscriber at most one sample: a newer sample replaces the pending one (for a
+streaming command only the newest matters) and the replaced ones are counted and reported. The
+counters are the node's own, behind a small lock; no daemon state is touched off the loop.
 """
 
 from __future__ import annotations
@@ -11,6 +18,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -21,8 +29,10 @@ from urdaemon.errors import UrDaemonError
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
 
 __all__ = [
+    "MAX_IN_FLIGHT",
     "Matching",
     "ZenohNode",
+    "busy_refusal",
     "declare_state_publisher",
     "size_refusal",
     "wildcard_refusal",
@@ -30,6 +40,72 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+MAX_IN_FLIGHT = 4
+"""Most queries of one key handed to the loop and not yet handled. A client waits for each reply,
+so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
+4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
+of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
+
+
+class _InFlight:
+    """How many messages of one key are handed to the loop and not yet handled (thread-safe)."""
+
+    __slots__ = ("_count", "_lock", "cap", "refused")
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self.refused = 0
+        """Messages refused because ``cap`` were in flight."""
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def enter(self) -> bool:
+        """Count one more in flight (on Zenoh's thread); ``False``, and counted as refused, at the cap."""
+        with self._lock:
+            if self._count >= self.cap:
+                self.refused += 1
+                return False
+            self._count += 1
+            return True
+
+    def leave(self) -> None:
+        """One fewer in flight (on the loop, once handled, or if it never got there)."""
+        with self._lock:
+            self._count -= 1
+
+
+class _Latest:
+    """A subscriber's newest sample not yet handled, and how many it replaced (thread-safe).
+
+    At most one sample is pending on the loop per key; one arriving while another waits replaces it.
+    """
+
+    __slots__ = ("_lock", "_pending", "_replaced", "replaced_total")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pending: bytes | None = None
+        self._replaced = 0
+        self.replaced_total = 0
+        """Samples replaced by a newer one before the loop handled them, since the start."""
+
+    def offer(self, payload: bytes) -> bool:
+        """Keep ``payload`` as the newest (on Zenoh's thread); ``True`` if the loop must be told."""
+        with self._lock:
+            first = self._pending is None
+            if not first:
+                self._replaced += 1
+                self.replaced_total += 1
+            self._pending = payload
+            return first
+
+    def take(self) -> tuple[bytes | None, int]:
+        """The newest sample and how many it replaced since the last take (on the loop)."""
+        with self._lock:
+            payload, replaced = self._pending, self._replaced
+            self._pending, self._replaced = None, 0
+            return payload, replaced
 
 
 def declare_state_publisher(session: Any, key: str) -> Any:
@@ -101,6 +177,9 @@ class ZenohNode:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
         self._entities: list[Any] = []
         self._closed = False
+        self._flights: dict[str, _InFlight] = {}
+        self.latest: dict[str, _Latest] = {}
+        """Each subscriber's pending sample, by key (``replaced_total``: samples replaced unhandled)."""
 
     def publisher(self, key: str, *, realtime: bool = False) -> Any:
         """Declare a publisher; ``realtime`` for state streams (express, top priority).
@@ -161,17 +240,33 @@ class ZenohNode:
             if max_bytes is not None and size > max_bytes:
                 _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
                 return
-            self._to_loop(handler, query)
+            if not flight.enter():
+                _refuse_query(query, busy_refusal(key), error=False, answer=answer)
+                return
+            self._to_loop_counted(flight, handler, query)
 
+        flight = self._flight(key)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
+
+    def in_flight(self, key: str) -> _InFlight:
+        """The in-flight counter of a queryable declared on ``key`` (its ``refused`` count)."""
+        return self._flights[key]
+
+    def _flight(self, key: str) -> _InFlight:
+        flight = self._flights[key] = _InFlight(MAX_IN_FLIGHT)
+        return flight
 
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
         ``handler(query)`` runs on the loop for every query; the handler decides whether to reply."""
 
         def on_query(query: Any) -> None:
-            self._to_loop(handler, query)
+            if flight.enter():
+                self._to_loop_counted(flight, handler, query)
+            else:  # others may answer it; this one stays silent rather than queue without bound
+                _drop(query)
 
+        flight = self._flight(key)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=False))
 
     def subscriber(
@@ -187,7 +282,26 @@ class ZenohNode:
         Only a sample put on exactly ``key`` is handled: a put on a wildcard expression that covers
         it (``<cell>/*/command/joint_position``) never acts. Such a sample, or one larger than
         ``max_bytes``, is not copied; ``refused(key expression, reason)`` hears of it on the loop.
+
+        Only the newest sample is handled: one that arrives while another still waits for the
+        loop replaces it, and ``refused`` hears how many were replaced along with the newest.
+        Refusals are bounded the same way: at most one report waits for the loop, counting the
+        refusals that arrived meanwhile.
         """
+        latest = _Latest()
+        pending_refusals = _Refusals()
+
+        def handle_latest() -> None:
+            payload, replaced = latest.take()
+            if replaced and refused is not None:
+                refused(key, replaced_refusal(key, replaced))
+            if payload is not None:
+                handler(key, payload)
+
+        def report_refusals() -> None:
+            taken = pending_refusals.take()
+            if taken is not None and refused is not None:
+                refused(*taken)
 
         def on_sample(sample: Any) -> None:
             put_on = str(sample.key_expr)
@@ -197,11 +311,13 @@ class ZenohNode:
             elif size > max_bytes:
                 reason = size_refusal(key, size, max_bytes)
             else:
-                self._to_loop(handler, put_on, sample.payload.to_bytes())
+                if latest.offer(sample.payload.to_bytes()):
+                    self._to_loop(handle_latest)
                 return
-            if refused is not None:
-                self._to_loop(refused, client_text(put_on, 80), reason)
+            if refused is not None and pending_refusals.offer(client_text(put_on, 80), reason):
+                self._to_loop(report_refusals)
 
+        self.latest[key] = latest
         self._entities.append(self.session.declare_subscriber(key, on_sample))
 
     def liveliness_token(self, key: str) -> None:
@@ -221,11 +337,27 @@ class ZenohNode:
         self._entities.clear()
         self.session.close()
 
-    def _to_loop(self, handler: Callable[..., None], *args: Any) -> None:
+    def _to_loop(self, handler: Callable[..., None], *args: Any) -> bool:
         if self._closed:
-            return
-        with contextlib.suppress(RuntimeError):  # the loop closed while Zenoh was delivering
+            return False
+        try:
             self._loop.call_soon_threadsafe(handler, *args)
+        except RuntimeError:  # the loop closed while Zenoh was delivering
+            return False
+        return True
+
+    def _to_loop_counted(self, flight: _InFlight, handler: Callable[[Any], None], query: Any) -> None:
+        """Hand ``query`` to ``handler`` on the loop; it leaves ``flight`` once handled."""
+
+        def handle() -> None:
+            try:
+                handler(query)
+            finally:
+                flight.leave()
+
+        if not self._to_loop(handle):
+            flight.leave()
+            _drop(query)
 
 
 def wildcard_refusal(asked: str, key: str) -> str:
@@ -239,6 +371,48 @@ def wildcard_refusal(asked: str, key: str) -> str:
 def size_refusal(key: str, size: int, limit: int) -> str:
     """Why a message too large to read was refused."""
     return f"{key}: message of {size} bytes exceeds the limit of {limit} bytes for this key"
+
+
+def busy_refusal(key: str) -> str:
+    """Why a query was refused because too many on its key were waiting for the loop."""
+    return f"busy: too many requests in flight on {key} (at most {MAX_IN_FLIGHT}); ask again"
+
+
+def replaced_refusal(key: str, replaced: int) -> str:
+    """Why samples put on a streaming key were never acted on."""
+    return (
+        f"busy: {replaced} sample(s) on {key} replaced by a newer one before the daemon read them "
+        "(only the newest streaming command is acted on)"
+    )
+
+
+class _Refusals:
+    """Refusals of one subscriber waiting for the loop: the newest, and how many (thread-safe)."""
+
+    __slots__ = ("_count", "_lock", "_newest")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._newest: tuple[str, str] | None = None
+        self._count = 0
+
+    def offer(self, put_on: str, reason: str) -> bool:
+        """Keep this refusal (on Zenoh's thread); ``True`` if the loop must be told."""
+        with self._lock:
+            first = self._newest is None
+            self._newest = (put_on, reason)
+            self._count += 1
+            return first
+
+    def take(self) -> tuple[str, str] | None:
+        """The newest refusal, saying how many arrived since the last take (on the loop)."""
+        with self._lock:
+            newest, count = self._newest, self._count
+            self._newest, self._count = None, 0
+        if newest is None:
+            return None
+        put_on, reason = newest
+        return put_on, reason if count == 1 else f"{reason} (and {count - 1} more refused like it)"
 
 
 def _refuse_query(query: Any, reason: str, *, error: bool, answer: str) -> None:
