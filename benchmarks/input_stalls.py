@@ -3,8 +3,9 @@
     python benchmarks/input_stalls.py            # every input 3 times, the full sizes
     python benchmarks/input_stalls.py --repeat 5
 
-A daemon serving two mock robots runs in this process; a client process connected over loopback TCP
-sends the inputs (its own encoding and sending are not counted).
+A daemon serving two mock robots runs in this process (they also take passthrough goals, encoding
+their points with the trajectory-point protocol as the ``ur`` backend does); a client process
+connected over loopback TCP sends the inputs (its own encoding and sending are not counted).
 A probe task turns the loop as fast as it can (``await asyncio.sleep(0)``) and records the longest
 gap between two of its turns: the longest any one callback (or a thread holding the GIL) kept every
 robot's cycle waiting. Each input is sent ``--repeat`` times; for each send the worst gap while it
@@ -29,9 +30,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from urdaemon import daemon as daemon_module
+from urdaemon.backends.mock import MockBackend
 from urdaemon.cell import parse_cell
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
+from urdaemon.protocols import trajectory_point
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
@@ -63,7 +67,7 @@ class Input:
     put: bool = False
 
 
-def trajectory(points: int) -> bytes:
+def trajectory(points: int, *, passthrough: bool = False) -> bytes:
     """A valid trajectory goal of ``points`` points with velocities and accelerations, 10 ms apart (a
     slow swing of 0.05 rad from rest), its last point at rest a second after the one before."""
     body: list[dict[str, object]] = []
@@ -82,7 +86,10 @@ def trajectory(points: int) -> bytes:
     body.append(
         {"positions": rest, "velocities": [0.0] * 6, "accelerations": [0.0] * 6, "time_from_start": end}
     )
-    return json.dumps({"points": body}, separators=(",", ":")).encode()
+    goal: dict[str, object] = {"points": body}
+    if passthrough:
+        goal["passthrough"] = True
+    return json.dumps(goal, separators=(",", ":")).encode()
 
 
 def inputs(scale: float = 1.0) -> list[Input]:
@@ -103,6 +110,11 @@ def inputs(scale: float = 1.0) -> list[Input]:
             f"valid {n(5000)}-point trajectory (pos, vel, acc)",
             f"{base}/goal/trajectory",
             trajectory(n(5000)),
+        ),
+        Input(
+            f"valid {n(5000)}-point passthrough trajectory",
+            f"{base}/goal/trajectory",
+            trajectory(n(5000), passthrough=True),
         ),
         Input("2 MiB trajectory, one huge point", f"{base}/goal/trajectory", _one_huge_point(n(2_000_000))),
         Input(
@@ -143,6 +155,32 @@ def _nested(depth: int) -> bytes:
 
 def _fields(count: int) -> bytes:
     return json.dumps({f"field_{i}": i for i in range(count)}, separators=(",", ":")).encode()
+
+
+class PassthroughMock(MockBackend):
+    """A mock robot that takes passthrough goals: their points are encoded as the ``ur`` backend
+    encodes them (84-byte trajectory-point frames), then dropped; the robot "runs" the goal until it is
+    canceled. ``start_passthrough`` is the backend API that encodes every point in one call."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.running: str | None = None
+
+    def passthrough_problem(self) -> str | None:
+        return None if self.running is None else f"passthrough goal {self.running} is still running"
+
+    def encode_passthrough_point(self, *point: Any) -> bytes:
+        return trajectory_point.encode_point(trajectory_point.SplinePoint(*point))
+
+    def start_encoded_passthrough(self, goal_id: str, frames: bytes, count: int, on_result: Any) -> None:
+        self.running = goal_id
+
+    def start_passthrough(self, goal_id: str, points: Any, on_result: Any) -> None:
+        frames = b"".join(self.encode_passthrough_point(*point) for point in points)
+        self.start_encoded_passthrough(goal_id, frames, len(points), on_result)
+
+    def cancel_passthrough(self) -> None:
+        self.running = None
 
 
 class Probe:
@@ -213,7 +251,17 @@ async def measure(
         endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
     daemon = Daemon(parse_cell(CELL, base_dir=ROOT / "configs"), listen=(endpoint,))
     stop = asyncio.Event()
-    serving = asyncio.create_task(daemon.run(stop))
+    # the mock robots this daemon builds take passthrough goals (restored once it is built)
+    mock = vars(daemon_module)["MockBackend"]
+    setattr(daemon_module, "MockBackend", PassthroughMock)  # noqa: B010
+    try:
+        serving = asyncio.create_task(daemon.run(stop))
+        for _ in range(1000):  # bounded: building is synchronous, at the task's first step
+            if daemon.runtimes:
+                break
+            await asyncio.sleep(0)
+    finally:
+        setattr(daemon_module, "MockBackend", mock)  # noqa: B010
     results: dict[str, float] = {}
     probe = Probe()
     proc = await asyncio.create_subprocess_exec(
