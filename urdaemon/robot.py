@@ -496,15 +496,15 @@ class RobotRuntime:
             for i in range(len(frames), len(points)):
                 point = points[i]
                 segment = point.time_from_start - (points[i - 1].time_from_start if i else 0.0)
-                frames.append(encode(point.positions, velocities[i], point.accelerations, segment))
+                try:
+                    frames.append(encode(point.positions, velocities[i], point.accelerations, segment))
+                except BackendError as err:
+                    raise GoalRejected(f"passthrough: point {i}: {err}") from None
                 if time.perf_counter() > deadline:
                     return i + 1 < len(points)
             return False
 
-        try:
-            await _sliced(step)
-        except BackendError as err:
-            raise GoalRejected(f"passthrough: {err}") from None
+        await _sliced(step)
         return b"".join(frames), len(frames)
 
     def _start_trajectory(

@@ -418,6 +418,11 @@ class UrBackend(Backend):
     ) -> bytes:
         """One spline point's 84-byte frame; BackendError for a value the wire cannot carry (a segment
         longer than trajectory_point.MAX_DURATION_S, a non-finite or too large value)."""
+        if segment_time > trajectory_point.MAX_DURATION_S:
+            raise BackendError(
+                f"a segment of {segment_time:.6g} s is longer than the robot can take"
+                f" (at most {trajectory_point.MAX_DURATION_S:g} s between two points)"
+            )
         try:
             return trajectory_point.encode_point(
                 trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time)
