@@ -577,7 +577,15 @@ async def _move(args: argparse.Namespace) -> int:
     async with client:
         try:
             robot = await client.robot(args.robot, cell=args.cell)
-            goal = await robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)
+            # sent as a task of its own, so that Ctrl-C while the accept reply is on its way does not
+            # lose the reply: the goal it names is canceled (_cancel_when_answered)
+            sending = asyncio.ensure_future(
+                robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)
+            )
+            try:
+                goal = await asyncio.shield(sending)
+            except asyncio.CancelledError:
+                return await _cancel_when_answered(sending)
         except GoalRejected as err:
             print(f"rejected: {err.reason}", file=sys.stderr)
             return EXIT_FAILED
@@ -607,6 +615,24 @@ async def _follow(goal: Any, bar: _ProgressBar) -> int:
     bar.end()
     print(json.dumps(result))
     return EXIT_OK if succeeded else EXIT_FAILED
+
+
+async def _cancel_when_answered(sending: asyncio.Future[Any]) -> int:
+    """Ctrl-C while the goal's accept reply is awaited: wait for the reply (at most the request's
+    own timeout) and cancel the goal it names, so no accepted goal is left with nobody following it."""
+    task = asyncio.current_task()
+    if task is not None:
+        task.uncancel()
+    print("interrupted: waiting for the goal's reply to cancel it", file=sys.stderr)
+    try:
+        goal = await sending
+    except GoalRejected as err:
+        print(f"goal not accepted, nothing moves: {err.reason}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except UrDaemonError as err:
+        _fail(err, "no reply to the goal, which may still have been accepted (see `urdaemon cancel`): ")
+        return EXIT_INTERRUPTED
+    return await _cancel_on_interrupt(goal)
 
 
 async def _cancel_on_interrupt(goal: Any) -> int:
