@@ -36,6 +36,7 @@ from urdaemon.cell import parse_cell
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.protocols import trajectory_point
+from urdaemon.publish.codec import SMALL_MESSAGE_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
@@ -52,6 +53,8 @@ robots:
     pose: {xyz: [1.0, 0.0, 0.0]}
     mock: {initial_positions: [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]}
 """
+LARGEST_READ = f"{SMALL_MESSAGE_BYTES // 1024} KiB garbage move (largest read)"
+"""The largest garbage message still read (the size limit of every message but a trajectory)."""
 PUT_SETTLE_S = 0.05
 BASELINE_WINDOW_S = 0.3
 """Length of a window with no input (as long as the longest input takes to be processed)."""
@@ -104,7 +107,7 @@ def inputs(scale: float = 1.0) -> list[Input]:
         Input(
             "1 MB move of 250 000 positions", f"{base}/goal/move", _numbers("positions", n(250_000), "0.1")
         ),
-        Input("64 KiB garbage move (largest read)", f"{base}/goal/move", b"[" + b"1," * n(32_700) + b"1]"),
+        Input(LARGEST_READ, f"{base}/goal/move", b"[" + b"1," * n((SMALL_MESSAGE_BYTES - 3) // 2) + b"1]"),
         Input("64 KiB move of 7 000 positions", f"{base}/goal/move", _numbers("positions", n(7_000))),
         Input(
             f"valid {n(5000)}-point trajectory (pos, vel, acc)",

@@ -27,6 +27,7 @@ from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.fakeur.controller import FakeController
+from urdaemon.publish.codec import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -199,7 +200,13 @@ async def _attack(
             assert (await back.result(timeout=30.0))["status"] == "succeeded"
         # every query of alice was answered (refused, or the trajectory accepted and then canceled)
         assert len(replies) == 2 * sum(1 for *_, put in inputs if not put), replies
-        assert sum(1 for r in replies if "exceeds the limit" in r.get("reason", "")) == 4, replies
+        oversized = sum(
+            1
+            for key, payload, put in inputs
+            if not put
+            and len(payload) > (MAX_MESSAGE_BYTES if key == "goal/trajectory" else SMALL_MESSAGE_BYTES)
+        )
+        assert sum(1 for r in replies if "exceeds the limit" in r.get("reason", "")) == 2 * oversized, replies
         assert sum(1 for r in replies if r.get("accepted") is True) == 2, replies  # the trajectories
         # bob's program ran all along
         assert programs == before, programs  # no program stopped, none started again
