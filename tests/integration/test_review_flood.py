@@ -74,7 +74,7 @@ class _Replies:
 
 
 async def test_a_burst_of_queries_reaches_the_handler_at_most_cap_at_a_time(
-    cell: tuple[Daemon, Client], monkeypatch: pytest.MonkeyPatch
+    cell: tuple[Daemon, Client], monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     """Reproduction: 40 `goal/move` queries on alice, each a 15 KB garbage move (within the size
     limit), arrive while the loop is busy. Before the fix every one was queued on the loop (nothing
@@ -117,6 +117,12 @@ async def test_a_burst_of_queries_reaches_the_handler_at_most_cap_at_a_time(
     assert (await goal_a.result(timeout=20.0))["status"] == "succeeded"
     assert daemon.node is not None
     assert daemon.node.in_flight(key).refused == BURST - MAX_IN_FLIGHT
+    # the log says so at the 1st and 10th refusal, not at each
+    floods = [r.getMessage() for r in caplog.records if "too many in flight" in r.getMessage()]
+    assert floods == [
+        f"{key}: 1 requests refused as too many in flight (a client floods it)",
+        f"{key}: 10 requests refused as too many in flight (a client floods it)",
+    ], floods
 
 
 async def test_a_burst_of_stream_commands_is_acted_on_only_by_its_newest(

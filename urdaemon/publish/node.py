@@ -74,6 +74,12 @@ class _InFlight:
         with self._lock:
             self._count -= 1
 
+    def log_refusals(self, key: str) -> None:
+        """Say so at the 1st, 10th, 100th, ... refusal: a flood logs a handful of lines, not one each."""
+        refused = self.refused
+        if refused > 0 and 10 ** (len(str(refused)) - 1) == refused:
+            log.warning("%s: %d requests refused as too many in flight (a client floods it)", key, refused)
+
 
 class _Latest:
     """A subscriber's newest sample not yet handled, and how many it replaced (thread-safe).
@@ -242,6 +248,7 @@ class ZenohNode:
                 return
             if not flight.enter():
                 _refuse_query(query, busy_refusal(key), error=False, answer=answer)
+                flight.log_refusals(key)
                 return
             self._to_loop_counted(flight, handler, query)
 
