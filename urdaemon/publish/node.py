@@ -230,7 +230,8 @@ class ZenohNode:
         naming the key to ask, on Zenoh's thread, and never acts. With ``any_id`` (a key with one
         ``*`` chunk, the goal results) any concrete key matching it is handled and a wildcard query is
         not answered. A payload larger than ``max_bytes`` is refused before anyone reads it, with
-        ``{answer: false, "reason": ...}``.
+        ``{answer: false, "reason": ...}``, and so is a query arriving while ``MAX_IN_FLIGHT`` of
+        this key's queries wait for the loop ("busy: too many requests in flight on <key>").
         """
 
         def on_query(query: Any) -> None:
@@ -265,7 +266,8 @@ class ZenohNode:
 
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
-        ``handler(query)`` runs on the loop for every query; the handler decides whether to reply."""
+        ``handler(query)`` runs on the loop for every query; the handler decides whether to reply.
+        Beyond ``MAX_IN_FLIGHT`` queries waiting for the loop, a query gets no answer from it."""
 
         def on_query(query: Any) -> None:
             if flight.enter():
