@@ -217,6 +217,7 @@ class RobotRuntime:
                 await self.backend.run(self._on_cycle)
                 reason = "backend stopped"
             except asyncio.CancelledError:
+                self._closing = True  # before anything else: no request may start motion from now on
                 self._end_motion(SHUTTING_DOWN)
                 raise
             except Exception as err:  # any failure of one robot is contained here
