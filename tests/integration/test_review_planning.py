@@ -393,3 +393,26 @@ async def test_a_passthrough_segment_too_long_for_the_robot_is_refused_before_ac
         after = Query(cell.key("goal/trajectory"), trajectory(5, passthrough=True))
         cell.runtime._on_trajectory_goal(after)
         assert (await after.answer())["accepted"] is True
+
+
+async def test_a_passthrough_goal_the_backend_fails_to_send_ends_with_one_result() -> None:
+    """Reproduction: the backend failed (a bug) after ``accept_external``: the client heard "accepted:
+    false, internal error" while the controller kept the EXTERNAL goal (every later goal "busy").
+    Now nothing is in limbo: the goal was accepted, so it is answered so and ends ABORTED, once."""
+    async with alice() as cell:
+
+        def broken(goal_id: str, frames: bytes, count: int, on_result: Any) -> None:
+            raise RuntimeError("socket gone")
+
+        cell.backend.start_encoded_passthrough = broken  # type: ignore[method-assign]
+        goal = Query(cell.key("goal/trajectory"), trajectory(5, passthrough=True))
+        cell.runtime._on_trajectory_goal(goal)
+        answer = await goal.answer()
+        assert answer["accepted"] is True, answer
+        results = [r for r in cell.node.results() if r.get("goal_id") == answer["goal_id"]]
+        assert [r["status"] for r in results] == ["aborted"], results
+        assert "internal error: RuntimeError: socket gone" in results[0]["reason"]
+        assert cell.runtime.controller.mode == "idle"
+        after = Query(cell.key("goal/trajectory"), trajectory(5))
+        cell.runtime._on_trajectory_goal(after)
+        assert (await after.answer())["accepted"] is True
