@@ -347,6 +347,10 @@ async def _goes_down(cell: Cell, link: str) -> None:
     """Kill ``link`` and wait until alice is seen not ready (status goes out on every change)."""
     sub = cell.client.subscribe(cell.alice.keys.status, 1000)
     try:
+        # a first status (they also go out at 2 Hz) proves the subscription reached the daemon: a
+        # link the daemon repairs within milliseconds (reverse) is not ready only that long, and a
+        # subscription still on its way on a busy machine would miss it
+        await sub.get_json(timeout=10.0)
         await _kill(cell, link)
         for _ in range(40):  # the status also goes out at 2 Hz: at most ~20 s
             if not (await sub.get_json(timeout=10.0))["ready"]:
