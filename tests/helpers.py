@@ -7,6 +7,7 @@ import asyncio
 import contextlib
 import io
 import logging
+import math
 import secrets
 import signal
 import socket
@@ -14,10 +15,10 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 __all__ = [
     "UR_PORTS",
@@ -295,3 +296,31 @@ def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:
             sink.append(line)
 
     threading.Thread(target=pump, name="stderr-drain", daemon=True).start()
+
+
+def swing_trajectory(
+    points: int, home: Sequence[float], *, passthrough: bool = False, last_segment: float = 1.0
+) -> dict[str, Any]:
+    """A valid trajectory goal of ``points`` points with velocities and accelerations, 10 ms apart: a
+    slow swing of 0.05 rad from ``home``, its last point at rest ``last_segment`` s after the one
+    before (benchmarks/input_stalls.py, a script of its own, builds the same goal)."""
+    body: list[dict[str, Any]] = []
+    for k in range(points - 1):
+        t = 0.5 + k * 0.01
+        body.append(
+            {
+                "positions": [round(h + 0.05 * (1 - math.cos(t)), 6) for h in home],
+                "velocities": [round(0.05 * math.sin(t), 6)] * 6,
+                "accelerations": [round(0.05 * math.cos(t), 6)] * 6,
+                "time_from_start": round(t, 6),
+            }
+        )
+    end = round(0.5 + (points - 2) * 0.01 + last_segment, 6)
+    rest = body[-1]["positions"] if body else list(home)
+    body.append(
+        {"positions": rest, "velocities": [0.0] * 6, "accelerations": [0.0] * 6, "time_from_start": end}
+    )
+    goal: dict[str, Any] = {"points": body}
+    if passthrough:
+        goal["passthrough"] = True
+    return goal

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import math
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from tests.helpers import swing_trajectory
 from tests.integration.conftest import TWO_MOCKS
 from urdaemon.backends.mock import MockBackend
 from urdaemon.cell import parse_cell
@@ -215,30 +215,7 @@ async def alice() -> AsyncIterator[Cell]:
 
 def trajectory(points: int, *, passthrough: bool = False, last_segment: float = 1.0) -> dict[str, Any]:
     """A valid goal of ``points`` points with velocities and accelerations (a slow swing from rest)."""
-    body: list[dict[str, Any]] = []
-    for k in range(points - 1):
-        t = 0.5 + k * 0.01
-        body.append(
-            {
-                "positions": [round(h + 0.05 * (1 - math.cos(t)), 6) for h in HOME],
-                "velocities": [round(0.05 * math.sin(t), 6)] * 6,
-                "accelerations": [round(0.05 * math.cos(t), 6)] * 6,
-                "time_from_start": round(t, 6),
-            }
-        )
-    end = round(0.5 + (points - 2) * 0.01 + last_segment, 6)
-    body.append(
-        {
-            "positions": body[-1]["positions"],
-            "velocities": [0.0] * 6,
-            "accelerations": [0.0] * 6,
-            "time_from_start": end,
-        }
-    )
-    goal: dict[str, Any] = {"points": body}
-    if passthrough:
-        goal["passthrough"] = True
-    return goal
+    return swing_trajectory(points, HOME, passthrough=passthrough, last_segment=last_segment)
 
 
 def planning(cell: Cell) -> bool:

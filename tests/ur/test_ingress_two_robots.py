@@ -14,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import threading
 from collections import Counter
 from collections.abc import AsyncIterator
@@ -23,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import fake_address, free_tcp_port
+from tests.helpers import fake_address, free_tcp_port, swing_trajectory
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.fakeur.controller import FakeController
@@ -63,39 +62,17 @@ robots:
 """
 
 
-def _trajectory(points: int) -> dict[str, Any]:
-    """A valid trajectory with velocities and accelerations at every point, 10 ms apart (a slow
-    swing of 0.05 rad from rest), then at rest a second after the last."""
-    body = []
-    for k in range(points):
-        t = 0.5 + k * 0.01
-        body.append(
-            {
-                "positions": [round(h + 0.05 * (1 - math.cos(t)), 6) for h in HOME],
-                "velocities": [round(0.05 * math.sin(t), 6)] * 6,
-                "accelerations": [round(0.05 * math.cos(t), 6)] * 6,
-                "time_from_start": round(t, 6),
-            }
-        )
-    end = round(body[-1]["time_from_start"] + 1.0, 6)  # type: ignore[operator]
-    body.append(
-        {
-            "positions": body[-1]["positions"],
-            "velocities": [0.0] * 6,
-            "accelerations": [0.0] * 6,
-            "time_from_start": end,
-        }
-    )
-    return {"points": body}
-
-
 def _worst_inputs() -> list[tuple[str, bytes, bool]]:
     """(key under ingress/alice/, payload, put) of the worst inputs of issue 13's finding 2, as large
     as the daemon used to take them (2 MiB)."""
     numbers = ",".join(["0.1"] * 500_000)
     return [
         ("goal/move", f'{{"positions": [{numbers}]}}'.encode(), False),  # a 2 MB move
-        ("goal/trajectory", json.dumps(_trajectory(4999)).encode(), False),  # 5 000 points, ~1.3 MB
+        (
+            "goal/trajectory",
+            json.dumps(swing_trajectory(5000, HOME)).encode(),
+            False,
+        ),  # 5 000 points, ~1.3 MB
         ("command/joint_position", json.dumps({"positions": [0.5] * 400_000}).encode(), True),
         ("service/set_payload", b'{"mass": ' + b"[" * 30_000 + b"]" * 30_000 + b"}", False),
         ("goal/move", b"x" * 1_000_000, False),
