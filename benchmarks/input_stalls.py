@@ -163,7 +163,7 @@ def _fields(count: int) -> bytes:
 class PassthroughMock(MockBackend):
     """A mock robot that takes passthrough goals: their points are encoded as the ``ur`` backend
     encodes them (84-byte trajectory-point frames), then dropped; the robot "runs" the goal until it is
-    canceled. ``start_passthrough`` is the backend API that encodes every point in one call."""
+    canceled."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -177,10 +177,6 @@ class PassthroughMock(MockBackend):
 
     def start_encoded_passthrough(self, goal_id: str, frames: bytes, count: int, on_result: Any) -> None:
         self.running = goal_id
-
-    def start_passthrough(self, goal_id: str, points: Any, on_result: Any) -> None:
-        frames = b"".join(self.encode_passthrough_point(*point) for point in points)
-        self.start_encoded_passthrough(goal_id, frames, len(points), on_result)
 
     def cancel_passthrough(self) -> None:
         self.running = None

@@ -135,11 +135,6 @@ class HandBackend(MockBackend):
         assert len(frames) == count * trajectory_point.FRAME_BYTES
         self.passthrough = (goal_id, count)
 
-    def start_passthrough(self, goal_id: str, points: Any, on_result: Any) -> None:
-        """The backend API before the review: every point encoded here, in one turn."""
-        frames = b"".join(self.encode_passthrough_point(*p) for p in points)
-        self.start_encoded_passthrough(goal_id, frames, len(points), on_result)
-
     def cancel_passthrough(self) -> None:
         self.passthrough = None
 

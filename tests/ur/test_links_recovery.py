@@ -88,9 +88,8 @@ async def test_absurd_payload_and_force_numbers_are_clear_refusals() -> None:
         with pytest.raises(BackendError, match="force mode"):
             await backend.force_mode(wrench)
         huge = ((1e9, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0,) * 6, None, 1.0)
-        results: list[tuple[str, int]] = []
         with pytest.raises(BackendError, match="trajectory"):
-            backend.start_passthrough("g1", [huge], lambda goal, code: results.append((goal, code)))
+            backend.encode_passthrough_point(*huge)  # refused before any START could go out
         assert backend.passthrough_problem() is None, "no START went out: no passthrough is running"
         await run.cycles_pass(10)
         assert program_is_running(run), "the links survived the refusals"

@@ -112,15 +112,6 @@ class Backend(abc.ABC):
         """Why a passthrough trajectory cannot start now (None when it can)."""
         return f"the {self.kind} backend has no robot-side interpolation (passthrough)"
 
-    def start_passthrough(
-        self,
-        goal_id: str,
-        points: Sequence[tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...] | None, float]],
-        on_result: Callable[[str, int], None],
-    ) -> None:
-        """Send (positions, velocities, accelerations or None, segment time) points for the robot to run."""
-        raise BackendError(self.passthrough_problem() or "passthrough unavailable")
-
     def encode_passthrough_point(
         self,
         positions: tuple[float, ...],

@@ -399,16 +399,6 @@ class UrBackend(Backend):
             return f"passthrough goal {self._passthrough[0]} is still running on the robot"
         return None
 
-    def start_passthrough(
-        self,
-        goal_id: str,
-        points: Sequence[tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...] | None, float]],
-        on_result: Callable[[str, int], None],
-    ) -> None:
-        """START(n) on the reverse socket, then the n spline points on the trajectory socket."""
-        frames = b"".join(self.encode_passthrough_point(*point) for point in points)
-        self.start_encoded_passthrough(goal_id, frames, len(points), on_result)
-
     def encode_passthrough_point(
         self,
         positions: tuple[float, ...],
