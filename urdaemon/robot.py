@@ -917,15 +917,8 @@ async def _release(owned: list[object]) -> None:
 
 async def _check_sliced(check: TrajectoryCheck) -> TrajectoryPlanner:
     """Check a trajectory's points in slices (``_sliced``), letting every robot's cycle run between."""
-
-    def step(deadline: float) -> bool:
-        while check.step(CHECK_STEPS):
-            if time.perf_counter() > deadline:
-                return True
-        return False
-
     try:
-        await _sliced(step)
+        await _sliced(_until_deadline(lambda: check.step(CHECK_STEPS)))
         return check.result()
     finally:
         check.close()
@@ -939,14 +932,20 @@ async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessag
 
 async def _plan_tail(planner: TrajectoryPlanner) -> None:
     """Plan a trajectory's tail in slices (``_sliced``), letting every robot's cycle run between."""
+    await _sliced(_until_deadline(planner.plan_next))
+
+
+def _until_deadline(advance: Callable[[], bool]) -> Callable[[float], bool]:
+    """A ``_sliced`` step: call ``advance`` (True while there is more) until it is done or the slice's
+    deadline passed; True while there is more."""
 
     def step(deadline: float) -> bool:
-        while planner.plan_next():
+        while advance():
             if time.perf_counter() > deadline:
                 return True
         return False
 
-    await _sliced(step)
+    return step
 
 
 def _payload(query: Any) -> bytes | None:
