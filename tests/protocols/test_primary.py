@@ -384,8 +384,19 @@ def test_robot_mode_data_without_the_reserved_byte_decodes() -> None:
     body = struct.pack(">Q7?bB3d", 5, True, True, True, False, True, False, False, 5, 0, 1.0, 0.5, 1.0)
     [state] = daemon().receive_data(frame(16, sub(0, body)))
     assert isinstance(state, RobotState)
-    expected = RobotModeData(5, True, True, True, False, True, False, False, 5, 0, 1.0, 0.5, 1.0)
+    expected = RobotModeData(5, True, True, True, False, True, False, False, 5, 0, 1.0, 0.5, 1.0, None)
     assert state.subpackages == (expected,)
+
+
+def test_robot_mode_data_is_46_bytes_in_the_cb3_layout_and_47_with_the_reserved_byte() -> None:
+    """A CB3 controller sends ROBOT_MODE_DATA without the e-Series' reserved byte (the fake used to
+    send 47 bytes for every version)."""
+    for reserved, length in ((None, 46), (0, 47), (9, 47)):
+        data = encode(RobotState((RobotModeData(robot_mode=7, reserved=reserved),)))
+        assert struct.unpack_from(">I", data, 5)[0] == length
+        [state] = daemon().receive_data(data)
+        assert isinstance(state, RobotState)
+        assert state.subpackages == (RobotModeData(robot_mode=7, reserved=reserved),)
 
 
 def test_joint_data_is_transposed_from_per_joint_records() -> None:

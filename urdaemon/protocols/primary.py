@@ -191,7 +191,8 @@ _ZERO6: Final[_Vec6] = (0.0,) * _JOINTS
 class RobotModeData:
     """ROBOT_MODE_DATA (0): uint64 timestamp, 7 bools, int8 robot_mode (§6.1), uint8 control_mode, 3 doubles.
 
-    URSim 5.8 appends one reserved byte (47-byte sub-package); we send it as 0 and ignore it on receipt.
+    e-Series controllers (URSim 5.8) append one reserved byte (47-byte sub-package); CB3 controllers do
+    not (46 bytes). ``reserved`` is that byte, or None for the CB3 layout (sent and received as such).
     """
 
     timestamp: int = 0
@@ -207,6 +208,7 @@ class RobotModeData:
     target_speed_fraction: float = 0.0
     speed_scaling: float = 0.0
     target_speed_fraction_limit: float = 0.0
+    reserved: int | None = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -622,9 +624,7 @@ def _vec(values: Sequence[Any], name: str) -> Sequence[Any]:
     return values
 
 
-def _flat_codec(
-    cls: type[Any], layout: str, pad: bytes = b""
-) -> tuple[Callable[[bytes], Any], Callable[[Any], bytes]]:
+def _flat_codec(cls: type[Any], layout: str) -> tuple[Callable[[bytes], Any], Callable[[Any], bytes]]:
     """Decoder and encoder for a sub-package whose fields are exactly ``layout``'s values, in order."""
     packer = struct.Struct(layout)
     names = tuple(f.name for f in fields(cls))
@@ -633,7 +633,7 @@ def _flat_codec(
         return cls(*packer.unpack_from(body))
 
     def encode(sub: Any) -> bytes:
-        return packer.pack(*[getattr(sub, name) for name in names]) + pad
+        return packer.pack(*[getattr(sub, name) for name in names])
 
     return decode, encode
 
@@ -764,7 +764,22 @@ def _encode_force(sub: ForceModeData) -> bytes:
 _Decoder: TypeAlias = Callable[[bytes], Any]
 _Encoder: TypeAlias = Callable[[Any], bytes]
 
-_robot_mode_codec = _flat_codec(RobotModeData, ">Q7?bB3d", pad=b"\x00")  # reserved byte as in 5.8
+_ROBOT_MODE: Final = struct.Struct(">Q7?bB3d")
+_ROBOT_MODE_RESERVED: Final = struct.Struct(">B")
+
+
+def _decode_robot_mode(body: bytes) -> RobotModeData:
+    values = _ROBOT_MODE.unpack_from(body)
+    reserved = body[_ROBOT_MODE.size] if len(body) > _ROBOT_MODE.size else None
+    return RobotModeData(**dict(zip(_ROBOT_MODE_FIELDS, values, strict=True)), reserved=reserved)
+
+
+def _encode_robot_mode(sub: RobotModeData) -> bytes:
+    body = _ROBOT_MODE.pack(*[getattr(sub, name) for name in _ROBOT_MODE_FIELDS])
+    return body if sub.reserved is None else body + _ROBOT_MODE_RESERVED.pack(sub.reserved)
+
+
+_ROBOT_MODE_FIELDS: Final = tuple(f.name for f in fields(RobotModeData))[:-1]
 _tool_codec = _flat_codec(ToolData, ">BBddfBffB")
 _additional_codec = _flat_codec(AdditionalInfo, ">B??B")
 _tool_comm_codec = _flat_codec(ToolCommInfo, ">?iiiff")
@@ -772,7 +787,7 @@ _tool_mode_codec = _flat_codec(ToolModeInfo, ">BBB")
 
 # type byte -> (class, decoder, encoder): the dispatch table both directions use
 _SUB_CODECS: Final[dict[int, tuple[type[Any], _Decoder, _Encoder]]] = {
-    SubPackageType.ROBOT_MODE_DATA: (RobotModeData, *_robot_mode_codec),
+    SubPackageType.ROBOT_MODE_DATA: (RobotModeData, _decode_robot_mode, _encode_robot_mode),
     SubPackageType.JOINT_DATA: (JointData, _decode_joint_data, _encode_joint_data),
     SubPackageType.TOOL_DATA: (ToolData, *_tool_codec),
     SubPackageType.MASTERBOARD_DATA: (MasterboardData, _decode_masterboard, _encode_masterboard),
