@@ -236,8 +236,10 @@ async def test_dashboard_bring_up_with_refusals_like_a_real_controller() -> None
         assert banner.is_standard
         await link.send(dash.GetRobotMode())
         assert (await link.next(dash.RobotModeReply)).mode is RobotMode.POWER_OFF
+        controller.emergency_stop()
         await link.send(dash.BrakeRelease())
-        assert (await link.next(dash.CommandReply)).success is False
+        assert (await link.next(dash.CommandReply)).success is False, "no power-on while e-stopped"
+        controller.release_emergency_stop()
         await link.send(dash.Play())
         assert (await link.next(dash.CommandReply)).success is False, "play while powered off is refused"
         await link.send(dash.PowerOn())
@@ -330,4 +332,10 @@ async def test_a_stall_pauses_the_streams_and_protective_stop_shows_in_rtde() ->
 
 def test_ports_default_to_urs_standard_ports() -> None:
     ports = FakePorts()
-    assert (ports.dashboard, ports.primary, ports.secondary, ports.rtde) == (29999, 30001, 30002, 30004)
+    assert (ports.dashboard, ports.primary, ports.secondary, ports.realtime, ports.rtde) == (
+        29999,
+        30001,
+        30002,
+        30003,
+        30004,
+    )

@@ -5,11 +5,21 @@ fakes can use the standard ports side by side on 127.0.0.5, 127.0.0.6, … (the 
 tests take theirs from a run-specific range, so two runs never meet on one). Its clock runs at the
 controller rate (500 Hz e-Series, 125 Hz CB3); every cycle it steps the running control program and
 the arm, then sends RTDE outputs to every client whose requested frequency is due (drift-free on the
-controller's own time grid); the primary and secondary interfaces get the robot state at 10 Hz.
+controller's own time grid); the primary and secondary interfaces get the robot state at 10 Hz, the
+real-time interface (30003) every cycle, encoded only while a client is connected.
 
-Programs start in two ways, as on a real controller: a ``def`` program arriving on the primary or
-secondary interface (headless), or ``play`` on the dashboard with a loaded program, which (like the
-External Control URCap) fetches the script from the daemon's script-sender port.
+Programs start in two ways, as on a real controller: a script arriving on the primary, secondary or
+real-time interface (headless), or ``play`` on the dashboard with a loaded program: the default
+External Control program (which, like the URCap, fetches the script from the daemon's script-sender
+port) or a URScript file in the programs directory. With ``interpreter`` on, every script runs in the
+URScript interpreter (``fakeur.urscript``): a ``def`` program replaces the running one, a ``sec``
+program runs beside it, bare lines run as a program of their own; a compile or runtime error is a
+RUNTIME_EXCEPTION message naming line and column. Off, the Python stand-in ``ProgramRunner`` runs
+our control script (until the interpreter replaces it).
+
+No client can stall the controller: a request/response service stops reading a client that does not
+read its replies (TCP flow control), a stream drops a client whose unsent backlog passes
+``MAX_BACKLOG_BYTES``, and scripts are handled one at a time between controller cycles.
 """
 
 from __future__ import annotations
@@ -17,9 +27,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import socket
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.backends.clock import TickClock, tick_clock
@@ -27,9 +39,11 @@ from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
 from urdaemon.errors import ProtocolError
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
 from urdaemon.fakeur.faults import FaultInjector
+from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
+from urdaemon.protocols import realtime as rt
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
@@ -46,7 +60,20 @@ STATE_PERIOD_S = 0.1
 READ_CHUNK = 65536
 SERIAL_NUMBER = "20235500001"
 PROGRAMS_DIR = "/programs"
-DEFAULT_URCAP_PROGRAM = f"{PROGRAMS_DIR}/external_control.urp"
+"""Where programs live when no directory is given (as on URSim); only the default program exists there."""
+EXTERNAL_CONTROL_PROGRAM = "external_control.urp"
+"""The default program: the External Control URCap's, which fetches its script from the daemon."""
+DEFAULT_URCAP_PROGRAM = f"{PROGRAMS_DIR}/{EXTERNAL_CONTROL_PROGRAM}"
+SCRIPT_SUFFIXES = (".script", ".urscript")
+"""Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
+MAX_BACKLOG_BYTES = 1 << 20
+"""A streaming client that leaves more than this unsent (it does not read) is dropped."""
+INTERPRETER = False
+"""Run scripts in the URScript interpreter by default (else the ProgramRunner stand-in runs them)."""
+CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
+"""The single-line commands a controller takes on its script ports besides URScript (§2.4 step 6)."""
+KINEMATICS_CALIBRATED = 0
+"""KINEMATICS_INFO ``calibration_status`` of a calibrated arm: what URSim sends (ur-protocols.md §2.2)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,7 +83,19 @@ class FakePorts:
     dashboard: int = 29999
     primary: int = 30001
     secondary: int = 30002
+    realtime: int = 30003
     rtde: int = 30004
+
+
+@dataclass
+class _Script:
+    """A program the interpreter runs: its name, its run (``ScriptRun``) and the host its builtins use."""
+
+    name: str
+    run: Any
+    host: ScriptHost
+    failure: str | None = None
+    """Why the interpreter itself failed while running it (a bug there, not the program's error)."""
 
 
 @dataclass
@@ -134,6 +173,8 @@ class FakeController:
         urcap: tuple[str, int] | None = None,
         faults: FaultInjector | None = None,
         rtde_versions: tuple[int, ...] = (1, 2),
+        programs: str | Path | None = None,
+        interpreter: bool | None = None,
     ) -> None:
         self.model = load_ur_model(model) if isinstance(model, str) else model
         self.address = address
@@ -150,9 +191,24 @@ class FakeController:
         frequency, no recipe ids), which a client must fall back to when v2 is refused."""
         self.urcap = urcap
         """Where a loaded External Control program fetches its script: the daemon's script sender."""
-        self.loaded_program: str | None = DEFAULT_URCAP_PROGRAM if urcap else None
-        self.programs = {DEFAULT_URCAP_PROGRAM}
+        self.programs_dir = Path(programs) if programs is not None else None
+        """Where ``load`` finds program files (relative names resolve under it); None: URSim's default
+        directory, holding only the default External Control program."""
+        base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
+        self.default_program = f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
+        self.loaded_program: str | None = self.default_program if urcap else None
+        self.interpreter = INTERPRETER if interpreter is None else interpreter
+        """Scripts run in the URScript interpreter (else in the ProgramRunner stand-in)."""
+        self.input_registers = InputRegisters()
+        """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
         self.program_name: str | None = None
+        self._script: _Script | None = None
+        self._secondary: list[_Script] = []
+        self._input_times: dict[str, float] = {}
+        """Controller time each RTDE input variable last arrived (what the watchdogs check)."""
+        self._release_when_idle = False
+        """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
+        self._realtime_clients: list[tuple[rt.RealtimeConnection, asyncio.StreamWriter]] = []
         self._runner: ProgramRunner | None = None
         self._runner_task: asyncio.Task[None] | None = None
         self._servers: list[asyncio.Server] = []
@@ -183,6 +239,7 @@ class FakeController:
             ("dashboard", self.ports.dashboard, self._serve_dashboard),
             ("primary", self.ports.primary, self._serve_primary),
             ("secondary", self.ports.secondary, self._serve_secondary),
+            ("realtime", self.ports.realtime, self._serve_realtime),
             ("rtde", self.ports.rtde, self._serve_rtde),
         )
         for service, port, handler in handlers:
@@ -200,6 +257,7 @@ class FakeController:
 
     async def close(self) -> None:
         """Stop serving: close every connection and server, stop the program and the clock."""
+        self._end_scripts()
         for server in self._servers:
             server.close()
         for writers in self._writers.values():
@@ -280,11 +338,18 @@ class FakeController:
         runner = self._runner
         if runner is not None:
             runner.step(dt)
+        if self._script is not None or self._secondary:
+            self._step_scripts()
+        if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:
+            self._release_when_idle = False
+            arm.brake_release()
         arm.step(dt)
         self.cycles += 1
         now = arm.timestamp
         if now < self.faults.stalled_until:
             return
+        if self._realtime_clients:
+            self._send_realtime()
         for client in self._rtde_clients:
             if client.streaming and now + 1e-9 >= client.next_due:
                 client.next_due += client.period
@@ -326,6 +391,10 @@ class FakeController:
 
     def _write(self, service: str, writer: asyncio.StreamWriter, data: bytes) -> None:
         if not data or writer.is_closing():
+            return
+        if writer.transport.get_write_buffer_size() > MAX_BACKLOG_BYTES:
+            log.info("%s %s: dropping a client that does not read", self.address, service)
+            writer.close()
             return
         mangled = self.faults.mangle(service, data)
         if mangled.delay_s <= 0.0 and len(mangled.pieces) == 1:
@@ -424,11 +493,16 @@ class FakeController:
             client.conn.send(rtde.OutputsSetup(0 if event.frequency is not None else None, types))
             return
         client.period = 1.0 / frequency
-        client.getters = [_output_getter(name, OUTPUT_VARIABLES[name]) for name in names]
+        client.getters = [
+            _output_getter(name, OUTPUT_VARIABLES[name], self.input_registers) for name in names
+        ]
         client.conn.send(rtde.OutputsSetup(1 if event.frequency is not None else None, types))
 
     def _apply_inputs(self, values: dict[str, Any]) -> None:
         arm, io = self.arm, self.arm.io
+        now = arm.timestamp
+        for name in values:
+            self._input_times[name] = now
         if values.get("speed_slider_mask"):
             self.set_speed_slider(float(values.get("speed_slider_fraction", arm.speed_slider)))
         for kind, shift in (("standard", 0), ("configurable", 8), ("tool", 16)):
@@ -444,13 +518,14 @@ class FakeController:
                     io.analog_out_types |= 1 << (pin + 2)
                 else:
                     io.analog_out_types &= ~(1 << (pin + 2))
+        registers = self.input_registers
         for name, value in values.items():
             if name.startswith("input_int_register_"):
-                io.registers_int[int(name.rsplit("_", 1)[1])] = int(value)
+                registers.ints[int(name.rsplit("_", 1)[1])] = int(value)
             elif name.startswith("input_double_register_"):
-                io.registers_double[int(name.rsplit("_", 1)[1])] = float(value)
+                registers.doubles[int(name.rsplit("_", 1)[1])] = float(value)
             elif name.startswith("input_bit_register_"):
-                io.registers_bit[int(name.rsplit("_", 1)[1])] = bool(value)
+                registers.bits[int(name.rsplit("_", 1)[1])] = bool(value)
 
     # ---- primary (30001) and secondary (30002) ------------------------------------------------------
 
@@ -474,11 +549,78 @@ class FakeController:
         entry = (conn, writer, service)
         self._state_clients.append(entry)  # the state follows on the controller's 10 Hz grid
         try:
-            while data := await reader.read(READ_CHUNK):
-                for event in conn.receive_data(data):
-                    self._on_script(event)
+            await self._read_scripts(reader, writer, conn)
         finally:
             self._state_clients.remove(entry)
+
+    async def _read_scripts(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        conn: prim.PrimaryConnection | rt.RealtimeConnection,
+    ) -> None:
+        """Run the scripts a client sends, one at a time: between two, the controller's cycles and
+        other clients get their turn, and a client that does not read what it is sent is not read."""
+        while data := await reader.read(READ_CHUNK):
+            for event in conn.receive_data(data):
+                if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
+                    self._on_script(event)
+                    await asyncio.sleep(0)
+            await writer.drain()
+
+    # ---- real-time interface (30003) ---------------------------------------------------------------
+
+    async def _serve_realtime(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        conn = rt.RealtimeConnection(Side.ROBOT, self.controller_version)
+        entry = (conn, writer)
+        self._realtime_clients.append(entry)  # the state follows every controller cycle
+        try:
+            await self._read_scripts(reader, writer, conn)
+        finally:
+            self._realtime_clients.remove(entry)
+
+    def _send_realtime(self) -> None:
+        state = self._realtime_state()
+        for conn, writer in self._realtime_clients:
+            conn.send(state)
+            self._write("realtime", writer, conn.data_to_send())
+
+    def _realtime_state(self) -> rt.RealtimeState:
+        arm = self.arm
+        q, qd, qdd = tuple(arm.q), tuple(arm.qd), tuple(arm.qdd)
+        pose = arm.tcp_pose()
+        running = arm.robot_mode is RobotMode.RUNNING
+        program_state = {RuntimeState.PLAYING: 2.0, RuntimeState.PAUSED: 3.0}.get(arm.runtime_state, 1.0)
+        return rt.RealtimeState(
+            time=arm.timestamp,
+            q_target=q,
+            qd_target=qd,
+            qdd_target=qdd,
+            i_target=tuple(arm.current),
+            q_actual=q,
+            qd_actual=qd,
+            i_actual=tuple(arm.current),
+            i_control=tuple(arm.current),
+            tool_vector_actual=pose,
+            tool_vector_target=pose,
+            digital_input_bits=float(arm.io.digital_in),
+            motor_temperatures=(30.0,) * 6,
+            controller_timer=0.0002,
+            robot_mode=float(arm.robot_mode),
+            joint_modes=(253.0 if running else 255.0,) * 6,
+            safety_mode=float(arm.safety_mode),
+            tool_accelerometer_values=(0.0, 0.0, 9.82),
+            speed_scaling=arm.speed_scaling,
+            v_main=48.0,
+            v_robot=48.0 if running else 0.0,
+            v_actual=(48.0 if running else 0.0,) * 6,
+            digital_outputs=float(arm.io.digital_out),
+            program_state=program_state,
+            safety_status=float(arm.safety_mode),
+            payload_mass=arm.payload_mass,
+            payload_cog=tuple(arm.payload_cog),
+            payload_inertia=tuple(arm.payload_inertia),
+        )
 
     def _send_primary(
         self, conn: prim.PrimaryConnection, writer: asyncio.StreamWriter, service: str, message: Any
@@ -492,34 +634,52 @@ class FakeController:
             if service == "primary":
                 self._send_primary(conn, writer, service, message)
 
-    def _on_script(self, event: Any) -> None:
+    def _on_script(self, event: prim.CommandReceived | prim.ProgramReceived) -> None:
         if isinstance(event, prim.CommandReceived):
-            self._controller_command(event.line.strip())
-        elif isinstance(event, prim.ProgramReceived):
-            if event.kind == "sec":
-                return  # secondary programs run beside the main one; nothing here moves the arm
+            line = event.line.strip()
+            if line in CONTROLLER_COMMANDS:
+                self._controller_command(line)
+            elif self.interpreter:
+                self._start_script("script", line + "\n")
+            else:
+                self._broadcast(
+                    prim.RuntimeExceptionMessage(1, 1, f"compile_error_name_not_found:{line.split()[0]}:")
+                )
+        elif self.interpreter:
+            self._start_script(event.name, event.text)
+        elif event.kind == "def":  # the stand-in runs no secondary program
             self._start_program(event.name, event.text)
 
     def _controller_command(self, line: str) -> None:
         arm = self.arm
-        if line == "power on":
+        if line == prim.ControllerCommand.POWER_ON:
             arm.power_on()
-        elif line == "power off":
-            arm.power_off()
-        elif line == "set robotmode run":
-            arm.brake_release()
-        elif line == "set unlock protective stop":
-            arm.unlock_protective_stop()
-        elif line == "stop program":
+        elif line == prim.ControllerCommand.POWER_OFF:
             self._stop_program()
-        else:
-            self._broadcast(
-                prim.RuntimeExceptionMessage(1, 1, f"compile_error_name_not_found:{line.split()[0]}:")
-            )
+            arm.power_off()
+        elif line == prim.ControllerCommand.BRAKE_RELEASE:
+            self._brake_release()
+        elif line == prim.ControllerCommand.UNLOCK_PROTECTIVE_STOP:
+            arm.unlock_protective_stop()
+        elif line == prim.ControllerCommand.STOP_PROGRAM:
+            self._stop_program()
+
+    def _brake_release(self) -> str | None:
+        """Release the brakes; from POWER_OFF power on first, then release once IDLE (as URSim does)."""
+        arm = self.arm
+        if arm.robot_mode in (RobotMode.POWER_OFF, RobotMode.BOOTING):
+            reason = arm.power_on()
+            if reason is None:
+                self._release_when_idle = True
+            return reason
+        return arm.brake_release()
 
     # ---- programs ----------------------------------------------------------------------------------------
 
     def _start_program(self, name: str, text: str) -> None:
+        if self.interpreter:
+            self._start_script(name, text)
+            return
         reason = self.arm.start_program()
         if reason is not None:
             self._broadcast(prim.TextMessage(f"program {name} not started: {reason}"))
@@ -566,7 +726,126 @@ class FakeController:
 
     def _stop_program(self) -> None:
         self._stop_runner()
+        self._end_scripts()
         self.arm.stop_program()
+
+    # ---- programs in the interpreter ---------------------------------------------------------------
+
+    def _start_script(self, name: str, text: str) -> None:
+        """Compile ``text``; a ``sec`` program runs beside the main one, any other replaces it."""
+        from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
+
+        major, minor = self.controller_version[:2]
+        try:
+            program = compile_program(text, series="e" if major >= 5 else "cb3", version=(major, minor))
+        except ScriptCompileError as err:
+            self._broadcast(prim.RuntimeExceptionMessage(err.line, err.column, err.message))
+            return
+        if program.kind == "sec":
+            host = self._script_host()
+            self._secondary.append(_Script(name, program.start(host), host))
+            return
+        self._stop_runner()
+        if self._script is not None:
+            self._end_script(self._script)
+        reason = self.arm.start_program()
+        if reason is not None:
+            self._broadcast(prim.TextMessage(f"program {name} not started: {reason}"))
+            return
+        host = self._script_host()
+        self._script = _Script(name, program.start(host), host)
+        self.program_name = name
+        self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))
+
+    def _script_host(self) -> ScriptHost:
+        major, minor = self.controller_version[:2]
+        return ScriptHost(
+            self.arm,
+            step_time=self.step_time,
+            series="e" if major >= 5 else "cb3",
+            version=(major, minor),
+            local_address=self.address,  # a real robot's connections come from its own address
+            message=self._script_message,
+            input_registers=self.input_registers,
+        )
+
+    def _script_message(self, kind: str, text: str) -> None:
+        if kind == "popup":
+            self._broadcast(prim.popup_message(text))
+        elif kind == "runtime":
+            self._broadcast(prim.RuntimeExceptionMessage(0, 0, text))
+        else:
+            self._broadcast(prim.TextMessage(text))
+
+    def _step_scripts(self) -> None:
+        """One cycle of the programs: the main one while it plays (not while paused), then every
+        ``sec`` program; a program that has ended is closed; the main one's RTDE watchdogs are checked."""
+        script = self._script
+        if script is not None:
+            state = self.arm.runtime_state
+            if state is RuntimeState.PLAYING:
+                self._step(script)
+                if script.run.done or script.failure is not None:
+                    self._end_script(script)
+                else:
+                    self._check_watchdogs(script)
+            elif state is RuntimeState.STOPPED:  # stopped from outside: power off, stop, ...
+                self._end_script(script)
+        for sec in list(self._secondary):
+            self._step(sec)
+            if sec.run.done or sec.failure is not None:
+                self._end_script(sec)
+
+    def _step(self, script: _Script) -> None:
+        try:
+            script.run.step()
+        except Exception as err:  # the interpreter's own fault ends this program, not the controller
+            log.exception("%s program %s: the interpreter failed", self.address, script.name)
+            script.failure = f"{type(err).__name__}: {err}"
+
+    def _check_watchdogs(self, script: _Script) -> None:
+        watchdogs = script.host.watchdogs
+        if not watchdogs:
+            return
+        now = self.arm.timestamp
+        for watchdog in list(watchdogs.values()):
+            if watchdog.min_frequency <= 0 or watchdog.action == "ignore":
+                continue
+            last = max(self._input_times.get(watchdog.variable, -math.inf), watchdog.since)
+            if now - last <= 1.0 / watchdog.min_frequency + 1e-9:
+                continue
+            text = f"RTDE watchdog: {watchdog.variable} not updated at {watchdog.min_frequency:g} Hz"
+            self._broadcast(prim.TextMessage(text))
+            if watchdog.action == "pause":
+                self.arm.pause_program()
+            else:
+                self._stop_program()
+            return
+
+    def _end_script(self, script: _Script) -> None:
+        """``script`` ends (by itself, by an error or stopped): report why, close what it opened."""
+        run = script.run
+        if not run.done:
+            with contextlib.suppress(Exception):
+                run.stop()
+        script.host.close()
+        error = run.error
+        if error is not None:
+            self._broadcast(prim.RuntimeExceptionMessage(error.line, error.column, error.message))
+        elif script.failure is not None:
+            self._broadcast(prim.RuntimeExceptionMessage(0, 0, script.failure))
+        if script in self._secondary:
+            self._secondary.remove(script)
+            return
+        if self._script is script:
+            self._script = None
+            self.arm.stop_program()
+        log.info("%s program %s ended", self.address, script.name)
+        self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STOPPED", script.name))
+
+    def _end_scripts(self) -> None:
+        for script in [*self._secondary, *([self._script] if self._script is not None else [])]:
+            self._end_script(script)
 
     async def _play_urcap(self) -> None:
         """What the External Control URCap does on play: fetch the script, then run it."""
@@ -632,11 +911,11 @@ class FakeController:
         if isinstance(command, dash.PowerOn):
             return "Powering on" if arm.power_on() is None else "Failed to execute: power on"
         if isinstance(command, dash.PowerOff):
+            self._stop_program()
             arm.power_off()
-            self._stop_runner()
             return "Powering off"
         if isinstance(command, dash.BrakeRelease):
-            return "Brake releasing" if arm.brake_release() is None else "Failed to execute: brake release"
+            return "Brake releasing" if self._brake_release() is None else "Failed to execute: brake release"
         if isinstance(command, dash.UnlockProtectiveStop):
             return (
                 "Protective stop releasing"
@@ -644,18 +923,26 @@ class FakeController:
                 else ("Cannot unlock protective stop: the robot is not in protective stop or still moving")
             )
         if isinstance(command, dash.Load):
-            if command.path not in self.programs:
+            path = self._program_path(command.path)
+            if path is None:
                 return f"File not found: {command.path}"
-            self.loaded_program = command.path
-            return f"Loading program: {command.path}"
+            self._stop_program()
+            self.loaded_program = path
+            return f"Loading program: {path}"
         if isinstance(command, dash.Play):
-            if program is None or arm.start_program() is not None:
-                return "Failed to execute: play"
-            if self._runner is None:
-                task = asyncio.get_running_loop().create_task(self._play_urcap())
-                self._tasks.add(task)
-                task.add_done_callback(self._tasks.discard)
-            return "Starting program"
+            return "Starting program" if self._play() is None else "Failed to execute: play"
+        if isinstance(command, dash.RestartSafety):
+            self._stop_program()
+            arm.power_off()
+            if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
+                arm.safety_mode = SafetyMode.NORMAL
+            return "Restarting safety"
+        if isinstance(command, dash.IsProgramSaved):
+            return dash.program_saved_text(program is not None, _basename(program))
+        if isinstance(command, dash.GetOperationalMode) and self.controller_version[0] >= 5:
+            return dash.operational_mode_text(dash.OperationalMode.NONE)  # no mode password set
+        if isinstance(command, dash.GetUserRole) and self.controller_version[0] < 5:
+            return dash.user_role_text(dash.UserRole.PROGRAMMER)  # no user password set
         if isinstance(command, dash.Pause):
             if arm.runtime_state is not RuntimeState.PLAYING:
                 return "Failed to execute: pause"
@@ -692,6 +979,8 @@ class FakeController:
             return SERIAL_NUMBER
         if isinstance(command, dash.GetRobotModel):
             return self.model.model.upper().removesuffix("E")
+        if isinstance(command, dash.GetOperationalMode | dash.GetUserRole):  # not on this series
+            return dash.unknown_command_text(command.KEYWORD)
         if isinstance(command, dash.Quit):
             return "Disconnected"
         if isinstance(command, dash.Shutdown):
@@ -701,6 +990,43 @@ class FakeController:
         return (
             success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
         )
+
+    def _program_path(self, name: str) -> str | None:
+        """The program file ``name`` stands for (relative names under the programs directory), or None
+        if there is no such file. The default External Control program always exists."""
+        base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
+        path = name if name.startswith("/") else f"{base.rstrip('/')}/{name}"
+        if path == self.default_program:
+            return path
+        if self.programs_dir is None or not Path(path).is_file():
+            return None
+        return path
+
+    def _play(self) -> str | None:
+        """``play``: resume a paused program, or start the loaded one; a reason if it cannot."""
+        arm, program = self.arm, self.loaded_program
+        if arm.runtime_state is RuntimeState.PAUSED:
+            return arm.resume_program()
+        if program is None:
+            return "no program loaded"
+        if program != self.default_program and not program.endswith(SCRIPT_SUFFIXES):
+            return f"{program}: the fake plays only URScript files and the External Control program"
+        reason = arm.start_program()
+        if reason is not None or self._runner is not None or self._script is not None:
+            return reason
+        if program == self.default_program:
+            task = asyncio.get_running_loop().create_task(self._play_urcap())
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+            return None
+        try:
+            text = Path(program).read_text(encoding="ascii")
+        except (OSError, UnicodeDecodeError) as err:
+            arm.stop_program()
+            return str(err)
+        arm.runtime_state = RuntimeState.STOPPED
+        self._start_program(_basename(program) or program, text)
+        return None
 
     # ---- robot state ---------------------------------------------------------------------------------
 
@@ -727,6 +1053,7 @@ class FakeController:
                     target_speed_fraction=arm.speed_slider,
                     speed_scaling=arm.speed_scaling,
                     target_speed_fraction_limit=1.0,
+                    reserved=0 if self.controller_version[0] >= 5 else None,  # CB3: 46 bytes
                 ),
                 prim.JointData(
                     q_actual=q,
@@ -745,7 +1072,7 @@ class FakeController:
                     dh_a=dh.a,
                     dh_d=dh.d,
                     dh_alpha=dh.alpha,
-                    calibration_status=0,
+                    calibration_status=KINEMATICS_CALIBRATED,
                 ),
                 prim.MasterboardData(
                     digital_input_bits=arm.io.digital_in & 0xFFFF,
@@ -790,11 +1117,20 @@ def _basename(path: str | None) -> str | None:
     return None if path is None else path.rsplit("/", 1)[-1]
 
 
-def _output_getter(name: str, rtde_type: str) -> Callable[[FakeArm], Any]:
+def _output_getter(name: str, rtde_type: str, inputs: InputRegisters) -> Callable[[FakeArm], Any]:
     """How to read output ``name`` off the arm (zero of its type for what the fake does not model)."""
     getter = _OUTPUTS.get(name)
     if getter is not None:
         return getter
+    if name.startswith("input_int_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.ints.get(at, 0)
+    if name.startswith("input_double_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.doubles.get(at, 0.0)
+    if name.startswith("input_bit_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.bits.get(at, False)
     if name.startswith("output_int_register_"):
         index = int(name.rsplit("_", 1)[1])
         return lambda arm: arm.io.registers_int.get(index, 0)

@@ -1,8 +1,8 @@
 """Scripted misbehaviour of the fake controller, for tests: refuse or drop links, stall, mangle bytes.
 
-Each fault names the service it applies to (``rtde``, ``primary``, ``secondary``, ``dashboard``) or
-``*`` for all. Outgoing bytes pass through :meth:`FaultInjector.mangle`, which may split a write into
-pieces, garble bytes, or ask the writer to wait before sending.
+Each fault names the service it applies to (``rtde``, ``primary``, ``secondary``, ``realtime``,
+``dashboard``) or ``*`` for all. Outgoing bytes pass through :meth:`FaultInjector.mangle`, which may
+split a write into pieces, garble bytes, or ask the writer to wait before sending.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 __all__ = ["SERVICES", "FaultInjector", "Mangled"]
 
-SERVICES = ("rtde", "primary", "secondary", "dashboard")
+SERVICES = ("rtde", "primary", "secondary", "realtime", "dashboard")
 
 
 @dataclass(frozen=True, slots=True)

@@ -77,6 +77,7 @@ __all__ = [
     "VersionMessage",
     "def_program",
     "headless_program",
+    "popup_message",
     "sec_program",
 ]
 
@@ -522,6 +523,21 @@ class OtherRobotMessage:
     _: KW_ONLY
     timestamp: int = 0
     source: int = -2
+
+
+_POPUP: Final = struct.Struct(">II???B")
+_POPUP_TITLE_MAX: Final = 255
+
+
+def popup_message(
+    text: str, title: str = "Popup", *, warning: bool = False, error: bool = False, blocking: bool = False
+) -> OtherRobotMessage:
+    """A POPUP (2) robot message, as URScript's ``popup`` makes one: uint32 request id, uint32 requested
+    type, bool warning, bool error, bool blocking, uint8 N, N bytes title, text to the end (the layout a
+    PolyScope URCap reads off a controller's primary interface)."""
+    head = title.encode()[:_POPUP_TITLE_MAX]
+    body = _POPUP.pack(0, 0, warning, error, blocking, len(head)) + head + text.encode()
+    return OtherRobotMessage(RobotMessageType.POPUP, body)
 
 
 RobotMessage: TypeAlias = (
