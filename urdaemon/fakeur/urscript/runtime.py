@@ -1,4 +1,4 @@
-"""The URScript runtime: values, builtin registry, errors and (to come) the scheduler.
+"""The URScript runtime: values, builtin registry, errors and the scheduler (:class:`ScriptRun`).
 
 Contract shared by every ``lib_*.py`` (see each function's docstring): builtins are registered with
 :func:`builtin`, take the :class:`~urdaemon.fakeur.urscript.host.ScriptHost` first and then their
@@ -9,19 +9,23 @@ rest of the current controller cycle; its return value is the call's value.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, Final
 
 __all__ = [
     "BUILTINS",
+    "MAIN",
+    "TOO_LONG",
     "Builtin",
     "ScriptCompileError",
+    "ScriptRun",
     "ScriptRuntimeError",
     "UrList",
     "UrPose",
     "UrStruct",
     "builtin",
+    "copy_value",
 ]
 
 
@@ -140,3 +144,239 @@ def _text(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return repr(value) if isinstance(value, (list, UrStruct)) else str(value)
+
+
+# -- the scheduler --------------------------------------------------------------------------------------
+
+TOO_LONG: Final = (
+    "The program used too much time without instructing the robot what to do. "
+    "Consider using a Wait or sync() to split long program sequences that do not move the robot."
+)
+"""The controller's runtime error for a thread that loops too long within one cycle."""
+
+MAIN: Final = 0
+"""The main program's thread handle."""
+
+
+class _Halt(BaseException):
+    """``halt``: ends the whole program (a BaseException so no builtin swallows it)."""
+
+
+class _Killed(BaseException):
+    """The running thread killed itself."""
+
+
+def copy_value(value: Any) -> Any:
+    """A URScript value as a new variable holds it: lists and structs are values, not references."""
+    kind = type(value)
+    if kind is UrList or kind is UrPose:
+        return kind(value)
+    if kind is UrStruct:
+        return UrStruct((k, copy_value(v)) for k, v in vars(value).items())
+    if isinstance(value, list):
+        return UrList(copy_value(v) for v in value)
+    return value
+
+
+def _struct(fields: Iterable[tuple[str, Any]]) -> UrStruct:
+    return UrStruct(fields)
+
+
+class _Thread:
+    __slots__ = ("generator", "handle")
+
+    def __init__(self, handle: int, generator: Any) -> None:
+        self.handle = handle
+        self.generator = generator
+
+
+class ScriptRun:
+    """One run of a compiled program on one host: the controller calls :meth:`step` once per cycle.
+
+    Each step resumes every live thread once, the main program first, then the threads in the order they
+    were started (one started during this step runs in it too); a thread runs until it blocks or ends.
+    While a thread is inside a critical section, no other thread runs. The run is :attr:`done` once the
+    main program ended, by returning, ``halt``, a runtime error (:attr:`error`) or :meth:`stop`.
+    """
+
+    def __init__(self, program: Any, host: Any) -> None:
+        from functools import partial
+        from itertools import count
+
+        self.program = program
+        self.host = host
+        self._done = False
+        self.error: ScriptRuntimeError | None = None
+        self._threads: list[_Thread] = []
+        self._alive: set[int] = set()
+        self._next_handle = 1
+        self._critical: _Thread | None = None
+        self._current: _Thread | None = None
+        self._count = count
+        namespace: dict[str, Any] = {
+            "__builtins__": {},
+            "_L": UrList,
+            "_P": UrPose,
+            "_S": _struct,
+            "_cp": copy_value,
+            "_f": float,
+            "_b": bool,
+            "_next": next,
+            "_tick": count(),
+            "_too_long": self._too_long,
+            "_start": self._start,
+            "_kill": self._kill,
+            "_join": self._join,
+            "_enter": self._enter,
+            "_exit": self._exit,
+            "_halt": self._halt,
+        }
+        namespace.update(program.constants)
+        for name, (function, _) in program.builtins.items():
+            namespace["b_" + name] = partial(function, host)
+        exec(program.code, namespace)
+        self._namespace = namespace
+        main = _Thread(MAIN, namespace["_main"]())
+        self._threads.append(main)
+        self._alive.add(MAIN)
+
+    # -- the controller's side --------------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One controller cycle."""
+        if self.done:
+            return
+        threads = self._threads
+        namespace = self._namespace
+        host = self.host
+        index = 0
+        while index < len(threads):
+            thread = threads[index]
+            index += 1
+            critical = self._critical
+            if critical is not None and critical is not thread:
+                continue
+            host.thread = thread.handle
+            namespace["_tick"] = self._count()
+            self._current = thread
+            try:
+                next(thread.generator)
+            except StopIteration:
+                self._ended(thread)
+            except _Killed:
+                self._ended(thread)
+            except _Halt:
+                self._finish()
+            except ScriptRuntimeError as error:
+                self._fail(error, error.__traceback__)
+            except Exception as error:
+                self._fail(ScriptRuntimeError(_describe(error)), error.__traceback__)
+            self._current = None
+            if self._done:
+                return
+        if len(threads) != len(self._alive):
+            self._threads = [t for t in threads if t.handle in self._alive]
+
+    @property
+    def done(self) -> bool:
+        """True once the main program ended (returned, halt, a runtime error or :meth:`stop`)."""
+        return self._done
+
+    def stop(self) -> None:
+        """The controller stops the program (stop program, a new program replacing it...)."""
+        self._finish()
+
+    @property
+    def threads(self) -> tuple[int, ...]:
+        """Handles of the live threads, main (0) first."""
+        return tuple(t.handle for t in self._threads if t.handle in self._alive)
+
+    def _ended(self, thread: _Thread) -> None:
+        self._alive.discard(thread.handle)
+        if self._critical is thread:
+            self._critical = None
+        if thread.handle == MAIN:
+            self._finish()
+
+    def _finish(self) -> None:
+        if self._done:
+            return
+        self._done = True
+        current = self._current
+        for thread in self._threads:
+            if thread is not current:
+                thread.generator.close()
+        self._alive.clear()
+        self._critical = None
+
+    def _fail(self, error: ScriptRuntimeError, traceback: Any) -> None:
+        if not error.line:
+            error.line, error.column = self._position(traceback)
+        self.error = error
+        self._finish()
+
+    def _position(self, traceback: Any) -> tuple[int, int]:
+        position = (0, 0)
+        code = self.program.code
+        while traceback is not None:
+            if traceback.tb_frame.f_code.co_filename == code.co_filename:
+                position = self.program.lines.get(traceback.tb_lineno, position)
+            traceback = traceback.tb_next
+        return position
+
+    # -- called by the generated code -------------------------------------------------------------------
+
+    def _too_long(self) -> None:
+        raise ScriptRuntimeError(TOO_LONG)
+
+    def _start(self, function: Callable[[], Any]) -> int:
+        handle = self._next_handle
+        self._next_handle += 1
+        self._threads.append(_Thread(handle, function()))
+        self._alive.add(handle)
+        return handle
+
+    def _kill(self, handle: Any) -> None:
+        if handle not in self._alive or handle == MAIN:
+            return
+        current = self._current
+        if current is not None and current.handle == handle:
+            raise _Killed
+        self._alive.discard(handle)
+        for thread in self._threads:
+            if thread.handle == handle:
+                thread.generator.close()
+                if self._critical is thread:
+                    self._critical = None
+
+    def _join(self, handle: Any) -> Iterator[None]:
+        while handle in self._alive and handle != MAIN:
+            yield
+
+    def _enter(self) -> None:
+        self._critical = self._current
+
+    def _exit(self) -> None:
+        if self._critical is self._current:
+            self._critical = None
+
+    def _halt(self) -> None:
+        raise _Halt
+
+
+def _describe(error: Exception) -> str:
+    """The controller's kind of message for a Python fault raised by a script's own operations."""
+    if isinstance(error, NameError):
+        name = getattr(error, "name", None) or str(error).split("'")[1 if "'" in str(error) else 0]
+        return f"Variable '{name.removeprefix('v_')}' is used before it is given a value"
+    if isinstance(error, IndexError):
+        return "Index out of bounds"
+    if isinstance(error, ZeroDivisionError):
+        return "Division by zero"
+    if isinstance(error, RecursionError):
+        return "Stack overflow: functions call each other too deeply"
+    if isinstance(error, AttributeError):
+        return f"Struct has no such field: {error}"
+    if isinstance(error, TypeError):
+        return f"Type error: {error}"
+    return f"{type(error).__name__}: {error}"

@@ -1,0 +1,689 @@
+"""URScript AST -> checked, compiled Python: ``compile_program(text, series, version)``.
+
+Compiling is the controller's: the whole program is refused (:class:`ScriptCompileError` with line and
+column) for a syntax error, a non-ASCII character, an unknown function or variable, a wrong argument
+count, an unknown keyword argument, a socket name no ``socket_open`` of the program opens, a builtin this
+series/version does not have, or a physical builtin in a ``sec`` program.
+
+Then every URScript function and thread becomes one Python function of a generated module, compiled once
+(:class:`_Generator`): those that may block are generators called with ``yield from``; the others stay
+plain functions. Names are prefixed (``v_`` variables, ``f_`` functions, ``t_`` threads, ``b_`` builtins)
+so no URScript name can clash with Python's.
+"""
+
+from __future__ import annotations
+
+import keyword
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from types import CodeType
+from typing import TYPE_CHECKING, Any, Final
+
+from urdaemon.fakeur.urscript import syntax as ast
+from urdaemon.fakeur.urscript.runtime import BUILTINS, ScriptCompileError
+
+if TYPE_CHECKING:
+    from urdaemon.fakeur.urscript.host import ScriptHost
+    from urdaemon.fakeur.urscript.runtime import ScriptRun
+
+__all__ = ["CONSTANTS", "MAX_OPS_PER_CYCLE", "Program", "compile_program"]
+
+MAX_OPS_PER_CYCLE: Final = 100_000
+"""Loop iterations one thread may run in one controller cycle before the controller stops the program."""
+
+CONSTANTS: Final[dict[str, object]] = {"pi": 3.141592653589793}
+"""Builtin variables of the language."""
+
+DEFAULT_SOCKET: Final = "socket_0"
+_FILENAME: Final = "<urscript>"
+
+
+@dataclass
+class Program:
+    """A compiled URScript program; ``start(host)`` gives a run (nothing runs before its first step)."""
+
+    kind: str  # "def", "sec" or "line"
+    name: str
+    code: CodeType
+    lines: dict[int, tuple[int, int]]
+    """Generated Python line -> the URScript (line, column) of its statement."""
+    builtins: dict[str, tuple[Callable[..., Any], bool]]
+    """Builtin name -> (implementation taking the host first, blocking)."""
+    constants: dict[str, object]
+    source: str = field(repr=False)
+
+    def start(self, host: ScriptHost) -> ScriptRun:
+        from urdaemon.fakeur.urscript.runtime import ScriptRun
+
+        return ScriptRun(self, host)
+
+
+def _not_simulated(name: str) -> Callable[..., Any]:
+    def missing(host: Any, *args: Any) -> Any:
+        from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError
+
+        raise ScriptRuntimeError(f"{name}: not simulated by the fake controller")
+
+    return missing
+
+
+def compile_program(
+    text: str,
+    series: str = "e",
+    version: tuple[int, int] = (5, 12),
+    *,
+    signatures: Mapping[str, Any] | None = None,
+) -> Program:
+    """Check ``text`` and compile it; raise :class:`ScriptCompileError` (line, column) if refused.
+
+    ``signatures``: the builtin table (name -> Signature) to check against; by default the table of
+    ``functions.yaml`` for ``series``/``version``.
+    """
+    items = ast.parse(text)
+    known_anywhere: Mapping[str, Any] = {}
+    if signatures is None:
+        from urdaemon.fakeur.urscript import signatures as table
+
+        signatures = table.load_signatures(series, version)
+        known_anywhere = table.all_signatures()
+    kind, name, body = _program_body(items)
+    checker = _Checker(kind, body, signatures, known_anywhere)
+    checker.check()
+    source, lines, used, constants = _Generator(checker).generate()
+    builtins: dict[str, tuple[Callable[..., Any], bool]] = {}
+    for builtin_name in used:
+        implementation = BUILTINS.get(builtin_name)
+        if implementation is None:
+            builtins[builtin_name] = (_not_simulated(builtin_name), False)
+        else:
+            builtins[builtin_name] = (implementation.function, implementation.blocking)
+    code = compile(source, _FILENAME, "exec")
+    return Program(kind, name, code, lines, builtins, constants, source)
+
+
+def _program_body(items: tuple[Any, ...]) -> tuple[str, str, tuple[Any, ...]]:
+    if len(items) == 1 and isinstance(items[0], ast.Function) and items[0].kind in ("def", "sec"):
+        only = items[0]
+        if only.params:
+            raise ScriptCompileError(only.line, only.column, f"program {only.name} may not take parameters")
+        return only.kind, only.name, only.body
+    return "line", "", items
+
+
+# -- scopes ---------------------------------------------------------------------------------------------
+
+
+def walk_statements(body: tuple[Any, ...], *, into_functions: bool = False) -> Iterator[Any]:
+    """Every statement of ``body``, nested blocks included (function bodies only if asked)."""
+    for statement in body:
+        yield statement
+        if isinstance(statement, ast.If):
+            for _, block in statement.branches:
+                yield from walk_statements(block, into_functions=into_functions)
+            if statement.orelse:
+                yield from walk_statements(statement.orelse, into_functions=into_functions)
+        elif isinstance(statement, ast.While):
+            yield from walk_statements(statement.body, into_functions=into_functions)
+        elif isinstance(statement, ast.Function) and into_functions:
+            yield from walk_statements(statement.body, into_functions=True)
+
+
+def walk_expressions(node: Any) -> Iterator[Any]:
+    """``node`` (an expression) and every expression inside it."""
+    yield node
+    if isinstance(node, ast.ListLiteral):
+        for item in node.items:
+            yield from walk_expressions(item)
+    elif isinstance(node, ast.Index):
+        yield from walk_expressions(node.base)
+        for index in node.indices:
+            yield from walk_expressions(index)
+    elif isinstance(node, ast.Attribute):
+        yield from walk_expressions(node.base)
+    elif isinstance(node, ast.Call):
+        for arg in node.args:
+            yield from walk_expressions(arg)
+        for keyword in node.keywords:
+            yield from walk_expressions(keyword.value)
+    elif isinstance(node, ast.Unary):
+        yield from walk_expressions(node.operand)
+    elif isinstance(node, ast.Binary):
+        yield from walk_expressions(node.left)
+        yield from walk_expressions(node.right)
+
+
+def statement_expressions(statement: Any) -> Iterator[Any]:
+    """The expressions a statement evaluates itself (not those of nested blocks)."""
+    if isinstance(statement, ast.Assign):
+        yield statement.value
+        target: Any = statement.target
+        while isinstance(target, (ast.Index, ast.Attribute)):
+            if isinstance(target, ast.Index):
+                yield from target.indices
+            target = target.base
+    elif isinstance(statement, ast.Declare):
+        if statement.value is not None:
+            yield statement.value
+    elif isinstance(statement, ast.ExprStatement):
+        yield statement.value
+    elif isinstance(statement, ast.If):
+        for condition, _ in statement.branches:
+            yield condition
+    elif isinstance(statement, ast.While):
+        yield statement.condition
+    elif isinstance(statement, ast.Return):
+        if statement.value is not None:
+            yield statement.value
+    elif isinstance(statement, (ast.Kill, ast.Join)):
+        yield statement.handle
+
+
+def target_root(target: Any) -> str | None:
+    while isinstance(target, (ast.Index, ast.Attribute)):
+        target = target.base
+    return target.name if isinstance(target, ast.Name) else None
+
+
+@dataclass
+class Scope:
+    """One function's (or the program's) names: its locals; every other name read is a global."""
+
+    function: ast.Function | None
+    locals: set[str]
+    body: tuple[Any, ...]
+
+
+class _Checker:
+    """Name resolution and the controller's static checks; what code generation works from."""
+
+    def __init__(
+        self,
+        kind: str,
+        body: tuple[Any, ...],
+        signatures: Mapping[str, Any],
+        known_anywhere: Mapping[str, Any],
+    ) -> None:
+        self.kind = kind
+        self.signatures = signatures
+        self.known_anywhere = known_anywhere
+        self.functions: dict[str, ast.Function] = {}
+        for statement in walk_statements(body, into_functions=True):
+            if isinstance(statement, ast.Function):
+                self.functions[statement.name] = statement
+        self.main_body = tuple(s for s in body if not isinstance(s, ast.Function))
+        self.globals: set[str] = set()
+        for statement in walk_statements(self.main_body):
+            if isinstance(statement, ast.Assign) and isinstance(statement.target, ast.Name):
+                self.globals.add(statement.target.name)
+            elif isinstance(statement, ast.Declare):
+                self.globals.add(statement.name)
+        for statement in walk_statements(body, into_functions=True):
+            if isinstance(statement, ast.Declare) and statement.scope == "global":
+                self.globals.add(statement.name)
+        self.mutated: set[str] = set()
+        for statement in walk_statements(body, into_functions=True):
+            if isinstance(statement, ast.Assign) and not isinstance(statement.target, ast.Name):
+                root = target_root(statement.target)
+                if root is not None:
+                    self.mutated.add(root)
+        self.scopes: dict[str, Scope] = {name: self._scope(f) for name, f in self.functions.items()}
+        self.main = Scope(None, set(), self.main_body)
+        self.errors: list[ScriptCompileError] = []
+        self.opened_sockets: set[str] = {DEFAULT_SOCKET}
+        self.blocking: set[str] = set()
+
+    def _scope(self, function: ast.Function) -> Scope:
+        names = {p.name for p in function.params}
+        own_body = tuple(s for s in function.body if not isinstance(s, ast.Function))
+        for statement in walk_statements(own_body):
+            if isinstance(statement, ast.Declare) and statement.scope == "local":
+                names.add(statement.name)
+        for statement in walk_statements(own_body):
+            target = statement.target if isinstance(statement, ast.Assign) else None
+            if isinstance(target, ast.Name) and target.name not in self.globals:
+                names.add(target.name)
+        for statement in walk_statements(own_body):
+            if isinstance(statement, ast.Declare) and statement.scope == "global":
+                names.discard(statement.name)
+        return Scope(function, names, own_body)
+
+    # -- checks -----------------------------------------------------------------------------------------
+
+    def error(self, node: Any, message: str) -> None:
+        self.errors.append(ScriptCompileError(node.line, node.column, message))
+
+    def check(self) -> None:
+        self._collect_sockets()
+        for scope in (self.main, *self.scopes.values()):
+            self._check_scope(scope)
+        self._find_blocking()
+        if self.errors:
+            raise min(self.errors, key=lambda e: (e.line, e.column))
+
+    def all_scopes(self) -> Iterator[Scope]:
+        yield self.main
+        yield from self.scopes.values()
+
+    def _collect_sockets(self) -> None:
+        for scope in self.all_scopes():
+            for call in self._calls(scope):
+                if call.name == "socket_open" and call.name not in self.functions:
+                    name = self._socket_argument(call)
+                    if isinstance(name, ast.String):
+                        self.opened_sockets.add(name.value)
+
+    def _calls(self, scope: Scope) -> Iterator[ast.Call]:
+        for statement in walk_statements(scope.body):
+            for expression in statement_expressions(statement):
+                for node in walk_expressions(expression):
+                    if isinstance(node, ast.Call):
+                        yield node
+
+    def _socket_argument(self, call: ast.Call) -> Any:
+        signature = self.signatures.get(call.name)
+        if signature is None:
+            return None
+        names = [p.name for p in signature.params]
+        if "socket_name" not in names:
+            return None
+        for given in call.keywords:
+            if given.name == "socket_name":
+                return given.value
+        position = names.index("socket_name")
+        if position < len(call.args):
+            return call.args[position]
+        return None
+
+    def _check_scope(self, scope: Scope) -> None:
+        function = scope.function
+        if function is not None:
+            for param in function.params:
+                if param.default is not None:
+                    self._check_expression(scope, param.default)
+            if function.kind == "thread" and function.params:
+                self.error(function, f"thread {function.name} may not take parameters")
+        for statement in walk_statements(scope.body):
+            if isinstance(statement, (ast.Break, ast.Continue)) and not self._inside_loop(scope, statement):
+                self.error(statement, f"{type(statement).__name__.lower()} outside a loop")
+            for expression in statement_expressions(statement):
+                self._check_expression(scope, expression)
+            if isinstance(statement, ast.Assign):
+                self._check_target(scope, statement.target)
+
+    def _inside_loop(self, scope: Scope, wanted: Any) -> bool:
+        def search(body: tuple[Any, ...], in_loop: bool) -> bool | None:
+            for statement in body:
+                if statement is wanted:
+                    return in_loop
+                if isinstance(statement, ast.If):
+                    for _, block in statement.branches:
+                        found = search(block, in_loop)
+                        if found is not None:
+                            return found
+                    if statement.orelse:
+                        found = search(statement.orelse, in_loop)
+                        if found is not None:
+                            return found
+                elif isinstance(statement, ast.While):
+                    found = search(statement.body, True)
+                    if found is not None:
+                        return found
+            return None
+
+        return bool(search(scope.body, False))
+
+    def _check_target(self, scope: Scope, target: Any) -> None:
+        if isinstance(target, (ast.Index, ast.Attribute)):
+            root = target_root(target)
+            if root is not None and not self.is_variable(scope, root):
+                self.error(target, f"compile_error_name_not_found:{root}:")
+
+    def is_variable(self, scope: Scope, name: str) -> bool:
+        return name in scope.locals or name in self.globals
+
+    def is_pose(self, scope: Scope, node: ast.Index) -> bool:
+        """``p[...]`` is a pose literal unless ``p`` is a variable indexed with one index."""
+        base = node.base
+        if not isinstance(base, ast.Name) or base.name != "p":
+            return False
+        return len(node.indices) != 1 or not self.is_variable(scope, "p")
+
+    def _check_expression(self, scope: Scope, expression: Any) -> None:
+        pose_bases = set()
+        for node in walk_expressions(expression):
+            if isinstance(node, ast.Index) and self.is_pose(scope, node):
+                pose_bases.add(id(node.base))
+        for node in walk_expressions(expression):
+            if isinstance(node, ast.Name):
+                if (
+                    id(node) not in pose_bases
+                    and not self.is_variable(scope, node.name)
+                    and node.name not in CONSTANTS
+                ):
+                    self.error(node, f"compile_error_name_not_found:{node.name}:")
+            elif isinstance(node, ast.Index) and self.is_pose(scope, node):
+                if len(node.indices) != 6:
+                    self.error(node, f"a pose p[...] takes 6 numbers, not {len(node.indices)}")
+            elif isinstance(node, ast.Call):
+                self._check_call(scope, node)
+            elif isinstance(node, ast.Run):
+                thread = self.functions.get(node.name)
+                if thread is None or thread.kind != "thread":
+                    self.error(node, f"compile_error_name_not_found:{node.name}: (no such thread)")
+
+    def _check_call(self, scope: Scope, call: ast.Call) -> None:
+        if call.name == "struct" and call.name not in self.functions:
+            if call.args:
+                self.error(call, "struct() takes only named fields: struct(name=value, ...)")
+            return
+        function = self.functions.get(call.name)
+        if function is not None:
+            if function.kind == "thread":
+                self.error(call, f"thread {call.name} is started with run, not called")
+                return
+            self.bind_arguments(call, [(p.name, p.default is not None) for p in function.params])
+            return
+        signature = self.signatures.get(call.name)
+        if signature is None:
+            detail = ""
+            if call.name in self.known_anywhere:
+                detail = " (not available on this controller series/version)"
+            self.error(call, f"compile_error_name_not_found:{call.name}:{detail}")
+            return
+        self.bind_arguments(call, [(p.name, not p.required) for p in signature.params])
+        if self.kind == "sec" and signature.physical:
+            self.error(call, f"{call.name} takes time on the arm: a sec program may not call it")
+        if call.name.startswith("socket_") and call.name != "socket_open":
+            name = self._socket_argument(call)
+            if isinstance(name, ast.String) and name.value not in self.opened_sockets:
+                self.error(name, f'socket "{name.value}" is not opened by any socket_open of the program')
+
+    def bind_arguments(self, call: ast.Call, params: list[tuple[str, bool]]) -> list[Any] | None:
+        """The call's arguments in parameter order (None: take the default); errors are recorded."""
+        if len(call.args) > len(params):
+            self.error(
+                call,
+                f"wrong number of arguments for {call.name}: {len(call.args)} given, at most {len(params)}",
+            )
+            return None
+        bound: list[Any] = list(call.args) + [None] * (len(params) - len(call.args))
+        names = [name for name, _ in params]
+        for given in call.keywords:
+            if given.name not in names:
+                self.error(given, f"unknown keyword argument {given.name} for {call.name}")
+                return None
+            position = names.index(given.name)
+            if bound[position] is not None:
+                self.error(given, f"argument {given.name} of {call.name} given twice")
+                return None
+            bound[position] = given.value
+        for (name, optional), value in zip(params, bound, strict=True):
+            if value is None and not optional:
+                self.error(call, f"wrong number of arguments for {call.name}: missing {name}")
+                return None
+        return bound
+
+    # -- which functions block --------------------------------------------------------------------------
+
+    def builtin_blocks(self, name: str) -> bool:
+        implementation = BUILTINS.get(name)
+        return implementation is not None and implementation.blocking
+
+    def _find_blocking(self) -> None:
+        direct: dict[str, set[str]] = {}
+        for name, scope in self.scopes.items():
+            callees: set[str] = set()
+            blocks = False
+            for statement in walk_statements(scope.body):
+                if isinstance(statement, ast.Join):
+                    blocks = True
+            for call in self._calls(scope):
+                if call.name in self.functions:
+                    callees.add(call.name)
+                elif self.builtin_blocks(call.name):
+                    blocks = True
+            if blocks:
+                self.blocking.add(name)
+            direct[name] = callees
+        changed = True
+        while changed:
+            changed = False
+            for name, callees in direct.items():
+                if name not in self.blocking and callees & self.blocking:
+                    self.blocking.add(name)
+                    changed = True
+
+
+# -- code generation ------------------------------------------------------------------------------------
+
+_BINARY: Final[dict[str, str]] = {"or": "or", "and": "and"}
+_INDENT: Final = "    "
+
+
+def _is_read(node: Any) -> bool:
+    """An expression whose value may be another variable's list or struct (not a fresh one)."""
+    return isinstance(node, (ast.Name, ast.Index, ast.Attribute))
+
+
+class _Generator:
+    """Python source for a checked program, one statement per line, with its line table."""
+
+    def __init__(self, checker: _Checker) -> None:
+        self.checker = checker
+        self.out: list[str] = []
+        self.lines: dict[int, tuple[int, int]] = {}
+        self.used: set[str] = set()
+        self.constants: dict[str, object] = {}
+        self.scope = checker.main
+
+    def generate(self) -> tuple[str, dict[int, tuple[int, int]], set[str], dict[str, object]]:
+        for name, function in self.checker.functions.items():
+            self.scope = self.checker.scopes[name]
+            self._function(function)
+        self.scope = self.checker.main
+        self._emit(0, "def _main():", None)
+        self._globals(1, self.checker.main_body)
+        self._block(1, self.checker.main_body)
+        self._emit(1, "return", None)
+        self._emit(1, "yield", None)
+        return "\n".join(self.out) + "\n", self.lines, self.used, self.constants
+
+    def _emit(self, indent: int, text: str, node: Any) -> None:
+        self.out.append(_INDENT * indent + text)
+        if node is not None:
+            self.lines[len(self.out)] = (node.line, node.column)
+
+    def _globals(self, indent: int, body: tuple[Any, ...]) -> None:
+        assigned = set()
+        for statement in walk_statements(body):
+            if isinstance(statement, ast.Assign) and isinstance(statement.target, ast.Name):
+                assigned.add(statement.target.name)
+            elif isinstance(statement, ast.Declare):
+                assigned.add(statement.name)
+        names = sorted(n for n in assigned if n not in self.scope.locals)
+        if names:
+            self._emit(indent, "global " + ", ".join("v_" + n for n in names), None)
+
+    def _function(self, function: ast.Function) -> None:
+        params = []
+        for param in function.params:
+            default = "" if param.default is None else "=" + self._expr(param.default)
+            params.append(f"v_{param.name}{default}")
+        prefix = "t_" if function.kind == "thread" else "f_"
+        self._emit(0, f"def {prefix}{function.name}({', '.join(params)}):", function)
+        self._globals(1, self.scope.body)
+        self._block(1, self.scope.body)
+        if function.kind == "thread" or function.name in self.checker.blocking:
+            self._emit(1, "return", None)
+            self._emit(1, "yield", None)
+
+    def _block(self, indent: int, body: tuple[Any, ...]) -> None:
+        emitted = False
+        for statement in body:
+            if not isinstance(statement, ast.Function):
+                self._statement(indent, statement)
+                emitted = True
+        if not emitted:
+            self._emit(indent, "pass", None)
+
+    def _statement(self, indent: int, node: Any) -> None:
+        if isinstance(node, ast.Assign):
+            self._emit(
+                indent, f"{self._target(node.target)} = {self._assigned(node.target, node.value)}", node
+            )
+        elif isinstance(node, ast.Declare):
+            if node.value is not None:
+                target = ast.Name(node.name, line=node.line, column=node.column)
+                self._emit(indent, f"v_{node.name} = {self._assigned(target, node.value)}", node)
+        elif isinstance(node, ast.ExprStatement):
+            self._emit(indent, self._expr(node.value), node)
+        elif isinstance(node, ast.If):
+            for number, (condition, block) in enumerate(node.branches):
+                keyword = "if" if number == 0 else "elif"
+                self._emit(indent, f"{keyword} {self._expr(condition)}:", condition)
+                self._block(indent + 1, block)
+            if node.orelse is not None:
+                self._emit(indent, "else:", None)
+                self._block(indent + 1, node.orelse)
+        elif isinstance(node, ast.While):
+            self._emit(indent, f"while {self._expr(node.condition)}:", node)
+            self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: _too_long()", node)
+            self._block(indent + 1, node.body)
+        elif isinstance(node, ast.Return):
+            value = node.value
+            if value is None:
+                self._emit(indent, "return", node)
+            else:
+                text = self._expr(value)
+                if _is_read(value) and self.checker.mutated:
+                    text = f"_cp({text})"
+                self._emit(indent, f"return {text}", node)
+        elif isinstance(node, ast.Break):
+            self._emit(indent, "break", node)
+        elif isinstance(node, ast.Continue):
+            self._emit(indent, "continue", node)
+        elif isinstance(node, ast.Halt):
+            self._emit(indent, "_halt()", node)
+        elif isinstance(node, ast.EnterCritical):
+            self._emit(indent, "_enter()", node)
+        elif isinstance(node, ast.ExitCritical):
+            self._emit(indent, "_exit()", node)
+        elif isinstance(node, ast.Kill):
+            self._emit(indent, f"_kill({self._expr(node.handle)})", node)
+        elif isinstance(node, ast.Join):
+            self._emit(indent, f"yield from _join({self._expr(node.handle)})", node)
+        else:  # pragma: no cover - the parser makes no other statement
+            raise TypeError(f"unknown statement {node!r}")
+
+    def _assigned(self, target: Any, value: Any) -> str:
+        """The value to store: a copy when it is another variable's list that either side mutates."""
+        text = self._expr(value)
+        if not _is_read(value) or self._is_pose(value):
+            return text
+        mutated = self.checker.mutated
+        if not isinstance(target, ast.Name) or target.name in mutated or target_root(value) in mutated:
+            return f"_cp({text})"
+        return text
+
+    def _target(self, target: Any) -> str:
+        if isinstance(target, ast.Name):
+            return f"v_{target.name}"
+        if isinstance(target, ast.Index):
+            return self._target(target.base) + "".join(f"[{self._expr(i)}]" for i in target.indices)
+        return self._attribute(self._target(target.base), target.name)
+
+    @staticmethod
+    def _attribute(base: str, name: str) -> str:
+        return (
+            f"{base}.{name}"
+            if name.isidentifier() and not keyword.iskeyword(name)
+            else f"{base}.__dict__[{name!r}]"
+        )
+
+    def _is_pose(self, node: Any) -> bool:
+        return isinstance(node, ast.Index) and self.checker.is_pose(self.scope, node)
+
+    def _expr(self, node: Any) -> str:
+        if isinstance(node, ast.Number):
+            return repr(node.value)
+        if isinstance(node, ast.String):
+            return repr(node.value)
+        if isinstance(node, ast.Bool):
+            return "True" if node.value else "False"
+        if isinstance(node, ast.Name):
+            if not self.checker.is_variable(self.scope, node.name):
+                return repr(CONSTANTS[node.name])
+            return f"v_{node.name}"
+        if isinstance(node, ast.ListLiteral):
+            return "_L([" + ", ".join(self._element(i) for i in node.items) + "])"
+        if isinstance(node, ast.Index):
+            if self._is_pose(node):
+                return "_P([" + ", ".join(self._float(i) for i in node.indices) + "])"
+            return self._expr(node.base) + "".join(f"[{self._expr(i)}]" for i in node.indices)
+        if isinstance(node, ast.Attribute):
+            return self._attribute(self._expr(node.base), node.name)
+        if isinstance(node, ast.Call):
+            return self._call(node)
+        if isinstance(node, ast.Run):
+            return f"_start(t_{node.name})"
+        if isinstance(node, ast.Unary):
+            op = "not " if node.op == "not" else node.op
+            return f"({op}{self._expr(node.operand)})"
+        if isinstance(node, ast.Binary):
+            left, right = self._expr(node.left), self._expr(node.right)
+            if node.op == "xor":
+                return f"(_b({left}) != _b({right}))"
+            return f"({left} {node.op} {right})"
+        raise TypeError(f"unknown expression {node!r}")  # pragma: no cover
+
+    def _element(self, node: Any) -> str:
+        text = self._expr(node)
+        if _is_read(node) and not self._is_pose(node) and target_root(node) in self.checker.mutated:
+            return f"_cp({text})"
+        return text
+
+    def _float(self, node: Any) -> str:
+        if isinstance(node, ast.Number):
+            return repr(float(node.value))
+        return f"_f({self._expr(node)})"
+
+    def _call(self, call: ast.Call) -> str:
+        checker = self.checker
+        function = checker.functions.get(call.name)
+        if function is not None:
+            bound = checker.bind_arguments(call, [(p.name, p.default is not None) for p in function.params])
+            assert bound is not None
+            parts = []
+            for param, value in zip(function.params, bound, strict=True):
+                if value is None:
+                    continue
+                text = self._expr(value)
+                aliased = param.name in checker.mutated or target_root(value) in checker.mutated
+                if aliased and _is_read(value) and not self._is_pose(value):
+                    text = f"_cp({text})"
+                parts.append(f"v_{param.name}={text}")
+            text = f"f_{call.name}({', '.join(parts)})"
+            return f"(yield from {text})" if call.name in checker.blocking else text
+        if call.name == "struct":
+            fields = ", ".join(f"({k.name!r}, {self._element(k.value)})" for k in call.keywords)
+            return f"_S(({fields}{',' if len(call.keywords) == 1 else ''}))"
+        signature = checker.signatures[call.name]
+        bound = checker.bind_arguments(call, [(p.name, not p.required) for p in signature.params])
+        assert bound is not None
+        self.used.add(call.name)
+        args = [
+            self._default(p.default) if value is None else self._expr(value)
+            for p, value in zip(signature.params, bound, strict=True)
+        ]
+        text = f"b_{call.name}({', '.join(args)})"
+        return f"(yield from {text})" if checker.builtin_blocks(call.name) else text
+
+    def _default(self, value: object) -> str:
+        if isinstance(value, (bool, int, float, str)) and type(value) in (bool, int, float, str):
+            return repr(value)
+        for name, known in self.constants.items():
+            if known is value:
+                return name
+        name = f"_k{len(self.constants)}"
+        self.constants[name] = value
+        return name

@@ -1,0 +1,382 @@
+"""Builtins that need no controller: time and messages, math, strings, lists and pose maths.
+
+Registered into :data:`~urdaemon.fakeur.urscript.runtime.BUILTINS` on import; arguments arrive in the
+order of ``functions.yaml`` (the URScript manual's), defaults filled in by the compiler.
+"""
+
+from __future__ import annotations
+
+import math
+import random as _random
+from collections.abc import Sequence
+from typing import Any
+
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+
+__all__ = ["matrix_to_rotvec", "rotvec_to_matrix", "text"]
+
+Matrix = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+
+# -- time and messages ----------------------------------------------------------------------------------
+
+
+@builtin("sync", blocking=True)
+def sync(host: ScriptHost) -> Any:
+    """Waits for the next controller cycle."""
+    yield
+
+
+@builtin("sleep", blocking=True)
+def sleep(host: ScriptHost, t: float) -> Any:
+    """Waits ``ceil(t / step_time)`` controller cycles (none for ``t <= 0``)."""
+    cycles = math.ceil(t / host.step_time - 1e-9)
+    for _ in range(cycles):
+        yield
+
+
+@builtin("get_steptime")
+def get_steptime(host: ScriptHost) -> float:
+    return host.step_time
+
+
+def text(value: Any) -> str:
+    """A value as the controller prints it (``textmsg``, ``to_str``, ``str_cat``)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, bool):
+        return "True" if value else "False"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)) and not isinstance(value, UrList):
+        return repr(UrList(value))
+    return repr(value) if not isinstance(value, int) else str(value)
+
+
+@builtin("textmsg")
+def textmsg(host: ScriptHost, s1: Any, s2: Any) -> None:
+    host.message("text", text(s1) + text(s2))
+
+
+@builtin("popup")
+def popup(host: ScriptHost, s: Any, title: Any, warning: bool, error: bool, blocking: bool) -> None:
+    kind = "error" if error else "warning" if warning else "message"
+    host.message("popup", f"{text(title)} ({kind}): {text(s)}")
+
+
+# -- strings --------------------------------------------------------------------------------------------
+
+
+def _string(name: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise ScriptRuntimeError(f"{name}: expected a string, got {text(value)}")
+    return value
+
+
+@builtin("str_cat")
+def str_cat(host: ScriptHost, op1: Any, op2: Any) -> str:
+    return text(op1) + text(op2)
+
+
+@builtin("str_len")
+def str_len(host: ScriptHost, string: Any) -> int:
+    return len(_string("str_len", string))
+
+
+@builtin("str_empty")
+def str_empty(host: ScriptHost, string: Any) -> bool:
+    return _string("str_empty", string) == ""
+
+
+@builtin("str_at")
+def str_at(host: ScriptHost, src: Any, index: int) -> str:
+    source = _string("str_at", src)
+    return source[index] if 0 <= index < len(source) else ""
+
+
+@builtin("str_find")
+def str_find(host: ScriptHost, src: Any, target: Any, start_from: int) -> int:
+    return _string("str_find", src).find(_string("str_find", target), max(int(start_from), 0))
+
+
+@builtin("str_sub")
+def str_sub(host: ScriptHost, src: Any, index: int, length: int) -> str:
+    source = _string("str_sub", src)
+    if index < 0 or index > len(source):
+        return ""
+    return source[index:] if length < 0 else source[index : index + length]
+
+
+@builtin("to_str")
+def to_str(host: ScriptHost, val: Any) -> str:
+    return text(val)
+
+
+@builtin("to_num")
+def to_num(host: ScriptHost, string: Any) -> int | float:
+    source = _string("to_num", string).strip()
+    try:
+        return int(source)
+    except ValueError:
+        pass
+    try:
+        return float(source)
+    except ValueError:
+        raise ScriptRuntimeError(f'to_num: "{source}" is not a number') from None
+
+
+# -- math -----------------------------------------------------------------------------------------------
+
+
+def _checked(name: str, function: Any, *args: float) -> float:
+    try:
+        result: float = function(*args)
+    except (ValueError, OverflowError):
+        raise ScriptRuntimeError(f"{name}: argument out of range") from None
+    return result
+
+
+def _unary(name: str, function: Any) -> None:
+    def implementation(host: ScriptHost, f: float) -> float:
+        return _checked(name, function, f)
+
+    implementation.__name__ = name
+    builtin(name)(implementation)
+
+
+for _name, _function in (
+    ("sin", math.sin),
+    ("cos", math.cos),
+    ("tan", math.tan),
+    ("asin", math.asin),
+    ("acos", math.acos),
+    ("atan", math.atan),
+    ("sqrt", math.sqrt),
+    ("d2r", math.radians),
+    ("r2d", math.degrees),
+):
+    _unary(_name, _function)
+
+
+@builtin("atan2")
+def atan2(host: ScriptHost, y: float, x: float) -> float:
+    """Arc tangent of first/second (the manual's ``atan2(y, x)``)."""
+    return math.atan2(y, x)
+
+
+@builtin("floor")
+def floor(host: ScriptHost, f: float) -> int:
+    return math.floor(f)
+
+
+@builtin("ceil")
+def ceil(host: ScriptHost, f: float) -> int:
+    return math.ceil(f)
+
+
+@builtin("pow")
+def power(host: ScriptHost, base: float, exponent: float) -> float:
+    return _checked("pow", math.pow, base, exponent)
+
+
+@builtin("log")
+def log(host: ScriptHost, b: float, f: float) -> float:
+    return _checked("log", math.log, f, b)
+
+
+@builtin("random")
+def random(host: ScriptHost) -> float:
+    return _random.random()
+
+
+@builtin("norm")
+def norm(host: ScriptHost, a: Any) -> float:
+    if isinstance(a, list):
+        return math.sqrt(sum(x * x for x in a))
+    return abs(a)  # type: ignore[no-any-return]
+
+
+@builtin("normalize")
+def normalize(host: ScriptHost, v: Sequence[float]) -> UrList:
+    length = math.sqrt(sum(x * x for x in v))
+    if length == 0.0:
+        raise ScriptRuntimeError("normalize: the zero vector has no direction")
+    return UrList(x / length for x in v)
+
+
+@builtin("length")
+def length(host: ScriptHost, v: Any) -> int:
+    return len(v)
+
+
+@builtin("get_list_length")
+def get_list_length(host: ScriptHost, v: Any) -> int:
+    return len(v)
+
+
+@builtin("binary_list_to_integer")
+def binary_list_to_integer(host: ScriptHost, bits: Sequence[bool]) -> int:
+    return sum(1 << i for i, bit in enumerate(bits) if bit)
+
+
+@builtin("integer_to_binary_list")
+def integer_to_binary_list(host: ScriptHost, x: int) -> UrList:
+    value = int(x) & 0xFFFFFFFF
+    return UrList(bool(value >> i & 1) for i in range(32))
+
+
+# -- pose maths -----------------------------------------------------------------------------------------
+
+
+def rotvec_to_matrix(rx: float, ry: float, rz: float) -> Matrix:
+    """Rotation matrix of a rotation vector (Rodrigues)."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-12:
+        return ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    x, y, z = rx / angle, ry / angle, rz / angle
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return (
+        (t * x * x + c, t * x * y - s * z, t * x * z + s * y),
+        (t * x * y + s * z, t * y * y + c, t * y * z - s * x),
+        (t * x * z - s * y, t * y * z + s * x, t * z * z + c),
+    )
+
+
+def matrix_to_rotvec(m: Matrix) -> tuple[float, float, float]:
+    """Rotation vector (angle in [0, pi]) of a rotation matrix."""
+    cosine = max(-1.0, min(1.0, (m[0][0] + m[1][1] + m[2][2] - 1.0) / 2.0))
+    angle = math.acos(cosine)
+    if angle < 1e-12:
+        return (0.0, 0.0, 0.0)
+    if math.pi - angle > 1e-6:
+        scale = angle / (2.0 * math.sin(angle))
+        return ((m[2][1] - m[1][2]) * scale, (m[0][2] - m[2][0]) * scale, (m[1][0] - m[0][1]) * scale)
+    # near pi: the axis from the diagonal, its sign from the off-diagonal terms
+    xx, yy, zz = (max(0.0, (m[i][i] + 1.0) / 2.0) for i in range(3))
+    x, y, z = math.sqrt(xx), math.sqrt(yy), math.sqrt(zz)
+    if x >= y and x >= z:
+        y, z = math.copysign(y, m[0][1] + m[1][0]), math.copysign(z, m[0][2] + m[2][0])
+    elif y >= z:
+        x, z = math.copysign(x, m[0][1] + m[1][0]), math.copysign(z, m[1][2] + m[2][1])
+    else:
+        x, y = math.copysign(x, m[0][2] + m[2][0]), math.copysign(y, m[1][2] + m[2][1])
+    n = math.sqrt(x * x + y * y + z * z)
+    return (x / n * angle, y / n * angle, z / n * angle)
+
+
+def _multiply(a: Matrix, b: Matrix) -> Matrix:
+    return tuple(  # type: ignore[return-value]
+        tuple(sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)) for i in range(3)
+    )
+
+
+def _transpose(m: Matrix) -> Matrix:
+    return tuple(tuple(m[j][i] for j in range(3)) for i in range(3))  # type: ignore[return-value]
+
+
+def _apply(m: Matrix, v: Sequence[float]) -> tuple[float, float, float]:
+    return (
+        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
+    )
+
+
+def _pose(name: str, value: Any) -> Sequence[float]:
+    if not isinstance(value, list) or len(value) != 6:
+        raise ScriptRuntimeError(f"{name}: expected a pose p[x, y, z, rx, ry, rz], got {text(value)}")
+    return value
+
+
+def _make_pose(position: Sequence[float], rotation: Matrix) -> UrPose:
+    return UrPose((*map(float, position), *matrix_to_rotvec(rotation)))
+
+
+@builtin("pose_trans")
+def pose_trans(host: ScriptHost, p_from: Any, p_from_to: Any) -> UrPose:
+    a, b = _pose("pose_trans", p_from), _pose("pose_trans", p_from_to)
+    rotation = rotvec_to_matrix(a[3], a[4], a[5])
+    moved = _apply(rotation, b[:3])
+    position = (a[0] + moved[0], a[1] + moved[1], a[2] + moved[2])
+    return _make_pose(position, _multiply(rotation, rotvec_to_matrix(b[3], b[4], b[5])))
+
+
+@builtin("pose_inv")
+def pose_inv(host: ScriptHost, p_from: Any) -> UrPose:
+    a = _pose("pose_inv", p_from)
+    inverse = _transpose(rotvec_to_matrix(a[3], a[4], a[5]))
+    position = _apply(inverse, a[:3])
+    return _make_pose((-position[0], -position[1], -position[2]), inverse)
+
+
+@builtin("pose_add")
+def pose_add(host: ScriptHost, p_1: Any, p_2: Any) -> UrPose:
+    a, b = _pose("pose_add", p_1), _pose("pose_add", p_2)
+    rotation = _multiply(rotvec_to_matrix(b[3], b[4], b[5]), rotvec_to_matrix(a[3], a[4], a[5]))
+    return _make_pose((a[0] + b[0], a[1] + b[1], a[2] + b[2]), rotation)
+
+
+@builtin("pose_sub")
+def pose_sub(host: ScriptHost, p_to: Any, p_from: Any) -> UrPose:
+    a, b = _pose("pose_sub", p_to), _pose("pose_sub", p_from)
+    inverse = _transpose(rotvec_to_matrix(b[3], b[4], b[5]))
+    rotation = _multiply(rotvec_to_matrix(a[3], a[4], a[5]), inverse)
+    return _make_pose((a[0] - b[0], a[1] - b[1], a[2] - b[2]), rotation)
+
+
+@builtin("point_dist")
+def point_dist(host: ScriptHost, p_from: Any, p_to: Any) -> float:
+    a, b = _pose("point_dist", p_from), _pose("point_dist", p_to)
+    return math.dist(a[:3], b[:3])
+
+
+@builtin("pose_dist")
+def pose_dist(host: ScriptHost, p_from: Any, p_to: Any) -> float:
+    """Position distance and rotation angle between the poses, combined as sqrt(d^2 + angle^2)."""
+    a, b = _pose("pose_dist", p_from), _pose("pose_dist", p_to)
+    relative = _multiply(_transpose(rotvec_to_matrix(a[3], a[4], a[5])), rotvec_to_matrix(b[3], b[4], b[5]))
+    angle = math.sqrt(sum(x * x for x in matrix_to_rotvec(relative)))
+    return math.sqrt(math.dist(a[:3], b[:3]) ** 2 + angle**2)
+
+
+@builtin("interpolate_pose")
+def interpolate_pose(host: ScriptHost, p_from: Any, p_to: Any, alpha: float) -> UrPose:
+    a, b = _pose("interpolate_pose", p_from), _pose("interpolate_pose", p_to)
+    start = rotvec_to_matrix(a[3], a[4], a[5])
+    relative = matrix_to_rotvec(_multiply(_transpose(start), rotvec_to_matrix(b[3], b[4], b[5])))
+    partial = rotvec_to_matrix(*(alpha * x for x in relative))
+    position = tuple(a[i] + alpha * (b[i] - a[i]) for i in range(3))
+    return _make_pose(position, _multiply(start, partial))
+
+
+@builtin("rotvec2rpy")
+def rotvec2rpy(host: ScriptHost, rotation_vector: Sequence[float]) -> UrList:
+    m = rotvec_to_matrix(rotation_vector[0], rotation_vector[1], rotation_vector[2])
+    pitch = math.atan2(-m[2][0], math.hypot(m[0][0], m[1][0]))
+    if abs(math.cos(pitch)) < 1e-9:
+        return UrList((0.0, pitch, math.atan2(-m[0][1], m[1][1])))
+    return UrList((math.atan2(m[2][1], m[2][2]), pitch, math.atan2(m[1][0], m[0][0])))
+
+
+@builtin("rpy2rotvec")
+def rpy2rotvec(host: ScriptHost, rpy_vector: Sequence[float]) -> UrList:
+    roll, pitch, yaw = rpy_vector[0], rpy_vector[1], rpy_vector[2]
+    rx = rotvec_to_matrix(roll, 0.0, 0.0)
+    ry = rotvec_to_matrix(0.0, pitch, 0.0)
+    rz = rotvec_to_matrix(0.0, 0.0, yaw)
+    return UrList(matrix_to_rotvec(_multiply(rz, _multiply(ry, rx))))
+
+
+@builtin("wrench_trans")
+def wrench_trans(host: ScriptHost, T_from_to: Any, w_from: Sequence[float]) -> UrList:
+    """The wrench ``w_from`` (in frame A) expressed in frame B, ``T_from_to`` being B in A."""
+    pose = _pose("wrench_trans", T_from_to)
+    inverse = _transpose(rotvec_to_matrix(pose[3], pose[4], pose[5]))
+    force = _apply(inverse, w_from[:3])
+    # the torque about B's origin: the torque about A's minus (B's origin x force), in B's axes
+    p = pose[:3]
+    f = w_from[:3]
+    moment = (p[1] * f[2] - p[2] * f[1], p[2] * f[0] - p[0] * f[2], p[0] * f[1] - p[1] * f[0])
+    torque = _apply(inverse, [w_from[3 + i] - moment[i] for i in range(3)])
+    return UrList((*force, *torque))

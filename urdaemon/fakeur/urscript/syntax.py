@@ -1,0 +1,444 @@
+"""URScript text -> AST: frozen dataclasses carrying the 1-based ``line`` and ``column`` of what they are.
+
+The grammar is ``grammar.lark`` (lark, LALR). Syntax errors and non-ASCII characters raise
+:class:`~urdaemon.fakeur.urscript.runtime.ScriptCompileError` naming the line and column, the way the
+controller refuses a program before it starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any, TypeAlias
+
+import lark
+from lark import Token, Transformer, v_args
+
+from urdaemon.fakeur.urscript.runtime import ScriptCompileError
+
+__all__ = [
+    "Assign",
+    "Attribute",
+    "Binary",
+    "Bool",
+    "Break",
+    "Call",
+    "Continue",
+    "Declare",
+    "EnterCritical",
+    "ExitCritical",
+    "Expr",
+    "ExprStatement",
+    "Function",
+    "Halt",
+    "If",
+    "Index",
+    "Join",
+    "Keyword",
+    "Kill",
+    "ListLiteral",
+    "Name",
+    "Node",
+    "Number",
+    "Param",
+    "Return",
+    "Run",
+    "Statement",
+    "String",
+    "Unary",
+    "While",
+    "parse",
+]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Node:
+    line: int = field(compare=False)
+    column: int = field(compare=False)
+
+
+# -- expressions ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Number(Node):
+    value: int | float
+
+
+@dataclass(frozen=True, slots=True)
+class String(Node):
+    value: str
+
+
+@dataclass(frozen=True, slots=True)
+class Bool(Node):
+    value: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Name(Node):
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class ListLiteral(Node):
+    items: tuple[Expr, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Index(Node):
+    """``base[i]`` (or ``base[i, j]``; ``p[x, y, z, rx, ry, rz]`` is a pose when ``p`` is no variable)."""
+
+    base: Expr
+    indices: tuple[Expr, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Attribute(Node):
+    base: Expr
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Keyword(Node):
+    name: str
+    value: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Call(Node):
+    name: str
+    args: tuple[Expr, ...]
+    keywords: tuple[Keyword, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Run(Node):
+    """``run thread_name()``: starts a thread, its value is the thread's handle."""
+
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Unary(Node):
+    op: str  # "-", "+" or "not"
+    operand: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Binary(Node):
+    op: str  # "or" "xor" "and" "==" "!=" "<" ">" "<=" ">=" "+" "-" "*" "/" "%"
+    left: Expr
+    right: Expr
+
+
+Expr: TypeAlias = (
+    Number | String | Bool | Name | ListLiteral | Index | Attribute | Call | Run | Unary | Binary
+)
+
+# -- statements -----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Assign(Node):
+    target: Name | Index | Attribute
+    value: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Declare(Node):
+    scope: str  # "global" or "local"
+    name: str
+    value: Expr | None
+
+
+@dataclass(frozen=True, slots=True)
+class ExprStatement(Node):
+    value: Call | Run
+
+
+@dataclass(frozen=True, slots=True)
+class If(Node):
+    branches: tuple[tuple[Expr, tuple[Statement, ...]], ...]
+    orelse: tuple[Statement, ...] | None
+
+
+@dataclass(frozen=True, slots=True)
+class While(Node):
+    condition: Expr
+    body: tuple[Statement, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Return(Node):
+    value: Expr | None
+
+
+@dataclass(frozen=True, slots=True)
+class Break(Node):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Continue(Node):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Halt(Node):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class EnterCritical(Node):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class ExitCritical(Node):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Kill(Node):
+    handle: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Join(Node):
+    handle: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Param(Node):
+    name: str
+    default: Expr | None
+
+
+@dataclass(frozen=True, slots=True)
+class Function(Node):
+    """``def``, ``sec`` or ``thread`` (kind); its body may hold nested definitions."""
+
+    kind: str
+    name: str
+    params: tuple[Param, ...]
+    body: tuple[Statement, ...]
+
+
+Statement: TypeAlias = (
+    Assign
+    | Declare
+    | ExprStatement
+    | If
+    | While
+    | Return
+    | Break
+    | Continue
+    | Halt
+    | EnterCritical
+    | ExitCritical
+    | Kill
+    | Join
+    | Function
+)
+
+# -- parsing --------------------------------------------------------------------------------------------
+
+
+@cache
+def _parser() -> lark.Lark:
+    grammar = (Path(__file__).parent / "grammar.lark").read_text(encoding="ascii")
+    return lark.Lark(grammar, parser="lalr", propagate_positions=True, maybe_placeholders=True)
+
+
+def _at(meta: Any) -> dict[str, int]:
+    return {"line": meta.line, "column": meta.column}
+
+
+def _tok(token: Token) -> dict[str, int]:
+    return {"line": token.line or 0, "column": token.column or 0}
+
+
+def _number(text: str) -> int | float:
+    if any(c in text for c in ".eE"):
+        return float(text)
+    return int(text)
+
+
+@v_args(meta=True)
+class _Build(Transformer[Token, tuple[Any, ...]]):
+    """Lark tree -> AST nodes."""
+
+    def start(self, meta: Any, items: list[Any]) -> tuple[Any, ...]:
+        return tuple(items)
+
+    def function(self, meta: Any, children: list[Any]) -> Function:
+        kind, name, *rest = children
+        params = tuple(c for c in rest if isinstance(c, Param))
+        body = tuple(c for c in rest if c is not None and not isinstance(c, Param))
+        return Function(str(kind), str(name), params, body, **_at(meta))
+
+    def thread(self, meta: Any, children: list[Any]) -> Function:
+        name, *body = children
+        return Function("thread", str(name), (), tuple(body), **_at(meta))
+
+    def param(self, meta: Any, children: list[Any]) -> Param:
+        return Param(str(children[0]), children[1], **_at(meta))
+
+    def assign(self, meta: Any, children: list[Any]) -> Assign:
+        return Assign(children[0], children[1], **_at(meta))
+
+    def declare(self, meta: Any, children: list[Any]) -> Declare:
+        return Declare(str(children[0]), str(children[1]), children[2], **_at(meta))
+
+    def call_statement(self, meta: Any, children: list[Any]) -> ExprStatement:
+        return ExprStatement(children[0], **_at(meta))
+
+    def run_statement(self, meta: Any, children: list[Any]) -> ExprStatement:
+        return ExprStatement(children[0], **_at(meta))
+
+    def return_statement(self, meta: Any, children: list[Any]) -> Return:
+        return Return(children[0], **_at(meta))
+
+    def break_statement(self, meta: Any, children: list[Any]) -> Break:
+        return Break(**_at(meta))
+
+    def continue_statement(self, meta: Any, children: list[Any]) -> Continue:
+        return Continue(**_at(meta))
+
+    def halt_statement(self, meta: Any, children: list[Any]) -> Halt:
+        return Halt(**_at(meta))
+
+    def enter_critical(self, meta: Any, children: list[Any]) -> EnterCritical:
+        return EnterCritical(**_at(meta))
+
+    def exit_critical(self, meta: Any, children: list[Any]) -> ExitCritical:
+        return ExitCritical(**_at(meta))
+
+    def kill_statement(self, meta: Any, children: list[Any]) -> Kill:
+        return Kill(children[0], **_at(meta))
+
+    def join_statement(self, meta: Any, children: list[Any]) -> Join:
+        return Join(children[0], **_at(meta))
+
+    def target(self, meta: Any, children: list[Any]) -> Name:
+        return Name(str(children[0]), **_at(meta))
+
+    def target_index(self, meta: Any, children: list[Any]) -> Index:
+        return Index(children[0], tuple(children[1:]), **_at(meta))
+
+    def target_attr(self, meta: Any, children: list[Any]) -> Attribute:
+        return Attribute(children[0], str(children[1]), **_at(meta))
+
+    def if_statement(self, meta: Any, children: list[Any]) -> If:
+        condition, *rest = children
+        orelse = rest.pop() if rest and (rest[-1] is None or isinstance(rest[-1], _Else)) else None
+        elifs = [c for c in rest if isinstance(c, _Elif)]
+        body = tuple(c for c in rest if not isinstance(c, _Elif))
+        branches = ((condition, body), *((e.condition, e.body) for e in elifs))
+        return If(branches, orelse.body if isinstance(orelse, _Else) else None, **_at(meta))
+
+    def elif_clause(self, meta: Any, children: list[Any]) -> _Elif:
+        return _Elif(children[0], tuple(children[1:]))
+
+    def else_clause(self, meta: Any, children: list[Any]) -> _Else:
+        return _Else(tuple(children))
+
+    def while_statement(self, meta: Any, children: list[Any]) -> While:
+        return While(children[0], tuple(children[1:]), **_at(meta))
+
+    def binary(self, meta: Any, children: list[Any]) -> Binary:
+        left, op, right = children
+        return Binary(str(op), left, right, **_at(meta))
+
+    def unary(self, meta: Any, children: list[Any]) -> Expr:
+        op, operand = children
+        if str(op) == "-" and isinstance(operand, Number):
+            return Number(-operand.value, **_at(meta))
+        return Unary(str(op), operand, **_at(meta))
+
+    def index(self, meta: Any, children: list[Any]) -> Index:
+        return Index(children[0], tuple(children[1:]), **_at(meta))
+
+    def attribute(self, meta: Any, children: list[Any]) -> Attribute:
+        return Attribute(children[0], str(children[1]), **_at(meta))
+
+    def number(self, meta: Any, children: list[Any]) -> Number:
+        return Number(_number(str(children[0])), **_tok(children[0]))
+
+    def string(self, meta: Any, children: list[Any]) -> String:
+        return String(str(children[0])[1:-1], **_tok(children[0]))
+
+    def true(self, meta: Any, children: list[Any]) -> Bool:
+        return Bool(True, **_tok(children[0]))
+
+    def false(self, meta: Any, children: list[Any]) -> Bool:
+        return Bool(False, **_tok(children[0]))
+
+    def name(self, meta: Any, children: list[Any]) -> Name:
+        return Name(str(children[0]), **_tok(children[0]))
+
+    def list_literal(self, meta: Any, children: list[Any]) -> ListLiteral:
+        return ListLiteral(tuple(c for c in children if c is not None), **_at(meta))
+
+    def run_expr(self, meta: Any, children: list[Any]) -> Run:
+        return Run(str(children[0]), **_at(meta))
+
+    def call(self, meta: Any, children: list[Any]) -> Call:
+        name, *arguments = children
+        args = tuple(a for a in arguments if a is not None and not isinstance(a, Keyword))
+        keywords = tuple(a for a in arguments if isinstance(a, Keyword))
+        return Call(str(name), args, keywords, **_at(meta))
+
+    def argument(self, meta: Any, children: list[Any]) -> Any:
+        return children[0]
+
+    def keyword_argument(self, meta: Any, children: list[Any]) -> Keyword:
+        return Keyword(str(children[0]), children[1], **_at(meta))
+
+
+@dataclass(frozen=True, slots=True)
+class _Elif:
+    condition: Expr
+    body: tuple[Statement, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class _Else:
+    body: tuple[Statement, ...]
+
+
+def _check_ascii(text: str) -> None:
+    for offset, char in enumerate(text):
+        if ord(char) > 127:
+            line = text.count("\n", 0, offset) + 1
+            column = offset - (text.rfind("\n", 0, offset) + 1) + 1
+            raise ScriptCompileError(
+                line, column, f"syntax_error: non-ASCII character {char!r} (U+{ord(char):04X})"
+            )
+
+
+def _source_line(text: str, line: int) -> str:
+    lines = text.splitlines()
+    return lines[line - 1] if 0 < line <= len(lines) else ""
+
+
+def parse(text: str) -> tuple[Function | Statement, ...]:
+    """Top-level items of ``text``: definitions and statements, in order."""
+    _check_ascii(text)
+    try:
+        tree = _parser().parse(text)
+    except lark.UnexpectedEOF:
+        line = text.count("\n") + 1
+        column = len(text) - (text.rfind("\n") + 1) + 1
+        raise ScriptCompileError(line, column, "syntax_error_on_line: unexpected end of program") from None
+    except lark.UnexpectedInput as error:
+        line, column = error.line, error.column
+        if line < 1:  # end of input
+            line, column = text.count("\n") + 1, 1
+        raise ScriptCompileError(
+            line, column, f"syntax_error_on_line:{line}:{_source_line(text, line)}:"
+        ) from None
+    items: tuple[Function | Statement, ...] = _Build().transform(tree)
+    return items
