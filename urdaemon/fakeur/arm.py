@@ -3,9 +3,13 @@
 Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller cycle; every
 command is a method that returns a refusal reason (or None) the way the real controller would
 refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
-(servoj target, speedj velocity, a spline/move segment driven by the program executor, or a stop
-with a given deceleration), always within the model's joint velocity limits; a command outside the
-joint position limits triggers a protective stop as on a real arm.
+(servoj target, speedj velocity, a ``Motion`` of fakeur/motion.py played on the program's time, or a
+stop with a given deceleration), always within the model's joint velocity limits; a command outside
+the joint position limits triggers a protective stop as on a real arm.
+
+A played motion advances ``dt × speed slider`` of program time per cycle (nothing while the arm cannot
+move): the controller's time scaling. When it is over and no new motion replaced it, the arm stops
+with the motion's deceleration (a speedj or servoj that is not renewed decelerates to rest).
 
 State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
 POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
@@ -19,14 +23,20 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.fakeur.motion import TIME_EPSILON_S, LinearStop, Motion, leading_stop_time
 from urdaemon.model import RobotMode, SafetyMode
+
+if TYPE_CHECKING:
+    from urdaemon.description.ik import UrKinematics
 
 __all__ = [
     "BOOT_TIME_S",
     "BRAKE_RELEASE_TIME_S",
+    "HISTORY_STEPS",
     "PROTECTIVE_STOP_DECELERATION",
     "FakeArm",
     "IoState",
@@ -44,6 +54,8 @@ EMERGENCY_STOP_DECELERATION = 20.0
 """Joint deceleration (rad/s²) of an emergency stop before power is cut."""
 SPEEDJ_DEFAULT_ACCELERATION = 40.0
 """rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
+HISTORY_STEPS = 1000
+"""Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
 
 
 class RuntimeState(enum.IntEnum):
@@ -64,6 +76,7 @@ class MotionMode(enum.Enum):
     SERVO = "servo"
     SPEED = "speed"
     STOP = "stop"
+    PLAY = "play"
 
 
 @dataclass
@@ -138,6 +151,14 @@ class FakeArm:
         self._servo_target: list[float] | None = None
         self._speed_target = [0.0] * 6
         self._acceleration = SPEEDJ_DEFAULT_ACCELERATION
+        self._motion: Motion | None = None
+        self._ik: UrKinematics | None = None
+        self._motion_time = 0.0
+        self._motion_stop = PROTECTIVE_STOP_DECELERATION
+        self._target_q = list(self.q)
+        self._target_qd = [0.0] * 6
+        self._history = [list(self.q) for _ in range(HISTORY_STEPS)]
+        self._history_at = 0
         if powered:
             self.robot_mode = RobotMode.RUNNING
 
@@ -261,11 +282,65 @@ class FakeArm:
         self._acceleration = max(float(acceleration), 1e-6)
 
     def stop(self, deceleration: float) -> None:
-        """stopj(a): decelerate every joint to rest at ``deceleration`` (rad/s²)."""
+        """Decelerate every joint to rest at ``deceleration`` (rad/s²)."""
         self._mode = MotionMode.STOP
         self._speed_target = [0.0] * 6
         self._acceleration = max(float(deceleration), 1e-6)
         self._servo_target = None
+        self._motion = None
+
+    def play(self, motion: Motion, stop_deceleration: float) -> bool:
+        """Follow ``motion`` from its start on the program's time; False (ignored) if the arm cannot move.
+
+        Once it is over, unless another motion replaced it, the arm stops from the motion's end velocity
+        at ``stop_deceleration`` (leading joint, rad/s²), along the path it was on."""
+        if not self.can_move:
+            return False
+        self._mode = MotionMode.PLAY
+        self._motion = motion
+        self._motion_time = 0.0
+        self._motion_stop = max(float(stop_deceleration), 1e-6)
+        self._servo_target = None
+        return True
+
+    @property
+    def motion(self) -> Motion | None:
+        """The motion being played (None when the arm holds, stops, or follows servoj/speedj)."""
+        return self._motion if self._mode is MotionMode.PLAY else None
+
+    @property
+    def motion_time(self) -> float:
+        """s: program time played of ``motion``."""
+        return self._motion_time
+
+    @property
+    def commanded_velocity(self) -> list[float]:
+        """rad/s: the velocity the arm is being driven at (a new motion starts from it)."""
+        if self._mode is MotionMode.PLAY:
+            return list(self._target_qd)
+        if self._mode is MotionMode.HOLD:
+            return [0.0] * 6
+        return list(self.qd)
+
+    @property
+    def target_q(self) -> list[float]:
+        """rad: the joint positions being commanded (the actual ones unless a motion is played)."""
+        return self._target_q if self._mode is MotionMode.PLAY else self.q
+
+    @property
+    def target_qd(self) -> list[float]:
+        """rad/s: the joint velocities being commanded."""
+        return self._target_qd if self._mode is MotionMode.PLAY else self.qd
+
+    @property
+    def steady(self) -> bool:
+        """True when the arm is fully at rest and nothing commands motion (``is_steady()``)."""
+        return self._mode is MotionMode.HOLD and not any(self.qd)
+
+    def history(self, steps: int) -> list[float]:
+        """rad: the actual joint positions ``steps`` cycles ago (0 = now), at most HISTORY_STEPS - 1."""
+        steps = max(0, min(int(steps), HISTORY_STEPS - 1))
+        return list(self._history[(self._history_at - steps) % HISTORY_STEPS])
 
     def hold(self) -> None:
         """Stand still (no motion thread)."""
@@ -274,6 +349,7 @@ class FakeArm:
     def _halt_motion(self) -> None:
         self._mode = MotionMode.HOLD
         self._servo_target = None
+        self._motion = None
         self.qd = [0.0] * 6
         self.qdd = [0.0] * 6
 
@@ -292,7 +368,9 @@ class FakeArm:
             self.stop(PROTECTIVE_STOP_DECELERATION)
         self.speed_scaling = 1.0 if self.runtime_state is RuntimeState.PLAYING else 0.0
         mode = self._mode
-        if mode is MotionMode.SERVO and self._servo_target is not None:
+        if mode is MotionMode.PLAY:
+            self._step_play(dt)
+        elif mode is MotionMode.SERVO and self._servo_target is not None:
             self._step_servo(dt, self._servo_target)
         elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
             self._step_speed(dt, self._speed_target, self._acceleration)
@@ -302,6 +380,9 @@ class FakeArm:
             self.qd = [0.0] * 6
             self.qdd = [0.0] * 6
         self._check_limits()
+        at = (self._history_at + 1) % HISTORY_STEPS
+        self._history[at][:] = self.q
+        self._history_at = at
 
     def _advance_transitions(self) -> None:
         if self._transition_at is None or self.timestamp < self._transition_at:
@@ -311,6 +392,33 @@ class FakeArm:
             self.robot_mode = RobotMode.IDLE
         elif self.robot_mode is RobotMode.POWER_ON:
             self.robot_mode = RobotMode.RUNNING
+
+    def _step_play(self, dt: float) -> None:
+        motion = self._motion
+        if motion is None:
+            return
+        elapsed = self._motion_time
+        if elapsed >= motion.duration - TIME_EPSILON_S:
+            # over, and nothing replaced it: stop along the path from the commanded velocity
+            velocity = self._target_qd
+            self._motion = LinearStop(self.q, velocity, leading_stop_time(velocity, self._motion_stop))
+            self._motion_time = elapsed = 0.0
+            motion = self._motion
+            if motion.duration <= 0:
+                self._mode = MotionMode.HOLD
+                self._motion = None
+                self._target_qd = [0.0] * 6
+                self.qd = [0.0] * 6
+                self.qdd = [0.0] * 6
+                return
+        slider = self.speed_slider
+        budget = dt * slider
+        elapsed = min(elapsed + budget, motion.duration)
+        self._motion_time = elapsed
+        target = motion.position(elapsed)
+        self._target_q = target
+        self._target_qd = [v * slider for v in motion.velocity(elapsed)]
+        self._step_servo(dt, target)
 
     def _step_servo(self, dt: float, target: list[float]) -> None:
         q, qd, vmax = self.q, self.qd, self.max_velocity
@@ -343,6 +451,16 @@ class FakeArm:
                 return
 
     # ---- derived values ----------------------------------------------------------------------------
+
+    @property
+    def ik(self) -> UrKinematics:
+        """Inverse kinematics and the Jacobian on the arm's calibrated model (made on first use)."""
+        solver = self._ik
+        if solver is None:
+            from urdaemon.description.ik import UrKinematics  # numpy: only for arms that need IK
+
+            solver = self._ik = UrKinematics(self.model, self.dh)
+        return solver
 
     def tcp_pose(self) -> tuple[float, float, float, float, float, float]:
         """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector.

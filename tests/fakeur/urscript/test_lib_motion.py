@@ -1,0 +1,247 @@
+"""URScript motion builtins on the fake arm, driven cycle by cycle as the scheduler drives them."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Generator, Sequence
+from typing import Any
+
+import pytest
+
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.urscript import lib_motion, lib_state
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.runtime import UrPose
+from urdaemon.fakeur.urscript.signatures import Computed
+from urdaemon.model import SafetyMode
+
+DT = 0.002
+LIMIT = 20_000
+"""Cycles any single motion in these tests may take (40 s of controller time)."""
+
+
+def _host(slider: float = 1.0) -> ScriptHost:
+    model = load_ur_model("ur10e")
+    arm = FakeArm(model, model.dh, powered=True)
+    arm.start_program()
+    arm.speed_slider = slider
+    return ScriptHost(arm, step_time=DT)
+
+
+def _run(host: ScriptHost, gen: Generator[None, None, Any], probe: list[list[float]] | None = None) -> int:
+    """Cycles until the builtin returns: each resumes it once, then steps the arm (controller order)."""
+    for cycle in range(LIMIT):
+        try:
+            next(gen)
+        except StopIteration:
+            return cycle
+        host.arm.step(DT)
+        if probe is not None:
+            probe.append(list(host.arm.q))
+    raise AssertionError("the builtin never returned")
+
+
+def _offset(q: Sequence[float], **changes: float) -> list[float]:
+    out = list(q)
+    for key, value in changes.items():
+        out[int(key[1:])] += value
+    return out
+
+
+def test_movej_reaches_its_target_within_v_and_a() -> None:
+    """movej: the target within 1e-3 rad, no joint faster than v, the profile's time at v and a."""
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j0=1.0, j1=0.3)
+    speeds: list[float] = []
+    positions: list[list[float]] = []
+    cycles = _run(host, lib_motion.movej(host, target, 1.4, 1.05, 0, 0), positions)
+    for before, after in itertools.pairwise(positions):
+        speeds.append(max(abs(b - a) for a, b in zip(before, after, strict=True)) / DT)
+    assert max(abs(a - b) for a, b in zip(arm.q, target, strict=True)) < 1e-3
+    assert max(speeds) <= 1.05 + 1e-9
+    expected = 1.0 / 1.05 + 1.05 / 1.4  # the leading joint's trapezoid
+    assert cycles == pytest.approx(expected / DT, abs=2)
+    accelerations = [abs(b - a) / DT for a, b in itertools.pairwise(speeds)]
+    assert max(accelerations) <= 1.4 * 1.01
+
+
+def test_movej_to_a_pose_goes_to_the_ik_solution_nearest_the_arm() -> None:
+    host = _host()
+    arm = host.arm
+    goal_joints = _offset(arm.q, j0=0.4, j2=-0.2)
+    goal = UrPose(lib_motion.tcp_pose(arm, goal_joints))
+    _run(host, lib_motion.movej(host, goal, 1.4, 1.05, 0, 0))
+    assert max(abs(a - b) for a, b in zip(arm.q, goal_joints, strict=True)) < 1e-6
+
+
+def test_movej_with_a_time_takes_that_time() -> None:
+    host = _host()
+    cycles = _run(host, lib_motion.movej(host, _offset(host.arm.q, j0=0.5), 1.4, 1.05, 2.0, 0))
+    assert cycles == pytest.approx(2.0 / DT, abs=2)
+
+
+def test_speed_slider_at_half_doubles_the_time_and_halves_the_speed() -> None:
+    full, half = _host(), _host(0.5)
+    target = _offset(full.arm.q, j0=1.0)
+    fast = _run(full, lib_motion.movej(full, target, 1.4, 1.05, 0, 0))
+    peak: list[list[float]] = []
+    slow = _run(half, lib_motion.movej(half, target, 1.4, 1.05, 0, 0), peak)
+    assert slow == pytest.approx(2 * fast, abs=2)
+    top = max(abs(b[0] - a[0]) for a, b in itertools.pairwise(peak)) / DT
+    assert top == pytest.approx(1.05 / 2, rel=1e-3)
+    assert half.arm.q[0] == pytest.approx(target[0], abs=1e-9)
+
+
+def test_movel_keeps_the_tcp_on_a_straight_line() -> None:
+    """movel: every cycle's TCP within 0.1 mm of the line, the target within 1e-4 m."""
+    host = _host()
+    arm = host.arm
+    arm.tcp_offset = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
+    start = lib_state.get_actual_tcp_pose(host)
+    goal = UrPose([start[0] + 0.15, start[1] - 0.05, start[2] - 0.1, *start[3:]])
+    cycles = 0
+    gen = lib_motion.movel(host, goal, 1.2, 0.25, 0, 0)
+    a, b = start[:3], goal[:3]
+    length = math.dist(a, b)
+    direction = [(y - x) / length for x, y in zip(a, b, strict=True)]
+    worst = 0.0
+    while cycles < LIMIT:
+        try:
+            next(gen)
+        except StopIteration:
+            break
+        arm.step(DT)
+        cycles += 1
+        p = lib_state.get_actual_tcp_pose(host)[:3]
+        rel = [x - y for x, y in zip(p, a, strict=True)]
+        along = sum(r * d for r, d in zip(rel, direction, strict=True))
+        worst = max(worst, math.dist(rel, [along * d for d in direction]))
+    end = lib_state.get_actual_tcp_pose(host)
+    assert worst < 1e-4
+    assert math.dist(end[:3], goal[:3]) < 1e-4
+    assert max(abs(x - y) for x, y in zip(end[3:], goal[3:], strict=True)) < 1e-4
+    assert cycles == pytest.approx((length / 0.25 + 0.25 / 1.2) / DT, abs=2)
+
+
+def test_servoj_reaches_each_target_in_its_time_rounded_to_cycles() -> None:
+    host = _host()
+    arm = host.arm
+    start = list(arm.q)
+    target = _offset(start, j0=0.004)
+    assert _run(host, lib_motion.servoj(host, target, 0, 0, 0.008, 0.1, 300)) == 4
+    assert arm.q[0] == pytest.approx(target[0], abs=1e-12)
+    assert _run(host, lib_motion.servoj(host, _offset(target, j0=0.001), 0, 0, 0.0025, 0.1, 300)) == 1
+
+
+def test_a_servoj_stream_tracks_and_then_comes_to_rest_when_it_stops() -> None:
+    """servoj every cycle: the arm is on each setpoint; no further servoj: it decelerates to rest."""
+    host = _host()
+    arm = host.arm
+    q0 = arm.q[0]
+    for k in range(1, 200):
+        setpoint = _offset(arm.q, j0=0.0)
+        setpoint[0] = q0 + 0.5 * math.sin(k * DT * 2.0)
+        _run(host, lib_motion.servoj(host, setpoint, 0, 0, DT, 0.1, 300))
+        assert arm.q[0] == pytest.approx(setpoint[0], abs=1e-12)
+    moving = abs(arm.qd[0])
+    assert moving > 0.1
+    for _ in range(200):
+        arm.step(DT)
+    assert arm.qd == [0.0] * 6
+    assert arm.steady
+
+
+def test_speedj_ramps_at_a_and_returns_after_t_or_once_at_speed() -> None:
+    host = _host()
+    arm = host.arm
+    assert _run(host, lib_motion.speedj(host, [0.5, 0, 0, 0, 0, 0], 2.0, 0.1)) == 50
+    assert arm.target_qd[0] == pytest.approx(0.2)
+    cycles = _run(host, lib_motion.speedj(host, [0.5, 0, 0, 0, 0, 0], 2.0, 0))
+    assert cycles == pytest.approx(0.15 / DT, abs=1)
+    assert arm.target_qd[0] == pytest.approx(0.5)
+    assert _run(host, lib_motion.speedj(host, [0.5, 0, 0, 0, 0, 0], 2.0, 0)) == 1, "at speed: one cycle"
+
+
+def test_stopj_decelerates_the_leading_joint_at_a() -> None:
+    host = _host()
+    arm = host.arm
+    _run(host, lib_motion.speedj(host, [1.0, -0.5, 0, 0, 0, 0], 4.0, 0))
+    cycles = _run(host, lib_motion.stopj(host, 2.0))
+    assert cycles == pytest.approx(1.0 / 2.0 / DT, abs=1)
+    arm.step(DT)
+    assert arm.qd == [0.0] * 6
+
+
+def test_stopl_stops_the_tool_in_its_speed_over_a() -> None:
+    host = _host()
+    arm = host.arm
+    _run(host, lib_motion.speedj(host, [0.3, 0.2, 0, 0, 0, 0], 4.0, 0))
+    tool = lib_state.get_actual_tcp_speed(host)
+    linear = math.sqrt(sum(v * v for v in tool[:3]))
+    assert linear > 0.05
+    cycles = _run(host, lib_motion.stopl(host, 0.5, Computed("param:a")))
+    assert cycles * DT >= linear / 0.5 - DT
+    arm.step(DT)
+    assert arm.qd == [0.0] * 6
+
+
+def test_a_blend_radius_returns_early_and_the_next_move_continues_smoothly() -> None:
+    """movej r > 0 returns within r of its target while moving; the next movej starts at that speed."""
+    host = _host()
+    arm = host.arm
+    via = _offset(arm.q, j0=0.8)
+    end = _offset(via, j1=0.5)
+    positions: list[list[float]] = []
+    _run(host, lib_motion.movej(host, via, 1.4, 1.05, 0, 0.05), positions)
+    assert any(abs(v) > 0.1 for v in arm.target_qd), "still moving at the blend"
+    goal_tcp = lib_motion.tcp_pose(arm, via)[:3]
+    assert math.dist(lib_motion.tcp_pose(arm, arm.q)[:3], goal_tcp) <= 0.05 + 1e-9
+    _run(host, lib_motion.movej(host, end, 1.4, 1.05, 0, 0), positions)
+    speeds = [[(b - a) / DT for a, b in zip(p, n, strict=True)] for p, n in itertools.pairwise(positions)]
+    jumps = [max(abs(y - x) for x, y in zip(s, t, strict=True)) for s, t in itertools.pairwise(speeds)]
+    assert max(jumps) < 1.4 * DT * 3, "no velocity jump at the blend"
+    assert max(abs(a - b) for a, b in zip(arm.q, end, strict=True)) < 1e-3
+
+
+def test_a_target_outside_the_joint_limits_is_a_protective_stop() -> None:
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j0=0.0)
+    target[2] = arm.max_position[2] + 0.1
+    before = list(arm.q)
+    assert _run(host, lib_motion.movej(host, target, 1.4, 1.05, 0, 0)) == 0
+    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    assert arm.q == before
+
+
+def test_the_latest_motion_command_wins() -> None:
+    """Two threads command motion: the first command returns when the second takes the arm."""
+    host = _host()
+    arm = host.arm
+    first = lib_motion.movej(host, _offset(arm.q, j0=1.0), 1.4, 1.05, 0, 0)
+    next(first)
+    arm.step(DT)
+    second = lib_motion.speedj(host, [0, 0.2, 0, 0, 0, 0], 2.0, 0.5)
+    next(second)
+    with pytest.raises(StopIteration):
+        next(first)
+    arm.step(DT)
+    assert _run(host, second) > 0
+    assert arm.target_qd[1] == pytest.approx(0.2)
+
+
+def test_killing_the_commanding_thread_stops_the_arm() -> None:
+    host = _host()
+    arm = host.arm
+    gen = lib_motion.movej(host, _offset(arm.q, j0=1.0), 1.4, 1.05, 0, 0)
+    for _ in range(300):
+        next(gen)
+        arm.step(DT)
+    gen.close()  # kill: the scheduler drops the thread's generator
+    for _ in range(300):
+        arm.step(DT)
+    assert arm.qd == [0.0] * 6
+    assert arm.q[0] < arm.history(0)[0] + 1e-12

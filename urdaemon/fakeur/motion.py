@@ -1,0 +1,454 @@
+"""The fake arm's motion primitives: what a controller plays for movej, speedj, servoj, stopj, stopl.
+
+Pure: no asyncio, no clock. A ``Motion`` is a joint-space path over program time ``[0, duration]``;
+``FakeArm.play`` samples it once per cycle, advancing ``dt × speed slider`` of program time (the
+controller's time scaling), so every motion here is written in program time. All arrays are plain
+lists of 6 floats (hot path: no numpy).
+
+* ``JointMove`` (movej): the leading joint follows a trapezoidal speed profile and every other joint
+  is scaled to arrive with it; started while the arm still moves (a blend), the old velocity fades out
+  under a cubic Hermite term decelerating at most at the move's acceleration, so the path is smooth.
+* ``SpeedRamp`` (speedj): accelerate linearly (``a`` of the leading joint, all joints reaching their
+  speeds together) to the target joint speeds, then keep them.
+* ``ServoRamp`` (servoj): the joint target reached at constant speed over the servo time.
+* ``LinearStop`` (stopj, stopl, a stop at the end of a motion): every joint decelerates linearly to rest
+  in the same time, so the arm stops along the path it was on.
+* ``CartesianMove`` (movel, movep): the TCP on a straight line (position interpolated, orientation
+  slerped) with a trapezoidal profile along it, each sample solved by inverse kinematics near the last.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Final, Protocol
+
+__all__ = [
+    "JOINTS",
+    "TIME_EPSILON_S",
+    "CartesianMove",
+    "JointMove",
+    "LinearStop",
+    "Motion",
+    "Profile",
+    "ServoRamp",
+    "SpeedRamp",
+    "compose",
+    "joint_move",
+    "leading_stop_time",
+    "matrix_of_pose",
+    "pose_of_matrix",
+    "profile",
+    "transposed",
+]
+
+JOINTS: Final = 6
+TIME_EPSILON_S: Final = 1e-9
+"""s: a motion with less than this left is over (float noise of summing cycle times)."""
+
+Vector = list[float]
+Matrix = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
+"""Row-major rotation r00..r22, then translation x y z."""
+
+
+class Motion(Protocol):
+    """A joint-space motion over ``[0, duration]`` s of program time."""
+
+    duration: float
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        ...
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t`` (in program time)."""
+        ...
+
+
+# ---- a 1-D trapezoidal profile ---------------------------------------------------------------------
+
+
+class Profile:
+    """Distance ``s(t)`` over ``[0, duration]``: accelerate for ``ramp`` s to ``peak``, cruise, decelerate."""
+
+    __slots__ = ("distance", "duration", "peak", "ramp")
+
+    def __init__(self, distance: float, ramp: float, peak: float) -> None:
+        self.distance = distance
+        self.ramp = ramp
+        self.peak = peak
+        self.duration = distance / peak + ramp if distance > 0 and peak > 0 else 0.0
+
+    def at(self, t: float) -> tuple[float, float]:
+        """(distance covered, speed) at ``t``."""
+        ramp, peak, total = self.ramp, self.peak, self.duration
+        if t <= 0.0 or total <= 0.0:
+            return 0.0, 0.0
+        if t >= total:
+            return self.distance, 0.0
+        if t < ramp:
+            return 0.5 * peak / ramp * t * t, peak / ramp * t
+        if t <= total - ramp:
+            return peak * (t - 0.5 * ramp), peak
+        left = total - t
+        return self.distance - 0.5 * peak / ramp * left * left, peak / ramp * left
+
+
+def profile(distance: float, *, velocity: float, acceleration: float, duration: float = 0.0) -> Profile:
+    """The profile covering ``distance`` at ``velocity``/``acceleration``, or in ``duration`` if > 0.
+
+    ValueError for a speed or acceleration that cannot move. With a duration (URScript: ``t`` given,
+    then ``v`` and ``a`` are ignored) the acceleration is kept if it can make the time, else the
+    gentlest triangle that does.
+    """
+    if distance <= 0:
+        return Profile(0.0, 0.0, 1.0)
+    if duration > 0:
+        a = acceleration
+        discriminant = (a * duration) ** 2 - 4 * a * distance if a > 0 else -1.0
+        if discriminant >= 0:
+            peak = (a * duration - math.sqrt(discriminant)) / 2
+            return Profile(distance, peak / a, peak)
+        return Profile(distance, duration / 2, 2 * distance / duration)
+    if not (velocity > 0 and acceleration > 0 and math.isfinite(velocity) and math.isfinite(acceleration)):
+        raise ValueError(f"needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
+    ramp = velocity / acceleration
+    if distance < velocity * ramp:  # never reaches v: a triangle at acceleration a
+        ramp = math.sqrt(distance / acceleration)
+        return Profile(distance, ramp, acceleration * ramp)
+    return Profile(distance, ramp, velocity)
+
+
+# ---- joint motions ---------------------------------------------------------------------------------
+
+
+class JointMove:
+    """movej: start → target along a straight joint-space line; a start velocity fades out smoothly."""
+
+    __slots__ = ("_delta", "_fade", "_profile", "_residual", "_start", "duration", "target")
+
+    def __init__(
+        self,
+        start: Sequence[float],
+        target: Sequence[float],
+        shape: Profile,
+        start_velocity: Sequence[float] | None = None,
+        fade_time: float = 0.0,
+    ) -> None:
+        self._start = [float(v) for v in start]
+        self.target = [float(v) for v in target]
+        self._delta = [b - a for a, b in zip(self._start, self.target, strict=True)]
+        self._profile = shape
+        moving = start_velocity is not None and fade_time > 0 and any(start_velocity)
+        self._residual = [float(v) for v in start_velocity] if moving and start_velocity else None
+        self._fade = fade_time if moving else 0.0
+        self.duration = max(shape.duration, self._fade)
+
+    def _fraction(self, t: float) -> tuple[float, float]:
+        shape = self._profile
+        if shape.distance <= 0:
+            return 1.0, 0.0
+        s, ds = shape.at(t)
+        return s / shape.distance, ds / shape.distance
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        f, _ = self._fraction(t)
+        q = [a + d * f for a, d in zip(self._start, self._delta, strict=True)]
+        residual, fade = self._residual, self._fade
+        if residual is not None and t < fade:
+            # Hermite h10(u)·T: 0 at both ends, slope 1 at the start and 0 at the end
+            u = max(t, 0.0) / fade
+            h = fade * u * (1.0 - u) * (1.0 - u)
+            q = [v + r * h for v, r in zip(q, residual, strict=True)]
+        return q
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``."""
+        _, rate = self._fraction(t)
+        qd = [d * rate for d in self._delta]
+        residual, fade = self._residual, self._fade
+        if residual is not None and t < fade:
+            u = max(t, 0.0) / fade
+            dh = (1.0 - u) * (1.0 - 3.0 * u)
+            qd = [v + r * dh for v, r in zip(qd, residual, strict=True)]
+        return qd
+
+
+def joint_move(
+    start: Sequence[float],
+    target: Sequence[float],
+    *,
+    velocity: float,
+    acceleration: float,
+    duration: float = 0.0,
+    max_velocity: Sequence[float] | None = None,
+    start_velocity: Sequence[float] | None = None,
+) -> JointMove:
+    """movej(target, a, v, t) from ``start``; v and a are the leading joint's, capped so that no joint
+    exceeds ``max_velocity``. A ``start_velocity`` (blending out of a moving motion) fades out,
+    decelerating at most at ``acceleration``. ValueError for a speed or acceleration that cannot move."""
+    delta = [b - a for a, b in zip(start, target, strict=True)]
+    distance = max((abs(d) for d in delta), default=0.0)
+    if max_velocity is not None and distance > 0 and duration <= 0:
+        for d, limit in zip(delta, max_velocity, strict=True):
+            if abs(d) > 0:
+                velocity = min(velocity, limit * distance / abs(d))
+    shape = profile(distance, velocity=velocity, acceleration=acceleration, duration=duration)
+    fade = 0.0
+    if start_velocity is not None and acceleration > 0:
+        # the Hermite fade's deceleration peaks at 4·v0/T at its start: T = 4·v0/a keeps it within a
+        fade = 4.0 * max((abs(v) for v in start_velocity), default=0.0) / acceleration
+    return JointMove(start, target, shape, start_velocity, fade)
+
+
+class SpeedRamp:
+    """speedj: from ``start_velocity`` to ``target_velocity`` at ``acceleration`` (leading joint); then on."""
+
+    __slots__ = ("_accel", "_q0", "_ramp", "_v0", "_v1", "duration")
+
+    def __init__(
+        self,
+        start: Sequence[float],
+        start_velocity: Sequence[float],
+        target_velocity: Sequence[float],
+        acceleration: float,
+        duration: float,
+    ) -> None:
+        """``duration`` <= 0: the motion lasts until the target speed is reached."""
+        self._q0 = [float(v) for v in start]
+        self._v0 = [float(v) for v in start_velocity]
+        self._v1 = [float(v) for v in target_velocity]
+        change = max(abs(b - a) for a, b in zip(self._v0, self._v1, strict=True))
+        a = max(float(acceleration), 1e-9)
+        self._ramp = change / a
+        ramp = self._ramp
+        self._accel = [(b - v) / ramp if ramp > 0 else 0.0 for v, b in zip(self._v0, self._v1, strict=True)]
+        self.duration = duration if duration > 0 else ramp
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        ramp = self._ramp
+        if t <= ramp:
+            return [
+                q + v * t + 0.5 * a * t * t for q, v, a in zip(self._q0, self._v0, self._accel, strict=True)
+            ]
+        rest = t - ramp
+        return [
+            q + v * ramp + 0.5 * a * ramp * ramp + w * rest
+            for q, v, a, w in zip(self._q0, self._v0, self._accel, self._v1, strict=True)
+        ]
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``."""
+        if t >= self._ramp:
+            return list(self._v1)
+        return [v + a * t for v, a in zip(self._v0, self._accel, strict=True)]
+
+
+class ServoRamp:
+    """servoj: from ``start`` to ``target`` at constant speed in ``duration`` s."""
+
+    __slots__ = ("_rate", "_start", "duration", "target")
+
+    def __init__(self, start: Sequence[float], target: Sequence[float], duration: float) -> None:
+        self._start = [float(v) for v in start]
+        self.target = [float(v) for v in target]
+        self.duration = duration
+        self._rate = [(b - a) / duration for a, b in zip(self._start, self.target, strict=True)]
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        if t >= self.duration:
+            return list(self.target)
+        return [a + r * t for a, r in zip(self._start, self._rate, strict=True)]
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``."""
+        return list(self._rate)
+
+
+class LinearStop:
+    """Every joint from ``start_velocity`` to rest in ``duration`` s, decelerating linearly."""
+
+    __slots__ = ("_q0", "_v0", "duration")
+
+    def __init__(self, start: Sequence[float], start_velocity: Sequence[float], duration: float) -> None:
+        self._q0 = [float(v) for v in start]
+        self._v0 = [float(v) for v in start_velocity]
+        self.duration = duration if any(self._v0) else 0.0
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        total = self.duration
+        t = min(max(t, 0.0), total)
+        factor = t - t * t / (2.0 * total) if total > 0 else 0.0
+        return [q + v * factor for q, v in zip(self._q0, self._v0, strict=True)]
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``."""
+        total = self.duration
+        if total <= 0 or t >= total:
+            return [0.0] * JOINTS
+        scale = 1.0 - max(t, 0.0) / total
+        return [v * scale for v in self._v0]
+
+
+def leading_stop_time(velocity: Sequence[float], deceleration: float) -> float:
+    """s: the time a stop at ``deceleration`` of the leading joint takes from ``velocity``."""
+    return max((abs(v) for v in velocity), default=0.0) / max(deceleration, 1e-9)
+
+
+# ---- poses: rotation vectors and homogeneous matrices (enough for movel without numpy) ---------------
+
+
+def matrix_of_pose(pose: Sequence[float]) -> Matrix:
+    """The transform of a UR pose (x, y, z, rx, ry, rz: rotation vector)."""
+    x, y, z, rx, ry, rz = (float(v) for v in pose)
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-15:
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, x, y, z)
+    kx, ky, kz = rx / angle, ry / angle, rz / angle
+    c, s = math.cos(angle), math.sin(angle)
+    v = 1.0 - c
+    return (
+        c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s,
+        ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s,
+        kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v,
+        x, y, z,
+    )  # fmt: skip
+
+
+def pose_of_matrix(m: Matrix) -> tuple[float, float, float, float, float, float]:
+    """The UR pose of a transform (rotation vector of angle in [0, π])."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = m
+    cos_angle = max(-1.0, min(1.0, (r00 + r11 + r22 - 1.0) / 2.0))
+    angle = math.acos(cos_angle)
+    if angle < 1e-12:
+        return (x, y, z, 0.0, 0.0, 0.0)
+    if angle < math.pi - 1e-6:
+        scale = angle / (2.0 * math.sin(angle))
+        return (x, y, z, (r21 - r12) * scale, (r02 - r20) * scale, (r10 - r01) * scale)
+    # near π: the axis from the diagonal (its sign from the off-diagonal terms)
+    kx = math.sqrt(max(0.0, (r00 + 1.0) / 2.0))
+    ky = math.sqrt(max(0.0, (r11 + 1.0) / 2.0))
+    kz = math.sqrt(max(0.0, (r22 + 1.0) / 2.0))
+    if kx >= ky and kx >= kz:
+        ky = math.copysign(ky, r01 + r10)
+        kz = math.copysign(kz, r02 + r20)
+    elif ky >= kz:
+        kx = math.copysign(kx, r01 + r10)
+        kz = math.copysign(kz, r12 + r21)
+    else:
+        kx = math.copysign(kx, r02 + r20)
+        ky = math.copysign(ky, r12 + r21)
+    norm = math.sqrt(kx * kx + ky * ky + kz * kz)
+    return (x, y, z, kx / norm * angle, ky / norm * angle, kz / norm * angle)
+
+
+def compose(a: Matrix, b: Matrix) -> Matrix:
+    """a · b."""
+    a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = a
+    b00, b01, b02, b10, b11, b12, b20, b21, b22, bx, by, bz = b
+    return (
+        a00 * b00 + a01 * b10 + a02 * b20,
+        a00 * b01 + a01 * b11 + a02 * b21,
+        a00 * b02 + a01 * b12 + a02 * b22,
+        a10 * b00 + a11 * b10 + a12 * b20,
+        a10 * b01 + a11 * b11 + a12 * b21,
+        a10 * b02 + a11 * b12 + a12 * b22,
+        a20 * b00 + a21 * b10 + a22 * b20,
+        a20 * b01 + a21 * b11 + a22 * b21,
+        a20 * b02 + a21 * b12 + a22 * b22,
+        a00 * bx + a01 * by + a02 * bz + ax,
+        a10 * bx + a11 * by + a12 * bz + ay,
+        a20 * bx + a21 * by + a22 * bz + az,
+    )
+
+
+def transposed(m: Matrix) -> Matrix:
+    """The inverse rotation (translation dropped)."""
+    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8], 0.0, 0.0, 0.0)
+
+
+def _relative_rotation(a: Matrix, b: Matrix) -> tuple[float, float, float]:
+    """The rotation vector of aᵀ·b (the rotation from a to b, in a's frame)."""
+    return pose_of_matrix(compose(transposed(a), b))[3:]
+
+
+InverseKinematics = Callable[[Sequence[float], Sequence[float]], Sequence[float] | None]
+"""(TCP pose, joints near) → joints reaching the pose, or None if it cannot be reached."""
+
+
+class CartesianMove:
+    """movel: the TCP from ``start`` to ``target`` on a straight line (orientation slerped).
+
+    The path parameter follows ``shape`` (its distance is the translation, or the rotation angle for a
+    pure rotation); each sample is solved by ``solve`` near the previous sample's joints, so the arm
+    keeps its configuration. ``failed`` is set once a sample has no solution (the arm then holds).
+    """
+
+    __slots__ = (
+        "_axis",
+        "_last",
+        "_last_t",
+        "_move",
+        "_rate",
+        "_shape",
+        "_solve",
+        "_start",
+        "duration",
+        "failed",
+    )
+
+    def __init__(
+        self,
+        start_pose: Sequence[float],
+        target_pose: Sequence[float],
+        shape: Profile,
+        start_joints: Sequence[float],
+        solve: InverseKinematics,
+    ) -> None:
+        self._start = matrix_of_pose(start_pose)
+        end = matrix_of_pose(target_pose)
+        self._move = (end[9] - self._start[9], end[10] - self._start[10], end[11] - self._start[11])
+        self._axis = _relative_rotation(self._start, end)
+        self._shape = shape
+        self._solve = solve
+        self._last = [float(v) for v in start_joints]
+        self._last_t = 0.0
+        self._rate = [0.0] * JOINTS
+        self.duration = shape.duration
+        self.failed = False
+
+    def pose(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """The TCP pose at ``t``."""
+        shape = self._shape
+        f = shape.at(t)[0] / shape.distance if shape.distance > 0 else 1.0
+        ax, ay, az = self._axis
+        m = compose(self._start, matrix_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
+        dx, dy, dz = self._move
+        s = self._start
+        return pose_of_matrix((*m[:9], s[9] + f * dx, s[10] + f * dy, s[11] + f * dz))
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t`` (the IK solution nearest the previous sample)."""
+        if self.failed or t == self._last_t:
+            return list(self._last)
+        q = self._solve(self.pose(t), self._last)
+        if q is None:
+            self.failed = True
+            self._rate = [0.0] * JOINTS
+            return list(self._last)
+        q = [float(v) for v in q]
+        h = t - self._last_t
+        self._rate = [(b - a) / h for a, b in zip(self._last, q, strict=True)] if h > 0 else [0.0] * JOINTS
+        self._last = q
+        self._last_t = t
+        return list(q)
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``: the rate over the last sampled step (call after position)."""
+        if self.failed or t >= self.duration:
+            return [0.0] * JOINTS
+        return list(self._rate)

@@ -1,0 +1,348 @@
+"""URScript motion builtins: servoj, speedj, speedl, movej, movel, movep, stopj, stopl.
+
+Each builtin hands the fake arm a ``Motion`` (fakeur/motion.py) and blocks its thread, cycle by cycle,
+until the arm has played it (``FakeArm.play``: ``dt × speed slider`` of program time per cycle).
+A motion starts from what the arm is commanded to do (position and velocity), so a command that
+follows one still moving (a blend, a servoj or speedj stream) continues smoothly.
+
+* Only one motion runs at a time: the latest command wins, the command it replaced returns at once
+  (a real controller has one motion queue; the fake never crashes on two threads commanding).
+* A thread killed (or a program stopped) in the middle of its motion leaves the arm decelerating at
+  that motion's stop deceleration.
+* A target outside the joint limits triggers a protective stop (the program pauses) and the command
+  returns without moving.
+* movej/movel with ``r`` > 0 return once the TCP is within ``r`` of the target; the arm goes on
+  towards it until the next motion command blends out of it (or it arrives).
+* servoj: the target is reached in ``t`` rounded to whole cycles; ``lookahead_time`` and ``gain`` do
+  not shape the fake's tracking (it follows the target exactly, within the joint velocity limits).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Generator, Sequence
+from typing import Any, Final
+
+from urdaemon.fakeur.arm import PROTECTIVE_STOP_DECELERATION, FakeArm
+from urdaemon.fakeur.motion import (
+    TIME_EPSILON_S,
+    CartesianMove,
+    LinearStop,
+    Motion,
+    ServoRamp,
+    SpeedRamp,
+    compose,
+    joint_move,
+    leading_stop_time,
+    matrix_of_pose,
+    pose_of_matrix,
+    profile,
+)
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose, builtin
+from urdaemon.fakeur.urscript.signatures import Computed
+
+__all__ = ["MotionState", "flange_pose", "tcp_pose"]
+
+SERVOJ_STOP_DECELERATION: Final = PROTECTIVE_STOP_DECELERATION
+"""rad/s²: how a servoj stream that is not renewed comes to rest (unverified on a real arm)."""
+
+Gen = Generator[None, None, Any]
+
+_DONE, _REPLACED, _INTERRUPTED = 0, 1, 2
+
+
+class MotionState:
+    """What lib_motion keeps per program (``host.motion``): which command owns the arm."""
+
+    __slots__ = ("serial",)
+
+    def __init__(self) -> None:
+        self.serial = 0
+
+
+def _state(host: ScriptHost) -> MotionState:
+    state = host.motion
+    if state is None:
+        state = host.motion = MotionState()
+    return state  # type: ignore[no-any-return]
+
+
+def _vector(name: str, value: Any) -> list[float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 6:
+        raise ScriptRuntimeError(f"{name}: expected a list of 6 numbers, got {value!r}")
+    try:
+        return [float(v) for v in value]
+    except (TypeError, ValueError):
+        raise ScriptRuntimeError(f"{name}: expected a list of 6 numbers, got {value!r}") from None
+
+
+def _number(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScriptRuntimeError(f"{name}: expected a number, got {value!r}")
+    return float(value)
+
+
+def _within_limits(arm: FakeArm, q: Sequence[float]) -> bool:
+    low, high = arm.min_position, arm.max_position
+    return all(low[i] <= q[i] <= high[i] for i in range(6))
+
+
+def _play(host: ScriptHost, motion: Motion, stop: float, until: Callable[[], bool] | None = None) -> Gen:
+    """Play ``motion`` and wait until it is over (or ``until()``); _DONE, _REPLACED or _INTERRUPTED."""
+    arm = host.arm
+    state = _state(host)
+    state.serial += 1
+    me = state.serial
+    while not arm.play(motion, stop):  # the arm cannot move (yet): wait, as a paused motion does
+        yield
+        if state.serial != me:
+            return _REPLACED
+    finished = False
+    try:
+        while True:
+            yield
+            if state.serial != me:
+                finished = True
+                return _REPLACED
+            if arm.motion is not motion:
+                finished = True
+                return _INTERRUPTED  # a safety stop or a pause took the arm
+            if arm.motion_time >= motion.duration - TIME_EPSILON_S or (until is not None and until()):
+                finished = True
+                return _DONE
+    finally:
+        if not finished and arm.motion is motion:
+            arm.stop(stop)  # the thread was killed or the program stopped in the middle of the motion
+
+
+def _start(arm: FakeArm) -> tuple[list[float], list[float]]:
+    """Where a new motion starts: the commanded joint positions and velocities."""
+    return list(arm.target_q), arm.commanded_velocity
+
+
+def _protective_stop(host: ScriptHost, what: str, q: Sequence[float]) -> None:
+    host.message("text", f"{what}: target {[round(v, 4) for v in q]} is outside the joint limits")
+    host.arm.protective_stop()
+
+
+# ---- servoj, speedj, stopj, stopl ------------------------------------------------------------------------
+
+
+@builtin("servoj", blocking=True)
+def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any, gain: Any) -> Gen:
+    """servoj(q, a, v, t, lookahead_time, gain): reach ``q`` in ``t`` (whole cycles, at least one)."""
+    target = _vector("servoj", q)
+    duration = _number("servoj t", t)
+    _number("servoj lookahead_time", lookahead_time)
+    _number("servoj gain", gain)
+    arm = host.arm
+    if not _within_limits(arm, target):
+        _protective_stop(host, "servoj", target)
+        return None
+    step = host.step_time
+    cycles = max(1, round(duration / step))
+    start, _ = _start(arm)
+    yield from _play(host, ServoRamp(start, target, cycles * step), SERVOJ_STOP_DECELERATION)
+    return None
+
+
+@builtin("speedj", blocking=True)
+def speedj(host: ScriptHost, qd: Any, a: Any, t: Any) -> Gen:
+    """speedj(qd, a, t): accelerate to joint speeds ``qd``; return after ``t``, or once at speed if t = 0."""
+    velocity = _vector("speedj", qd)
+    acceleration = _number("speedj a", a)
+    duration = _number("speedj t", t)
+    if acceleration <= 0:
+        raise ScriptRuntimeError(f"speedj: acceleration must be > 0, got {acceleration}")
+    arm = host.arm
+    limits = arm.max_velocity
+    velocity = [max(-limits[i], min(limits[i], velocity[i])) for i in range(6)]
+    start, moving = _start(arm)
+    ramp = SpeedRamp(start, moving, velocity, acceleration, duration)
+    if ramp.duration < host.step_time:  # t = 0 and already (nearly) at speed: one cycle at that speed
+        ramp = SpeedRamp(start, moving, velocity, acceleration, host.step_time)
+    yield from _play(host, ramp, acceleration)
+    return None
+
+
+@builtin("stopj", blocking=True)
+def stopj(host: ScriptHost, a: Any) -> Gen:
+    """stopj(a): decelerate to rest, linear in joint space, ``a`` for the leading joint."""
+    deceleration = _number("stopj a", a)
+    if deceleration <= 0:
+        raise ScriptRuntimeError(f"stopj: deceleration must be > 0, got {deceleration}")
+    start, moving = _start(host.arm)
+    yield from _play(host, LinearStop(start, moving, leading_stop_time(moving, deceleration)), deceleration)
+    return None
+
+
+@builtin("stopl", blocking=True)
+def stopl(host: ScriptHost, a: Any, aRot: Any) -> Gen:
+    """stopl(a, aRot): decelerate the tool to rest along its path, ``a`` m/s² and ``aRot`` rad/s²."""
+    deceleration = _number("stopl a", a)
+    rotation = deceleration if isinstance(aRot, Computed) or aRot is None else _number("stopl aRot", aRot)
+    if deceleration <= 0 or rotation <= 0:
+        raise ScriptRuntimeError(f"stopl: decelerations must be > 0, got {deceleration}, {rotation}")
+    arm = host.arm
+    start, moving = _start(arm)
+    linear, angular = _tool_speed(arm, start, moving)
+    duration = max(linear / deceleration, angular / rotation)
+    if duration <= 0 and any(moving):
+        duration = leading_stop_time(moving, PROTECTIVE_STOP_DECELERATION)
+    joint_deceleration = leading_stop_time(moving, 1.0) / duration if duration > 0 else 1.0
+    yield from _play(host, LinearStop(start, moving, duration), joint_deceleration)
+    return None
+
+
+def _tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> tuple[float, float]:
+    """(m/s, rad/s) of the TCP at joints ``q`` moving at ``qd`` (a forward difference over 1 ms)."""
+    h = 1e-3
+    here = tcp_matrix(arm, q)
+    ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
+    linear = math.dist(here[9:], ahead[9:]) / h
+    rel = compose(_transpose(here), ahead)
+    angular = math.sqrt(sum(v * v for v in pose_of_matrix(rel)[3:])) / h
+    return linear, angular
+
+
+def _transpose(m: tuple[float, ...]) -> Any:
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = m[:9]
+    return (r00, r10, r20, r01, r11, r21, r02, r12, r22, 0.0, 0.0, 0.0)
+
+
+# ---- movej, movel, movep ---------------------------------------------------------------------------
+
+
+def flange_pose(arm: FakeArm, q: Sequence[float]) -> tuple[float, float, float, float, float, float]:
+    """The tool flange pose for joints ``q`` (base frame, rotation vector)."""
+    if list(q) == arm.q:
+        return arm.tcp_pose()
+    x, y, z, qx, qy, qz, qw = arm.kinematics.tool_pose(q)
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+    if norm < 1e-12:
+        return (x, y, z, 0.0, 0.0, 0.0)
+    scale = 2.0 * math.atan2(norm, qw) / norm
+    return (x, y, z, qx * scale, qy * scale, qz * scale)
+
+
+def tcp_matrix(arm: FakeArm, q: Sequence[float], tcp: Sequence[float] | None = None) -> Any:
+    """The TCP transform for joints ``q`` and TCP offset ``tcp`` (the arm's when None)."""
+    return compose(
+        matrix_of_pose(flange_pose(arm, q)), matrix_of_pose(arm.tcp_offset if tcp is None else tcp)
+    )
+
+
+def tcp_pose(
+    arm: FakeArm, q: Sequence[float], tcp: Sequence[float] | None = None
+) -> tuple[float, float, float, float, float, float]:
+    """The TCP pose for joints ``q`` and TCP offset ``tcp`` (the arm's when None)."""
+    return pose_of_matrix(tcp_matrix(arm, q, tcp))
+
+
+def _joint_target(host: ScriptHost, name: str, target: Any) -> list[float] | None:
+    """The joints of a movej/movel target: a joint list as is, a pose by IK nearest the arm's joints."""
+    values = _vector(name, target)
+    if not isinstance(target, UrPose):
+        return values
+    return _inverse(host, values, host.arm.target_q)
+
+
+def _inverse(host: ScriptHost, pose: Sequence[float], near: Sequence[float]) -> list[float] | None:
+    from urdaemon.fakeur.urscript import lib_state  # the IK glue lives with get_inverse_kin
+
+    return lib_state.inverse_near(host.arm, pose, near, host.arm.tcp_offset)
+
+
+def _blend_check(arm: FakeArm, target: Sequence[float], radius: float) -> Callable[[], bool] | None:
+    if radius <= 0:
+        return None
+    goal = tcp_matrix(arm, target)[9:]
+
+    def within() -> bool:
+        return math.dist(tcp_matrix(arm, arm.target_q)[9:], goal) <= radius
+
+    return within
+
+
+@builtin("movej", blocking=True)
+def movej(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, r: Any) -> Gen:
+    """movej(q, a, v, t, r): to joints ``q`` (or a pose, by IK), linear in joint space."""
+    acceleration, velocity = _number("movej a", a), _number("movej v", v)
+    duration, radius = _number("movej t", t), _number("movej r", r)
+    arm = host.arm
+    target = _joint_target(host, "movej", q)
+    if target is None:
+        raise ScriptRuntimeError(f"movej: no inverse kinematics solution for {q!r}")
+    if not _within_limits(arm, target):
+        _protective_stop(host, "movej", target)
+        return None
+    if duration <= 0 and (acceleration <= 0 or velocity <= 0):
+        raise ScriptRuntimeError(f"movej: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
+    until = _blend_check(arm, target, radius)
+    while True:
+        start, moving = _start(arm)
+        move = joint_move(
+            start,
+            target,
+            velocity=velocity,
+            acceleration=acceleration,
+            duration=duration,
+            max_velocity=arm.max_velocity,
+            start_velocity=moving,
+        )
+        outcome = yield from _play(host, move, max(acceleration, 1e-3), until)
+        if outcome != _INTERRUPTED:
+            return None
+        duration = 0.0  # resumed after a stop: the rest at v and a
+
+
+def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r: Any) -> Gen:
+    acceleration, velocity = _number(f"{name} a", a), _number(f"{name} v", v)
+    duration, radius = _number(f"{name} t", t), _number(f"{name} r", r)
+    arm = host.arm
+    values = _vector(name, pose)
+    goal = values if isinstance(pose, UrPose) else tcp_pose(arm, values)
+    if duration <= 0 and (acceleration <= 0 or velocity <= 0):
+        raise ScriptRuntimeError(f"{name}: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
+    end = _inverse(host, goal, arm.target_q)
+    if end is None:
+        raise ScriptRuntimeError(f"{name}: no inverse kinematics solution for {pose!r}")
+    if not _within_limits(arm, end):
+        _protective_stop(host, name, end)
+        return None
+    until = _blend_check(arm, end, radius)
+    tcp = list(arm.tcp_offset)
+
+    def solve(target: Sequence[float], near: Sequence[float]) -> list[float] | None:
+        from urdaemon.fakeur.urscript import lib_state
+
+        return lib_state.inverse_near(arm, target, near, tcp)
+
+    while True:
+        start, _ = _start(arm)
+        start_pose = tcp_pose(arm, start)
+        distance = math.dist(start_pose[:3], goal[:3])
+        if distance < 1e-6:  # a pure rotation: v and a taken as rad/s and rad/s²
+            rel = compose(_transpose(matrix_of_pose(start_pose)), matrix_of_pose(goal))
+            distance = math.sqrt(sum(c * c for c in pose_of_matrix(rel)[3:]))
+        shape = profile(distance, velocity=velocity, acceleration=acceleration, duration=duration)
+        move = CartesianMove(start_pose, goal, shape, start, solve)
+        outcome = yield from _play(host, move, PROTECTIVE_STOP_DECELERATION, until)
+        if move.failed:
+            raise ScriptRuntimeError(f"{name}: the straight line to {pose!r} leaves the reachable space")
+        if outcome != _INTERRUPTED:
+            return None
+        duration = 0.0
+
+
+@builtin("movel", blocking=True)
+def movel(host: ScriptHost, pose: Any, a: Any, v: Any, t: Any, r: Any) -> Gen:
+    """movel(pose, a, v, t, r): the TCP on a straight line to ``pose`` (joints: their forward kinematics)."""
+    return (yield from _cartesian(host, "movel", pose, a, v, t, r))
+
+
+@builtin("movep", blocking=True)
+def movep(host: ScriptHost, pose: Any, a: Any, v: Any, r: Any) -> Gen:
+    """movep(pose, a, v, r): as movel (the fake keeps the tool speed constant along each line)."""
+    return (yield from _cartesian(host, "movep", pose, a, v, 0.0, r))

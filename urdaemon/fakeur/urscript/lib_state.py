@@ -1,0 +1,241 @@
+"""URScript state getters and kinematics builtins, read from the fake arm.
+
+Joint values come from ``FakeArm`` (actual: where the arm is; target: what the running motion
+commands); TCP values apply the arm's TCP offset (``set_tcp``) to the flange pose. Forces and torques
+are zero (the fake arm has no dynamics and touches nothing); joint temperatures are a constant 30 °C.
+Inverse kinematics is ``urdaemon.description.ik`` on the arm's calibrated model.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, Final
+
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoRamp, compose, pose_of_matrix
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.lib_motion import flange_pose, tcp_matrix, tcp_pose
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+from urdaemon.fakeur.urscript.signatures import Computed
+
+__all__ = ["inverse_near", "tool_speed"]
+
+JOINT_TEMPERATURE: Final = 30.0
+"""°C: what every joint reports (the controller's primary and RTDE data say the same)."""
+SPEED_STEP_S: Final = 1e-3
+"""s: the forward difference over which a TCP speed is computed from joint speeds."""
+
+
+def inverse_near(
+    arm: FakeArm,
+    pose: Sequence[float],
+    near: Sequence[float],
+    tcp: Sequence[float] | None,
+    max_position_error: float = 1e-10,
+    max_orientation_error: float = 1e-10,
+) -> list[float] | None:
+    """Joints reaching TCP ``pose`` nearest ``near``, or None."""
+    q = arm.ik.nearest(pose, near, tcp, max_position_error, max_orientation_error)
+    return None if q is None else list(q)
+
+
+def tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> UrList:
+    """[vx, vy, vz, wx, wy, wz]: the TCP's speed at joints ``q`` moving at ``qd`` (base frame)."""
+    if not any(qd):
+        return UrList([0.0] * 6)
+    h = SPEED_STEP_S
+    here = tcp_matrix(arm, q)
+    ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
+    linear = [(b - a) / h for a, b in zip(here[9:], ahead[9:], strict=True)]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = here[:9]
+    transposed = (r00, r10, r20, r01, r11, r21, r02, r12, r22, 0.0, 0.0, 0.0)
+    wx, wy, wz = pose_of_matrix(compose(ahead, transposed))[3:]  # ahead · hereᵀ: the turn in base
+    return UrList([*linear, wx / h, wy / h, wz / h])
+
+
+def _joints(name: str, value: Any) -> list[float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 6:
+        raise ScriptRuntimeError(f"{name}: expected a list of 6 numbers, got {value!r}")
+    return [float(v) for v in value]
+
+
+def _optional(value: Any) -> Any:
+    """None for a parameter left at its 'current value' default (computed, no value, or an empty list)."""
+    if value is None or isinstance(value, Computed) or (isinstance(value, (list, tuple)) and len(value) == 0):
+        return None
+    return value
+
+
+@builtin("get_actual_joint_positions")
+def get_actual_joint_positions(host: ScriptHost) -> UrList:
+    """The joint positions where the arm is (rad)."""
+    return UrList(host.arm.q)
+
+
+@builtin("get_joint_positions")
+def get_joint_positions(host: ScriptHost) -> UrList:
+    """The joint positions (the older name of get_actual_joint_positions)."""
+    return UrList(host.arm.q)
+
+
+@builtin("get_target_joint_positions")
+def get_target_joint_positions(host: ScriptHost) -> UrList:
+    """The joint positions the running motion commands (rad)."""
+    return UrList(host.arm.target_q)
+
+
+@builtin("get_actual_joint_speeds")
+def get_actual_joint_speeds(host: ScriptHost) -> UrList:
+    """The joint speeds (rad/s)."""
+    return UrList(host.arm.qd)
+
+
+@builtin("get_target_joint_speeds")
+def get_target_joint_speeds(host: ScriptHost) -> UrList:
+    """The joint speeds the running motion commands (rad/s)."""
+    return UrList(host.arm.target_qd)
+
+
+@builtin("get_actual_tcp_pose")
+def get_actual_tcp_pose(host: ScriptHost) -> UrPose:
+    """The TCP pose where the arm is (base frame)."""
+    return UrPose(tcp_pose(host.arm, host.arm.q))
+
+
+@builtin("get_target_tcp_pose")
+def get_target_tcp_pose(host: ScriptHost) -> UrPose:
+    """The TCP pose the running motion commands."""
+    return UrPose(tcp_pose(host.arm, host.arm.target_q))
+
+
+@builtin("get_actual_tool_flange_pose")
+def get_actual_tool_flange_pose(host: ScriptHost) -> UrPose:
+    """The tool flange pose where the arm is (no TCP offset)."""
+    return UrPose(flange_pose(host.arm, host.arm.q))
+
+
+@builtin("get_actual_tcp_speed")
+def get_actual_tcp_speed(host: ScriptHost) -> UrList:
+    """The TCP speed [vx, vy, vz, wx, wy, wz] (m/s, rad/s; base frame)."""
+    return tool_speed(host.arm, host.arm.q, host.arm.qd)
+
+
+@builtin("get_target_tcp_speed")
+def get_target_tcp_speed(host: ScriptHost) -> UrList:
+    """The TCP speed the running motion commands."""
+    return tool_speed(host.arm, host.arm.target_q, host.arm.target_qd)
+
+
+@builtin("get_tcp_force")
+def get_tcp_force(host: ScriptHost) -> UrPose:
+    """The wrench at the TCP: zero (the fake arm touches nothing)."""
+    return UrPose([0.0] * 6)
+
+
+@builtin("get_joint_torques")
+def get_joint_torques(host: ScriptHost) -> UrList:
+    """The joint torques beyond gravity: zero (no dynamics)."""
+    return UrList([0.0] * 6)
+
+
+@builtin("get_joint_temp")
+def get_joint_temp(host: ScriptHost, j: Any) -> float:
+    """The temperature of joint ``j`` (°C)."""
+    if isinstance(j, bool) or not isinstance(j, int) or not 0 <= j <= 5:
+        raise ScriptRuntimeError(f"get_joint_temp: joint index must be 0 to 5, got {j!r}")
+    return JOINT_TEMPERATURE
+
+
+@builtin("get_actual_joint_positions_history")
+def get_actual_joint_positions_history(host: ScriptHost, steps: Any) -> UrList:
+    """The joint positions ``steps`` controller cycles ago (0: now)."""
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ScriptRuntimeError(
+            f"get_actual_joint_positions_history: steps must be an integer >= 0, got {steps!r}"
+        )
+    return UrList(host.arm.history(steps))
+
+
+@builtin("is_steady")
+def is_steady(host: ScriptHost) -> bool:
+    """True when the arm is fully at rest and no motion is commanded."""
+    return host.arm.steady
+
+
+@builtin("get_target_waypoint")
+def get_target_waypoint(host: ScriptHost) -> UrPose:
+    """The TCP pose the active move ends at (the target TCP pose when no move is active)."""
+    arm = host.arm
+    motion = arm.motion
+    if isinstance(motion, CartesianMove):
+        return UrPose(motion.pose(motion.duration))
+    if isinstance(motion, (JointMove, ServoRamp)):
+        return UrPose(tcp_pose(arm, motion.target))
+    return UrPose(tcp_pose(arm, arm.target_q))
+
+
+@builtin("get_forward_kin")
+def get_forward_kin(host: ScriptHost, q: Any, tcp: Any) -> UrPose:
+    """The TCP pose of joints ``q`` (default: where the arm is) with ``tcp`` (default: the active TCP)."""
+    arm = host.arm
+    joints = arm.q if _optional(q) is None else _joints("get_forward_kin q", q)
+    offset = None if _optional(tcp) is None else _joints("get_forward_kin tcp", tcp)
+    return UrPose(tcp_pose(arm, joints, offset))
+
+
+def _solve(name: str, host: ScriptHost, x: Any, qnear: Any, position: Any, orientation: Any, tcp: Any) -> Any:
+    arm = host.arm
+    pose = _joints(f"{name} x", x)
+    near = arm.q if _optional(qnear) is None else _joints(f"{name} qnear", qnear)
+    offset = arm.tcp_offset if _optional(tcp) is None else _joints(f"{name} tcp", tcp)
+    position_error = 1e-10 if _optional(position) is None else float(position)
+    orientation_error = 1e-10 if _optional(orientation) is None else float(orientation)
+    return inverse_near(arm, pose, near, offset, position_error, orientation_error)
+
+
+@builtin("get_inverse_kin")
+def get_inverse_kin(
+    host: ScriptHost,
+    x: Any,
+    qnear: Any,
+    maxPositionError: Any,
+    maxOrientationError: Any,
+    tcp: Any,
+) -> UrList:
+    """Joints reaching ``x`` nearest ``qnear``; a runtime error if there are none (as the controller)."""
+    q = _solve("get_inverse_kin", host, x, qnear, maxPositionError, maxOrientationError, tcp)
+    if q is None:
+        raise ScriptRuntimeError(f"get_inverse_kin: no solution for {x!r}")
+    return UrList(q)
+
+
+@builtin("get_inverse_kin_has_solution")
+def get_inverse_kin_has_solution(
+    host: ScriptHost,
+    pose: Any,
+    qnear: Any,
+    maxPositionError: Any,
+    maxOrientationError: Any,
+    tcp: Any,
+) -> bool:
+    """Whether get_inverse_kin would find a solution."""
+    return (
+        _solve("get_inverse_kin_has_solution", host, pose, qnear, maxPositionError, maxOrientationError, tcp)
+        is not None
+    )
+
+
+@builtin("is_within_safety_limits")
+def is_within_safety_limits(host: ScriptHost, pose: Any) -> bool:
+    """Whether a pose (by IK nearest the arm's joints) or a joint list lies within the joint limits."""
+    arm = host.arm
+    if isinstance(pose, UrPose):
+        q = _solve("is_within_safety_limits", host, pose, None, None, None, None)
+        if q is None:
+            return False
+    else:
+        q = _joints("is_within_safety_limits", pose)
+    return all(arm.min_position[i] <= q[i] <= arm.max_position[i] for i in range(6)) and all(
+        math.isfinite(v) for v in q
+    )
