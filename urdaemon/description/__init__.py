@@ -1,4 +1,4 @@
-"""The robot-description layer: UR model data, calibration, the cell URDF, and fast kinematics."""
+"""The robot-description layer: UR model data, calibration, the cell URDF, fast kinematics and IK."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from urdaemon.description.calibration import (
     load_calibration,
     robot_dh,
 )
+from urdaemon.description.ik import IkSolution, UrKinematics
 from urdaemon.description.kinematics import DhKinematics, KinematicTree, TreeJoint
 from urdaemon.description.urdf import joint_limits_for, load_urdf
 from urdaemon.description.urmodels import (
@@ -26,12 +27,14 @@ __all__ = [
     "Calibration",
     "DhKinematics",
     "DhParameters",
+    "IkSolution",
     "KinematicTree",
     "LinkInertial",
     "Origin",
     "TreeJoint",
     "UrChain",
     "UrJoint",
+    "UrKinematics",
     "UrModel",
     "build_cell_urdf",
     "joint_limits_for",

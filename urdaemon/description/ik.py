@@ -1,0 +1,541 @@
+"""Inverse kinematics and the Jacobian of a UR arm, on its calibrated kinematics.
+
+``UrKinematics(model, dh)`` solves in two stages: the closed-form UR solution on the model's nominal
+DH gives up to eight branches, then Newton steps (damped least squares) on the calibrated DH (what
+``DhKinematics`` computes) bring each branch onto the calibrated arm to 1e-10 m and 1e-10 rad.
+
+Conventions (URScript's): poses are ``(x, y, z, rx, ry, rz)`` in the controller's base frame, metres
+and a rotation vector (axis times angle, rad); ``tcp`` is the flange -> TCP pose (``set_tcp``), the
+flange being tool0 (the DH tool frame); joint values are in rad, shoulder_pan ... wrist_3. A twist is
+``(vx, vy, vz, wx, wy, wz)``: the TCP point's velocity and the angular velocity, both in base.
+
+Branches: bit 2 ``SHOULDER`` (q1 = phi + pi/2 - acos(d4/r) instead of + acos), bit 1 ``WRIST`` (q5 <= 0),
+bit 0 ``ELBOW`` (q3 <= 0). At a singular pose two branches coincide; a joint the pose leaves free
+(q6 with the wrist straight, q5 = 0 or pi) takes the seed's value. docs/kinematics.md has the details.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.errors import DescriptionError
+
+__all__ = [
+    "ELBOW",
+    "SHOULDER",
+    "WRIST",
+    "IkSolution",
+    "UrKinematics",
+    "frame_of_pose",
+    "pose_of_frame",
+]
+
+SHOULDER, WRIST, ELBOW = 4, 2, 1
+
+Frame = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
+"""Row-major rotation r00 r01 r02 r10 r11 r12 r20 r21 r22, then translation x y z."""
+Pose = tuple[float, float, float, float, float, float]
+Joints = tuple[float, float, float, float, float, float]
+
+_TAU = 2.0 * math.pi
+_HALF_PI = 0.5 * math.pi
+_NOMINAL_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
+_IDENTITY: Frame = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+_ZERO_SEED: Joints = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_REACH_SLACK = 0.25
+"""How far (cosine units) past the nominal arm's reach a pose is still tried on the calibrated arm."""
+_NUDGE = 0.1
+"""rad off a singularity where a pose just out of the nominal arm's reach starts Newton's steps."""
+_WRIST_SINGULAR = 1e-10
+"""Below this |sin q5| the wrist is straight: q4 and q6 turn about one axis and q6 takes the seed's value."""
+_NEWTON_TOLERANCE = 1e-12
+_NEWTON_EVALUATIONS = 30
+_CONTINUATION_STEPS = 8
+_NEARER_MARGIN = 0.05
+"""Nominal branches this much (rad, joint distance) farther than the best refined one are refined too."""
+
+
+class IkSolution(NamedTuple):
+    """One inverse-kinematics solution: its branch (``SHOULDER | WRIST | ELBOW`` bits) and joints."""
+
+    branch: int
+    q: Joints
+
+
+def frame_of_pose(pose: Sequence[float]) -> Frame:
+    """The frame of a UR pose (x, y, z, rx, ry, rz) (Rodrigues)."""
+    x, y, z, rx, ry, rz = pose
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-300:
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, float(x), float(y), float(z))
+    ux, uy, uz = rx / angle, ry / angle, rz / angle
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return (
+        t * ux * ux + c, t * ux * uy - s * uz, t * ux * uz + s * uy,
+        t * ux * uy + s * uz, t * uy * uy + c, t * uy * uz - s * ux,
+        t * ux * uz - s * uy, t * uy * uz + s * ux, t * uz * uz + c,
+        float(x), float(y), float(z),
+    )  # fmt: skip
+
+
+def pose_of_frame(f: Frame) -> Pose:
+    """The UR pose (x, y, z, rx, ry, rz) of a frame; the rotation angle is in [0, pi]."""
+    rx, ry, rz = _log(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8])
+    return (f[9], f[10], f[11], rx, ry, rz)
+
+
+def _log(
+    r00: float, r01: float, r02: float, r10: float, r11: float, r12: float, r20: float, r21: float, r22: float
+) -> tuple[float, float, float]:
+    """Rotation vector of a rotation matrix, accurate at every angle including near pi."""
+    vx, vy, vz = 0.5 * (r21 - r12), 0.5 * (r02 - r20), 0.5 * (r10 - r01)
+    s = math.sqrt(vx * vx + vy * vy + vz * vz)
+    c = 0.5 * (r00 + r11 + r22 - 1.0)
+    angle = math.atan2(s, c)
+    if c > -0.5:
+        # sin(angle) is accurate here (angle below 2pi/3): v = sin(angle) * axis.
+        scale = angle / s if s > 1e-300 else 1.0
+        return (vx * scale, vy * scale, vz * scale)
+    # Near pi: read the axis off the symmetric part (1 - c) * u u^T, largest diagonal first.
+    d = 1.0 - c
+    xx, yy, zz = (r00 - c) / d, (r11 - c) / d, (r22 - c) / d
+    if xx >= yy and xx >= zz:
+        ux = math.sqrt(max(xx, 0.0))
+        uy, uz = (r01 + r10) / (2.0 * d * ux), (r02 + r20) / (2.0 * d * ux)
+    elif yy >= zz:
+        uy = math.sqrt(max(yy, 0.0))
+        ux, uz = (r01 + r10) / (2.0 * d * uy), (r12 + r21) / (2.0 * d * uy)
+    else:
+        uz = math.sqrt(max(zz, 0.0))
+        ux, uy = (r02 + r20) / (2.0 * d * uz), (r12 + r21) / (2.0 * d * uz)
+    if ux * vx + uy * vy + uz * vz < 0.0:
+        ux, uy, uz = -ux, -uy, -uz
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    return (ux * angle / norm, uy * angle / norm, uz * angle / norm)
+
+
+def _compose(a: Frame, b: Frame) -> Frame:
+    a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = a
+    b00, b01, b02, b10, b11, b12, b20, b21, b22, bx, by, bz = b
+    return (
+        a00 * b00 + a01 * b10 + a02 * b20,
+        a00 * b01 + a01 * b11 + a02 * b21,
+        a00 * b02 + a01 * b12 + a02 * b22,
+        a10 * b00 + a11 * b10 + a12 * b20,
+        a10 * b01 + a11 * b11 + a12 * b21,
+        a10 * b02 + a11 * b12 + a12 * b22,
+        a20 * b00 + a21 * b10 + a22 * b20,
+        a20 * b01 + a21 * b11 + a22 * b21,
+        a20 * b02 + a21 * b12 + a22 * b22,
+        ax + a00 * bx + a01 * by + a02 * bz,
+        ay + a10 * bx + a11 * by + a12 * bz,
+        az + a20 * bx + a21 * by + a22 * bz,
+    )  # fmt: skip
+
+
+def _inverse(f: Frame) -> Frame:
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = f
+    return (
+        r00, r10, r20, r01, r11, r21, r02, r12, r22,
+        -(r00 * x + r10 * y + r20 * z), -(r01 * x + r11 * y + r21 * z), -(r02 * x + r12 * y + r22 * z),
+    )  # fmt: skip
+
+
+def _branch_acos(value: float, negative: bool) -> float | None:
+    """acos of ``value``, negated for the negative branch; None when far outside [-1, 1].
+
+    A value up to ``_REACH_SLACK`` outside (the nominal arm just cannot reach, the calibrated one may)
+    gives an angle ``_NUDGE`` inside the singularity rather than on it, so that Newton's steps on the
+    calibrated arm can leave it (at the singularity the missing direction is not in the Jacobian)."""
+    if value > 1.0:
+        angle = _NUDGE if value - 1.0 <= _REACH_SLACK else None
+    elif value < -1.0:
+        angle = math.pi - _NUDGE if -1.0 - value <= _REACH_SLACK else None
+    else:
+        angle = math.acos(value)
+    if angle is None:
+        return None
+    return -angle if negative else angle
+
+
+class _Chain(NamedTuple):
+    """Forward kinematics with what the Jacobian needs: the TCP frame, each joint's axis and a point on it."""
+
+    frame: Frame
+    axes: tuple[tuple[float, float, float], ...]
+    points: tuple[tuple[float, float, float], ...]
+
+
+class UrKinematics:
+    """Forward and inverse kinematics and the Jacobian of one UR arm with its calibration.
+
+    ``model`` gives the nominal DH (the closed-form stage) and the joint limits; ``dh`` is the arm's
+    calibrated DH (default: the nominal one). Every method takes ``tcp``, the flange -> TCP pose
+    (default: none, i.e. poses are of the flange, tool0)."""
+
+    __slots__ = ("_a2", "_a3", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
+
+    def __init__(self, model: UrModel, dh: DhParameters | None = None) -> None:
+        nominal = model.dh
+        structure_ok = (
+            all(abs(t) < 1e-12 for t in nominal.theta)
+            and all(abs(nominal.a[i]) < 1e-12 for i in (0, 3, 4, 5))
+            and all(abs(nominal.d[i]) < 1e-12 for i in (1, 2))
+            and all(abs(x - y) < 1e-12 for x, y in zip(nominal.alpha, _NOMINAL_ALPHA, strict=True))
+            and nominal.a[1] != 0.0
+            and nominal.a[2] != 0.0
+            and nominal.d[3] != 0.0
+        )
+        if not structure_ok:
+            raise DescriptionError(
+                f"model {model.model!r}: the nominal DH does not have the UR arm's structure"
+            )
+        self._a2, self._a3 = nominal.a[1], nominal.a[2]
+        self._d1, self._d4, self._d5, self._d6 = nominal.d[0], nominal.d[3], nominal.d[4], nominal.d[5]
+        real = nominal if dh is None else dh
+        self._joints = tuple(
+            (real.theta[i], real.d[i], real.a[i], math.cos(real.alpha[i]), math.sin(real.alpha[i]))
+            for i in range(6)
+        )
+        self._lower = tuple(-math.inf if j.min_position is None else j.min_position for j in model.joints)
+        self._upper = tuple(math.inf if j.max_position is None else j.max_position for j in model.joints)
+
+    # ---- public API ----------------------------------------------------------------------------
+
+    def forward(self, q: Sequence[float], tcp: Sequence[float] | None = None) -> Pose:
+        """The TCP pose for joints ``q`` (URScript ``get_forward_kin(q, tcp)``)."""
+        frame = self._frame(q)
+        if tcp is not None:
+            frame = _compose(frame, frame_of_pose(tcp))
+        return pose_of_frame(frame)
+
+    def solutions(
+        self,
+        pose: Sequence[float],
+        tcp: Sequence[float] | None = None,
+        qnear: Sequence[float] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> list[IkSolution]:
+        """Every branch that reaches ``pose`` within the limits, in branch order.
+
+        Each joint is the 2pi-shift of its value that lies within the joint's limits nearest ``qnear``
+        (default all zeros), which also gives the value of a joint the pose leaves free."""
+        seed = _ZERO_SEED if qnear is None else qnear
+        target = self._flange_target(pose, tcp)
+        found: list[IkSolution] = []
+        for branch, q0 in self._analytic(target, seed):
+            q = self._solve_branch(target, q0, seed, max_position_error, max_orientation_error)
+            if q is not None:
+                found.append(IkSolution(branch, q))
+        return found
+
+    def nearest(
+        self,
+        pose: Sequence[float],
+        qnear: Sequence[float],
+        tcp: Sequence[float] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Joints | None:
+        """The solution nearest ``qnear`` (Euclidean in joint space), or None if the pose has none.
+
+        URScript ``get_inverse_kin(x, qnear, maxPositionError, maxOrientationError, tcp)``."""
+        target = self._flange_target(pose, tcp)
+        ranked = sorted(
+            (_distance(_shift_near(q0, qnear), qnear), branch, q0)
+            for branch, q0 in self._analytic(target, qnear)
+        )
+        best: Joints | None = None
+        best_distance = math.inf
+        for nominal_distance, _, q0 in ranked:
+            if nominal_distance > best_distance + _NEARER_MARGIN:
+                break
+            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error)
+            if q is not None:
+                distance = _distance(q, qnear)
+                if distance < best_distance:
+                    best, best_distance = q, distance
+        return best
+
+    def has_solution(
+        self,
+        pose: Sequence[float],
+        qnear: Sequence[float] | None = None,
+        tcp: Sequence[float] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> bool:
+        """Whether ``nearest`` finds a solution (URScript ``get_inverse_kin_has_solution``)."""
+        seed = _ZERO_SEED if qnear is None else qnear
+        return self.nearest(pose, seed, tcp, max_position_error, max_orientation_error) is not None
+
+    def jacobian(self, q: Sequence[float], tcp: Sequence[float] | None = None) -> NDArray[np.float64]:
+        """The 6x6 geometric Jacobian at ``q``: rows vx vy vz wx wy wz of the TCP in base, columns joints."""
+        chain = self._chain(q, None if tcp is None else frame_of_pose(tcp))
+        return np.array(_jacobian_rows(chain))
+
+    def joint_velocity(
+        self,
+        q: Sequence[float],
+        twist: Sequence[float],
+        tcp: Sequence[float] | None = None,
+        *,
+        singular_value: float = 0.05,
+        max_damping: float = 0.05,
+    ) -> Joints:
+        """Joint velocities that give the TCP ``twist`` at ``q``, damped near singularities.
+
+        Damped least squares: qd = sum sigma_i / (sigma_i^2 + l^2) v_i u_i^T twist over the singular
+        values of the Jacobian, with l^2 = (1 - (sigma_min / singular_value)^2) * max_damping^2 when
+        sigma_min < singular_value, else 0 (the exact inverse away from singularities)."""
+        jac = self.jacobian(q, tcp)
+        u, sigma, vt = np.linalg.svd(jac)
+        smallest = float(sigma[5])
+        damping = 0.0
+        if smallest < singular_value:
+            damping = (1.0 - (smallest / singular_value) ** 2) * max_damping * max_damping
+        gain = sigma / (sigma * sigma + damping) if damping > 0.0 else 1.0 / sigma
+        qd = vt.T @ (gain * (u.T @ np.asarray(twist, dtype=np.float64)))
+        return (float(qd[0]), float(qd[1]), float(qd[2]), float(qd[3]), float(qd[4]), float(qd[5]))
+
+    # ---- stages --------------------------------------------------------------------------------
+
+    def _flange_target(self, pose: Sequence[float], tcp: Sequence[float] | None) -> Frame:
+        target = frame_of_pose(pose)
+        return target if tcp is None else _compose(target, _inverse(frame_of_pose(tcp)))
+
+    def _solve_branch(
+        self,
+        target: Frame,
+        q0: list[float],
+        seed: Sequence[float],
+        max_position: float,
+        max_orientation: float,
+    ) -> Joints | None:
+        """Refine one nominal branch on the calibrated arm, check the error and the limits."""
+        q, position_error, orientation_error = self._refine(target, q0)
+        if not (position_error <= max_position and orientation_error <= max_orientation):
+            q, position_error, orientation_error = self._continuation(target, q0)
+            if not (position_error <= max_position and orientation_error <= max_orientation):
+                return None
+        return self._within_limits(_shift_near(q, seed))
+
+    def _continuation(self, target: Frame, q: list[float]) -> tuple[list[float], float, float]:
+        """Follow the branch from where ``q`` puts the calibrated arm to ``target`` in small steps.
+
+        The fallback when Newton's steps from the nominal branch do not converge: near a singularity
+        the calibrated branch can lie far (in joints) from the nominal one."""
+        start = self._chain(q, None).frame
+        sx, sy, sz = start[9], start[10], start[11]
+        dx, dy, dz = target[9] - sx, target[10] - sy, target[11] - sz
+        # The rotation from the start's orientation to the target's, in base, as a rotation vector.
+        rx, ry, rz = _log(*_compose(target, _inverse(start))[:9])
+        rotation: Frame = (*start[:9], 0.0, 0.0, 0.0)
+        for k in range(1, _CONTINUATION_STEPS):
+            s = k / _CONTINUATION_STEPS
+            turned = _compose(frame_of_pose((0.0, 0.0, 0.0, s * rx, s * ry, s * rz)), rotation)
+            waypoint: Frame = (*turned[:9], sx + s * dx, sy + s * dy, sz + s * dz)
+            q = self._refine(waypoint, q)[0]
+        return self._refine(target, q)
+
+    def _analytic(self, f: Frame, seed: Sequence[float]) -> list[tuple[int, list[float]]]:
+        """The closed-form solutions on the nominal DH, as (branch, joints); unreachable branches left out."""
+        r00, r01, r02, r10, r11, r12, _, _, _, px, py, _ = f
+        d4, d6 = self._d4, self._d6
+        wx, wy = px - d6 * r02, py - d6 * r12
+        radius = math.hypot(wx, wy)
+        # Joint 2's axis z1 = (sin q1, -cos q1, 0); the wrist centre lies d4 along it: w . z1 = d4.
+        if not radius > 0.0:
+            return []
+        phi = math.atan2(wy, wx) + _HALF_PI
+        found: list[tuple[int, list[float]]] = []
+        for shoulder in (0, SHOULDER):
+            spread = _branch_acos(d4 / radius, shoulder != 0)
+            if spread is None:
+                return []
+            q1 = phi + spread
+            s1, c1 = math.sin(q1), math.cos(q1)
+            # The tool z axis against z1 is cos q5; its x and y axes against z1 give q6.
+            c5 = min(1.0, max(-1.0, r02 * s1 - r12 * c1))
+            for wrist in (0, WRIST):
+                q5 = math.acos(c5) if wrist == 0 else -math.acos(c5)
+                s5 = math.sin(q5)
+                if abs(s5) < _WRIST_SINGULAR:
+                    q6 = float(seed[5])
+                else:
+                    q6 = math.atan2((r11 * c1 - r01 * s1) / s5, (r00 * s1 - r10 * c1) / s5)
+                self._arm_plane(found, shoulder | wrist, f, q1, q5, q6, seed)
+        return found
+
+    def _arm_plane(
+        self,
+        found: list[tuple[int, list[float]]],
+        branch: int,
+        f: Frame,
+        q1: float,
+        q5: float,
+        q6: float,
+        seed: Sequence[float],
+    ) -> None:
+        """Joints 2-4 (parallel axes) for given q1, q5, q6: both elbow branches, appended to ``found``."""
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = f
+        a2, a3, d5, d6 = self._a2, self._a3, self._d5, self._d6
+        s1, c1 = math.sin(q1), math.cos(q1)
+        s5, c5, s6, c6 = math.sin(q5), math.cos(q5), math.sin(q6), math.cos(q6)
+        # Frame 4 from the tool: z4 = -s6 n - c6 o, x4 = c5 c6 n - c5 s6 o - s5 a (n, o, a: tool axes).
+        o4x = px - d6 * r02 + d5 * (s6 * r00 + c6 * r01)
+        o4y = py - d6 * r12 + d5 * (s6 * r10 + c6 * r11)
+        o4z = pz - d6 * r22 + d5 * (s6 * r20 + c6 * r21)
+        x4x = c5 * c6 * r00 - c5 * s6 * r01 - s5 * r02
+        x4y = c5 * c6 * r10 - c5 * s6 * r11 - s5 * r12
+        x4z = c5 * c6 * r20 - c5 * s6 * r21 - s5 * r22
+        # In joint 2's plane (x1 = (c1, s1, 0), y1 = base z, origin at height d1) joints 2-4 are planar.
+        x = c1 * o4x + s1 * o4y
+        y = o4z - self._d1
+        angle234 = math.atan2(x4z, c1 * x4x + s1 * x4y)
+        cosine = (x * x + y * y - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)
+        reach = math.atan2(y, x) if x * x + y * y > 0.0 else float(seed[1])
+        for bit in (0, ELBOW):
+            q3 = _branch_acos(cosine, bit != 0)
+            if q3 is None:
+                return
+            q2 = reach - math.atan2(a3 * math.sin(q3), a2 + a3 * math.cos(q3))
+            found.append((branch | bit, [q1, q2, q3, angle234 - q2 - q3, q5, q6]))
+
+    def _refine(self, target: Frame, q: list[float]) -> tuple[list[float], float, float]:
+        """Levenberg-Marquardt steps on the calibrated arm from ``q`` (a nominal branch).
+
+        The damping starts at the squared error (so Newton's quadratic convergence near the solution)
+        and grows tenfold after a step that does not lower the error. Returns the joints and their
+        position and orientation errors (m, rad)."""
+        chain, error, position, orientation = self._error(target, q)
+        evaluations = 1
+        while evaluations < _NEWTON_EVALUATIONS:
+            total = position + orientation
+            if position < _NEWTON_TOLERANCE and orientation < _NEWTON_TOLERANCE:
+                break
+            jac = np.array(_jacobian_rows(chain))
+            normal = jac @ jac.T
+            residual = np.array(error)
+            damping = total * total + 1e-24
+            while evaluations < _NEWTON_EVALUATIONS and damping < 1.0:
+                lhs = normal.copy()
+                lhs.flat[::7] += damping
+                step = jac.T @ np.linalg.solve(lhs, residual)
+                trial = [q[i] + float(step[i]) for i in range(6)]
+                evaluations += 1
+                trial_chain, trial_error, trial_position, trial_orientation = self._error(target, trial)
+                if trial_position + trial_orientation < total:
+                    q, chain, error = trial, trial_chain, trial_error
+                    position, orientation = trial_position, trial_orientation
+                    break
+                damping *= 10.0
+            else:
+                break  # no step lowers the error: at the rounding floor, or stuck
+        return q, position, orientation
+
+    def _error(self, target: Frame, q: list[float]) -> tuple[_Chain, tuple[float, ...], float, float]:
+        """The chain at ``q`` and the twist from it to ``target`` (position, rotation vector in base)."""
+        t00, t01, t02, t10, t11, t12, t20, t21, t22, tx, ty, tz = target
+        chain = self._chain(q, None)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = chain.frame
+        ex, ey, ez = tx - px, ty - py, tz - pz
+        # The rotation that takes the current tool to the target, in base: target * current^T.
+        wx, wy, wz = _log(
+            t00 * r00 + t01 * r01 + t02 * r02,
+            t00 * r10 + t01 * r11 + t02 * r12,
+            t00 * r20 + t01 * r21 + t02 * r22,
+            t10 * r00 + t11 * r01 + t12 * r02,
+            t10 * r10 + t11 * r11 + t12 * r12,
+            t10 * r20 + t11 * r21 + t12 * r22,
+            t20 * r00 + t21 * r01 + t22 * r02,
+            t20 * r10 + t21 * r11 + t22 * r12,
+            t20 * r20 + t21 * r21 + t22 * r22,
+        )
+        position = math.sqrt(ex * ex + ey * ey + ez * ez)
+        orientation = math.sqrt(wx * wx + wy * wy + wz * wz)
+        return chain, (ex, ey, ez, wx, wy, wz), position, orientation
+
+    # ---- the calibrated chain ------------------------------------------------------------------
+
+    def _frame(self, q: Sequence[float]) -> Frame:
+        return self._chain(q, None).frame
+
+    def _chain(self, q: Sequence[float], tcp: Frame | None) -> _Chain:
+        cos, sin = math.cos, math.sin
+        xx, xy, xz = 1.0, 0.0, 0.0
+        yx, yy, yz = 0.0, 1.0, 0.0
+        zx, zy, zz = 0.0, 0.0, 1.0
+        px = py = pz = 0.0
+        axes = []
+        points = []
+        for (theta, d, a, ca, sa), qi in zip(self._joints, q, strict=True):
+            axes.append((zx, zy, zz))
+            points.append((px, py, pz))
+            angle = theta + qi
+            ct, st = cos(angle), sin(angle)
+            px += d * zx
+            py += d * zy
+            pz += d * zz
+            ux, uy, uz = ct * xx + st * yx, ct * xy + st * yy, ct * xz + st * yz
+            vx, vy, vz = ct * yx - st * xx, ct * yy - st * xy, ct * yz - st * xz
+            px += a * ux
+            py += a * uy
+            pz += a * uz
+            xx, xy, xz = ux, uy, uz
+            yx, yy, yz, zx, zy, zz = (
+                ca * vx + sa * zx, ca * vy + sa * zy, ca * vz + sa * zz,
+                ca * zx - sa * vx, ca * zy - sa * vy, ca * zz - sa * vz,
+            )  # fmt: skip
+        frame: Frame = (xx, yx, zx, xy, yy, zy, xz, yz, zz, px, py, pz)
+        if tcp is not None:
+            frame = _compose(frame, tcp)
+        return _Chain(frame, tuple(axes), tuple(points))
+
+    def _within_limits(self, q: Joints) -> Joints | None:
+        """``q`` (already shifted near the seed) with each joint moved by 2pi into its limits, or None."""
+        out = list(q)
+        for i, (lower, upper) in enumerate(zip(self._lower, self._upper, strict=True)):
+            value = out[i]
+            if value > upper:
+                value -= _TAU
+            elif value < lower:
+                value += _TAU
+            if not lower <= value <= upper:
+                return None
+            out[i] = value
+        return (out[0], out[1], out[2], out[3], out[4], out[5])
+
+
+def _jacobian_rows(chain: _Chain) -> list[list[float]]:
+    """Rows of the geometric Jacobian: column i is (z_i x (p - o_i), z_i)."""
+    f = chain.frame
+    px, py, pz = f[9], f[10], f[11]
+    rows: list[list[float]] = [[], [], [], [], [], []]
+    for (zx, zy, zz), (ox, oy, oz) in zip(chain.axes, chain.points, strict=True):
+        dx, dy, dz = px - ox, py - oy, pz - oz
+        rows[0].append(zy * dz - zz * dy)
+        rows[1].append(zz * dx - zx * dz)
+        rows[2].append(zx * dy - zy * dx)
+        rows[3].append(zx)
+        rows[4].append(zy)
+        rows[5].append(zz)
+    return rows
+
+
+def _shift_near(q: Sequence[float], seed: Sequence[float]) -> Joints:
+    """Each joint shifted by a multiple of 2pi to lie nearest the seed's."""
+    out = [v + _TAU * round((s - v) / _TAU) for v, s in zip(q, seed, strict=True)]
+    return (out[0], out[1], out[2], out[3], out[4], out[5])
+
+
+def _distance(q: Sequence[float], seed: Sequence[float]) -> float:
+    return math.sqrt(sum((a - b) * (a - b) for a, b in zip(q, seed, strict=True)))
