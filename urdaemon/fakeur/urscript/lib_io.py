@@ -1,0 +1,272 @@
+"""URScript's IO builtins: digital and analog in/out, tool voltage, and the RTDE general purpose registers.
+
+The controller's IO lives in ``host.arm.io`` (what RTDE and the primary interface report): digital outputs
+and inputs as one bit word each (standard 0-7 in bits 0-7, configurable 0-7 in bits 8-15, tool 0-1 in
+bits 16-17), the two standard analog outputs as the relative level ``set_standard_analog_out`` takes
+(0..1, like RTDE's ``standard_analog_output_X`` inputs) and ``analog_out_types`` as RTDE's
+``analog_io_types`` (bits 0-1: standard analog inputs, bits 2-3: outputs; 1 = voltage, 0 = current).
+
+Registers (UR's RTDE guide): integer and float registers 0..47, boolean registers 0..127, in two separate
+sets. The *input* registers are written by RTDE clients and read by ``read_input_*_register`` (they are
+``host.input_registers``, kept by the controller); the *output* registers are written by
+``write_output_*_register``, read back by ``read_output_*_register`` and published as RTDE
+``output_*_register_X`` (they are ``arm.io.registers_int/double/bit``). A register never written reads 0,
+0.0 or False. An address outside its range, or a value of the wrong kind, is a runtime error.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Final
+
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
+
+__all__ = ["BIT_REGISTERS", "NUMBER_REGISTERS", "TOOL_VOLTAGES"]
+
+NUMBER_REGISTERS: Final = 48
+"""Integer and float registers per direction: addresses 0..47."""
+BIT_REGISTERS: Final = 128
+"""Boolean registers per direction: addresses 0..127 (64..127 are RTDE's ``*_bit_register_X``)."""
+TOOL_VOLTAGES: Final = (0, 12, 24)
+"""Volts ``set_tool_voltage`` accepts."""
+_INT32: Final = (-(2**31), 2**31 - 1)
+
+# (first bit in the word, how many) of each digital IO group
+_STANDARD: Final = (0, 8)
+_CONFIGURABLE: Final = (8, 8)
+_TOOL: Final = (16, 2)
+_ALL: Final = (0, 18)
+"""The deprecated ``*_digital_*(n)`` numbering: 0-7 standard, 8-15 configurable, 16-17 tool."""
+
+
+def _index(function: str, value: Any, count: int) -> int:
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if value.__class__ is not int or not 0 <= value < count:
+        raise ScriptRuntimeError(f"{function}: {value!r} is not in 0..{count - 1}")
+    return int(value)
+
+
+def _level(function: str, value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    raise ScriptRuntimeError(f"{function}: expected True or False, got {value!r}")
+
+
+def _number(function: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScriptRuntimeError(f"{function}: expected a number, got {value!r}")
+    return float(value)
+
+
+# ---- digital ------------------------------------------------------------------------------------------
+
+
+def _set_bit(host: ScriptHost, function: str, group: tuple[int, int], n: Any, b: Any) -> None:
+    bit = 1 << (group[0] + _index(function, n, group[1]))
+    io = host.arm.io
+    io.digital_out = io.digital_out | bit if _level(function, b) else io.digital_out & ~bit
+
+
+def _get_bit(word: int, function: str, group: tuple[int, int], n: Any) -> bool:
+    return bool(word >> (group[0] + _index(function, n, group[1])) & 1)
+
+
+@builtin("set_standard_digital_out")
+def set_standard_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
+    _set_bit(host, "set_standard_digital_out", _STANDARD, n, b)
+
+
+@builtin("set_configurable_digital_out")
+def set_configurable_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
+    _set_bit(host, "set_configurable_digital_out", _CONFIGURABLE, n, b)
+
+
+@builtin("set_tool_digital_out")
+def set_tool_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
+    _set_bit(host, "set_tool_digital_out", _TOOL, n, b)
+
+
+@builtin("set_digital_out")
+def set_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
+    _set_bit(host, "set_digital_out", _ALL, n, b)
+
+
+@builtin("get_standard_digital_out")
+def get_standard_digital_out(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_out, "get_standard_digital_out", _STANDARD, n)
+
+
+@builtin("get_configurable_digital_out")
+def get_configurable_digital_out(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_out, "get_configurable_digital_out", _CONFIGURABLE, n)
+
+
+@builtin("get_tool_digital_out")
+def get_tool_digital_out(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_out, "get_tool_digital_out", _TOOL, n)
+
+
+@builtin("get_digital_out")
+def get_digital_out(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_out, "get_digital_out", _ALL, n)
+
+
+@builtin("get_standard_digital_in")
+def get_standard_digital_in(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_in, "get_standard_digital_in", _STANDARD, n)
+
+
+@builtin("get_configurable_digital_in")
+def get_configurable_digital_in(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_in, "get_configurable_digital_in", _CONFIGURABLE, n)
+
+
+@builtin("get_tool_digital_in")
+def get_tool_digital_in(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_in, "get_tool_digital_in", _TOOL, n)
+
+
+@builtin("get_digital_in")
+def get_digital_in(host: ScriptHost, n: Any) -> bool:
+    return _get_bit(host.arm.io.digital_in, "get_digital_in", _ALL, n)
+
+
+# ---- analog and tool voltage -----------------------------------------------------------------------------
+
+
+def _set_analog_out(host: ScriptHost, function: str, n: Any, f: Any) -> None:
+    pin = _index(function, n, 2)
+    level = _number(function, f)
+    if not 0.0 <= level <= 1.0:
+        raise ScriptRuntimeError(f"{function}: level {level:g} is not in 0..1")
+    host.arm.io.analog_out[pin] = level
+
+
+@builtin("set_standard_analog_out")
+def set_standard_analog_out(host: ScriptHost, n: Any, f: Any) -> None:
+    """Set analog output ``n`` (0..1) to the relative level ``f`` (0..1) of its domain."""
+    _set_analog_out(host, "set_standard_analog_out", n, f)
+
+
+@builtin("set_analog_out")
+def set_analog_out(host: ScriptHost, n: Any, f: Any) -> None:
+    _set_analog_out(host, "set_analog_out", n, f)
+
+
+@builtin("get_standard_analog_out")
+def get_standard_analog_out(host: ScriptHost, n: Any) -> float:
+    return host.arm.io.analog_out[_index("get_standard_analog_out", n, 2)]
+
+
+@builtin("get_analog_out")
+def get_analog_out(host: ScriptHost, n: Any) -> float:
+    return host.arm.io.analog_out[_index("get_analog_out", n, 2)]
+
+
+@builtin("get_standard_analog_in")
+def get_standard_analog_in(host: ScriptHost, n: Any) -> float:
+    return host.arm.io.analog_in[_index("get_standard_analog_in", n, 2)]
+
+
+@builtin("get_tool_analog_in")
+def get_tool_analog_in(host: ScriptHost, n: Any) -> float:
+    return host.arm.io.tool_analog_in[_index("get_tool_analog_in", n, 2)]
+
+
+@builtin("get_analog_in")
+def get_analog_in(host: ScriptHost, n: Any) -> float:
+    """Deprecated numbering: 0-1 standard analog inputs, 2-3 tool analog inputs."""
+    pin = _index("get_analog_in", n, 4)
+    io = host.arm.io
+    return io.analog_in[pin] if pin < 2 else io.tool_analog_in[pin - 2]
+
+
+def _set_domain(host: ScriptHost, function: str, first_bit: int, port: Any, domain: Any) -> None:
+    bit = 1 << (first_bit + _index(function, port, 2))
+    voltage = _index(function, domain, 2) == 1
+    io = host.arm.io
+    io.analog_out_types = io.analog_out_types | bit if voltage else io.analog_out_types & ~bit
+
+
+@builtin("set_analog_outputdomain")
+def set_analog_outputdomain(host: ScriptHost, port: Any, domain: Any) -> None:
+    """Analog output ``port`` (0..1) in current (``domain`` 0, 4-20 mA) or voltage (1, 0-10 V) mode."""
+    _set_domain(host, "set_analog_outputdomain", 2, port, domain)
+
+
+@builtin("set_standard_analog_input_domain")
+def set_standard_analog_input_domain(host: ScriptHost, port: Any, domain: Any) -> None:
+    """Analog input ``port`` (0..1) in current (``domain`` 0) or voltage (1) mode."""
+    _set_domain(host, "set_standard_analog_input_domain", 0, port, domain)
+
+
+@builtin("set_tool_voltage")
+def set_tool_voltage(host: ScriptHost, voltage: Any) -> None:
+    """Tool output voltage: 0, 12 or 24 V."""
+    if isinstance(voltage, float) and voltage.is_integer():
+        voltage = int(voltage)
+    if isinstance(voltage, bool) or voltage not in TOOL_VOLTAGES:
+        raise ScriptRuntimeError(f"set_tool_voltage: {voltage!r} V is not one of 0, 12, 24")
+    host.arm.io.tool_voltage = int(voltage)
+
+
+# ---- RTDE registers --------------------------------------------------------------------------------------
+
+
+@builtin("read_input_integer_register")
+def read_input_integer_register(host: ScriptHost, address: Any) -> int:
+    return host.input_registers.ints.get(_index("read_input_integer_register", address, NUMBER_REGISTERS), 0)
+
+
+@builtin("read_input_float_register")
+def read_input_float_register(host: ScriptHost, address: Any) -> float:
+    return host.input_registers.doubles.get(
+        _index("read_input_float_register", address, NUMBER_REGISTERS), 0.0
+    )
+
+
+@builtin("read_input_boolean_register")
+def read_input_boolean_register(host: ScriptHost, address: Any) -> bool:
+    return host.input_registers.bits.get(_index("read_input_boolean_register", address, BIT_REGISTERS), False)
+
+
+@builtin("read_output_integer_register")
+def read_output_integer_register(host: ScriptHost, address: Any) -> int:
+    return host.arm.io.registers_int.get(_index("read_output_integer_register", address, NUMBER_REGISTERS), 0)
+
+
+@builtin("read_output_float_register")
+def read_output_float_register(host: ScriptHost, address: Any) -> float:
+    index = _index("read_output_float_register", address, NUMBER_REGISTERS)
+    return host.arm.io.registers_double.get(index, 0.0)
+
+
+@builtin("read_output_boolean_register")
+def read_output_boolean_register(host: ScriptHost, address: Any) -> bool:
+    index = _index("read_output_boolean_register", address, BIT_REGISTERS)
+    return host.arm.io.registers_bit.get(index, False)
+
+
+@builtin("write_output_integer_register")
+def write_output_integer_register(host: ScriptHost, address: Any, value: Any) -> None:
+    index = _index("write_output_integer_register", address, NUMBER_REGISTERS)
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if value.__class__ is not int or not _INT32[0] <= value <= _INT32[1]:
+        raise ScriptRuntimeError(f"write_output_integer_register: {value!r} is not a 32-bit integer")
+    host.arm.io.registers_int[index] = value
+
+
+@builtin("write_output_float_register")
+def write_output_float_register(host: ScriptHost, address: Any, value: Any) -> None:
+    index = _index("write_output_float_register", address, NUMBER_REGISTERS)
+    host.arm.io.registers_double[index] = _number("write_output_float_register", value)
+
+
+@builtin("write_output_boolean_register")
+def write_output_boolean_register(host: ScriptHost, address: Any, value: Any) -> None:
+    index = _index("write_output_boolean_register", address, BIT_REGISTERS)
+    host.arm.io.registers_bit[index] = _level("write_output_boolean_register", value)
