@@ -1,0 +1,161 @@
+"""Payload, TCP, gravity, force mode, freedrive, tool contact and watchdog builtins."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.urscript import compile_program
+from urdaemon.fakeur.urscript import lib_config as cfg
+from urdaemon.fakeur.urscript.host import ScriptHost, Watchdog
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose
+from urdaemon.fakeur.urscript.signatures import ACTIVE_TCP
+
+DT = 0.002
+
+
+def _host() -> ScriptHost:
+    model = load_ur_model("ur10e")
+    return ScriptHost(FakeArm(model, model.dh, powered=True), step_time=DT)
+
+
+def _run(host: ScriptHost, text: str, version: tuple[int, int] = (5, 12)) -> Any:
+    run = compile_program(text, series="e", version=version).start(host)
+    for _ in range(50):
+        if run.done:
+            break
+        run.step()
+        host.arm.step(DT)
+    assert run.done
+    return run.error
+
+
+def test_payload_setters_and_getters() -> None:
+    host = _host()
+    cfg.set_target_payload(host, 2.5, [0.0, 0.01, 0.05], [0.1, 0.2, 0.3, 0, 0, 0], 0)
+    arm = host.arm
+    assert (arm.payload_mass, arm.payload_cog, arm.payload_inertia) == (
+        2.5,
+        [0.0, 0.01, 0.05],
+        [0.1, 0.2, 0.3, 0, 0, 0],
+    )
+    assert cfg.get_target_payload(host) == 2.5
+    assert cfg.get_target_payload_cog(host) == [0.0, 0.01, 0.05]
+    assert cfg.get_target_payload_inertia(host) == [0.1, 0.2, 0.3, 0.0, 0.0, 0.0]
+    cfg.set_payload_mass(host, 1.0)
+    cfg.set_payload_cog(host, [0, 0, 0.1])
+    assert (arm.payload_mass, arm.payload_cog) == (1.0, [0.0, 0.0, 0.1])
+
+
+def test_set_payload_without_cog_uses_the_tcp_position() -> None:
+    host = _host()
+    cfg.set_tcp(host, [0, 0, 0.2, 0, 0, 0])
+    cfg.set_payload(host, 3.0, ACTIVE_TCP)
+    assert host.arm.payload_mass == 3.0
+    assert host.arm.payload_cog == [0.0, 0.0, 0.2]
+
+
+def test_tcp_and_gravity() -> None:
+    host = _host()
+    cfg.set_tcp(host, UrPose([0.0, 0.0, 0.1, 0.0, 0.0, 1.0]))
+    offset = cfg.get_tcp_offset(host)
+    assert isinstance(offset, UrPose)
+    assert offset == [0.0, 0.0, 0.1, 0.0, 0.0, 1.0]
+    cfg.set_gravity(host, [0, 9.82, 0])
+    assert host.arm.gravity == [0.0, 9.82, 0.0]
+    assert cfg.get_gravity(host) == [0.0, 9.82, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("call", "args"),
+    [
+        (cfg.set_payload, (-1.0, [0, 0, 0])),
+        (cfg.set_target_payload, (1.0, [0, 0])),
+        (cfg.set_tcp, ([0, 0, 0.1],)),
+        (cfg.set_gravity, ("down",)),
+        (cfg.force_mode, ([0] * 6, [0, 0, 2, 0, 0, 0], [0] * 6, 2, [0.1] * 6)),
+        (cfg.force_mode, ([0] * 6, [0, 0, 1, 0, 0, 0], [0] * 6, 4, [0.1] * 6)),
+        (cfg.force_mode_set_damping, (1.5,)),
+        (cfg.force_mode_set_gain_scaling, (-0.1,)),
+        (cfg.rtde_set_watchdog, ("output_int_register_0", 10, "stop")),
+        (cfg.rtde_set_watchdog, ("input_int_register_0", 0, "stop")),
+        (cfg.rtde_set_watchdog, ("input_int_register_0", 10, "halt")),
+    ],
+)
+def test_bad_arguments_are_runtime_errors(call: Any, args: tuple[Any, ...]) -> None:
+    with pytest.raises(ScriptRuntimeError, match=call.__name__):
+        call(_host(), *args)
+
+
+def test_force_mode_on_and_off_with_its_parameters() -> None:
+    host = _host()
+    cfg.force_mode_set_damping(host, 0.025)
+    cfg.force_mode_set_gain_scaling(host, 0.5)
+    cfg.force_mode(host, UrPose([0.0] * 6), [0, 0, 1, 0, 0, 0], [0, 0, -5, 0, 0, 0], 2, [0.1] * 6)
+    assert host.arm.force_mode is True
+    assert host.config.force_wrench == [0.0, 0.0, -5.0, 0.0, 0.0, 0.0]
+    assert (cfg.force_mode_get_damping(host), cfg.force_mode_get_gain_scaling(host)) == (0.025, 0.5)
+    cfg.zero_ftsensor(host)
+    assert host.config.ft_zeroed_at == host.now
+    cfg.end_force_mode(host)
+    assert host.arm.force_mode is False
+
+
+def test_freedrive_teach_mode_and_tool_contact() -> None:
+    host = _host()
+    cfg.freedrive_mode(host, [1, 1, 1, 0, 0, 0], UrPose([0.0] * 6))
+    assert host.arm.freedrive is True
+    assert host.config.free_axes == [1, 1, 1, 0, 0, 0]
+    assert cfg.get_freedrive_status(host) == 0
+    cfg.end_freedrive_mode(host)
+    assert host.arm.freedrive is False
+    cfg.teach_mode(host)
+    assert host.arm.freedrive is True
+    cfg.end_teach_mode(host)
+    assert host.arm.freedrive is False
+    assert cfg.tool_contact(host, [0, 0, -0.1, 0, 0, 0]) == 0
+
+
+def test_watchdog_is_recorded_for_the_controller_and_dropped_at_close() -> None:
+    host = _host()
+    host.arm.step(0.5)
+    cfg.rtde_set_watchdog(host, "input_int_register_0", 10, "stop")
+    cfg.rtde_set_watchdog(host, "input_double_register_1", 2.5, "pause")
+    cfg.rtde_set_watchdog(host, "input_int_register_0", 20, "ignore")
+    assert host.watchdogs == {
+        "input_int_register_0": Watchdog("input_int_register_0", 20.0, "ignore", 0.5),
+        "input_double_register_1": Watchdog("input_double_register_1", 2.5, "pause", 0.5),
+    }
+    host.close()
+    assert host.watchdogs == {}
+
+
+def test_a_script_configures_the_arm() -> None:
+    """ur_rtde's and our control script's calls, in their keyword forms."""
+    host = _host()
+    error = _run(
+        host,
+        "set_tcp(p[0, 0, 0.15, 0, 0, 0])\n"
+        "set_target_payload(1.2, [0, 0, 0.05])\n"
+        "set_payload(1.4)\n"
+        "set_gravity([0, 0, 9.82])\n"
+        "force_mode_set_damping(0.1)\n"
+        "force_mode(p[0, 0, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 10, 0, 0, 0], 2,"
+        " [0.1, 0.1, 0.1, 0.1, 0.1, 0.1])\n"
+        "end_force_mode()\n"
+        "freedrive_mode(freeAxes=[1, 0, 0, 0, 0, 1])\n"
+        'rtde_set_watchdog("input_int_register_24", 10, "stop")\n'
+        "if tool_contact(direction=[0, 0, -0.1, 0, 0, 0]) != 0:\n  halt\nend\n"
+        "write_output_integer_register(0, get_freedrive_status())\n",
+    )
+    assert error is None
+    arm = host.arm
+    assert arm.tcp_offset == [0.0, 0.0, 0.15, 0.0, 0.0, 0.0]
+    assert (arm.payload_mass, arm.payload_cog) == (1.4, [0.0, 0.0, 0.15])
+    assert arm.force_mode is False
+    assert arm.freedrive is True
+    assert host.config.free_axes == [1, 0, 0, 0, 0, 1]
+    assert set(host.watchdogs) == {"input_int_register_24"}
