@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 from importlib import resources
 from types import MappingProxyType
@@ -116,9 +116,13 @@ class Signature:
     ``physical``: the call consumes time on the arm (motion, ``sleep``, ``sync``, blocking socket reads...);
     a ``sec`` program may not call it. ``since`` maps each series where the function exists to the first
     software version that has it (a series missing from it: never there); ``until`` to the first version
-    that no longer has it. ``documented`` is False for builtins real controllers accept that the manual
-    does not list (e.g. ``get_joint_positions``); ``deprecated`` names the version from which the manual
-    calls it deprecated (it still works), if any.
+    that no longer has it. ``names_only`` maps a series to the first version whose compiler knows the name
+    although the series does not have the function (CB3 3.14+ compiles programs that mention e-Series
+    functions, e.g. urcl's script with ``force_mode_set_gain_scaling`` behind a run-time check): for such a
+    controller ``supported`` is False, so a program that mentions the function compiles and calling it is
+    a runtime error. ``documented`` is False for builtins real controllers accept that the manual does not
+    list (e.g. ``get_joint_positions``); ``deprecated`` names the version from which the manual calls it
+    deprecated (it still works), if any.
     """
 
     name: str
@@ -128,6 +132,8 @@ class Signature:
     until: Mapping[str, Version] = field(default_factory=dict, hash=False)
     documented: bool = True
     deprecated: str | None = None
+    names_only: Mapping[str, Version] = field(default_factory=dict, hash=False)
+    supported: bool = True
 
     @property
     def required_count(self) -> int:
@@ -145,6 +151,11 @@ class Signature:
             return False
         last = self.until.get(series)
         return last is None or version < last
+
+    def known(self, series: str, version: Version) -> bool:
+        """Whether that controller's compiler accepts a program that calls it (it may lack the function)."""
+        first = self.names_only.get(series)
+        return self.available(series, version) or (first is not None and version >= first)
 
 
 _TABLE: Final = "functions.yaml"
@@ -207,17 +218,20 @@ def all_signatures() -> Mapping[str, Signature]:
     """Every builtin of the table in any series or version, by name, for checks across series.
 
     Each one's parameters are those of the newest version that has it (e-Series first, then CB3), so a
-    compiler can tell "not available in this version" from "no such function".
+    compiler can tell "not available on this controller" from "no such function" (use
+    :meth:`Signature.available` and :meth:`Signature.known`). Loading it checks every entry of the table
+    at every version where it changes.
     """
     table = _raw_table()
     defaults = table.get("defaults", {})
     found: dict[str, Signature] = {}
     for name, entry in table["functions"].items():
+        _check_entry(name, entry, defaults)
         for series in SERIES:
             until = _versions(name, entry, "until", {}).get(series)
             newest = (until[0], until[1] - 1) if until is not None else (_NEWEST, 0)
             signature = _signature(name, entry, defaults, series, newest)
-            if signature is not None:
+            if signature is not None and signature.supported:
                 found[name] = signature
                 break
         else:
@@ -225,20 +239,46 @@ def all_signatures() -> Mapping[str, Signature]:
     return MappingProxyType(found)
 
 
+def _check_entry(name: str, entry: Any, defaults: Mapping[str, Any]) -> None:
+    """Parse ``entry`` at each version where it starts or changes: a malformed one raises ValueError."""
+    if not isinstance(entry, dict):
+        raise ValueError(f"{_TABLE}: {name!r}: expected an identifier mapped to a mapping")
+    marks = [
+        _versions(name, entry, key, defaults if key == "since" else {}) for key in ("since", "names_only")
+    ]
+    revisions = entry.get("revisions", [])
+    if not isinstance(revisions, list):
+        raise ValueError(f"{_TABLE}: {name}: revisions must be a list")
+    marks += [_versions(name, revision, "since", {}) for revision in revisions]
+    for versions in marks:
+        for series, version in versions.items():
+            _signature(name, entry, defaults, series, version)
+
+
 def _signature(
     name: str, entry: Any, defaults: Mapping[str, Any], series: str, version: Version
 ) -> Signature | None:
     if not _NAME.match(name) or not isinstance(entry, dict):
         raise ValueError(f"{_TABLE}: {name!r}: expected an identifier mapped to a mapping")
-    unknown = set(entry) - {"params", "physical", "since", "until", "revisions", "documented", "deprecated"}
+    keys = {"params", "physical", "since", "until", "names_only", "revisions", "documented", "deprecated"}
+    unknown = set(entry) - keys
     if unknown:
         raise ValueError(f"{_TABLE}: {name}: unknown keys {sorted(unknown)}")
     since = _versions(name, entry, "since", defaults)
     until = _versions(name, entry, "until", {})
-    signature_since = MappingProxyType(since)
-    signature_until = MappingProxyType(until)
-    first = since.get(series)
-    if first is None or version < first or (series in until and version >= until[series]):
+    names_only = _versions(name, entry, "names_only", {})
+    if set(names_only) & set(since):
+        raise ValueError(f"{_TABLE}: {name}: names_only names a series that has the function")
+    signature = Signature(
+        name,
+        (),
+        False,
+        MappingProxyType(since),
+        MappingProxyType(until),
+        names_only=MappingProxyType(names_only),
+    )
+    supported = signature.available(series, version)
+    if not signature.known(series, version):
         return None
     params_entry = entry.get("params", [])
     for revision in entry.get("revisions", []):
@@ -254,7 +294,14 @@ def _signature(
         raise ValueError(f"{_TABLE}: {name}: physical and documented must be booleans")
     if deprecated is not None and not isinstance(deprecated, str):
         raise ValueError(f"{_TABLE}: {name}: deprecated must be a version string")
-    return Signature(name, params, physical, signature_since, signature_until, documented, deprecated)
+    return replace(
+        signature,
+        params=params,
+        physical=physical,
+        documented=documented,
+        deprecated=deprecated,
+        supported=supported,
+    )
 
 
 def _versions(
