@@ -19,6 +19,7 @@ import pytest
 from tests.helpers import fake_address, free_tcp_port
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript import lib_sockets as ls
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList
@@ -393,3 +394,38 @@ def test_number_must_be_positive(server: socket.socket) -> None:
     with pytest.raises(ScriptRuntimeError, match="number"):
         _drive(host, ls.socket_read_binary_integer(host, 0, "socket_0", 1.0))
     peer.close()
+
+
+# ---- through a script ------------------------------------------------------------------------------------
+
+
+def test_a_script_echoes_frames_until_the_peer_stops(server: socket.socket) -> None:
+    """The shape of our control script's main loop: open, read a frame per cycle, answer, end on a failed
+    read (the peer closed), close."""
+    host = _host()
+    port = server.getsockname()[1]
+    text = (
+        f'if not socket_open("127.0.0.1", {port}, "reverse_socket"):\n  halt\nend\n'
+        "while True:\n"
+        '  frame = socket_read_binary_integer(2, "reverse_socket", 0)\n'
+        "  if frame[0] != 2:\n    break\n  end\n"
+        '  socket_send_int(frame[1] + frame[2], "reverse_socket")\n'
+        "end\n"
+        'socket_close("reverse_socket")\n'
+    )
+    run = compile_program(text, series="e", version=(5, 12)).start(host)
+    run.step()
+    peer, _ = server.accept()
+    peer.settimeout(WAIT_S)
+    for index in range(20):
+        peer.sendall(_frame(index, 100))
+        _arrived(host, "reverse_socket")
+        run.step()
+        host.arm.step(DT)
+        assert struct.unpack(">i", peer.recv(4)) == (index + 100,)
+    peer.close()
+    _arrived(host, "reverse_socket")
+    run.step()
+    assert run.done
+    assert run.error is None
+    assert host.sockets.get("reverse_socket") is None
