@@ -152,11 +152,14 @@ class FakeArm:
         self._speed_target = [0.0] * 6
         self._acceleration = SPEEDJ_DEFAULT_ACCELERATION
         self._motion: Motion | None = None
+        self._played: Motion | None = None
         self._ik: UrKinematics | None = None
         self._motion_time = 0.0
         self._motion_stop = PROTECTIVE_STOP_DECELERATION
         self._target_q = list(self.q)
         self._target_qd = [0.0] * 6
+        self._program_qd = [0.0] * 6
+        """rad/s of program time: the played motion's velocity before the speed slider's scaling."""
         self._history = [list(self.q) for _ in range(HISTORY_STEPS)]
         self._history_at = 0
         if powered:
@@ -288,6 +291,7 @@ class FakeArm:
         self._acceleration = max(float(deceleration), 1e-6)
         self._servo_target = None
         self._motion = None
+        self._played = None
 
     def play(self, motion: Motion, stop_deceleration: float) -> bool:
         """Follow ``motion`` from its start on the program's time; False (ignored) if the arm cannot move.
@@ -297,7 +301,7 @@ class FakeArm:
         if not self.can_move:
             return False
         self._mode = MotionMode.PLAY
-        self._motion = motion
+        self._motion = self._played = motion
         self._motion_time = 0.0
         self._motion_stop = max(float(stop_deceleration), 1e-6)
         self._servo_target = None
@@ -309,15 +313,20 @@ class FakeArm:
         return self._motion if self._mode is MotionMode.PLAY else None
 
     @property
+    def played(self) -> Motion | None:
+        """The last motion given to ``play``, until a stop took the arm (it stays once played out)."""
+        return self._played
+
+    @property
     def motion_time(self) -> float:
         """s: program time played of ``motion``."""
         return self._motion_time
 
     @property
     def commanded_velocity(self) -> list[float]:
-        """rad/s: the velocity the arm is being driven at (a new motion starts from it)."""
+        """rad/s of program time: the velocity the arm is driven at (a new motion starts from it)."""
         if self._mode is MotionMode.PLAY:
-            return list(self._target_qd)
+            return list(self._program_qd)
         if self._mode is MotionMode.HOLD:
             return [0.0] * 6
         return list(self.qd)
@@ -349,7 +358,7 @@ class FakeArm:
     def _halt_motion(self) -> None:
         self._mode = MotionMode.HOLD
         self._servo_target = None
-        self._motion = None
+        self._motion = self._played = None
         self.qd = [0.0] * 6
         self.qdd = [0.0] * 6
 
@@ -400,7 +409,7 @@ class FakeArm:
         elapsed = self._motion_time
         if elapsed >= motion.duration - TIME_EPSILON_S:
             # over, and nothing replaced it: stop along the path from the commanded velocity
-            velocity = self._target_qd
+            velocity = self._program_qd
             self._motion = LinearStop(self.q, velocity, leading_stop_time(velocity, self._motion_stop))
             self._motion_time = elapsed = 0.0
             motion = self._motion
@@ -408,6 +417,7 @@ class FakeArm:
                 self._mode = MotionMode.HOLD
                 self._motion = None
                 self._target_qd = [0.0] * 6
+                self._program_qd = [0.0] * 6
                 self.qd = [0.0] * 6
                 self.qdd = [0.0] * 6
                 return
@@ -417,8 +427,17 @@ class FakeArm:
         self._motion_time = elapsed
         target = motion.position(elapsed)
         self._target_q = target
-        self._target_qd = [v * slider for v in motion.velocity(elapsed)]
+        velocity = self._program_qd = motion.velocity(elapsed)
+        self._target_qd = [v * slider for v in velocity]
         self._step_servo(dt, target)
+        if elapsed >= motion.duration - TIME_EPSILON_S and not any(velocity):
+            q = self.q
+            if all(abs(q[i] - target[i]) < 1e-9 for i in range(6)):
+                # played out at rest: the arm stands on its target from here on
+                q[:] = target
+                self._mode = MotionMode.HOLD
+                self._motion = None
+                self.qd = [0.0] * 6
 
     def _step_servo(self, dt: float, target: list[float]) -> None:
         q, qd, vmax = self.q, self.qd, self.max_velocity

@@ -13,6 +13,8 @@ lists of 6 floats (hot path: no numpy).
 * ``ServoRamp`` (servoj): the joint target reached at constant speed over the servo time.
 * ``LinearStop`` (stopj, stopl, a stop at the end of a motion): every joint decelerates linearly to rest
   in the same time, so the arm stops along the path it was on.
+* ``ToolSpeedRamp`` (speedl): the TCP twist ramped linearly to its target, joint speeds from the
+  Jacobian each sample (damped near singularities).
 * ``CartesianMove`` (movel, movep): the TCP on a straight line (position interpolated, orientation
   slerped) with a trapezoidal profile along it, each sample solved by inverse kinematics near the last.
 """
@@ -33,6 +35,7 @@ __all__ = [
     "Profile",
     "ServoRamp",
     "SpeedRamp",
+    "ToolSpeedRamp",
     "compose",
     "joint_move",
     "leading_stop_time",
@@ -385,15 +388,18 @@ class CartesianMove:
 
     The path parameter follows ``shape`` (its distance is the translation, or the rotation angle for a
     pure rotation); each sample is solved by ``solve`` near the previous sample's joints, so the arm
-    keeps its configuration. ``failed`` is set once a sample has no solution (the arm then holds).
+    keeps its configuration. A ``start_velocity`` (blending out of a moving motion) fades out in joint
+    space as in ``JointMove``. ``failed`` is set once a sample has no solution (the arm then holds).
     """
 
     __slots__ = (
         "_axis",
+        "_fade",
         "_last",
         "_last_t",
         "_move",
         "_rate",
+        "_residual",
         "_shape",
         "_solve",
         "_start",
@@ -408,6 +414,8 @@ class CartesianMove:
         shape: Profile,
         start_joints: Sequence[float],
         solve: InverseKinematics,
+        start_velocity: Sequence[float] | None = None,
+        fade_time: float = 0.0,
     ) -> None:
         self._start = matrix_of_pose(start_pose)
         end = matrix_of_pose(target_pose)
@@ -418,11 +426,14 @@ class CartesianMove:
         self._last = [float(v) for v in start_joints]
         self._last_t = 0.0
         self._rate = [0.0] * JOINTS
-        self.duration = shape.duration
+        moving = start_velocity is not None and fade_time > 0 and any(start_velocity)
+        self._residual = [float(v) for v in start_velocity] if moving and start_velocity else None
+        self._fade = fade_time if moving else 0.0
+        self.duration = max(shape.duration, self._fade)
         self.failed = False
 
     def pose(self, t: float) -> tuple[float, float, float, float, float, float]:
-        """The TCP pose at ``t``."""
+        """The TCP pose of the straight path at ``t``."""
         shape = self._shape
         f = shape.at(t)[0] / shape.distance if shape.distance > 0 else 1.0
         ax, ay, az = self._axis
@@ -431,24 +442,106 @@ class CartesianMove:
         s = self._start
         return pose_of_matrix((*m[:9], s[9] + f * dx, s[10] + f * dy, s[11] + f * dz))
 
-    def position(self, t: float) -> Vector:
-        """Joint positions [rad] at ``t`` (the IK solution nearest the previous sample)."""
+    def _path(self, t: float) -> Vector:
+        """The joints on the straight path at ``t`` (solved near the previous sample)."""
         if self.failed or t == self._last_t:
-            return list(self._last)
+            return self._last
         q = self._solve(self.pose(t), self._last)
         if q is None:
             self.failed = True
             self._rate = [0.0] * JOINTS
-            return list(self._last)
+            return self._last
         q = [float(v) for v in q]
         h = t - self._last_t
         self._rate = [(b - a) / h for a, b in zip(self._last, q, strict=True)] if h > 0 else [0.0] * JOINTS
         self._last = q
         self._last_t = t
-        return list(q)
+        return q
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        q = list(self._path(t))
+        residual, fade = self._residual, self._fade
+        if residual is not None and t < fade and not self.failed:
+            u = max(t, 0.0) / fade
+            h = fade * u * (1.0 - u) * (1.0 - u)
+            q = [v + r * h for v, r in zip(q, residual, strict=True)]
+        return q
 
     def velocity(self, t: float) -> Vector:
-        """Joint velocities [rad/s] at ``t``: the rate over the last sampled step (call after position)."""
+        """Joint velocities [rad/s] at ``t``: the path's rate over the last sampled step, plus the fade."""
         if self.failed or t >= self.duration:
             return [0.0] * JOINTS
+        qd = list(self._rate) if t < self._shape.duration else [0.0] * JOINTS
+        residual, fade = self._residual, self._fade
+        if residual is not None and t < fade:
+            u = max(t, 0.0) / fade
+            dh = (1.0 - u) * (1.0 - 3.0 * u)
+            qd = [v + r * dh for v, r in zip(qd, residual, strict=True)]
+        return qd
+
+
+JointVelocity = Callable[[Sequence[float], Sequence[float]], Sequence[float]]
+"""(joints, TCP twist) → joint velocities giving that twist."""
+
+
+class ToolSpeedRamp:
+    """speedl: the TCP twist from ``start_twist`` to ``target_twist`` (linear ramp), then held.
+
+    The ramp takes the longer of |Δv|/``linear_acceleration`` and |Δω|/``angular_acceleration``.
+    Joint positions are integrated sample by sample (the arm samples forward in time), each step with
+    the joint velocities ``joint_velocity`` gives for the twist at the previous sample's joints.
+    """
+
+    __slots__ = ("_last", "_last_t", "_ramp", "_rate", "_solve", "_twist0", "_twist1", "duration")
+
+    def __init__(
+        self,
+        start: Sequence[float],
+        start_twist: Sequence[float],
+        target_twist: Sequence[float],
+        linear_acceleration: float,
+        angular_acceleration: float,
+        duration: float,
+        joint_velocity: JointVelocity,
+    ) -> None:
+        self._twist0 = [float(v) for v in start_twist]
+        self._twist1 = [float(v) for v in target_twist]
+        change = [b - a for a, b in zip(self._twist0, self._twist1, strict=True)]
+        linear = math.sqrt(sum(v * v for v in change[:3]))
+        angular = math.sqrt(sum(v * v for v in change[3:]))
+        self._ramp = max(linear / max(linear_acceleration, 1e-9), angular / max(angular_acceleration, 1e-9))
+        self._solve = joint_velocity
+        self._last = [float(v) for v in start]
+        self._last_t = 0.0
+        self._rate = [float(v) for v in joint_velocity(self._last, self._twist0)]
+        self.duration = duration if duration > 0 else self._ramp
+
+    @property
+    def ramp_time(self) -> float:
+        """s: how long the twist takes to reach its target."""
+        return self._ramp
+
+    def twist(self, t: float) -> Vector:
+        """The commanded TCP twist at ``t``."""
+        ramp = self._ramp
+        f = 1.0 if ramp <= 0 or t >= ramp else max(t, 0.0) / ramp
+        return [a + (b - a) * f for a, b in zip(self._twist0, self._twist1, strict=True)]
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t`` (integrated from the previous sample; ``t`` only increases)."""
+        h = t - self._last_t
+        if h > 0:
+            # midpoint rule: the twist half-way, at the joints half-way
+            middle = self.twist(self._last_t + 0.5 * h)
+            rate = [float(v) for v in self._solve(self._last, middle)]
+            halfway = [q + r * 0.5 * h for q, r in zip(self._last, rate, strict=True)]
+            rate = [float(v) for v in self._solve(halfway, middle)]
+            self._last = [q + r * h for q, r in zip(self._last, rate, strict=True)]
+            self._rate = rate
+            self._last_t = t
+        return list(self._last)
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] over the last sampled step (call after ``position``)."""
         return list(self._rate)

@@ -31,21 +31,29 @@ from urdaemon.fakeur.motion import (
     Motion,
     ServoRamp,
     SpeedRamp,
+    ToolSpeedRamp,
     compose,
     joint_move,
     leading_stop_time,
     matrix_of_pose,
     pose_of_matrix,
     profile,
+    transposed,
 )
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose, builtin
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed
 
-__all__ = ["MotionState", "flange_pose", "tcp_pose"]
+__all__ = ["MotionState", "flange_pose", "inverse_near", "tcp_matrix", "tcp_pose", "tool_speed"]
 
 SERVOJ_STOP_DECELERATION: Final = PROTECTIVE_STOP_DECELERATION
 """rad/s²: how a servoj stream that is not renewed comes to rest (unverified on a real arm)."""
+
+JOINT_BLEND_DECELERATION: Final = 1.4
+"""rad/s²: how fast a blend into movel/movep cancels the joint velocity it starts with (movej's
+default acceleration)."""
+SPEED_STEP_S: Final = 1e-3
+"""s: the forward difference over which a TCP speed is computed from joint speeds."""
 
 Gen = Generator[None, None, Any]
 
@@ -105,7 +113,7 @@ def _play(host: ScriptHost, motion: Motion, stop: float, until: Callable[[], boo
             if state.serial != me:
                 finished = True
                 return _REPLACED
-            if arm.motion is not motion:
+            if arm.played is not motion:
                 finished = True
                 return _INTERRUPTED  # a safety stop or a pause took the arm
             if arm.motion_time >= motion.duration - TIME_EPSILON_S or (until is not None and until()):
@@ -166,6 +174,38 @@ def speedj(host: ScriptHost, qd: Any, a: Any, t: Any) -> Gen:
     return None
 
 
+@builtin("speedl", blocking=True)
+def speedl(host: ScriptHost, xd: Any, a: Any, t: Any, aRot: Any) -> Gen:
+    """speedl(xd, a, t, aRot): accelerate the TCP to twist ``xd`` (m/s, rad/s; base frame).
+
+    ``a`` m/s² and ``aRot`` rad/s² (default: ``a``); returns after ``t``, or once at speed if t = 0."""
+    twist = _vector("speedl", xd)
+    linear = _number("speedl a", a)
+    angular = linear if isinstance(aRot, Computed) or aRot is None else _number("speedl aRot", aRot)
+    duration = _number("speedl t", t)
+    if linear <= 0 or angular <= 0:
+        raise ScriptRuntimeError(f"speedl: accelerations must be > 0, got {linear}, {angular}")
+    arm = host.arm
+    tcp = list(arm.tcp_offset)
+    ik = arm.ik
+
+    def joint_velocity(q: Sequence[float], wanted: Sequence[float]) -> Sequence[float]:
+        return ik.joint_velocity(q, wanted, tcp)
+
+    start, moving = _start(arm)
+    now = tool_speed(arm, start, moving)
+    ramp = ToolSpeedRamp(start, now, twist, linear, angular, duration, joint_velocity)
+    if ramp.duration < host.step_time:
+        ramp = ToolSpeedRamp(start, now, twist, linear, angular, host.step_time, joint_velocity)
+    # when it is not renewed the arm stops in the time the tool accelerations need
+    stop_time = max(
+        math.sqrt(sum(v * v for v in twist[:3])) / linear, math.sqrt(sum(v * v for v in twist[3:])) / angular
+    )
+    peak = max((abs(v) for v in joint_velocity(start, twist)), default=0.0)
+    yield from _play(host, ramp, peak / stop_time if stop_time > 0 else PROTECTIVE_STOP_DECELERATION)
+    return None
+
+
 @builtin("stopj", blocking=True)
 def stopj(host: ScriptHost, a: Any) -> Gen:
     """stopj(a): decelerate to rest, linear in joint space, ``a`` for the leading joint."""
@@ -186,29 +226,15 @@ def stopl(host: ScriptHost, a: Any, aRot: Any) -> Gen:
         raise ScriptRuntimeError(f"stopl: decelerations must be > 0, got {deceleration}, {rotation}")
     arm = host.arm
     start, moving = _start(arm)
-    linear, angular = _tool_speed(arm, start, moving)
+    speed = tool_speed(arm, start, moving)
+    linear = math.sqrt(sum(v * v for v in speed[:3]))
+    angular = math.sqrt(sum(v * v for v in speed[3:]))
     duration = max(linear / deceleration, angular / rotation)
     if duration <= 0 and any(moving):
         duration = leading_stop_time(moving, PROTECTIVE_STOP_DECELERATION)
     joint_deceleration = leading_stop_time(moving, 1.0) / duration if duration > 0 else 1.0
     yield from _play(host, LinearStop(start, moving, duration), joint_deceleration)
     return None
-
-
-def _tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> tuple[float, float]:
-    """(m/s, rad/s) of the TCP at joints ``q`` moving at ``qd`` (a forward difference over 1 ms)."""
-    h = 1e-3
-    here = tcp_matrix(arm, q)
-    ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
-    linear = math.dist(here[9:], ahead[9:]) / h
-    rel = compose(_transpose(here), ahead)
-    angular = math.sqrt(sum(v * v for v in pose_of_matrix(rel)[3:])) / h
-    return linear, angular
-
-
-def _transpose(m: tuple[float, ...]) -> Any:
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = m[:9]
-    return (r00, r10, r20, r01, r11, r21, r02, r12, r22, 0.0, 0.0, 0.0)
 
 
 # ---- movej, movel, movep ---------------------------------------------------------------------------
@@ -249,9 +275,32 @@ def _joint_target(host: ScriptHost, name: str, target: Any) -> list[float] | Non
 
 
 def _inverse(host: ScriptHost, pose: Sequence[float], near: Sequence[float]) -> list[float] | None:
-    from urdaemon.fakeur.urscript import lib_state  # the IK glue lives with get_inverse_kin
+    return inverse_near(host.arm, pose, near, host.arm.tcp_offset)
 
-    return lib_state.inverse_near(host.arm, pose, near, host.arm.tcp_offset)
+
+def inverse_near(
+    arm: FakeArm,
+    pose: Sequence[float],
+    near: Sequence[float],
+    tcp: Sequence[float] | None,
+    max_position_error: float = 1e-10,
+    max_orientation_error: float = 1e-10,
+) -> list[float] | None:
+    """Joints reaching TCP ``pose`` nearest ``near``, or None."""
+    q = arm.ik.nearest(pose, near, tcp, max_position_error, max_orientation_error)
+    return None if q is None else list(q)
+
+
+def tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> UrList:
+    """[vx, vy, vz, wx, wy, wz]: the TCP's speed at joints ``q`` moving at ``qd`` (base frame)."""
+    if not any(qd):
+        return UrList([0.0] * 6)
+    h = SPEED_STEP_S
+    here = tcp_matrix(arm, q)
+    ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
+    linear = [(b - a) / h for a, b in zip(here[9:], ahead[9:], strict=True)]
+    wx, wy, wz = pose_of_matrix(compose(ahead, transposed(here)))[3:]  # ahead · hereᵀ: the turn in base
+    return UrList([*linear, wx / h, wy / h, wz / h])
 
 
 def _blend_check(arm: FakeArm, target: Sequence[float], radius: float) -> Callable[[], bool] | None:
@@ -269,16 +318,34 @@ def _blend_check(arm: FakeArm, target: Sequence[float], radius: float) -> Callab
 def movej(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, r: Any) -> Gen:
     """movej(q, a, v, t, r): to joints ``q`` (or a pose, by IK), linear in joint space."""
     acceleration, velocity = _number("movej a", a), _number("movej v", v)
-    duration, radius = _number("movej t", t), _number("movej r", r)
+    return (yield from _joint_motion(host, "movej", q, acceleration, velocity, _number("movej t", t), r))
+
+
+@builtin("optimovej", blocking=True)
+def optimovej(host: ScriptHost, q: Any, a: Any, v: Any, r: Any) -> Gen:
+    """optimovej(q, a, v, r): movej with ``a`` and ``v`` as fractions (0, 1] of the joints' limits."""
+    fraction_a, fraction_v = _number("optimovej a", a), _number("optimovej v", v)
+    if not (0 < fraction_a <= 1 and 0 < fraction_v <= 1):
+        raise ScriptRuntimeError(f"optimovej: a and v must be fractions in (0, 1], got a={a!r}, v={v!r}")
     arm = host.arm
-    target = _joint_target(host, "movej", q)
+    velocity = fraction_v * min(arm.max_velocity)
+    acceleration = fraction_a * min(j.max_acceleration for j in arm.model.joints)
+    return (yield from _joint_motion(host, "optimovej", q, acceleration, velocity, 0.0, r))
+
+
+def _joint_motion(
+    host: ScriptHost, name: str, q: Any, acceleration: float, velocity: float, duration: float, r: Any
+) -> Gen:
+    radius = _number(f"{name} r", r)
+    arm = host.arm
+    target = _joint_target(host, name, q)
     if target is None:
-        raise ScriptRuntimeError(f"movej: no inverse kinematics solution for {q!r}")
+        raise ScriptRuntimeError(f"{name}: no inverse kinematics solution for {q!r}")
     if not _within_limits(arm, target):
-        _protective_stop(host, "movej", target)
+        _protective_stop(host, name, target)
         return None
     if duration <= 0 and (acceleration <= 0 or velocity <= 0):
-        raise ScriptRuntimeError(f"movej: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
+        raise ScriptRuntimeError(f"{name}: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
     until = _blend_check(arm, target, radius)
     while True:
         start, moving = _start(arm)
@@ -305,7 +372,7 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
     goal = values if isinstance(pose, UrPose) else tcp_pose(arm, values)
     if duration <= 0 and (acceleration <= 0 or velocity <= 0):
         raise ScriptRuntimeError(f"{name}: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
-    end = _inverse(host, goal, arm.target_q)
+    end = _inverse(host, goal, arm.target_q) if isinstance(pose, UrPose) else values
     if end is None:
         raise ScriptRuntimeError(f"{name}: no inverse kinematics solution for {pose!r}")
     if not _within_limits(arm, end):
@@ -315,19 +382,20 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
     tcp = list(arm.tcp_offset)
 
     def solve(target: Sequence[float], near: Sequence[float]) -> list[float] | None:
-        from urdaemon.fakeur.urscript import lib_state
-
-        return lib_state.inverse_near(arm, target, near, tcp)
+        return inverse_near(arm, target, near, tcp)
 
     while True:
-        start, _ = _start(arm)
+        start, moving = _start(arm)
         start_pose = tcp_pose(arm, start)
         distance = math.dist(start_pose[:3], goal[:3])
         if distance < 1e-6:  # a pure rotation: v and a taken as rad/s and rad/s²
-            rel = compose(_transpose(matrix_of_pose(start_pose)), matrix_of_pose(goal))
+            rel = compose(transposed(matrix_of_pose(start_pose)), matrix_of_pose(goal))
             distance = math.sqrt(sum(c * c for c in pose_of_matrix(rel)[3:]))
         shape = profile(distance, velocity=velocity, acceleration=acceleration, duration=duration)
-        move = CartesianMove(start_pose, goal, shape, start, solve)
+        # a blend: the joint velocity the arm has fades out decelerating at most at the joints' own
+        # default acceleration (the tool acceleration a is not a joint-space one)
+        fade = 4.0 * leading_stop_time(moving, JOINT_BLEND_DECELERATION)
+        move = CartesianMove(start_pose, goal, shape, start, solve, moving, fade)
         outcome = yield from _play(host, move, PROTECTIVE_STOP_DECELERATION, until)
         if move.failed:
             raise ScriptRuntimeError(f"{name}: the straight line to {pose!r} leaves the reachable space")
@@ -346,3 +414,28 @@ def movel(host: ScriptHost, pose: Any, a: Any, v: Any, t: Any, r: Any) -> Gen:
 def movep(host: ScriptHost, pose: Any, a: Any, v: Any, r: Any) -> Gen:
     """movep(pose, a, v, r): as movel (the fake keeps the tool speed constant along each line)."""
     return (yield from _cartesian(host, "movep", pose, a, v, 0.0, r))
+
+
+@builtin("servoc", blocking=True)
+def servoc(host: ScriptHost, pose: Any, a: Any, v: Any, r: Any) -> Gen:
+    """servoc(pose, a, v, r): to ``pose`` at tool speed ``v``, on a straight line as movel (blends: r)."""
+    return (yield from _cartesian(host, "servoc", pose, a, v, 0.0, r))
+
+
+@builtin("set_pos")
+def set_pos(host: ScriptHost, q: Any) -> None:
+    """set_pos(q): put the simulated arm at joints ``q`` at once (a simulator-only builtin)."""
+    target = _vector("set_pos", q)
+    arm = host.arm
+    if not _within_limits(arm, target):
+        raise ScriptRuntimeError(f"set_pos: {target} is outside the joint limits")
+    _state(host).serial += 1  # a motion in progress ends
+    arm.stop(PROTECTIVE_STOP_DECELERATION)
+    arm.q[:] = target
+    arm.qd[:] = [0.0] * 6
+
+
+@builtin("protective_stop")
+def protective_stop(host: ScriptHost) -> None:
+    """protective_stop(): the arm stops as on a protective stop; the program pauses."""
+    host.arm.protective_stop()

@@ -9,49 +9,18 @@ Inverse kinematics is ``urdaemon.description.ik`` on the arm's calibrated model.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any, Final
 
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoRamp, compose, pose_of_matrix
+from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoRamp
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.lib_motion import flange_pose, tcp_matrix, tcp_pose
+from urdaemon.fakeur.urscript.lib_motion import flange_pose, inverse_near, tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed
 
-__all__ = ["inverse_near", "tool_speed"]
+__all__: list[str] = []
 
 JOINT_TEMPERATURE: Final = 30.0
 """°C: what every joint reports (the controller's primary and RTDE data say the same)."""
-SPEED_STEP_S: Final = 1e-3
-"""s: the forward difference over which a TCP speed is computed from joint speeds."""
-
-
-def inverse_near(
-    arm: FakeArm,
-    pose: Sequence[float],
-    near: Sequence[float],
-    tcp: Sequence[float] | None,
-    max_position_error: float = 1e-10,
-    max_orientation_error: float = 1e-10,
-) -> list[float] | None:
-    """Joints reaching TCP ``pose`` nearest ``near``, or None."""
-    q = arm.ik.nearest(pose, near, tcp, max_position_error, max_orientation_error)
-    return None if q is None else list(q)
-
-
-def tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> UrList:
-    """[vx, vy, vz, wx, wy, wz]: the TCP's speed at joints ``q`` moving at ``qd`` (base frame)."""
-    if not any(qd):
-        return UrList([0.0] * 6)
-    h = SPEED_STEP_S
-    here = tcp_matrix(arm, q)
-    ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
-    linear = [(b - a) / h for a, b in zip(here[9:], ahead[9:], strict=True)]
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = here[:9]
-    transposed = (r00, r10, r20, r01, r11, r21, r02, r12, r22, 0.0, 0.0, 0.0)
-    wx, wy, wz = pose_of_matrix(compose(ahead, transposed))[3:]  # ahead · hereᵀ: the turn in base
-    return UrList([*linear, wx / h, wy / h, wz / h])
 
 
 def _joints(name: str, value: Any) -> list[float]:
@@ -75,8 +44,8 @@ def get_actual_joint_positions(host: ScriptHost) -> UrList:
 
 @builtin("get_joint_positions")
 def get_joint_positions(host: ScriptHost) -> UrList:
-    """The joint positions (the older name of get_actual_joint_positions)."""
-    return UrList(host.arm.q)
+    """The target joint positions (undocumented; UR's External Control script uses it)."""
+    return UrList(host.arm.target_q)
 
 
 @builtin("get_target_joint_positions")
@@ -97,6 +66,18 @@ def get_target_joint_speeds(host: ScriptHost) -> UrList:
     return UrList(host.arm.target_qd)
 
 
+@builtin("get_actual_joint_accelerations")
+def get_actual_joint_accelerations(host: ScriptHost) -> UrList:
+    """The joint accelerations (rad/s²)."""
+    return UrList(host.arm.qdd)
+
+
+@builtin("get_target_joint_accelerations")
+def get_target_joint_accelerations(host: ScriptHost) -> UrList:
+    """The joint accelerations commanded (the fake arm follows its commands: the actual ones)."""
+    return UrList(host.arm.qdd)
+
+
 @builtin("get_actual_tcp_pose")
 def get_actual_tcp_pose(host: ScriptHost) -> UrPose:
     """The TCP pose where the arm is (base frame)."""
@@ -107,6 +88,18 @@ def get_actual_tcp_pose(host: ScriptHost) -> UrPose:
 def get_target_tcp_pose(host: ScriptHost) -> UrPose:
     """The TCP pose the running motion commands."""
     return UrPose(tcp_pose(host.arm, host.arm.target_q))
+
+
+@builtin("get_target_tcp_pose_along_path")
+def get_target_tcp_pose_along_path(host: ScriptHost) -> UrPose:
+    """The target TCP pose without path offset (the fake has none: the target TCP pose)."""
+    return UrPose(tcp_pose(host.arm, host.arm.target_q))
+
+
+@builtin("get_target_tcp_speed_along_path")
+def get_target_tcp_speed_along_path(host: ScriptHost) -> UrList:
+    """The target TCP speed without path offset (the fake has none: the target TCP speed)."""
+    return tool_speed(host.arm, host.arm.target_q, host.arm.target_qd)
 
 
 @builtin("get_actual_tool_flange_pose")
