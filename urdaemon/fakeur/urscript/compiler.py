@@ -20,7 +20,7 @@ from types import CodeType
 from typing import TYPE_CHECKING, Any, Final
 
 from urdaemon.fakeur.urscript import syntax as ast
-from urdaemon.fakeur.urscript.runtime import BUILTINS, ScriptCompileError
+from urdaemon.fakeur.urscript.runtime import BUILTINS, Builtin, ScriptCompileError
 
 if TYPE_CHECKING:
     from urdaemon.fakeur.urscript.host import ScriptHost
@@ -73,11 +73,14 @@ def compile_program(
     version: tuple[int, int] = (5, 12),
     *,
     signatures: Mapping[str, Any] | None = None,
+    builtins: Mapping[str, Builtin] | None = None,
 ) -> Program:
     """Check ``text`` and compile it; raise :class:`ScriptCompileError` (line, column) if refused.
 
     ``signatures``: the builtin table (name -> Signature) to check against; by default the table of
-    ``functions.yaml`` for ``series``/``version``.
+    ``functions.yaml`` for ``series``/``version``. ``builtins``: the implementations (default: the
+    registry :data:`~urdaemon.fakeur.urscript.runtime.BUILTINS`); a tabled name without one compiles and
+    stops the program with "not simulated" when called.
     """
     items = ast.parse(text)
     known_anywhere: Mapping[str, Any] = {}
@@ -87,12 +90,13 @@ def compile_program(
         signatures = table.load_signatures(series, version)
         known_anywhere = table.all_signatures()
     kind, name, body = _program_body(items)
-    checker = _Checker(kind, body, signatures, known_anywhere)
+    implementations = BUILTINS if builtins is None else builtins
+    checker = _Checker(kind, body, signatures, known_anywhere, implementations)
     checker.check()
     source, lines, used, constants = _Generator(checker).generate()
     builtins: dict[str, tuple[Callable[..., Any], bool]] = {}
     for builtin_name in used:
-        implementation = BUILTINS.get(builtin_name)
+        implementation = implementations.get(builtin_name)
         if implementation is None:
             builtins[builtin_name] = (_not_simulated(builtin_name), False)
         else:
@@ -202,8 +206,10 @@ class _Checker:
         body: tuple[Any, ...],
         signatures: Mapping[str, Any],
         known_anywhere: Mapping[str, Any],
+        implementations: Mapping[str, Builtin],
     ) -> None:
         self.kind = kind
+        self.implementations = implementations
         self.signatures = signatures
         self.known_anywhere = known_anywhere
         self.functions: dict[str, ast.Function] = {}
@@ -426,7 +432,7 @@ class _Checker:
     # -- which functions block --------------------------------------------------------------------------
 
     def builtin_blocks(self, name: str) -> bool:
-        implementation = BUILTINS.get(name)
+        implementation = self.implementations.get(name)
         return implementation is not None and implementation.blocking
 
     def _find_blocking(self) -> None:

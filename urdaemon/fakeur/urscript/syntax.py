@@ -429,16 +429,17 @@ def parse(text: str) -> tuple[Function | Statement, ...]:
     _check_ascii(text)
     try:
         tree = _parser().parse(text)
-    except lark.UnexpectedEOF:
-        line = text.count("\n") + 1
-        column = len(text) - (text.rfind("\n") + 1) + 1
-        raise ScriptCompileError(line, column, "syntax_error_on_line: unexpected end of program") from None
     except lark.UnexpectedInput as error:
-        line, column = error.line, error.column
-        if line < 1:  # end of input
-            line, column = text.count("\n") + 1, 1
-        raise ScriptCompileError(
-            line, column, f"syntax_error_on_line:{line}:{_source_line(text, line)}:"
-        ) from None
+        at_end = isinstance(error, lark.UnexpectedEOF) or (
+            isinstance(error, lark.UnexpectedToken) and error.token.type == "$END"
+        )
+        if at_end or error.line < 1:
+            line = text.count("\n") + 1
+            column = len(text) - (text.rfind("\n") + 1) + 1
+            message = "syntax_error_on_line: unexpected end of program"
+        else:
+            line, column = error.line, error.column
+            message = f"syntax_error_on_line:{line}:{_source_line(text, line)}:"
+        raise ScriptCompileError(line, column, message) from None
     items: tuple[Function | Statement, ...] = _Build().transform(tree)
     return items
