@@ -318,6 +318,7 @@ def test_a_name_written_twice_is_refused() -> None:
         ("{params: [a], since: {e: 5.4}}", "bad entry"),
         ("{params: [a], since: {cb2: '1.8'}}", "bad entry"),
         ("{params: [a], physical: 'yes'}", "booleans"),
+        ("{params: [a], deprecated: '5.1'}", "booleans"),
         ("{params: [{a: {pose: [1, 2]}}]}", "unsupported default"),
         ("{params: [{a: {computed: 'param:b'}}]}", "copies unknown"),
         ("{params: [a], typo: 1}", "unknown keys"),

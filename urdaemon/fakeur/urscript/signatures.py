@@ -121,8 +121,7 @@ class Signature:
     functions, e.g. urcl's script with ``force_mode_set_gain_scaling`` behind a run-time check): for such a
     controller ``supported`` is False, so a program that mentions the function compiles and calling it is
     a runtime error. ``documented`` is False for builtins real controllers accept that the manual does not
-    list (e.g. ``get_joint_positions``); ``deprecated`` names the version from which the manual calls it
-    deprecated (it still works), if any.
+    list (e.g. ``get_joint_positions``); ``deprecated``: the manual calls it deprecated (it still works).
     """
 
     name: str
@@ -131,7 +130,7 @@ class Signature:
     since: Mapping[str, Version] = field(default_factory=dict, hash=False)
     until: Mapping[str, Version] = field(default_factory=dict, hash=False)
     documented: bool = True
-    deprecated: str | None = None
+    deprecated: bool = False
     names_only: Mapping[str, Version] = field(default_factory=dict, hash=False)
     supported: bool = True
 
@@ -165,7 +164,10 @@ _NEWEST: Final = 1000
 """A major version newer than any: where ``all_signatures`` looks at a function that was never removed."""
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
+_SafeLoader: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _UniqueKeyLoader(_SafeLoader):  # type: ignore[valid-type,misc]
     """A safe YAML loader that refuses a key written twice in one mapping (PyYAML keeps the last)."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -173,7 +175,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         for index, key in enumerate(keys):
             if key in keys[:index]:
                 raise ValueError(f"{_TABLE}: {key!r} written twice (line {node.start_mark.line + 1})")
-        return super().construct_mapping(node, deep=deep)
+        mapping: dict[Any, Any] = super().construct_mapping(node, deep=deep)
+        return mapping
 
 
 def _parse_table(text: str) -> dict[str, Any]:
@@ -289,11 +292,9 @@ def _signature(
     _check_params(name, params)
     physical = entry.get("physical", False)
     documented = entry.get("documented", True)
-    deprecated = entry.get("deprecated")
-    if not isinstance(physical, bool) or not isinstance(documented, bool):
-        raise ValueError(f"{_TABLE}: {name}: physical and documented must be booleans")
-    if deprecated is not None and not isinstance(deprecated, str):
-        raise ValueError(f"{_TABLE}: {name}: deprecated must be a version string")
+    deprecated = entry.get("deprecated", False)
+    if not all(isinstance(flag, bool) for flag in (physical, documented, deprecated)):
+        raise ValueError(f"{_TABLE}: {name}: physical, documented and deprecated must be booleans")
     return replace(
         signature,
         params=params,
