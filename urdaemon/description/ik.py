@@ -30,8 +30,12 @@ __all__ = [
     "ELBOW",
     "SHOULDER",
     "WRIST",
+    "Frame",
     "IkSolution",
+    "Joints",
+    "Pose",
     "UrKinematics",
+    "Vector",
     "frame_of_pose",
     "pose_of_frame",
 ]
@@ -42,6 +46,8 @@ Frame = tuple[float, float, float, float, float, float, float, float, float, flo
 """Row-major rotation r00 r01 r02 r10 r11 r12 r20 r21 r22, then translation x y z."""
 Pose = tuple[float, float, float, float, float, float]
 Joints = tuple[float, float, float, float, float, float]
+Vector = Sequence[float] | NDArray[np.float64]
+"""What the public methods accept for joints, poses and twists: any 6 numbers (list, tuple, array)."""
 
 _TAU = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
@@ -68,7 +74,7 @@ class IkSolution(NamedTuple):
     q: Joints
 
 
-def frame_of_pose(pose: Sequence[float]) -> Frame:
+def frame_of_pose(pose: Vector) -> Frame:
     """The frame of a UR pose (x, y, z, rx, ry, rz) (Rodrigues)."""
     x, y, z, rx, ry, rz = pose
     angle = math.sqrt(rx * rx + ry * ry + rz * rz)
@@ -209,7 +215,7 @@ class UrKinematics:
 
     # ---- public API ----------------------------------------------------------------------------
 
-    def forward(self, q: Sequence[float], tcp: Sequence[float] | None = None) -> Pose:
+    def forward(self, q: Vector, tcp: Vector | None = None) -> Pose:
         """The TCP pose for joints ``q`` (URScript ``get_forward_kin(q, tcp)``)."""
         frame = self._frame(q)
         if tcp is not None:
@@ -218,9 +224,9 @@ class UrKinematics:
 
     def solutions(
         self,
-        pose: Sequence[float],
-        tcp: Sequence[float] | None = None,
-        qnear: Sequence[float] | None = None,
+        pose: Vector,
+        tcp: Vector | None = None,
+        qnear: Vector | None = None,
         max_position_error: float = 1e-10,
         max_orientation_error: float = 1e-10,
     ) -> list[IkSolution]:
@@ -239,9 +245,9 @@ class UrKinematics:
 
     def nearest(
         self,
-        pose: Sequence[float],
-        qnear: Sequence[float],
-        tcp: Sequence[float] | None = None,
+        pose: Vector,
+        qnear: Vector,
+        tcp: Vector | None = None,
         max_position_error: float = 1e-10,
         max_orientation_error: float = 1e-10,
     ) -> Joints | None:
@@ -267,9 +273,9 @@ class UrKinematics:
 
     def has_solution(
         self,
-        pose: Sequence[float],
-        qnear: Sequence[float] | None = None,
-        tcp: Sequence[float] | None = None,
+        pose: Vector,
+        qnear: Vector | None = None,
+        tcp: Vector | None = None,
         max_position_error: float = 1e-10,
         max_orientation_error: float = 1e-10,
     ) -> bool:
@@ -277,16 +283,16 @@ class UrKinematics:
         seed = _ZERO_SEED if qnear is None else qnear
         return self.nearest(pose, seed, tcp, max_position_error, max_orientation_error) is not None
 
-    def jacobian(self, q: Sequence[float], tcp: Sequence[float] | None = None) -> NDArray[np.float64]:
+    def jacobian(self, q: Vector, tcp: Vector | None = None) -> NDArray[np.float64]:
         """The 6x6 geometric Jacobian at ``q``: rows vx vy vz wx wy wz of the TCP in base, columns joints."""
         chain = self._chain(q, None if tcp is None else frame_of_pose(tcp))
         return np.array(_jacobian_rows(chain))
 
     def joint_velocity(
         self,
-        q: Sequence[float],
-        twist: Sequence[float],
-        tcp: Sequence[float] | None = None,
+        q: Vector,
+        twist: Vector,
+        tcp: Vector | None = None,
         *,
         singular_value: float = 0.05,
         max_damping: float = 0.05,
@@ -308,7 +314,7 @@ class UrKinematics:
 
     # ---- stages --------------------------------------------------------------------------------
 
-    def _flange_target(self, pose: Sequence[float], tcp: Sequence[float] | None) -> Frame:
+    def _flange_target(self, pose: Vector, tcp: Vector | None) -> Frame:
         target = frame_of_pose(pose)
         return target if tcp is None else _compose(target, _inverse(frame_of_pose(tcp)))
 
@@ -316,7 +322,7 @@ class UrKinematics:
         self,
         target: Frame,
         q0: list[float],
-        seed: Sequence[float],
+        seed: Vector,
         max_position: float,
         max_orientation: float,
     ) -> Joints | None:
@@ -346,7 +352,7 @@ class UrKinematics:
             q = self._refine(waypoint, q)[0]
         return self._refine(target, q)
 
-    def _analytic(self, f: Frame, seed: Sequence[float]) -> list[tuple[int, list[float]]]:
+    def _analytic(self, f: Frame, seed: Vector) -> list[tuple[int, list[float]]]:
         """The closed-form solutions on the nominal DH, as (branch, joints); unreachable branches left out."""
         r00, r01, r02, r10, r11, r12, _, _, _, px, py, _ = f
         d4, d6 = self._d4, self._d6
@@ -383,7 +389,7 @@ class UrKinematics:
         q1: float,
         q5: float,
         q6: float,
-        seed: Sequence[float],
+        seed: Vector,
     ) -> None:
         """Joints 2-4 (parallel axes) for given q1, q5, q6: both elbow branches, appended to ``found``."""
         r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = f
@@ -466,10 +472,10 @@ class UrKinematics:
 
     # ---- the calibrated chain ------------------------------------------------------------------
 
-    def _frame(self, q: Sequence[float]) -> Frame:
+    def _frame(self, q: Vector) -> Frame:
         return self._chain(q, None).frame
 
-    def _chain(self, q: Sequence[float], tcp: Frame | None) -> _Chain:
+    def _chain(self, q: Vector, tcp: Frame | None) -> _Chain:
         cos, sin = math.cos, math.sin
         xx, xy, xz = 1.0, 0.0, 0.0
         yx, yy, yz = 0.0, 1.0, 0.0
@@ -501,14 +507,14 @@ class UrKinematics:
         return _Chain(frame, tuple(axes), tuple(points))
 
     def _within_limits(self, q: Joints) -> Joints | None:
-        """``q`` (already shifted near the seed) with each joint moved by 2pi into its limits, or None."""
+        """``q`` (shifted near the seed), each joint turned by whole turns just into its limits; or None."""
         out = list(q)
         for i, (lower, upper) in enumerate(zip(self._lower, self._upper, strict=True)):
             value = out[i]
             if value > upper:
-                value -= _TAU
+                value -= _TAU * math.ceil((value - upper) / _TAU)
             elif value < lower:
-                value += _TAU
+                value += _TAU * math.ceil((lower - value) / _TAU)
             if not lower <= value <= upper:
                 return None
             out[i] = value
@@ -531,11 +537,11 @@ def _jacobian_rows(chain: _Chain) -> list[list[float]]:
     return rows
 
 
-def _shift_near(q: Sequence[float], seed: Sequence[float]) -> Joints:
+def _shift_near(q: Vector, seed: Vector) -> Joints:
     """Each joint shifted by a multiple of 2pi to lie nearest the seed's."""
     out = [v + _TAU * round((s - v) / _TAU) for v, s in zip(q, seed, strict=True)]
     return (out[0], out[1], out[2], out[3], out[4], out[5])
 
 
-def _distance(q: Sequence[float], seed: Sequence[float]) -> float:
+def _distance(q: Vector, seed: Vector) -> float:
     return math.sqrt(sum((a - b) * (a - b) for a, b in zip(q, seed, strict=True)))
