@@ -185,13 +185,11 @@ def test_keywords_are_resolved_and_defaults_filled_at_compile_time() -> None:
 
 def control_script(**overrides: Any) -> str:
     """Our control script as the daemon renders it (tool setup as in tests/test_urscript.py)."""
-    params = ScriptParameters(
-        "127.0.0.1",
-        tool_setup=("set_tool_voltage(24)", "set_tool_communication(True, 115200, 0, 1, 1.5, 3.5)"),
-        controller_version=(5, 15, 0),
-        **overrides,
-    )
-    return render_control_script(params)
+    fields: dict[str, Any] = {
+        "tool_setup": ("set_tool_voltage(24)", "set_tool_communication(True, 115200, 0, 1, 1.5, 3.5)"),
+        "controller_version": (5, 15, 0),
+    }
+    return render_control_script(ScriptParameters("127.0.0.1", **(fields | overrides)))
 
 
 def test_our_control_script_compiles_unwrapped_and_headless() -> None:

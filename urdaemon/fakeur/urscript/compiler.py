@@ -94,15 +94,15 @@ def compile_program(
     checker = _Checker(kind, body, signatures, known_anywhere, implementations)
     checker.check()
     source, lines, used, constants = _Generator(checker).generate()
-    builtins: dict[str, tuple[Callable[..., Any], bool]] = {}
+    bound: dict[str, tuple[Callable[..., Any], bool]] = {}
     for builtin_name in used:
         implementation = implementations.get(builtin_name)
         if implementation is None:
-            builtins[builtin_name] = (_not_simulated(builtin_name), False)
+            bound[builtin_name] = (_not_simulated(builtin_name), False)
         else:
-            builtins[builtin_name] = (implementation.function, implementation.blocking)
+            bound[builtin_name] = (implementation.function, implementation.blocking)
     code = compile(source, _FILENAME, "exec")
-    return Program(kind, name, code, lines, builtins, constants, source)
+    return Program(kind, name, code, lines, bound, constants, source)
 
 
 def _program_body(items: tuple[Any, ...]) -> tuple[str, str, tuple[Any, ...]]:
