@@ -161,6 +161,31 @@ def test_every_builtin_of_our_cb3_script_compiles_on_cb3() -> None:
     assert sorted(name for name in called if not cb3[name].supported) == ["force_mode_set_gain_scaling"]
 
 
+def _our_names_unknown_to(series: str, version: tuple[int, int]) -> list[str]:
+    rendered = _called_builtins(_our_script((*version, 0)))
+    return sorted(rendered - set(load_signatures(series, version)))
+
+
+@pytest.mark.parametrize("version", [(5, 4), (5, 9), (5, 10), (5, 15), (5, 25)])
+def test_our_script_compiles_name_wise_on_e_series_from_5_4(version: tuple[int, int]) -> None:
+    assert _our_names_unknown_to("e", version) == []
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="urdaemon/urscript.py renders tool_contact(...) from 5.0 on, but tool_contact exists from 5.4: "
+    "TOOL_CONTACT_CALL must be gated at (5, 4, 0)",
+)
+def test_our_script_compiles_name_wise_on_e_series_before_5_4() -> None:
+    """Reproduction: render the control script for controller_version (5, 3, 0); it calls tool_contact."""
+    assert _our_names_unknown_to("e", (5, 3)) == []
+
+
+@pytest.mark.parametrize("version", [(3, 14), (3, 15)])
+def test_our_script_compiles_name_wise_on_cb3_from_3_14(version: tuple[int, int]) -> None:
+    assert _our_names_unknown_to("cb3", version) == []
+
+
 def test_every_builtin_ur_rtde_calls_is_there_on_e_series() -> None:
     assert sorted(set(UR_RTDE_CALLS) - set(load_signatures(*E_SERIES))) == []
 
