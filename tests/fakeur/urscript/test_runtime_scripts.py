@@ -3,9 +3,9 @@ streaming, mode switches, STOPPED) and ur_rtde's rtde_control script (a command 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import pytest
 
@@ -66,7 +66,7 @@ class Controller:
         table.update({name: Builtin(name, f, blocking) for name, (f, blocking) in stubs.items()})
         return table
 
-    def _read(self, host: Any, number: int, name: str, timeout: float) -> Iterator[None]:
+    def _read(self, host: Any, number: int, name: str, timeout: float) -> Generator[None, None, UrList]:
         """The reverse socket delivers one queued frame per cycle; the other sockets stay silent."""
         if name != "reverse_socket":
             while True:
@@ -102,7 +102,7 @@ def test_our_control_script_streams_servoj_and_ends_on_stopped(wrapped: bool) ->
         text = headless_program(text).split("\n", 1)[1]
     controller = Controller()
     program = compile_program(text, series="e", version=(5, 15), builtins=controller.builtins())
-    run = program.start(controller)
+    run = program.start(cast(Any, controller))
     controller.step(run, 3)
     assert any("control active" in m for m in controller.messages)
     targets = [[0.1 + 0.001 * i + 0.01 * j for j in range(6)] for i in range(5)]
@@ -126,7 +126,9 @@ def test_our_control_script_streams_servoj_and_ends_on_stopped(wrapped: bool) ->
 def test_our_control_script_aborts_when_the_reverse_socket_times_out() -> None:
     controller = Controller()
     text = control_script(tool_setup=())
-    run = compile_program(text, series="e", version=(5, 15), builtins=controller.builtins()).start(controller)
+    run = compile_program(text, series="e", version=(5, 15), builtins=controller.builtins()).start(
+        cast(Any, controller)
+    )
     controller.frames = [reverse_frame(MODE_IDLE), UrList([0])]
     controller.step(run, 5)
     assert run.done
@@ -140,7 +142,9 @@ def test_our_control_script_aborts_when_the_reverse_socket_times_out() -> None:
 def test_ur_rtde_control_script_answers_a_command_and_stops() -> None:
     controller = Controller()
     text = Path(RTDE_CONTROL_SCRIPT).read_text(encoding="ascii")
-    run = compile_program(text, series="e", version=(5, 15), builtins=controller.builtins()).start(controller)
+    run = compile_program(text, series="e", version=(5, 15), builtins=controller.builtins()).start(
+        cast(Any, controller)
+    )
     controller.step(run, 3)
     assert run.error is None
     assert controller.outputs[0] == 1  # signal_ready
