@@ -22,7 +22,7 @@ from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript import lib_sockets as ls
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
 
 DT = 0.002
 WAIT_S = 5.0
@@ -284,6 +284,22 @@ def test_sends_reach_the_peer_byte_for_byte(server: socket.socket) -> None:
     assert ls.socket_send_line(host, "power on", "socket_0") is True
     ls.socket_set_var(host, "X", 12, "socket_0")
     expected = struct.pack(">i", -3) + b"\xff" + b"hi" + b"power on\n" + b"SET X 12\n"
+    got = b""
+    while len(got) < len(expected):
+        chunk = peer.recv(64)
+        assert chunk
+        got += chunk
+    assert got == expected
+    peer.close()
+
+
+def test_send_string_prints_other_values_as_the_controller_does(server: socket.socket) -> None:
+    """A common robot program sends its pose with socket_send_string(get_actual_tcp_pose())."""
+    host = _host()
+    peer = _open(host, server)
+    assert ls.socket_send_string(host, UrPose([0.1, 0, 0.5, 0, 3.14159, 0]), "socket_0") is True
+    assert ls.socket_send_line(host, 7, "socket_0") is True
+    expected = b"p[0.1, 0, 0.5, 0, 3.14159, 0]7\n"
     got = b""
     while len(got) < len(expected):
         chunk = peer.recv(64)

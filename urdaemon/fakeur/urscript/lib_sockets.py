@@ -26,6 +26,7 @@ from collections.abc import Generator
 from typing import Any, Final
 
 from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.lib_core import text as printed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, builtin
 
 __all__ = [
@@ -341,14 +342,14 @@ def socket_send_byte(host: ScriptHost, value: Any, socket_name: Any = DEFAULT_SO
 
 @builtin("socket_send_string")
 def socket_send_string(host: ScriptHost, text: Any, socket_name: Any = DEFAULT_SOCKET) -> bool:
-    """Send ``text`` in ASCII, nothing added."""
-    return _send(host, socket_name, _ascii("socket_send_string", text))
+    """Send ``text`` in ASCII, nothing added; another value as the controller prints it (``p[0.1, ...]``)."""
+    return _send(host, socket_name, _ascii("socket_send_string", printed(text)))
 
 
 @builtin("socket_send_line")
 def socket_send_line(host: ScriptHost, text: Any, socket_name: Any = DEFAULT_SOCKET) -> bool:
-    """Send ``text`` in ASCII followed by a newline."""
-    return _send(host, socket_name, _ascii("socket_send_line", text) + b"\n")
+    """Send ``text`` (or another value, printed) in ASCII followed by a newline."""
+    return _send(host, socket_name, _ascii("socket_send_line", printed(text)) + b"\n")
 
 
 @builtin("socket_set_var")
