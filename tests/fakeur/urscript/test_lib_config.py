@@ -80,6 +80,12 @@ def test_tcp_and_gravity() -> None:
         (cfg.force_mode, ([0] * 6, [0, 0, 1, 0, 0, 0], [0] * 6, 4, [0.1] * 6)),
         (cfg.force_mode_set_damping, (1.5,)),
         (cfg.force_mode_set_gain_scaling, (-0.1,)),
+        (cfg.set_tool_communication, (True, 4800, 0, 1, 1.5, 3.5)),
+        (cfg.set_tool_communication, (True, 115200, 3, 1, 1.5, 3.5)),
+        (cfg.set_tool_communication, (1, 115200, 0, 1, 1.5, 3.5)),
+        (cfg.set_tool_digital_output_mode, (2, 1)),
+        (cfg.set_tool_digital_output_mode, (0, 4)),
+        (cfg.set_tool_output_mode, (2,)),
         (cfg.rtde_set_watchdog, ("output_int_register_0", 10, "stop")),
         (cfg.rtde_set_watchdog, ("input_int_register_0", 0, "stop")),
         (cfg.rtde_set_watchdog, ("input_int_register_0", 10, "halt")),
@@ -117,6 +123,16 @@ def test_freedrive_teach_mode_and_tool_contact() -> None:
     cfg.end_teach_mode(host)
     assert host.arm.freedrive is False
     assert cfg.tool_contact(host, [0, 0, -0.1, 0, 0, 0]) == 0
+
+
+def test_tool_io_configuration_is_recorded() -> None:
+    host = _host()
+    cfg.set_tool_communication(host, True, 115200, 0, 1, 1.5, 3.5)
+    cfg.set_tool_digital_output_mode(host, 1, 3)
+    cfg.set_tool_output_mode(host, 1)
+    assert host.config.tool_communication == (True, 115200, 0, 1, 1.5, 3.5)
+    assert host.config.tool_output_modes == [2, 3]
+    assert host.config.tool_output_mode == 1
 
 
 def test_watchdog_is_recorded_for_the_controller_and_dropped_at_close() -> None:

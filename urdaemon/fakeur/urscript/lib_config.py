@@ -27,6 +27,8 @@ DEFAULT_DAMPING: Final = 0.005
 DEFAULT_GAIN_SCALING: Final = 1.0
 """Force mode gain scaling until ``force_mode_set_gain_scaling`` (UR's manual)."""
 FORCE_MODE_TYPES: Final = (1, 2, 3)
+TOOL_BAUD_RATES: Final = (9600, 19200, 38400, 57600, 115200, 1_000_000, 2_000_000, 5_000_000)
+"""Baud rates the tool's RS-485 interface supports (UR's manual)."""
 
 
 @dataclass
@@ -44,6 +46,12 @@ class ConfigState:
     freedrive_feature: list[float] = field(default_factory=lambda: [0.0] * 6)
     ft_zeroed_at: float | None = None
     """Controller time of the last ``zero_ftsensor``."""
+    tool_communication: tuple[bool, int, int, int, float, float] | None = None
+    """``set_tool_communication``'s (enabled, baud rate, parity, stop bits, rx idle, tx idle)."""
+    tool_output_modes: list[int] = field(default_factory=lambda: [2, 2])
+    """Tool digital outputs 0 and 1: 1 sinking (NPN), 2 sourcing (PNP), 3 push-pull."""
+    tool_output_mode: int = 0
+    """Tool output pins: 0 digital outputs, 1 dual pin power."""
 
 
 def _config(host: ScriptHost) -> ConfigState:
@@ -259,6 +267,55 @@ def tool_contact(host: ScriptHost, direction: Any = (0, 0, 0, 0, 0, 0), force_th
     _vector("tool_contact", direction, 6)
     _number("tool_contact", force_threshold)
     return 0
+
+
+# ---- tool IO configuration ------------------------------------------------------------------------------
+
+
+def _choice(function: str, what: str, value: Any, allowed: Sequence[int]) -> int:
+    number = _number(function, value)
+    if number not in allowed:
+        raise ScriptRuntimeError(
+            f"{function}: {what} {number:g} is not one of {', '.join(map(str, allowed))}"
+        )
+    return int(number)
+
+
+@builtin("set_tool_communication")
+def set_tool_communication(
+    host: ScriptHost,
+    enabled: Any,
+    baud_rate: Any,
+    parity: Any,
+    stop_bits: Any,
+    rx_idle_chars: Any,
+    tx_idle_chars: Any,
+) -> None:
+    """Configure the tool's RS-485 interface (the fake has no tool device to talk to: it is recorded)."""
+    function = "set_tool_communication"
+    if not isinstance(enabled, bool):
+        raise ScriptRuntimeError(f"{function}: enabled must be True or False, got {enabled!r}")
+    _config(host).tool_communication = (
+        enabled,
+        _choice(function, "baud_rate", baud_rate, TOOL_BAUD_RATES),
+        _choice(function, "parity", parity, (0, 1, 2)),
+        _choice(function, "stop_bits", stop_bits, (1, 2)),
+        _in_range(function, "rx_idle_chars", rx_idle_chars, 1.0, 40.0),
+        _in_range(function, "tx_idle_chars", tx_idle_chars, 0.0, 40.0),
+    )
+
+
+@builtin("set_tool_digital_output_mode")
+def set_tool_digital_output_mode(host: ScriptHost, n: Any, mode: Any) -> None:
+    """Tool digital output ``n`` (0..1): 1 sinking (NPN), 2 sourcing (PNP), 3 push-pull."""
+    pin = _choice("set_tool_digital_output_mode", "output", n, (0, 1))
+    _config(host).tool_output_modes[pin] = _choice("set_tool_digital_output_mode", "mode", mode, (1, 2, 3))
+
+
+@builtin("set_tool_output_mode")
+def set_tool_output_mode(host: ScriptHost, mode: Any) -> None:
+    """Tool output pins as digital outputs (0) or dual pin power (1)."""
+    _config(host).tool_output_mode = _choice("set_tool_output_mode", "mode", mode, (0, 1))
 
 
 # ---- RTDE watchdog -----------------------------------------------------------------------------------------
