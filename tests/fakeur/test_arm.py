@@ -7,7 +7,8 @@ import math
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, FakeArm, RuntimeState
+from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, HISTORY_STEPS, FakeArm, RuntimeState
+from urdaemon.fakeur.motion import SpeedRamp
 from urdaemon.model import RobotMode, SafetyMode
 
 DT = 0.002
@@ -149,3 +150,42 @@ def test_tcp_pose_is_the_dh_forward_kinematics_as_a_rotation_vector() -> None:
     assert y == pytest.approx(-(dh.d[3] + dh.d[5]), abs=1e-9)
     assert z == pytest.approx(dh.d[0] - dh.d[4], abs=1e-9)
     assert math.sqrt(rx * rx + ry * ry + rz * rz) == pytest.approx(math.pi / 2, abs=1e-9)
+
+
+def test_a_played_motion_advances_by_the_speed_slider_and_stops_when_not_renewed() -> None:
+    """play(): dt × slider of program time per cycle; once over, the arm stops at the given deceleration."""
+    arm = _arm(powered=True)
+    arm.speed_slider = 0.5
+    start = list(arm.q)
+    ramp = SpeedRamp(start, [0.0] * 6, [0.4, 0, 0, 0, 0, 0], 100.0, 0.1)
+    assert arm.play(ramp, 2.0)
+    _run(arm, 0.1)
+    assert arm.motion_time == pytest.approx(0.05)
+    assert arm.qd[0] == pytest.approx(0.2, abs=1e-9), "the motion's 0.4 rad/s at half speed"
+    _run(arm, 0.1)
+    assert arm.motion is ramp
+    arm.step(DT)
+    assert arm.motion is not ramp, "over and not renewed: a stop"
+    _run(arm, 0.5)
+    assert arm.qd == [0.0] * 6
+    assert arm.steady
+    assert arm.target_q == arm.q
+
+
+def test_play_is_refused_while_the_arm_cannot_move() -> None:
+    arm = _arm()
+    assert not arm.play(SpeedRamp(arm.q, [0.0] * 6, [1.0] * 6, 1.0, 1.0), 1.0)
+    assert arm.motion is None
+
+
+def test_history_keeps_the_positions_of_past_cycles() -> None:
+    arm = _arm(powered=True)
+    arm.play(SpeedRamp(arm.q, [0.0] * 6, [0.5, 0, 0, 0, 0, 0], 100.0, 1.0), 1.0)
+    seen = []
+    for _ in range(HISTORY_STEPS + 10):
+        arm.step(DT)
+        seen.append(list(arm.q))
+    assert arm.history(0) == seen[-1]
+    assert arm.history(5) == seen[-6]
+    assert arm.history(HISTORY_STEPS - 1) == seen[-HISTORY_STEPS]
+    assert arm.history(HISTORY_STEPS + 100) == seen[-HISTORY_STEPS]

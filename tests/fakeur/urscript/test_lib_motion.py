@@ -13,7 +13,7 @@ from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.runtime import UrPose
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
 from urdaemon.fakeur.urscript.signatures import Computed
 from urdaemon.model import SafetyMode
 
@@ -245,3 +245,100 @@ def test_killing_the_commanding_thread_stops_the_arm() -> None:
         arm.step(DT)
     assert arm.qd == [0.0] * 6
     assert arm.q[0] < arm.history(0)[0] + 1e-12
+
+
+def test_a_speedj_stream_under_a_reduced_slider_stays_smooth_at_the_scaled_speed() -> None:
+    """speedj every cycle at slider 0.5: the arm runs at half the speed, without a jerk per command."""
+    host = _host(0.5)
+    arm = host.arm
+    speeds: list[float] = []
+    for _ in range(400):
+        _run(host, lib_motion.speedj(host, [0.4, 0, 0, 0, 0, 0], 2.0, DT))
+        speeds.append(arm.qd[0])
+    assert speeds[-1] == pytest.approx(0.2, abs=1e-9)
+    steps = [abs(b - a) for a, b in itertools.pairwise(speeds)]
+    assert max(steps) <= 2.0 * 0.5 * 0.5 * DT * 2 + 1e-12, (
+        "acceleration at most a, scaled twice by the slider"
+    )
+
+
+def test_speedl_moves_the_tcp_at_the_commanded_twist() -> None:
+    host = _host()
+    arm = host.arm
+    twist = [0.05, -0.03, 0.02, 0.0, 0.0, 0.1]
+    _run(host, lib_motion.speedl(host, twist, 0.5, 0.5, Computed("param:a")))
+    assert list(lib_state.get_target_tcp_speed(host)) == pytest.approx(twist, abs=1e-3)
+    before = lib_state.get_actual_tcp_pose(host)
+    gen = lib_motion.speedl(host, twist, 0.5, 0.2, Computed("param:a"))
+    cycles = _run(host, gen)
+    after = lib_state.get_actual_tcp_pose(host)
+    moved = [(b - a) / (cycles * DT) for a, b in zip(before[:3], after[:3], strict=True)]
+    assert moved == pytest.approx(twist[:3], abs=1e-3)
+    for _ in range(500):  # not renewed: it stops
+        arm.step(DT)
+    assert arm.qd == [0.0] * 6
+
+
+def test_servoc_and_optimovej_reach_their_targets() -> None:
+    host = _host()
+    arm = host.arm
+    start = lib_state.get_actual_tcp_pose(host)
+    goal = UrPose([start[0] - 0.05, start[1] + 0.05, start[2], *start[3:]])
+    _run(host, lib_motion.servoc(host, goal, 1.2, 0.25, 0))
+    assert math.dist(lib_state.get_actual_tcp_pose(host)[:3], goal[:3]) < 1e-4
+    target = _offset(arm.q, j3=0.3)
+    cycles = _run(host, lib_motion.optimovej(host, target, 0.5, 0.5, 0))
+    assert max(abs(a - b) for a, b in zip(arm.q, target, strict=True)) < 1e-3
+    slowest = min(arm.max_velocity) * 0.5
+    assert cycles * DT >= 0.3 / slowest
+
+
+def test_movel_to_joint_positions_goes_to_their_pose_on_a_line() -> None:
+    """movel(q) with a joint list (our script's tool-contact retreat): the arm ends at those joints."""
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j0=0.1, j1=-0.05)
+    _run(host, lib_motion.movel(host, UrList(target), 1.2, 0.25, 0, 0))
+    assert max(abs(a - b) for a, b in zip(arm.q, target, strict=True)) < 1e-6
+
+
+def test_a_movej_interrupted_by_a_protective_stop_resumes_to_its_target() -> None:
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j0=1.0)
+    gen = lib_motion.movej(host, target, 1.4, 1.05, 0, 0)
+    for _ in range(200):
+        next(gen)
+        arm.step(DT)
+    lib_motion.protective_stop(host)
+    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    for _ in range(200):  # the controller does not step a paused program
+        arm.step(DT)
+    assert arm.qd == [0.0] * 6
+    assert arm.unlock_protective_stop() is None
+    assert arm.resume_program() is None
+    _run(host, gen)
+    assert max(abs(a - b) for a, b in zip(arm.q, target, strict=True)) < 1e-3
+
+
+def test_set_pos_puts_the_arm_there_at_once() -> None:
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j5=1.0)
+    lib_motion.set_pos(host, target)
+    assert arm.q == target
+    arm.step(DT)
+    assert arm.q == target
+    assert arm.qd == [0.0] * 6
+
+
+def test_bad_arguments_are_runtime_errors() -> None:
+    host = _host()
+    with pytest.raises(ScriptRuntimeError, match="movej"):
+        _run(host, lib_motion.movej(host, [0.0] * 5, 1.4, 1.05, 0, 0))
+    with pytest.raises(ScriptRuntimeError, match="speedj"):
+        _run(host, lib_motion.speedj(host, [0.0] * 6, 0, 0))
+    with pytest.raises(ScriptRuntimeError, match="stopj"):
+        _run(host, lib_motion.stopj(host, "fast"))
+    with pytest.raises(ScriptRuntimeError, match="movel"):
+        _run(host, lib_motion.movel(host, UrPose([5.0, 0, 0, 0, 0, 0]), 1.2, 0.25, 0, 0))

@@ -1,0 +1,118 @@
+"""The fake arm's pure motion primitives (fakeur/motion.py)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from urdaemon.fakeur.motion import (
+    JointMove,
+    LinearStop,
+    ServoRamp,
+    SpeedRamp,
+    compose,
+    joint_move,
+    leading_stop_time,
+    matrix_of_pose,
+    pose_of_matrix,
+    profile,
+    transposed,
+)
+
+START = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0]
+
+
+def _samples(move: JointMove | SpeedRamp | LinearStop | ServoRamp, dt: float = 0.002) -> list[list[float]]:
+    count = math.ceil(move.duration / dt)
+    return [move.position(min(k * dt, move.duration)) for k in range(count + 1)]
+
+
+def test_profile_trapezoid_and_triangle() -> None:
+    shape = profile(1.0, velocity=1.0, acceleration=2.0)
+    assert shape.duration == pytest.approx(1.0 / 1.0 + 1.0 / 2.0)
+    assert shape.at(shape.duration) == (1.0, 0.0)
+    assert shape.at(0.25) == pytest.approx((0.0625, 0.5))
+    short = profile(0.01, velocity=1.0, acceleration=1.0)  # never reaches v
+    assert short.peak == pytest.approx(0.1)
+    assert short.duration == pytest.approx(0.2)
+    timed = profile(1.0, velocity=1.0, acceleration=2.0, duration=3.0)
+    assert timed.duration == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="a > 0"):
+        profile(1.0, velocity=0.0, acceleration=1.0)
+
+
+@given(
+    st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6),
+    st.floats(0.1, 3.0),
+    st.floats(0.2, 5.0),
+)
+def test_joint_move_arrives_together_within_v_a_and_the_joint_limits(
+    delta: list[float], velocity: float, acceleration: float
+) -> None:
+    target = [a + d for a, d in zip(START, delta, strict=True)]
+    limits = [2.0, 2.0, 3.0, 3.0, 3.0, 3.0]
+    move = joint_move(START, target, velocity=velocity, acceleration=acceleration, max_velocity=limits)
+    assert move.position(move.duration) == pytest.approx(target, abs=1e-12)
+    assert move.velocity(move.duration) == pytest.approx([0.0] * 6, abs=1e-12)
+    for k in range(50):
+        qd = move.velocity(move.duration * k / 50)
+        assert max(abs(v) for v in qd) <= velocity + 1e-9
+        assert all(abs(v) <= limit + 1e-9 for v, limit in zip(qd, limits, strict=True))
+
+
+def test_a_blended_joint_move_starts_at_the_given_velocity_and_stays_within_a() -> None:
+    v0 = [0.8, -0.3, 0.0, 0.0, 0.0, 0.0]
+    target = [0.5, -1.0, 1.5, -1.5, -1.5, 0.0]
+    move = joint_move(START, target, velocity=1.0, acceleration=1.4, start_velocity=v0)
+    assert move.velocity(0.0) == pytest.approx(v0, abs=1e-12)
+    assert move.position(move.duration) == pytest.approx(target, abs=1e-12)
+    dt = 0.001
+    speeds = [move.velocity(k * dt) for k in range(int(move.duration / dt))]
+    worst = max(
+        max(abs(b - a) for a, b in zip(s, t, strict=True)) / dt for s, t in itertools.pairwise(speeds)
+    )
+    assert worst <= 2 * 1.4 + 1e-6, "the fade adds at most a to the move's own acceleration"
+
+
+def test_speed_ramp_reaches_the_speed_with_the_leading_joint_at_a() -> None:
+    ramp = SpeedRamp(START, [0.0] * 6, [1.0, -0.5, 0, 0, 0, 0], 2.0, 0.0)
+    assert ramp.duration == pytest.approx(0.5)
+    assert ramp.velocity(0.25) == pytest.approx([0.5, -0.25, 0, 0, 0, 0])
+    assert ramp.position(0.5)[0] == pytest.approx(0.25)
+    assert ramp.position(1.0)[0] == pytest.approx(0.25 + 0.5)
+
+
+def test_linear_stop_and_servo_ramp() -> None:
+    stop = LinearStop(START, [1.0, 0.5, 0, 0, 0, 0], leading_stop_time([1.0, 0.5], 4.0))
+    assert stop.duration == pytest.approx(0.25)
+    assert stop.velocity(stop.duration) == [0.0] * 6
+    assert stop.position(stop.duration)[0] == pytest.approx(0.125)
+    assert stop.position(stop.duration)[1] == pytest.approx(START[1] + 0.0625)
+    assert LinearStop(START, [0.0] * 6, 1.0).duration == 0.0
+    servo = ServoRamp(START, [0.01, *START[1:]], 0.004)
+    assert servo.position(0.002)[0] == pytest.approx(0.005)
+    assert servo.position(0.004) == [0.01, *START[1:]]
+
+
+@given(
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+    st.floats(0.0, math.pi),
+)
+def test_pose_matrix_round_trip_up_to_a_half_turn(
+    position: list[float], axis: list[float], angle: float
+) -> None:
+    norm = math.sqrt(sum(v * v for v in axis))
+    if norm < 1e-3:
+        return
+    rotation = [v / norm * angle for v in axis]
+    pose = (*position, *rotation)
+    back = pose_of_matrix(matrix_of_pose(pose))
+    again = matrix_of_pose(back)
+    assert list(again) == pytest.approx(list(matrix_of_pose(pose)), abs=1e-9)
+    identity = compose(matrix_of_pose(pose), transposed(matrix_of_pose(pose)))
+    assert list(identity[:9]) == pytest.approx([1, 0, 0, 0, 1, 0, 0, 0, 1], abs=1e-12)
