@@ -244,25 +244,28 @@ def rotvec_to_matrix(rx: float, ry: float, rz: float) -> Matrix:
 
 
 def matrix_to_rotvec(m: Matrix) -> tuple[float, float, float]:
-    """Rotation vector (angle in [0, pi]) of a rotation matrix."""
-    cosine = max(-1.0, min(1.0, (m[0][0] + m[1][1] + m[2][2] - 1.0) / 2.0))
-    angle = math.acos(cosine)
+    """Rotation vector (angle in [0, pi]) of a rotation matrix, accurate up to a half turn."""
+    sx, sy, sz = m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]
+    sine = 0.5 * math.sqrt(sx * sx + sy * sy + sz * sz)
+    cosine = (m[0][0] + m[1][1] + m[2][2] - 1.0) / 2.0
+    angle = math.atan2(sine, cosine)
     if angle < 1e-12:
         return (0.0, 0.0, 0.0)
-    if math.pi - angle > 1e-6:
-        scale = angle / (2.0 * math.sin(angle))
-        return ((m[2][1] - m[1][2]) * scale, (m[0][2] - m[2][0]) * scale, (m[1][0] - m[0][1]) * scale)
-    # near pi: the axis from the diagonal, its sign from the off-diagonal terms
-    xx, yy, zz = (max(0.0, (m[i][i] + 1.0) / 2.0) for i in range(3))
-    x, y, z = math.sqrt(xx), math.sqrt(yy), math.sqrt(zz)
-    if x >= y and x >= z:
-        y, z = math.copysign(y, m[0][1] + m[1][0]), math.copysign(z, m[0][2] + m[2][0])
-    elif y >= z:
-        x, z = math.copysign(x, m[0][1] + m[1][0]), math.copysign(z, m[1][2] + m[2][1])
-    else:
-        x, y = math.copysign(x, m[0][2] + m[2][0]), math.copysign(y, m[1][2] + m[2][1])
-    n = math.sqrt(x * x + y * y + z * z)
-    return (x / n * angle, y / n * angle, z / n * angle)
+    if cosine > -0.5:
+        scale = angle / (2.0 * sine)
+        return (sx * scale, sy * scale, sz * scale)
+    # near a half turn the skew part vanishes: the axis from k k^T = (sym(R) - cos I) / (1 - cos)
+    outer = [
+        [((m[i][j] + m[j][i]) / 2.0 - (cosine if i == j else 0.0)) / (1.0 - cosine) for j in range(3)]
+        for i in range(3)
+    ]
+    column = max(range(3), key=lambda i: outer[i][i])
+    size = math.sqrt(outer[column][column])
+    axis = [outer[i][column] / size for i in range(3)]
+    if axis[0] * sx + axis[1] * sy + axis[2] * sz < 0.0:
+        axis = [-x for x in axis]
+    norm = math.sqrt(sum(x * x for x in axis))
+    return (axis[0] / norm * angle, axis[1] / norm * angle, axis[2] / norm * angle)
 
 
 def _multiply(a: Matrix, b: Matrix) -> Matrix:
@@ -319,9 +322,10 @@ def pose_add(host: ScriptHost, p_1: Any, p_2: Any) -> UrPose:
 
 @builtin("pose_sub")
 def pose_sub(host: ScriptHost, p_to: Any, p_from: Any) -> UrPose:
+    """The inverse of ``pose_add``: ``pose_add(pose_sub(p_to, p_from), p_from) == p_to``."""
     a, b = _pose("pose_sub", p_to), _pose("pose_sub", p_from)
     inverse = _transpose(rotvec_to_matrix(b[3], b[4], b[5]))
-    rotation = _multiply(rotvec_to_matrix(a[3], a[4], a[5]), inverse)
+    rotation = _multiply(inverse, rotvec_to_matrix(a[3], a[4], a[5]))
     return _make_pose((a[0] - b[0], a[1] - b[1], a[2] - b[2]), rotation)
 
 
