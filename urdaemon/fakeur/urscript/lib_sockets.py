@@ -69,7 +69,10 @@ class ScriptSocket:
         """The peer has finished sending (or the socket failed): reads stop waiting."""
 
     def take(self, size: int) -> bytes | None:
-        """Exactly ``size`` bytes if they have arrived, else None (what arrived stays buffered)."""
+        """Exactly ``size`` bytes if they have arrived, else None (what arrived stays buffered).
+
+        Takes from the kernel only what the request still lacks (at most :data:`READ_CHUNK` per
+        ``recv``), so a peer sending faster than the script reads is held back by TCP flow control."""
         if self.pending:
             self.flush()
         buffer = self.buffer
@@ -77,17 +80,10 @@ class ScriptSocket:
         sock = self.sock
         if have < size and sock is not None and not self.eof:
             try:
-                if not have:
-                    data = sock.recv(size)
-                    if len(data) == size:
-                        return data  # the common case: one whole frame, no copy into the buffer
-                    if not data:
-                        self.eof = True
-                        return None
-                    buffer += data
-                    have = len(data)
                 while have < size:
-                    data = sock.recv(size - have)
+                    data = sock.recv(min(size - have, READ_CHUNK))
+                    if len(data) == size:
+                        return data  # the common case: one whole frame at once, no copy
                     if not data:
                         self.eof = True
                         break
@@ -219,6 +215,8 @@ def _deadline(host: ScriptHost, timeout: Any) -> float:
 
 
 def _count(function: str, number: Any) -> int:
+    if number.__class__ is int and number > 0:
+        return int(number)
     if isinstance(number, float) and number.is_integer():
         number = int(number)
     if isinstance(number, bool) or not isinstance(number, int) or number < 1:
@@ -372,16 +370,10 @@ def _ints_format(number: int) -> struct.Struct:
     return fmt
 
 
-def _read_exact(
-    host: ScriptHost, socket_name: Any, size: int, timeout: Any
+def _wait_exact(
+    host: ScriptHost, entry: ScriptSocket, size: int, timeout: Any
 ) -> Generator[None, None, bytes | None]:
-    """Exactly ``size`` bytes, waiting cycle by cycle; None on a timeout, a closed or unknown socket."""
-    entry = _entry(host, socket_name)
-    if entry is None:
-        return None
-    data = entry.take(size)
-    if data is not None or entry.eof:
-        return data
+    """Exactly ``size`` bytes, waiting cycle by cycle; None on a timeout or when the socket ends."""
     deadline = _deadline(host, timeout)
     while True:
         yield
@@ -396,7 +388,10 @@ def socket_read_binary_integer(
 ) -> Blocking:
     """``[number, v1, ..., vn]``: ``number`` big-endian int32s; ``[0, -1, ...]`` if they do not come."""
     count = _count("socket_read_binary_integer", number)
-    data = yield from _read_exact(host, socket_name, 4 * count, timeout)
+    entry = _entry(host, socket_name)
+    data = None if entry is None else entry.take(4 * count)
+    if data is None and entry is not None and not entry.eof:
+        data = yield from _wait_exact(host, entry, 4 * count, timeout)
     if data is None:
         return UrList((0, *(-1,) * count))
     return UrList((count, *_ints_format(count).unpack(data)))
@@ -408,7 +403,10 @@ def socket_read_byte_list(
 ) -> Blocking:
     """``[number, b1, ..., bn]``: ``number`` bytes (0..255); ``[0, -1, ...]`` if they do not come."""
     count = _count("socket_read_byte_list", number)
-    data = yield from _read_exact(host, socket_name, count, timeout)
+    entry = _entry(host, socket_name)
+    data = None if entry is None else entry.take(count)
+    if data is None and entry is not None and not entry.eof:
+        data = yield from _wait_exact(host, entry, count, timeout)
     if data is None:
         return UrList((0, *(-1,) * count))
     return UrList((count, *data))
