@@ -60,9 +60,12 @@ _NUDGE = 0.1
 """rad off a singularity where a pose just out of the nominal arm's reach starts Newton's steps."""
 _WRIST_SINGULAR = 1e-10
 """Below this |sin q5| the wrist is straight: q4 and q6 turn about one axis and q6 takes the seed's value."""
-_NEWTON_TOLERANCE = 1e-12
+_NEWTON_TOLERANCE = 1e-11
+"""Newton stops below this (m and rad): ten times under get_inverse_kin's default maxPositionError."""
 _NEWTON_EVALUATIONS = 30
 _CONTINUATION_STEPS = 8
+_WARM_START = 0.1
+"""When qnear is this near (rad, joint distance) a branch's nominal solution, Newton starts from qnear."""
 _NEARER_MARGIN = 0.05
 """Nominal branches this much (rad, joint distance) farther than the best refined one are refined too."""
 
@@ -186,7 +189,7 @@ class UrKinematics:
     calibrated DH (default: the nominal one). Every method takes ``tcp``, the flange -> TCP pose
     (default: none, i.e. poses are of the flange, tool0)."""
 
-    __slots__ = ("_a2", "_a3", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
+    __slots__ = ("_a2", "_a3", "_calibrated", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
 
     def __init__(self, model: UrModel, dh: DhParameters | None = None) -> None:
         nominal = model.dh
@@ -206,6 +209,7 @@ class UrKinematics:
         self._a2, self._a3 = nominal.a[1], nominal.a[2]
         self._d1, self._d4, self._d5, self._d6 = nominal.d[0], nominal.d[3], nominal.d[4], nominal.d[5]
         real = nominal if dh is None else dh
+        self._calibrated = real != nominal
         self._joints = tuple(
             (real.theta[i], real.d[i], real.a[i], math.cos(real.alpha[i]), math.sin(real.alpha[i]))
             for i in range(6)
@@ -264,7 +268,10 @@ class UrKinematics:
         for nominal_distance, _, q0 in ranked:
             if nominal_distance > best_distance + _NEARER_MARGIN:
                 break
-            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error)
+            # qnear this close to the branch is the better start (a servo target, a small step).
+            warm = self._calibrated and nominal_distance < _WARM_START
+            start = [float(v) for v in qnear] if warm else None
+            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error, start)
             if q is not None:
                 distance = _distance(q, qnear)
                 if distance < best_distance:
@@ -325,9 +332,14 @@ class UrKinematics:
         seed: Vector,
         max_position: float,
         max_orientation: float,
+        start: list[float] | None = None,
     ) -> Joints | None:
-        """Refine one nominal branch on the calibrated arm, check the error and the limits."""
-        q, position_error, orientation_error = self._refine(target, q0)
+        """Refine a nominal branch on the calibrated arm (from ``start`` if given); check errors, limits."""
+        q, position_error, orientation_error = self._refine(target, q0 if start is None else start)
+        if start is not None and not (
+            position_error <= max_position and orientation_error <= max_orientation
+        ):
+            q, position_error, orientation_error = self._refine(target, q0)
         if not (position_error <= max_position and orientation_error <= max_orientation):
             q, position_error, orientation_error = self._continuation(target, q0)
             if not (position_error <= max_position and orientation_error <= max_orientation):
