@@ -36,6 +36,7 @@ __all__ = [
     "RtdeWatch",
     "fake_robot",
     "pose_error",
+    "pose_off",
     "send_script",
     "tcp_pose",
     "wait_until",
@@ -137,7 +138,8 @@ class _Watch(threading.Thread):
             self._changed.notify_all()
 
     def wait_for(self, predicate: Callable[[], bool], seconds: float) -> bool:
-        """Wait until ``predicate()`` holds (checked on every arrival), at most ``seconds``; whether it held."""
+        """Wait until ``predicate()`` holds (checked on every arrival), at most ``seconds``; whether it
+        held."""
         deadline = time.monotonic() + seconds
         with self._changed:
             for _ in range(1_000_000):
@@ -245,7 +247,11 @@ class RtdeWatch(_Watch):
         self.sample: dict[str, Any] = {}
         self.samples = 0
         self._pending: list[Any] = []
-        for request in (rtde.RequestProtocolVersion(2), rtde.SetupOutputs(frequency, self.names), rtde.Start()):
+        for request in (
+            rtde.RequestProtocolVersion(2),
+            rtde.SetupOutputs(frequency, self.names),
+            rtde.Start(),
+        ):
             self.conn.send(request)
             self.sock.sendall(self.conn.data_to_send())
             reply = self._next_event()
@@ -370,3 +376,16 @@ def pose_error(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     relative = _matmul([list(col) for col in zip(*ra, strict=True)], rb)
     cos = max(-1.0, min(1.0, (relative[0][0] + relative[1][1] + relative[2][2] - 1) / 2))
     return position, math.acos(cos)
+
+
+def pose_off(
+    actual: Sequence[float],
+    target: Sequence[float],
+    position_tol: float = 1e-4,
+    orientation_tol: float = 1e-3,
+) -> str:
+    """ "" when pose ``actual`` is within the tolerances (m, rad) of ``target``, else how far off it is."""
+    position, orientation = pose_error(actual, target)
+    if position <= position_tol and orientation <= orientation_tol:
+        return ""
+    return f"{list(actual)} is {position:.3g} m / {orientation:.3g} rad from {list(target)}"

@@ -23,7 +23,15 @@ from typing import Any
 
 import pytest
 
-from tests.fakeur.judges import FakeProcess, PrimaryWatch, RtdeWatch, fake_robot, pose_error, tcp_pose
+from tests.fakeur.judges import (
+    FakeProcess,
+    PrimaryWatch,
+    RtdeWatch,
+    fake_robot,
+    pose_error,
+    pose_off,
+    tcp_pose,
+)
 
 urx = pytest.importorskip("urx")
 
@@ -45,7 +53,9 @@ class Judge:
     primary: PrimaryWatch
 
     def explain(self, call: str) -> str:
-        return f"{call} failed against the fake.\n{self.primary.describe()}\nfake log:\n{self.fake.log_tail()}"
+        return (
+            f"{call} failed against the fake.\n{self.primary.describe()}\nfake log:\n{self.fake.log_tail()}"
+        )
 
     def settled_at(self, target: Sequence[float], name: str, tol: float) -> dict[str, Any]:
         """The first RTDE sample with the arm at rest and ``name`` within ``tol`` of ``target`` (or the
@@ -88,10 +98,9 @@ def test_getj_and_getl_read_the_robot(judge: Judge) -> None:
     sample = judge.rtde.next_samples(2)
     assert judge.robot.getj(wait=True) == pytest.approx(list(sample["actual_q"]), abs=1e-9)
     pose = urx.URRobot.getl(judge.robot, wait=True)  # urx.Robot.getl needs math3d < 4
-    position, orientation = pose_error(pose, sample["actual_TCP_pose"])
-    assert position < 1e-9 and orientation < 1e-6
-    position, orientation = pose_error(pose, tcp_pose(MODEL, sample["actual_q"]))
-    assert position < 1e-9 and orientation < 1e-6, "urx and our kinematics agree on the TCP pose"
+    assert not pose_off(pose, sample["actual_TCP_pose"], 1e-9, 1e-6), "urx and our RTDE reader agree"
+    off = pose_off(pose, tcp_pose(MODEL, sample["actual_q"]), 1e-9, 1e-6)
+    assert not off, f"urx and our kinematics agree on the TCP pose: {off}"
 
 
 def test_movej_reaches_its_target(judge: Judge) -> None:
@@ -121,10 +130,8 @@ def test_movel_reaches_its_target_pose(judge: Judge) -> None:
     finally:
         robot.close()
     sample = judge.settled_at(target, "actual_TCP_pose", POSITION_TOL)
-    position, orientation = pose_error(sample["actual_TCP_pose"], target)
-    assert position < POSITION_TOL and orientation < ORIENTATION_TOL, (
-        f"movel ended {position} m / {orientation} rad from its target\n" + judge.explain("urx movel")
-    )
+    off = pose_off(sample["actual_TCP_pose"], target, POSITION_TOL, ORIENTATION_TOL)
+    assert not off, f"movel ended at {off}\n" + judge.explain("urx movel")
 
 
 def test_set_digital_out_sets_the_output(judge: Judge) -> None:
