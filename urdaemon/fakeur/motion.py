@@ -254,11 +254,13 @@ class ServoRamp:
 
     __slots__ = ("_rate", "_start", "duration", "target")
 
-    def __init__(self, start: Sequence[float], target: Sequence[float], duration: float) -> None:
-        self._start = [float(v) for v in start]
-        self.target = [float(v) for v in target]
+    def __init__(self, start: list[float], target: list[float], duration: float) -> None:
+        """Keeps ``start`` and ``target`` (the caller gives lists it does not change afterwards)."""
+        self._start = start
+        self.target = target
         self.duration = duration
-        self._rate = [(b - a) / duration for a, b in zip(self._start, self.target, strict=True)]
+        rate = 1.0 / duration
+        self._rate = [(b - a) * rate for a, b in zip(start, target, strict=True)]
 
     def position(self, t: float) -> Vector:
         """Joint positions [rad] at ``t``."""

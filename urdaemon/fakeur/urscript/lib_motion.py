@@ -77,23 +77,30 @@ def _state(host: ScriptHost) -> MotionState:
 
 
 def _vector(name: str, value: Any) -> list[float]:
+    """A new list of 6 finite floats (a copy: motions keep it)."""
     if not isinstance(value, (list, tuple)) or len(value) != 6:
         raise ScriptRuntimeError(f"{name}: expected a list of 6 numbers, got {value!r}")
     try:
-        return [float(v) for v in value]
+        out = [float(v) for v in value]
     except (TypeError, ValueError):
         raise ScriptRuntimeError(f"{name}: expected a list of 6 numbers, got {value!r}") from None
+    if not math.isfinite(sum(out)):
+        raise ScriptRuntimeError(f"{name}: expected a list of 6 finite numbers, got {value!r}")
+    return out
 
 
 def _number(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScriptRuntimeError(f"{name}: expected a number, got {value!r}")
-    return float(value)
+    kind = type(value)
+    if (kind is float or kind is int) and math.isfinite(value):  # the hot path: one check
+        return float(value)
+    raise ScriptRuntimeError(f"{name}: expected a number, got {value!r}")
 
 
 def _within_limits(arm: FakeArm, q: Sequence[float]) -> bool:
-    low, high = arm.min_position, arm.max_position
-    return all(low[i] <= q[i] <= high[i] for i in range(6))
+    for value, low, high in zip(q, arm.min_position, arm.max_position, strict=True):
+        if not low <= value <= high:
+            return False
+    return True
 
 
 def _play(host: ScriptHost, motion: Motion, stop: float, until: Callable[[], bool] | None = None) -> Gen:
