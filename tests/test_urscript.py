@@ -373,3 +373,5 @@ def test_older_controllers_get_set_payload_instead_of_set_target_payload() -> No
     assert "set_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3))" in old
     assert "= tool_contact(direction=" in new
     assert "= tool_contact(" not in old, "tool_contact is e-Series only"
+    before_5_4 = render_control_script(ScriptParameters(server_ip="10.0.0.2", controller_version=(5, 3, 0)))
+    assert "= tool_contact(" not in before_5_4, "tool_contact exists from PolyScope 5.4 on"

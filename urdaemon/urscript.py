@@ -143,6 +143,8 @@ def _check_tool_setup(value: object) -> tuple[str, ...]:
 
 TARGET_PAYLOAD_SINCE = (5, 10, 0)
 """First PolyScope version with ``set_target_payload`` (ur-protocols.md §5.1 version gates)."""
+TOOL_CONTACT_SINCE = (5, 4, 0)
+"""First PolyScope version with ``tool_contact`` (the URScript manual; fakeur/urscript/functions.yaml)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,10 +204,10 @@ def _values(params: ScriptParameters) -> dict[str, str]:
             if params.controller_version >= TARGET_PAYLOAD_SINCE
             else "set_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3))"
         ),
-        # tool_contact exists on e-Series only (ur-protocols.md §4.5); elsewhere: never a contact
+        # tool_contact exists on e-Series 5.4 and later only; elsewhere: never a contact
         "TOOL_CONTACT_CALL": (
             "tool_contact(direction=get_actual_tcp_speed())"
-            if params.controller_version >= (5, 0, 0)
+            if params.controller_version >= TOOL_CONTACT_SINCE
             else "0"
         ),
     }

@@ -171,11 +171,6 @@ def test_our_script_compiles_name_wise_on_e_series_from_5_4(version: tuple[int, 
     assert _our_names_unknown_to("e", version) == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="urdaemon/urscript.py renders tool_contact(...) from 5.0 on, but tool_contact exists from 5.4: "
-    "TOOL_CONTACT_CALL must be gated at (5, 4, 0)",
-)
 def test_our_script_compiles_name_wise_on_e_series_before_5_4() -> None:
     """Reproduction: render the control script for controller_version (5, 3, 0); it calls tool_contact."""
     assert _our_names_unknown_to("e", (5, 3)) == []
