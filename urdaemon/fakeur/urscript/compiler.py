@@ -16,6 +16,7 @@ from __future__ import annotations
 import keyword
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from types import CodeType
 from typing import TYPE_CHECKING, Any, Final
 
@@ -81,7 +82,28 @@ def compile_program(
     ``functions.yaml`` for ``series``/``version``. ``builtins``: the implementations (default: the
     registry :data:`~urdaemon.fakeur.urscript.runtime.BUILTINS`); a tabled name without one compiles and
     stops the program with "not simulated" when called.
+
+    Compiling takes tens to hundreds of milliseconds (parsing); a program compiled with the default
+    table and registry is cached by its text, series and version (a daemon re-sends the same script), and
+    a Program is never changed by running it.
     """
+    if signatures is None and builtins is None:
+        return _compile_default(text, series, version)
+    return _compile(text, series, version, signatures, builtins)
+
+
+@lru_cache(maxsize=16)
+def _compile_default(text: str, series: str, version: tuple[int, int]) -> Program:
+    return _compile(text, series, version, None, None)
+
+
+def _compile(
+    text: str,
+    series: str,
+    version: tuple[int, int],
+    signatures: Mapping[str, Any] | None,
+    builtins: Mapping[str, Builtin] | None,
+) -> Program:
     items = ast.parse(text)
     known_anywhere: Mapping[str, Any] = {}
     if signatures is None:
