@@ -132,6 +132,29 @@ def test_open_gives_up_after_two_seconds_of_controller_time() -> None:
     assert cycles == pytest.approx(ls.CONNECT_TIMEOUT_S / DT, abs=2)
 
 
+def test_a_thread_killed_while_connecting_leaves_no_socket() -> None:
+    """The scheduler drops a killed thread's generator: the half-open socket is closed with it."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(0)
+        target = listener.getsockname()
+        fillers = [socket.socket(socket.AF_INET, socket.SOCK_STREAM) for _ in range(4)]
+        for filler in fillers:
+            filler.setblocking(False)
+            filler.connect_ex(target)
+        host = _host()
+        call = ls.socket_open(host, *target, "socket_0")
+        next(call)
+        frame = call.gi_frame
+        assert frame is not None
+        half_open = frame.f_locals["sock"]
+        call.close()
+        assert half_open.fileno() == -1
+        assert host.sockets.get("socket_0") is None
+        for filler in fillers:
+            filler.close()
+
+
 def test_an_open_name_stays_connected_on_a_second_open(server: socket.socket) -> None:
     host = _host()
     peer = _open(host, server)

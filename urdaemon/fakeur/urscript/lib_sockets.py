@@ -265,15 +265,18 @@ def socket_open(
         return False
     sock, target = started
     deadline = host.now + (float(timeout) if float(timeout) > 0 else CONNECT_TIMEOUT_S) - _TIME_EPSILON
-    while True:
-        status = sock.connect_ex(target)
-        if status in (0, errno.EISCONN):
-            table.add(socket_name, sock)
-            return True
-        if status not in _IN_PROGRESS or host.now >= deadline:
+    try:
+        while True:
+            status = sock.connect_ex(target)
+            if status in (0, errno.EISCONN):
+                table.add(socket_name, sock)
+                return True
+            if status not in _IN_PROGRESS or host.now >= deadline:
+                return False
+            yield
+    finally:  # refused, timed out, or the thread was killed (or the program stopped) while connecting
+        if table.get(socket_name) is None or table.sockets[socket_name].sock is not sock:
             sock.close()
-            return False
-        yield
 
 
 def _target(address: str, port: int) -> tuple[str, int]:
