@@ -438,6 +438,47 @@ def test_number_must_be_positive(server: socket.socket) -> None:
 # ---- through a script ------------------------------------------------------------------------------------
 
 
+def test_a_script_retries_until_the_server_listens() -> None:
+    """Our control script's connect loop: socket_open is refused while nothing listens, the script sleeps
+    and tries again, and connects once the server is up."""
+    messages: list[str] = []
+    model = load_ur_model("ur10e")
+    host = ScriptHost(
+        FakeArm(model, model.dh),
+        step_time=DT,
+        local_address=fake_address(),
+        message=lambda kind, text: messages.append(text),
+    )
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as server:
+        server.bind(("127.0.0.1", 0))  # bound, not listening: connections are refused
+        port = server.getsockname()[1]
+        text = (
+            "attempt = 0\n"
+            f'while not socket_open("127.0.0.1", {port}, "trajectory_socket"):\n'
+            '  attempt = attempt + 1\n  textmsg("refused ", attempt)\n  sleep(0.2)\n'
+            "end\n"
+            'textmsg("connected after ", attempt)\n'
+        )
+        run = compile_program(text, series="e", version=(5, 12)).start(host)
+        for _ in range(1000):
+            run.step()
+            host.arm.step(DT)
+            if len(messages) == 2:
+                break
+        assert messages == ["refused 1", "refused 2"]
+        server.listen(1)
+        for _ in range(1000):
+            if run.done:
+                break
+            run.step()
+            host.arm.step(DT)
+        assert run.error is None
+        assert messages[-1] == "connected after 2"
+        peer, (address, _) = server.accept()
+        peer.close()
+    assert address == host.local_address
+
+
 def test_a_script_echoes_frames_until_the_peer_stops(server: socket.socket) -> None:
     """The shape of our control script's main loop: open, read a frame per cycle, answer, end on a failed
     read (the peer closed), close."""
