@@ -212,3 +212,21 @@ def test_ur_rtde_control_script_compiles() -> None:
     program = compile_program(RTDE_CONTROL_SCRIPT.read_text(encoding="ascii"), series="e", version=(5, 12))
     assert program.kind == "def"
     assert program.name == "rtde_control"
+
+
+def test_deep_nesting_is_a_compile_error_not_a_crash() -> None:
+    error = _refused("x = " + "[" * 5000 + "1" + "]" * 5000 + "\n")
+    assert (error.line, error.column) == (1, 1)
+    assert "nested too deeply" in error.message
+
+
+def test_a_parameter_declared_global_stays_the_parameter() -> None:
+    compile_stub("g = 1\ndef f(g):\n  global g = 2\n  return g\nend\nx = f(3)\n")
+
+
+def test_more_nested_loops_than_python_allows_is_a_compile_error() -> None:
+    depth = 25
+    text = "".join(" " * i + "while True:\n" for i in range(depth)) + "sync()\n" + "end\n" * depth
+    error = _refused(text)
+    assert "nested" in error.message
+    assert error.line > 1

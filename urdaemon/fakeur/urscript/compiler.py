@@ -87,9 +87,12 @@ def compile_program(
     table and registry is cached by its text, series and version (a daemon re-sends the same script), and
     a Program is never changed by running it.
     """
-    if signatures is None and builtins is None:
-        return _compile_default(text, series, version)
-    return _compile(text, series, version, signatures, builtins)
+    try:
+        if signatures is None and builtins is None:
+            return _compile_default(text, series, version)
+        return _compile(text, series, version, signatures, builtins)
+    except RecursionError:
+        raise ScriptCompileError(1, 1, "compile_error: expressions or blocks nested too deeply") from None
 
 
 @lru_cache(maxsize=16)
@@ -123,7 +126,11 @@ def _compile(
             bound[builtin_name] = (_not_simulated(builtin_name), False)
         else:
             bound[builtin_name] = (implementation.function, implementation.blocking)
-    code = compile(source, _FILENAME, "exec")
+    try:
+        code = compile(source, _FILENAME, "exec")
+    except SyntaxError as error:  # a limit of Python's compiler, e.g. more than 20 nested loops
+        line, column = lines.get(error.lineno or 0, (1, 1))
+        raise ScriptCompileError(line, column, f"compile_error: {error.msg}") from None
     return Program(kind, name, code, lines, bound, constants, source)
 
 
@@ -270,8 +277,13 @@ class _Checker:
             target = statement.target if isinstance(statement, ast.Assign) else None
             if isinstance(target, ast.Name) and target.name not in self.globals:
                 names.add(target.name)
+        params = {p.name for p in function.params}
         for statement in walk_statements(own_body):
-            if isinstance(statement, ast.Declare) and statement.scope == "global":
+            if (
+                isinstance(statement, ast.Declare)
+                and statement.scope == "global"
+                and statement.name not in params
+            ):
                 names.discard(statement.name)
         return Scope(function, names, own_body)
 
