@@ -112,16 +112,18 @@ def test_force_mode_on_and_off_with_its_parameters() -> None:
 
 def test_freedrive_teach_mode_and_tool_contact() -> None:
     host = _host()
+    seen = []
     cfg.freedrive_mode(host, [1, 1, 1, 0, 0, 0], UrPose([0.0] * 6))
-    assert host.arm.freedrive is True
+    seen.append(host.arm.freedrive)
     assert host.config.free_axes == [1, 1, 1, 0, 0, 0]
     assert cfg.get_freedrive_status(host) == 0
     cfg.end_freedrive_mode(host)
-    assert host.arm.freedrive is False
+    seen.append(host.arm.freedrive)
     cfg.teach_mode(host)
-    assert host.arm.freedrive is True
+    seen.append(host.arm.freedrive)
     cfg.end_teach_mode(host)
-    assert host.arm.freedrive is False
+    seen.append(host.arm.freedrive)
+    assert seen == [True, False, True, False]
     assert cfg.tool_contact(host, [0, 0, -0.1, 0, 0, 0]) == 0
 
 
