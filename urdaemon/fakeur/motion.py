@@ -15,6 +15,7 @@ lists of 6 floats (hot path: no numpy).
   in the same time, so the arm stops along the path it was on.
 * ``ToolSpeedRamp`` (speedl): the TCP twist ramped linearly to its target, joint speeds from the
   Jacobian each sample (damped near singularities).
+* ``ArcMove`` (movec): the TCP on the circle through three points.
 * ``CartesianMove`` (movel, movep): the TCP on a straight line (position interpolated, orientation
   slerped) with a trapezoidal profile along it, each sample solved by inverse kinematics near the last.
 """
@@ -28,6 +29,7 @@ from typing import Final, Protocol
 __all__ = [
     "JOINTS",
     "TIME_EPSILON_S",
+    "ArcMove",
     "CartesianMove",
     "JointMove",
     "LinearStop",
@@ -481,6 +483,83 @@ class CartesianMove:
             dh = (1.0 - u) * (1.0 - 3.0 * u)
             qd = [v + r * dh for v, r in zip(qd, residual, strict=True)]
         return qd
+
+
+class ArcMove(CartesianMove):
+    """movec: the TCP on the circle through ``start``, ``via`` and ``target`` (from start to target).
+
+    ``fixed_orientation`` False (mode 0): the orientation is interpolated from start to target as in
+    movel; True (mode 1): it turns with the arc, keeping its angle to the circle's tangent.
+    ValueError for points on one line (no circle through them)."""
+
+    __slots__ = ("_arc", "_center", "_fixed", "_normal", "_radius", "_u", "_w")
+
+    def __init__(
+        self,
+        start_pose: Sequence[float],
+        via: Sequence[float],
+        target_pose: Sequence[float],
+        velocity: float,
+        acceleration: float,
+        start_joints: Sequence[float],
+        solve: InverseKinematics,
+        *,
+        fixed_orientation: bool = False,
+        start_velocity: Sequence[float] | None = None,
+        fade_time: float = 0.0,
+    ) -> None:
+        p0, p1, p2 = (list(map(float, p[:3])) for p in (start_pose, via, target_pose))
+        a = [x - y for x, y in zip(p1, p0, strict=True)]
+        b = [x - y for x, y in zip(p2, p0, strict=True)]
+        n = _cross(a, b)
+        nn = _dot(n, n)
+        if nn < 1e-18:
+            raise ValueError("the three points lie on one line: no circle through them")
+        # circumcentre: p0 + (|a|²·(b × n) + |b|²·(n × a)) / (2|n|²)
+        bn, na = _cross(b, n), _cross(n, a)
+        aa, bb = _dot(a, a), _dot(b, b)
+        center = [p0[i] + (aa * bn[i] + bb * na[i]) / (2.0 * nn) for i in range(3)]
+        radius = math.dist(center, p0)
+        normal = [v / math.sqrt(nn) for v in n]
+        u = [(p0[i] - center[i]) / radius for i in range(3)]
+        w = _cross(normal, u)
+        rel = [p2[i] - center[i] for i in range(3)]
+        arc = math.atan2(_dot(rel, w), _dot(rel, u)) % (2.0 * math.pi)
+        self._center, self._radius, self._normal, self._u, self._w, self._arc = (
+            center,
+            radius,
+            normal,
+            u,
+            w,
+            arc,
+        )
+        self._fixed = fixed_orientation
+        shape = profile(radius * arc, velocity=velocity, acceleration=acceleration)
+        super().__init__(start_pose, target_pose, shape, start_joints, solve, start_velocity, fade_time)
+
+    def pose(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """The TCP pose on the arc at ``t``."""
+        shape = self._shape
+        f = shape.at(t)[0] / shape.distance if shape.distance > 0 else 1.0
+        angle = f * self._arc
+        c, s_ = math.cos(angle) * self._radius, math.sin(angle) * self._radius
+        point = [self._center[i] + c * self._u[i] + s_ * self._w[i] for i in range(3)]
+        if self._fixed:
+            nx, ny, nz = self._normal
+            turn = matrix_of_pose((0.0, 0.0, 0.0, nx * angle, ny * angle, nz * angle))
+            m = compose(turn, self._start)  # turned about the circle's axis, in base
+        else:
+            ax, ay, az = self._axis
+            m = compose(self._start, matrix_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
+        return pose_of_matrix((*m[:9], point[0], point[1], point[2]))
+
+
+def _cross(a: Sequence[float], b: Sequence[float]) -> list[float]:
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 JointVelocity = Callable[[Sequence[float], Sequence[float]], Sequence[float]]

@@ -342,3 +342,41 @@ def test_bad_arguments_are_runtime_errors() -> None:
         _run(host, lib_motion.stopj(host, "fast"))
     with pytest.raises(ScriptRuntimeError, match="movel"):
         _run(host, lib_motion.movel(host, UrPose([5.0, 0, 0, 0, 0, 0]), 1.2, 0.25, 0, 0))
+
+
+def test_movec_keeps_the_tcp_on_the_circle_through_the_three_points() -> None:
+    host = _host()
+    arm = host.arm
+    start = lib_state.get_actual_tcp_pose(host)
+    via = UrPose([start[0] + 0.1, start[1] + 0.1, start[2], *start[3:]])
+    goal = UrPose([start[0] + 0.2, start[1], start[2], *start[3:]])
+    center = [start[0] + 0.1, start[1], start[2]]
+    gen = lib_motion.movec(host, via, goal, 1.2, 0.25, 0, 0)
+    worst = 0.0
+    passed_via = False
+    for _ in range(LIMIT):
+        try:
+            next(gen)
+        except StopIteration:
+            break
+        arm.step(DT)
+        p = lib_state.get_actual_tcp_pose(host)
+        worst = max(worst, abs(math.dist(p[:3], center) - 0.1))
+        passed_via = passed_via or math.dist(p[:3], via[:3]) < 1e-3
+    end = lib_state.get_actual_tcp_pose(host)
+    assert worst < 1e-6
+    assert passed_via
+    assert math.dist(end[:3], goal[:3]) < 1e-6
+    with pytest.raises(ScriptRuntimeError, match="one line"):
+        _run(
+            host,
+            lib_motion.movec(
+                host,
+                UrPose([*end[:2], end[2] + 0.1, *end[3:]]),
+                UrPose([*end[:2], end[2] + 0.2, *end[3:]]),
+                1.2,
+                0.25,
+                0,
+                0,
+            ),
+        )

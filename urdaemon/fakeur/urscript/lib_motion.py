@@ -26,6 +26,7 @@ from typing import Any, Final
 from urdaemon.fakeur.arm import PROTECTIVE_STOP_DECELERATION, FakeArm
 from urdaemon.fakeur.motion import (
     TIME_EPSILON_S,
+    ArcMove,
     CartesianMove,
     LinearStop,
     Motion,
@@ -409,6 +410,59 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
         if outcome != _INTERRUPTED:
             return None
         duration = 0.0
+
+
+@builtin("movec", blocking=True)
+def movec(host: ScriptHost, pose_via: Any, pose_to: Any, a: Any, v: Any, r: Any, mode: Any) -> Gen:
+    """movec(pose_via, pose_to, a, v, r, mode): the TCP on the circle through here, via and to.
+
+    mode 0: the orientation interpolated from here to ``pose_to``; mode 1: fixed to the arc's tangent."""
+    acceleration, velocity, radius = _number("movec a", a), _number("movec v", v), _number("movec r", r)
+    if acceleration <= 0 or velocity <= 0:
+        raise ScriptRuntimeError(f"movec: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
+    if mode not in (0, 1):
+        raise ScriptRuntimeError(f"movec: mode must be 0 or 1, got {mode!r}")
+    arm = host.arm
+    via_values, to_values = _vector("movec", pose_via), _vector("movec", pose_to)
+    via = via_values if isinstance(pose_via, UrPose) else tcp_pose(arm, via_values)
+    goal = to_values if isinstance(pose_to, UrPose) else tcp_pose(arm, to_values)
+    tcp = list(arm.tcp_offset)
+
+    def solve(target: Sequence[float], near: Sequence[float]) -> list[float] | None:
+        return inverse_near(arm, target, near, tcp)
+
+    start, moving = _start(arm)
+    try:
+        move = ArcMove(
+            tcp_pose(arm, start),
+            via,
+            goal,
+            velocity,
+            acceleration,
+            start,
+            solve,
+            fixed_orientation=mode == 1,
+            start_velocity=moving,
+            fade_time=4.0 * leading_stop_time(moving, JOINT_BLEND_DECELERATION),
+        )
+    except ValueError as err:
+        raise ScriptRuntimeError(f"movec: {err}") from None
+    # (a movec interrupted by a safety stop is not resumed: the program goes on after it)
+    yield from _play(host, move, PROTECTIVE_STOP_DECELERATION, _pose_blend_check(arm, goal, radius))
+    if move.failed:
+        raise ScriptRuntimeError(f"movec: the arc to {pose_to!r} leaves the reachable space")
+    return None
+
+
+def _pose_blend_check(arm: FakeArm, goal: Sequence[float], radius: float) -> Callable[[], bool] | None:
+    if radius <= 0:
+        return None
+    point = list(goal[:3])
+
+    def within() -> bool:
+        return math.dist(tcp_matrix(arm, arm.target_q)[9:], point) <= radius
+
+    return within
 
 
 @builtin("movel", blocking=True)
