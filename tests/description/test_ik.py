@@ -199,6 +199,12 @@ def test_unreachable_poses_have_no_solution() -> None:
         assert kinematics.nearest(pose, GENERIC_Q) is None
         assert not kinematics.has_solution(pose, GENERIC_Q)
         assert kinematics.solutions(pose) == []
+    # Just beyond reach: the stretched arm's pose moved 10 mm further out from the shoulder.
+    stretched = np.array(kinematics.forward((0.3, -0.5, 0.0, -1.0, 1.2, 0.4)))
+    outward = stretched[:3] - (0.0, 0.0, load_ur_model("ur5e").dh.d[0])
+    stretched[:3] += 0.01 * outward / np.linalg.norm(outward)
+    assert kinematics.nearest(stretched, GENERIC_Q) is None
+    assert UrKinematics(load_ur_model("ur5e")).nearest(stretched, GENERIC_Q) is None
     reachable = kinematics.forward(GENERIC_Q, TCP)
     assert kinematics.has_solution(reachable, GENERIC_Q, TCP)
     # A tolerance the solution cannot meet (it is ~1e-13 off) is honoured.

@@ -54,8 +54,12 @@ _HALF_PI = 0.5 * math.pi
 _NOMINAL_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
 _IDENTITY: Frame = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 _ZERO_SEED: Joints = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-_REACH_SLACK = 0.25
-"""How far (cosine units) past the nominal arm's reach a pose is still tried on the calibrated arm."""
+_REACH_SLACK = 0.05
+"""How far (cosine units) past the nominal arm's reach a pose is still tried on a calibrated arm (~5 mm)."""
+_ROUNDING = 1e-9
+"""Cosines this far past +-1 are rounding: clamped, on every arm."""
+_SLOW_STEPS = 3
+"""Newton gives up after this many steps that do not halve the error (linear convergence: no solution)."""
 _NUDGE = 0.1
 """rad off a singularity where a pose just out of the nominal arm's reach starts Newton's steps."""
 _WRIST_SINGULAR = 1e-10
@@ -64,6 +68,7 @@ _NEWTON_TOLERANCE = 1e-11
 """Newton stops below this (m and rad): ten times under get_inverse_kin's default maxPositionError."""
 _NEWTON_EVALUATIONS = 30
 _CONTINUATION_STEPS = 8
+_WAYPOINT_TOLERANCE = 1e-9
 _WARM_START = 0.1
 """When qnear is this near (rad, joint distance) a branch's nominal solution, Newton starts from qnear."""
 _NEARER_MARGIN = 0.05
@@ -157,16 +162,17 @@ def _inverse(f: Frame) -> Frame:
     )  # fmt: skip
 
 
-def _branch_acos(value: float, negative: bool) -> float | None:
-    """acos of ``value``, negated for the negative branch; None when far outside [-1, 1].
+def _branch_acos(value: float, negative: bool, slack: float) -> float | None:
+    """acos of ``value``, negated for the negative branch; None when outside [-1, 1] by more than ``slack``.
 
-    A value up to ``_REACH_SLACK`` outside (the nominal arm just cannot reach, the calibrated one may)
-    gives an angle ``_NUDGE`` inside the singularity rather than on it, so that Newton's steps on the
-    calibrated arm can leave it (at the singularity the missing direction is not in the Jacobian)."""
+    Rounding past +-1 is clamped. A value further out but within ``slack`` (the nominal arm just
+    cannot reach, the calibrated one may) gives an angle ``_NUDGE`` inside the singularity rather than
+    on it, so that Newton's steps on the calibrated arm can leave it (at the singularity the missing
+    direction is not in the Jacobian)."""
     if value > 1.0:
-        angle = _NUDGE if value - 1.0 <= _REACH_SLACK else None
+        angle = 0.0 if value - 1.0 <= _ROUNDING else _NUDGE if value - 1.0 <= slack else None
     elif value < -1.0:
-        angle = math.pi - _NUDGE if -1.0 - value <= _REACH_SLACK else None
+        angle = math.pi if -1.0 - value <= _ROUNDING else math.pi - _NUDGE if -1.0 - value <= slack else None
     else:
         angle = math.acos(value)
     if angle is None:
@@ -340,7 +346,7 @@ class UrKinematics:
             position_error <= max_position and orientation_error <= max_orientation
         ):
             q, position_error, orientation_error = self._refine(target, q0)
-        if not (position_error <= max_position and orientation_error <= max_orientation):
+        if self._calibrated and not (position_error <= max_position and orientation_error <= max_orientation):
             q, position_error, orientation_error = self._continuation(target, q0)
             if not (position_error <= max_position and orientation_error <= max_orientation):
                 return None
@@ -350,7 +356,8 @@ class UrKinematics:
         """Follow the branch from where ``q`` puts the calibrated arm to ``target`` in small steps.
 
         The fallback when Newton's steps from the nominal branch do not converge: near a singularity
-        the calibrated branch can lie far (in joints) from the nominal one."""
+        the calibrated branch can lie far (in joints) from the nominal one. A waypoint the branch does
+        not reach ends the attempt (so an unreachable pose costs a few steps per branch)."""
         start = self._chain(q, None).frame
         sx, sy, sz = start[9], start[10], start[11]
         dx, dy, dz = target[9] - sx, target[10] - sy, target[11] - sz
@@ -361,7 +368,9 @@ class UrKinematics:
             s = k / _CONTINUATION_STEPS
             turned = _compose(frame_of_pose((0.0, 0.0, 0.0, s * rx, s * ry, s * rz)), rotation)
             waypoint: Frame = (*turned[:9], sx + s * dx, sy + s * dy, sz + s * dz)
-            q = self._refine(waypoint, q)[0]
+            q, position, orientation = self._refine(waypoint, q)
+            if position + orientation > _WAYPOINT_TOLERANCE:
+                return q, math.inf, math.inf  # the branch does not reach this far: give up early
         return self._refine(target, q)
 
     def _analytic(self, f: Frame, seed: Vector) -> list[tuple[int, list[float]]]:
@@ -374,9 +383,10 @@ class UrKinematics:
         if not radius > 0.0:
             return []
         phi = math.atan2(wy, wx) + _HALF_PI
+        slack = _REACH_SLACK if self._calibrated else 0.0
         found: list[tuple[int, list[float]]] = []
         for shoulder in (0, SHOULDER):
-            spread = _branch_acos(d4 / radius, shoulder != 0)
+            spread = _branch_acos(d4 / radius, shoulder != 0, slack)
             if spread is None:
                 return []
             q1 = phi + spread
@@ -422,7 +432,7 @@ class UrKinematics:
         cosine = (x * x + y * y - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)
         reach = math.atan2(y, x) if x * x + y * y > 0.0 else float(seed[1])
         for bit in (0, ELBOW):
-            q3 = _branch_acos(cosine, bit != 0)
+            q3 = _branch_acos(cosine, bit != 0, _REACH_SLACK if self._calibrated else 0.0)
             if q3 is None:
                 return
             q2 = reach - math.atan2(a3 * math.sin(q3), a2 + a3 * math.cos(q3))
@@ -436,6 +446,7 @@ class UrKinematics:
         position and orientation errors (m, rad)."""
         chain, error, position, orientation = self._error(target, q)
         evaluations = 1
+        slow = 0
         while evaluations < _NEWTON_EVALUATIONS:
             total = position + orientation
             if position < _NEWTON_TOLERANCE and orientation < _NEWTON_TOLERANCE:
@@ -458,6 +469,10 @@ class UrKinematics:
                 damping *= 10.0
             else:
                 break  # no step lowers the error: at the rounding floor, or stuck
+            if position + orientation > 0.5 * total:
+                slow += 1
+                if slow >= _SLOW_STEPS:
+                    break  # creeping towards the nearest pose the arm can reach: not a solution
         return q, position, orientation
 
     def _error(self, target: Frame, q: list[float]) -> tuple[_Chain, tuple[float, ...], float, float]:
