@@ -200,6 +200,11 @@ def test_our_control_script_compiles_unwrapped_and_headless() -> None:
     assert compile_program(program, series="e", version=(5, 15)).kind == "def"
 
 
+def test_our_control_script_rendered_for_cb3_compiles() -> None:
+    script = render_control_script(ScriptParameters("127.0.0.1", controller_version=(3, 15, 0)))
+    assert compile_program(script, series="cb3", version=(3, 15)).kind == "line"
+
+
 def test_our_control_script_rendered_for_an_old_e_series_compiles() -> None:
     script = render_control_script(ScriptParameters("127.0.0.1", controller_version=(5, 4, 0)))
     assert compile_program(script, series="e", version=(5, 4)).kind == "line"

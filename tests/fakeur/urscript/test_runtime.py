@@ -4,14 +4,16 @@ runtime errors with line and column, and URScript's value semantics."""
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, cast
 
 import pytest
 
-from tests.fakeur.urscript.test_compiler import compile_stub
+from tests.fakeur.urscript.test_compiler import STUB_TABLE, compile_stub
+from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript.compiler import MAX_OPS_PER_CYCLE
 from urdaemon.fakeur.urscript.lib_core import sleep, sync, textmsg
 from urdaemon.fakeur.urscript.runtime import TOO_LONG, Builtin, ScriptRun, ScriptRuntimeError
+from urdaemon.fakeur.urscript.signatures import Signature
 
 
 class Host:
@@ -397,3 +399,19 @@ def test_sleep_waits_whole_cycles_of_controller_time() -> None:
     run, host = start("record(1)\nsleep(0.005)\nrecord(2)\nsleep(0)\nrecord(3)\n")
     per_cycle = cycles(run, host, 4)
     assert per_cycle == [[(0, 1)], [], [], [(0, 2), (0, 3)]]
+
+
+def test_a_name_the_compiler_knows_but_the_controller_lacks_fails_when_called() -> None:
+    """CB3 3.14+ compiles e-Series names (urcl's script guards them at run time): calling one is an error."""
+    table = dict(STUB_TABLE)
+    table["e_only"] = Signature("e_only", (), False, {"e": (5, 0)}, supported=False)
+    implementations = dict(BUILTINS, e_only=Builtin("e_only", _record, blocking=False))
+    text = "if False:\n  e_only()\nend\nrecord(1)\ne_only()\n"
+    program = compile_program(text, "cb3", (3, 15), signatures=table, builtins=implementations)
+    host = Host()
+    run = program.start(cast(Any, host))
+    run.step()
+    assert host.records == [(0, 1)]
+    assert run.error is not None
+    assert run.error.message == "e_only: not available on this controller (CB3 3.15)"
+    assert (run.error.line, run.error.column) == (5, 1)

@@ -68,6 +68,17 @@ def _not_simulated(name: str) -> Callable[..., Any]:
     return missing
 
 
+def _unsupported(name: str, series: str, version: tuple[int, int]) -> Callable[..., Any]:
+    controller = f"{'e-Series' if series == 'e' else series.upper()} {version[0]}.{version[1]}"
+
+    def unsupported(host: Any, *args: Any) -> Any:
+        from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError
+
+        raise ScriptRuntimeError(f"{name}: not available on this controller ({controller})")
+
+    return unsupported
+
+
 def compile_program(
     text: str,
     series: str = "e",
@@ -121,8 +132,10 @@ def _compile(
     source, lines, used, constants = _Generator(checker).generate()
     bound: dict[str, tuple[Callable[..., Any], bool]] = {}
     for builtin_name in used:
-        implementation = implementations.get(builtin_name)
-        if implementation is None:
+        implementation = checker.implementation(builtin_name)
+        if not getattr(signatures[builtin_name], "supported", True):
+            bound[builtin_name] = (_unsupported(builtin_name, series, version), False)
+        elif implementation is None:
             bound[builtin_name] = (_not_simulated(builtin_name), False)
         else:
             bound[builtin_name] = (implementation.function, implementation.blocking)
@@ -465,8 +478,14 @@ class _Checker:
 
     # -- which functions block --------------------------------------------------------------------------
 
+    def implementation(self, name: str) -> Builtin | None:
+        """The builtin's implementation, None if not simulated or not on this controller."""
+        if not getattr(self.signatures[name], "supported", True):
+            return None
+        return self.implementations.get(name)
+
     def builtin_blocks(self, name: str) -> bool:
-        implementation = self.implementations.get(name)
+        implementation = self.implementation(name) if name in self.signatures else None
         return implementation is not None and implementation.blocking
 
     def _find_blocking(self) -> None:
