@@ -270,7 +270,9 @@ def test_agrees_with_ur_analytic_ik_on_nominal_models(name: str) -> None:
         for solution in ours:
             assert any(_wrapped_close(solution.q, other, 1e-9) for other in theirs)
         closest = solver.inverse_kinematics_closest(solver.forward_kinematics(*q), *q)[0]
-        assert _wrapped_close(kinematics.nearest(kinematics.forward(q), q) or (), closest, 1e-9)
+        near = kinematics.nearest(kinematics.forward(q), q)
+        assert near is not None
+        assert _wrapped_close(near, closest, 1e-9)
 
 
 def test_pose_conversions_round_trip_at_every_angle() -> None:

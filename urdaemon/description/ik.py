@@ -52,7 +52,6 @@ Vector = Sequence[float] | NDArray[np.float64]
 _TAU = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
 _NOMINAL_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
-_IDENTITY: Frame = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 _ZERO_SEED: Joints = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 _REACH_SLACK = 0.05
 """How far (cosine units) past the nominal arm's reach a pose is still tried on a calibrated arm (~5 mm)."""
@@ -63,7 +62,7 @@ _SLOW_STEPS = 3
 _NUDGE = 0.1
 """rad off a singularity where a pose just out of the nominal arm's reach starts Newton's steps."""
 _WRIST_SINGULAR = 1e-10
-"""Below this |sin q5| the wrist is straight: q4 and q6 turn about one axis and q6 takes the seed's value."""
+"""Below this |sin q5| the wrist is straight: joint 6's axis parallels joints 2-4; q6 takes the seed's."""
 _NEWTON_TOLERANCE = 1e-11
 """Newton stops below this (m and rad): ten times under get_inverse_kin's default maxPositionError."""
 _NEWTON_EVALUATIONS = 30
