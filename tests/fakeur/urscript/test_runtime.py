@@ -12,8 +12,8 @@ from tests.fakeur.urscript.test_compiler import STUB_TABLE, compile_stub
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript.compiler import MAX_OPS_PER_CYCLE
 from urdaemon.fakeur.urscript.lib_core import sleep, sync, textmsg
-from urdaemon.fakeur.urscript.runtime import TOO_LONG, Builtin, ScriptRun, ScriptRuntimeError
-from urdaemon.fakeur.urscript.signatures import Signature
+from urdaemon.fakeur.urscript.runtime import TOO_LONG, Builtin, ScriptRun, ScriptRuntimeError, UrList
+from urdaemon.fakeur.urscript.signatures import Param, Signature
 
 
 class Host:
@@ -415,3 +415,23 @@ def test_a_name_the_compiler_knows_but_the_controller_lacks_fails_when_called() 
     assert run.error is not None
     assert run.error.message == "e_only: not available on this controller (CB3 3.15)"
     assert (run.error.line, run.error.column) == (5, 1)
+
+
+def test_builtins_keep_their_lists_when_the_program_mutates_its_own() -> None:
+    """A builtin may return a list it keeps (the arm's joints) or keep a list it was given (a TCP)."""
+    kept = UrList([1.0, 2.0])
+    given: list[Any] = []
+    table = dict(STUB_TABLE)
+    table["keeper"] = Signature("keeper", (), False, {"e": (5, 0)})
+    table["remember"] = Signature("remember", (Param("v"),), False, {"e": (5, 0)})
+    implementations = dict(
+        BUILTINS,
+        keeper=Builtin("keeper", lambda host: kept, blocking=False),
+        remember=Builtin("remember", lambda host, v: given.append(v), blocking=False),
+    )
+    text = "q = keeper()\nq[0] = 99\nremember(q)\nq[1] = 77\nrecord(q)\n"
+    host = Host()
+    compile_program(text, signatures=table, builtins=implementations).start(cast(Any, host)).step()
+    assert host.records == [(0, [99, 77])]
+    assert kept == [1.0, 2.0]
+    assert given == [[99, 2.0]]

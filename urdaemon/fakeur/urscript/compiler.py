@@ -635,11 +635,18 @@ class _Generator:
             raise TypeError(f"unknown statement {node!r}")
 
     def _assigned(self, target: Any, value: Any) -> str:
-        """The value to store: a copy when it is another variable's list that either side mutates."""
+        """The value to store: a copy when it is another variable's list that either side mutates.
+
+        A builtin's result stored in a variable the program mutates is copied too: a builtin may return a
+        list it keeps (the arm's joint positions), which the program must not change behind its back.
+        """
         text = self._expr(value)
+        mutated = self.checker.mutated
+        from_builtin = isinstance(value, ast.Call) and value.name not in self.checker.functions
+        if from_builtin and target_root(target) in mutated:
+            return f"_cp({text})"
         if not _is_read(value) or self._is_pose(value):
             return text
-        mutated = self.checker.mutated
         if not isinstance(target, ast.Name) or target.name in mutated or target_root(value) in mutated:
             return f"_cp({text})"
         return text
@@ -731,7 +738,7 @@ class _Generator:
         assert bound is not None
         self.used.add(call.name)
         args = [
-            self._default(p.default) if value is None else self._expr(value)
+            self._default(p.default) if value is None else self._element(value)
             for p, value in zip(signature.params, bound, strict=True)
         ]
         text = f"b_{call.name}({', '.join(args)})"
