@@ -435,3 +435,21 @@ def test_builtins_keep_their_lists_when_the_program_mutates_its_own() -> None:
     assert host.records == [(0, [99, 77])]
     assert kept == [1.0, 2.0]
     assert given == [[99, 2.0]]
+
+
+def test_list_arithmetic_is_element_wise_on_either_side() -> None:
+    """URScript's + - * / on lists work element-wise, also with a plain list (a builtin's) on the left."""
+    a = UrList([1.0, 2.0])
+    plain: Any = [10, 20]
+    assert a + plain == [11.0, 22.0]
+    assert plain + a == [11.0, 22.0]
+    assert isinstance(plain + a, UrList)
+    assert plain - a == [9.0, 18.0]
+    assert 1 - a == [0.0, -1.0]
+    assert a / 2 == [0.5, 1.0]
+    assert -a == [-1.0, -2.0]
+    longer: Any = [1, 2, 3]
+    with pytest.raises(ScriptRuntimeError, match="different lengths"):
+        _ = a + longer
+    with pytest.raises(ScriptRuntimeError, match="different lengths"):
+        _ = longer * a

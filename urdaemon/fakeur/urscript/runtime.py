@@ -9,6 +9,7 @@ rest of the current controller cycle; its return value is the call's value.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, Final
@@ -81,38 +82,42 @@ class UrList(list[Any]):
         if isinstance(other, list):
             if len(other) != len(self):
                 raise ScriptRuntimeError(f"lists of different lengths ({len(self)} and {len(other)})")
-            return type(self)(op(a, b) for a, b in zip(self, other, strict=True))
-        return type(self)(op(a, other) for a in self)
+            return type(self)(map(op, self, other))
+        return type(self)([op(a, other) for a in self])
 
     def _rzip(self, other: Any, op: Callable[[Any, Any], Any]) -> UrList:
-        return type(self)(op(other, a) for a in self)
+        if isinstance(other, list):  # a plain list on the left: still element-wise
+            if len(other) != len(self):
+                raise ScriptRuntimeError(f"lists of different lengths ({len(other)} and {len(self)})")
+            return type(self)(map(op, other, self))
+        return type(self)([op(other, a) for a in self])
 
     def __add__(self, other: Any) -> UrList:
-        return self._zip(other, lambda a, b: a + b)
+        return self._zip(other, operator.add)
 
     def __radd__(self, other: Any) -> UrList:
-        return self._rzip(other, lambda a, b: a + b)
+        return self._rzip(other, operator.add)
 
     def __sub__(self, other: Any) -> UrList:
-        return self._zip(other, lambda a, b: a - b)
+        return self._zip(other, operator.sub)
 
     def __rsub__(self, other: Any) -> UrList:
-        return self._rzip(other, lambda a, b: a - b)
+        return self._rzip(other, operator.sub)
 
     def __mul__(self, other: Any) -> UrList:
-        return self._zip(other, lambda a, b: a * b)
+        return self._zip(other, operator.mul)
 
     def __rmul__(self, other: Any) -> UrList:
-        return self._rzip(other, lambda a, b: a * b)
+        return self._rzip(other, operator.mul)
 
     def __truediv__(self, other: Any) -> UrList:
-        return self._zip(other, lambda a, b: a / b)
+        return self._zip(other, operator.truediv)
 
     def __rtruediv__(self, other: Any) -> UrList:
-        return self._rzip(other, lambda a, b: a / b)
+        return self._rzip(other, operator.truediv)
 
     def __neg__(self) -> UrList:
-        return type(self)(-a for a in self)
+        return type(self)(map(operator.neg, self))
 
     def __repr__(self) -> str:
         return "[" + ", ".join(map(_text, self)) + "]"
