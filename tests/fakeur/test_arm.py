@@ -8,7 +8,7 @@ import pytest
 
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, HISTORY_STEPS, FakeArm, RuntimeState
-from urdaemon.fakeur.motion import SpeedRamp
+from urdaemon.fakeur.motion import SpeedRamp, matrix_of_pose
 from urdaemon.model import RobotMode, SafetyMode
 
 DT = 0.002
@@ -189,3 +189,17 @@ def test_history_keeps_the_positions_of_past_cycles() -> None:
     assert arm.history(5) == seen[-6]
     assert arm.history(HISTORY_STEPS - 1) == seen[-HISTORY_STEPS]
     assert arm.history(HISTORY_STEPS + 100) == seen[-HISTORY_STEPS]
+
+
+def test_actual_tcp_pose_applies_the_tcp_offset() -> None:
+    arm = _arm(powered=True)
+    assert arm.actual_tcp_pose() == arm.tcp_pose(), "no offset: the flange"
+    arm.tcp_offset = [0.0, 0.0, 0.2, 0.0, 0.0, 0.0]
+    x, y, z, *_ = arm.tcp_pose()
+    rotation = matrix_of_pose(arm.tcp_pose())
+    tool = arm.actual_tcp_pose()
+    # 0.2 m along the flange's z axis (the third column of its rotation)
+    assert tool[:3] == pytest.approx(
+        (x + 0.2 * rotation[2], y + 0.2 * rotation[5], z + 0.2 * rotation[8]), abs=1e-12
+    )
+    assert tool[3:] == pytest.approx(arm.tcp_pose()[3:], abs=1e-12)

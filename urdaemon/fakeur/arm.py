@@ -23,11 +23,19 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
-from urdaemon.fakeur.motion import TIME_EPSILON_S, LinearStop, Motion, leading_stop_time
+from urdaemon.fakeur.motion import (
+    TIME_EPSILON_S,
+    LinearStop,
+    Motion,
+    compose,
+    leading_stop_time,
+    matrix_of_pose,
+    pose_of_matrix,
+)
 from urdaemon.model import RobotMode, SafetyMode
 
 if TYPE_CHECKING:
@@ -130,6 +138,8 @@ class FakeArm:
             None
         )
         """The last ``tcp_pose()`` and the joint values it is for."""
+        self._tcp_cache: tuple[Any, tuple[float, float, float, float, float, float]] | None = None
+        """The last ``actual_tcp_pose()`` and the flange pose and offset it is for."""
         self.robot_mode = RobotMode.POWER_OFF
         self.safety_mode = SafetyMode.NORMAL
         self.runtime_state = RuntimeState.STOPPED
@@ -493,6 +503,20 @@ class FakeArm:
         x, y, z, qx, qy, qz, qw = self.kinematics.tool_pose(q)
         pose = (x, y, z, *_rotation_vector(qx, qy, qz, qw))
         self._pose_cache = (q, pose)
+        return pose
+
+    def actual_tcp_pose(self) -> tuple[float, float, float, float, float, float]:
+        """The TCP pose (the flange pose with ``tcp_offset`` applied), as RTDE ``actual_TCP_pose``."""
+        flange = self.tcp_pose()
+        offset = self.tcp_offset
+        if not any(offset):
+            return flange
+        cached = self._tcp_cache
+        key = (flange, tuple(offset))
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        pose = pose_of_matrix(compose(matrix_of_pose(flange), matrix_of_pose(offset)))
+        self._tcp_cache = (key, pose)
         return pose
 
     @property

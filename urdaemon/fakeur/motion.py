@@ -26,6 +26,8 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Final, Protocol
 
+from urdaemon.description.kinematics import quaternion_of
+
 __all__ = [
     "JOINTS",
     "TIME_EPSILON_S",
@@ -327,30 +329,15 @@ def matrix_of_pose(pose: Sequence[float]) -> Matrix:
 
 
 def pose_of_matrix(m: Matrix) -> tuple[float, float, float, float, float, float]:
-    """The UR pose of a transform (rotation vector of angle in [0, π])."""
-    r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = m
-    cos_angle = max(-1.0, min(1.0, (r00 + r11 + r22 - 1.0) / 2.0))
-    angle = math.acos(cos_angle)
-    if angle < 1e-12:
+    """The UR pose of a transform (rotation vector of angle in [0, π]; through the quaternion, which
+    stays accurate near a half turn)."""
+    qx, qy, qz, qw = quaternion_of(*m[:9])
+    x, y, z = m[9], m[10], m[11]
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+    if norm < 1e-15:
         return (x, y, z, 0.0, 0.0, 0.0)
-    if angle < math.pi - 1e-6:
-        scale = angle / (2.0 * math.sin(angle))
-        return (x, y, z, (r21 - r12) * scale, (r02 - r20) * scale, (r10 - r01) * scale)
-    # near π: the axis from the diagonal (its sign from the off-diagonal terms)
-    kx = math.sqrt(max(0.0, (r00 + 1.0) / 2.0))
-    ky = math.sqrt(max(0.0, (r11 + 1.0) / 2.0))
-    kz = math.sqrt(max(0.0, (r22 + 1.0) / 2.0))
-    if kx >= ky and kx >= kz:
-        ky = math.copysign(ky, r01 + r10)
-        kz = math.copysign(kz, r02 + r20)
-    elif ky >= kz:
-        kx = math.copysign(kx, r01 + r10)
-        kz = math.copysign(kz, r12 + r21)
-    else:
-        kx = math.copysign(kx, r02 + r20)
-        ky = math.copysign(ky, r12 + r21)
-    norm = math.sqrt(kx * kx + ky * ky + kz * kz)
-    return (x, y, z, kx / norm * angle, ky / norm * angle, kz / norm * angle)
+    scale = 2.0 * math.atan2(norm, qw) / norm
+    return (x, y, z, qx * scale, qy * scale, qz * scale)
 
 
 def compose(a: Matrix, b: Matrix) -> Matrix:

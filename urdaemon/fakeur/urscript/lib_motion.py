@@ -271,6 +271,8 @@ def tcp_pose(
     arm: FakeArm, q: Sequence[float], tcp: Sequence[float] | None = None
 ) -> tuple[float, float, float, float, float, float]:
     """The TCP pose for joints ``q`` and TCP offset ``tcp`` (the arm's when None)."""
+    if tcp is None and q is arm.q:
+        return arm.actual_tcp_pose()  # cached per cycle
     return pose_of_matrix(tcp_matrix(arm, q, tcp))
 
 
