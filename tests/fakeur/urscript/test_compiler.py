@@ -84,6 +84,14 @@ def _refused(text: str) -> ScriptCompileError:
         ),
         ('socket_send_int(1, "socket_0")\nsocket_send_int(2)\n', None, None, None),  # the default socket
         ('socket_open("h", 1, socket_name="a")\nsocket_send_int(1, socket_name="a")\n', None, None, None),
+        # a socket_open whose name is computed (urcl opens its sockets in a function): any name may be open
+        (
+            'def connect(name):\n  return socket_open("h", 1, name)\nend\n'
+            'x = connect("b")\nsocket_send_int(1, "b")\n',
+            None,
+            None,
+            None,
+        ),
         ("x = p[1, 2, 3]\n", 1, 5, "a pose p[...] takes 6 numbers, not 3"),
         ("break\n", 1, 1, "break outside a loop"),
         ("thread t():\n  sync()\nend\nt()\n", 4, 1, "thread t is started with run"),

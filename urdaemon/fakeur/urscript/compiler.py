@@ -277,7 +277,7 @@ class _Checker:
         self.scopes: dict[str, Scope] = {name: self._scope(f) for name, f in self.functions.items()}
         self.main = Scope(None, set(), self.main_body)
         self.errors: list[ScriptCompileError] = []
-        self.opened_sockets: set[str] = {DEFAULT_SOCKET}
+        self.opened_sockets: set[str] | None = {DEFAULT_SOCKET}
         self.blocking: set[str] = set()
 
     def _scope(self, function: ast.Function) -> Scope:
@@ -318,12 +318,17 @@ class _Checker:
         yield from self.scopes.values()
 
     def _collect_sockets(self) -> None:
+        """The socket names the program's socket_open calls name; None if one takes its name at run time
+        (urcl's script opens its sockets through a function with the name as a parameter)."""
         for scope in self.all_scopes():
             for call in self._calls(scope):
                 if call.name == "socket_open" and call.name not in self.functions:
                     name = self._socket_argument(call)
                     if isinstance(name, ast.String):
-                        self.opened_sockets.add(name.value)
+                        if self.opened_sockets is not None:
+                            self.opened_sockets.add(name.value)
+                    elif name is not None:
+                        self.opened_sockets = None
 
     def _calls(self, scope: Scope) -> Iterator[ast.Call]:
         for statement in walk_statements(scope.body):
@@ -448,7 +453,8 @@ class _Checker:
             self.error(call, f"{call.name} takes time on the arm: a sec program may not call it")
         if call.name.startswith("socket_") and call.name != "socket_open":
             name = self._socket_argument(call)
-            if isinstance(name, ast.String) and name.value not in self.opened_sockets:
+            opened = self.opened_sockets
+            if opened is not None and isinstance(name, ast.String) and name.value not in opened:
                 self.error(name, f'socket "{name.value}" is not opened by any socket_open of the program')
 
     def bind_arguments(self, call: ast.Call, params: list[tuple[str, bool]]) -> list[Any] | None:
