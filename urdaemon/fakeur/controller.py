@@ -57,7 +57,8 @@ log = logging.getLogger("urdaemon.fakeur")
 
 STATE_PERIOD_S = 0.1
 """Robot state on the primary/secondary interfaces: 10 Hz (ur-protocols.md §0)."""
-READ_CHUNK = 65536
+READ_CHUNK = 4096
+"""Bytes read from a client at a time: a few hundred requests at most are handled in one turn."""
 SERIAL_NUMBER = "20235500001"
 PROGRAMS_DIR = "/programs"
 """Where programs live when no directory is given (as on URSim); only the default program exists there."""
@@ -424,6 +425,7 @@ class FakeController:
                 for event in conn.receive_data(data):
                     self._on_rtde(client, event)
                 self._write("rtde", writer, conn.data_to_send())
+                await _paced(writer, data)
         finally:
             client.streaming = False
             with contextlib.suppress(ValueError):
@@ -566,7 +568,7 @@ class FakeController:
                 if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
                     self._on_script(event)
                     await asyncio.sleep(0)
-            await writer.drain()
+            await _paced(writer, data)
 
     # ---- real-time interface (30003) ---------------------------------------------------------------
 
@@ -899,11 +901,13 @@ class FakeController:
                     continue
                 conn.send(dash.ReplyLine(reply))
                 self._write("dashboard", writer, conn.data_to_send())
+                await asyncio.sleep(0)  # one command per turn: a flood of them delays no cycle
                 if isinstance(event, dash.CommandReceived) and isinstance(
                     event.command, dash.Quit | dash.Shutdown
                 ):
                     await writer.drain()
                     return
+            await _paced(writer, data)
 
     def _dashboard_reply(self, command: Any) -> str:
         arm = self.arm
@@ -1106,6 +1110,14 @@ class FakeController:
                 prim.AdditionalInfo(),
             )
         )
+
+
+async def _paced(writer: asyncio.StreamWriter, data: bytes) -> None:
+    """After handling one read: wait while the client does not read its replies (TCP flow control:
+    it is not read meanwhile), and give others a turn when more is waiting (a full read)."""
+    await writer.drain()
+    if len(data) >= READ_CHUNK:
+        await asyncio.sleep(0)
 
 
 def _names(requested: tuple[str, ...]) -> tuple[str, ...]:
