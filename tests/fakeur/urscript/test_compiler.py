@@ -94,6 +94,8 @@ def _refused(text: str) -> ScriptCompileError:
         ),
         ("x = p[1, 2, 3]\n", 1, 5, "a pose p[...] takes 6 numbers, not 3"),
         ("break\n", 1, 1, "break outside a loop"),
+        ("g = 1\ndef f(a=g):\n  return a\nend\n", 2, 9, "default of parameter a must be a constant"),
+        ("def f(a=[1, -2], b=p[0, 0, 0, 0, 0, 0], c=False):\n  return a\nend\nx = f()\n", None, None, None),
         ("thread t():\n  sync()\nend\nt()\n", 4, 1, "thread t is started with run"),
         ("def f():\n  return 1\nend\nh = run f()\n", 4, 5, "no such thread"),
         ("x[0] = 1\n", 1, 1, "compile_error_name_not_found:x:"),

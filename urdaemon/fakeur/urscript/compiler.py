@@ -356,8 +356,8 @@ class _Checker:
         function = scope.function
         if function is not None:
             for param in function.params:
-                if param.default is not None:
-                    self._check_expression(scope, param.default)
+                if param.default is not None and not self._constant(scope, param.default):
+                    self.error(param.default, f"default of parameter {param.name} must be a constant")
             if function.kind == "thread" and function.params:
                 self.error(function, f"thread {function.name} may not take parameters")
         for statement in walk_statements(scope.body):
@@ -367,6 +367,18 @@ class _Checker:
                 self._check_expression(scope, expression)
             if isinstance(statement, ast.Assign):
                 self._check_target(scope, statement.target)
+
+    def _constant(self, scope: Scope, node: Any) -> bool:
+        """A literal: number, string, boolean, or a list or pose of literals (defaults must be)."""
+        if isinstance(node, (ast.Number, ast.String, ast.Bool)):
+            return True
+        if isinstance(node, ast.Unary) and node.op in "+-":
+            return isinstance(node.operand, ast.Number)
+        if isinstance(node, ast.ListLiteral):
+            return all(self._constant(scope, item) for item in node.items)
+        if isinstance(node, ast.Index) and self.is_pose(scope, node):
+            return len(node.indices) == 6 and all(self._constant(scope, item) for item in node.indices)
+        return False
 
     def _inside_loop(self, scope: Scope, wanted: Any) -> bool:
         def search(body: tuple[Any, ...], in_loop: bool) -> bool | None:
