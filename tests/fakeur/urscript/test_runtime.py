@@ -157,12 +157,18 @@ sync()
     assert cycles(run, host, 2) == [[(1, "before")], []]
 
 
-def test_while_a_thread_is_in_a_critical_section_no_other_thread_runs() -> None:
+def test_a_critical_section_is_never_interleaved_and_blocking_in_it_lets_others_run() -> None:
+    """UR's External Control script (urcl) blocks in socket_read_binary_integer inside enter_critical in
+    its main loop, and in servoj inside one in its servo thread; on a real controller both threads still
+    run every cycle. Holding other threads off across a block would starve the servo thread for ever."""
     run, host = start(
         """
 thread other():
   while True:
-    record("other")
+    enter_critical
+    record("other in")
+    record("other out")
+    exit_critical
     sync()
   end
 end
@@ -179,10 +185,10 @@ sync()
 """
     )
     per_cycle = cycles(run, host, 4)
-    assert per_cycle[0] == [(1, "other")]
-    assert per_cycle[1] == [(0, "critical 1")]
-    assert per_cycle[2] == [(0, "critical 2")]
-    assert per_cycle[3] == [(0, "out"), (1, "other")]
+    assert per_cycle[0] == [(1, "other in"), (1, "other out")]
+    assert per_cycle[1] == [(0, "critical 1"), (1, "other in"), (1, "other out")]
+    assert per_cycle[2] == [(0, "critical 2"), (1, "other in"), (1, "other out")]
+    assert per_cycle[3] == [(0, "out"), (1, "other in"), (1, "other out")]
 
 
 def test_halt_ends_the_whole_program() -> None:

@@ -642,9 +642,9 @@ class _Generator:
         elif isinstance(node, ast.Halt):
             self._emit(indent, "_halt()", node)
         elif isinstance(node, ast.EnterCritical):
-            self._emit(indent, "_enter()", node)
+            self._emit(indent, "pass  # enter_critical: a thread is never interrupted between blocks", node)
         elif isinstance(node, ast.ExitCritical):
-            self._emit(indent, "_exit()", node)
+            self._emit(indent, "pass  # exit_critical", node)
         elif isinstance(node, ast.Kill):
             self._emit(indent, f"_kill({self._expr(node.handle)})", node)
         elif isinstance(node, ast.Join):

@@ -200,8 +200,11 @@ class ScriptRun:
 
     Each step resumes every live thread once, the main program first, then the threads in the order they
     were started (one started during this step runs in it too); a thread runs until it blocks or ends.
-    While a thread is inside a critical section, no other thread runs. The run is :attr:`done` once the
-    main program ended, by returning, ``halt``, a runtime error (:attr:`error`) or :meth:`stop`.
+    No thread is ever interrupted between two blocking calls, so ``enter_critical``/``exit_critical``
+    need no action: a critical section cannot be interleaved, and a thread that blocks inside one lets
+    the others run (as on a real controller: UR's External Control script blocks in a socket read and in
+    ``servoj`` inside critical sections, and its threads still share the cycle). The run is :attr:`done`
+    once the main program ended, by returning, ``halt``, a runtime error (:attr:`error`) or :meth:`stop`.
     """
 
     def __init__(self, program: Any, host: Any) -> None:
@@ -215,7 +218,6 @@ class ScriptRun:
         self._threads: list[_Thread] = []
         self._alive: set[int] = set()
         self._next_handle = 1
-        self._critical: _Thread | None = None
         self._current: _Thread | None = None
         self._count = count
         namespace: dict[str, Any] = {
@@ -232,8 +234,6 @@ class ScriptRun:
             "_start": self._start,
             "_kill": self._kill,
             "_join": self._join,
-            "_enter": self._enter,
-            "_exit": self._exit,
             "_halt": self._halt,
         }
         namespace.update(program.constants)
@@ -258,9 +258,6 @@ class ScriptRun:
         while index < len(threads):
             thread = threads[index]
             index += 1
-            critical = self._critical
-            if critical is not None and critical is not thread:
-                continue
             host.thread = thread.handle
             namespace["_tick"] = self._count()
             self._current = thread
@@ -298,8 +295,6 @@ class ScriptRun:
 
     def _ended(self, thread: _Thread) -> None:
         self._alive.discard(thread.handle)
-        if self._critical is thread:
-            self._critical = None
         if thread.handle == MAIN:
             self._finish()
 
@@ -312,7 +307,6 @@ class ScriptRun:
             if thread is not current:
                 thread.generator.close()
         self._alive.clear()
-        self._critical = None
 
     def _fail(self, error: ScriptRuntimeError, traceback: Any) -> None:
         if not error.line:
@@ -351,19 +345,10 @@ class ScriptRun:
         for thread in self._threads:
             if thread.handle == handle:
                 thread.generator.close()
-                if self._critical is thread:
-                    self._critical = None
 
     def _join(self, handle: Any) -> Iterator[None]:
         while handle in self._alive and handle != MAIN:
             yield
-
-    def _enter(self) -> None:
-        self._critical = self._current
-
-    def _exit(self) -> None:
-        if self._critical is self._current:
-            self._critical = None
 
     def _halt(self) -> None:
         raise _Halt
