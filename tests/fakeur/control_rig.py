@@ -267,12 +267,20 @@ class Rig:
                 return index
         raise AssertionError("the arm never moved")
 
+    def last_motion(self, after: int = 0) -> int:
+        """Index in ``history`` of the last cycle (from ``after``) in which the arm moved."""
+        history = self.history
+        for index in range(len(history) - 1, max(after, 1) - 1, -1):
+            if history[index] != history[index - 1]:
+                return index
+        raise AssertionError("the arm never moved")
+
     def at_rest(self) -> bool:
         return all(v == 0.0 for v in self.arm.qd)
 
     def variable(self, name: str) -> Any:
         """A program variable's value (the interpreter keeps them in the generated module)."""
-        return self.run._namespace["v_" + name]  # noqa: SLF001 - the test looks inside the program
+        return self.run._namespace["v_" + name]  # the test looks inside the program
 
 
 def script_text(ports: dict[str, int], server_ip: str = "127.0.0.1") -> str:
