@@ -439,7 +439,15 @@ class FakeArm:
         self._target_q = target
         velocity = self._program_qd = motion.velocity(elapsed)
         self._target_qd = [v * slider for v in velocity]
-        self._step_servo(dt, target)
+        if self._step_servo(dt, target):
+            # the motion asks more than the joints can do: what is commanded is what the arm does
+            # (the controller's target speeds never exceed the joint limits), and a following
+            # motion or stop starts from that
+            self._target_q = list(self.q)
+            self._target_qd = list(self.qd)
+            if slider > 0:
+                self._program_qd = [v / slider for v in self.qd]
+            velocity = self._program_qd
         if elapsed >= motion.duration - TIME_EPSILON_S and not any(velocity):
             q = self.q
             if all(abs(q[i] - target[i]) < 1e-9 for i in range(6)):
@@ -449,15 +457,23 @@ class FakeArm:
                 self._motion = None
                 self.qd = [0.0] * 6
 
-    def _step_servo(self, dt: float, target: list[float]) -> None:
+    def _step_servo(self, dt: float, target: list[float]) -> bool:
+        """Move towards ``target`` within the velocity limits; True if a limit held a joint back."""
         q, qd, vmax = self.q, self.qd, self.max_velocity
+        limited = False
         for i in range(6):
             want = (target[i] - q[i]) / dt
             limit = vmax[i]
-            v = limit if want > limit else -limit if want < -limit else want
+            if want > limit:
+                v, limited = limit, True
+            elif want < -limit:
+                v, limited = -limit, True
+            else:
+                v = want
             self.qdd[i] = (v - qd[i]) / dt
             qd[i] = v
             q[i] += v * dt
+        return limited
 
     def _step_speed(self, dt: float, target: list[float], acceleration: float) -> None:
         q, qd, vmax = self.q, self.qd, self.max_velocity

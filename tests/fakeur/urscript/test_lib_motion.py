@@ -380,3 +380,22 @@ def test_movec_keeps_the_tcp_on_the_circle_through_the_three_points() -> None:
                 0,
             ),
         )
+
+
+def test_a_servoj_beyond_the_speed_limit_commands_only_what_the_joints_can_do() -> None:
+    """A servoj target 15 rad/s away: target speeds within the limit, and stopj stops within the
+    stopping distance of the limit speed (reproduction: two servoj 0.03 rad apart, then stopj(4))."""
+    host = _host()
+    arm = host.arm
+    limit = arm.max_velocity[0]
+    target = list(arm.q)
+    for _ in range(10):
+        target = _offset(target, j0=0.03)
+        _run(host, lib_motion.servoj(host, target, 0, 0, DT, 0.1, 300))
+        assert abs(lib_state.get_target_joint_speeds(host)[0]) <= limit + 1e-9
+    assert arm.qd[0] == pytest.approx(limit)
+    at = arm.q[0]
+    stopping = limit / 4.0
+    cycles = _run(host, lib_motion.stopj(host, 4.0))
+    assert cycles <= round(stopping / DT) + 1
+    assert arm.q[0] - at <= limit * stopping / 2 + 2 * limit * DT
