@@ -192,7 +192,9 @@ def test_labels_comments_and_positions() -> None:
 @pytest.mark.parametrize(
     ("text", "line", "column"),
     [
-        ("def f():\n  x = 1\n", 3, 1),  # missing end
+        ("def f():\n  x = 1\n", 1, 1),  # missing end: the block left open
+        ("while a:\n  if b:\n    c = 1\n  elif d:\n    e = 1\nend\n", 1, 1),
+        ("x = 1\nthread t():\n  while True:\n    sync()\n  end\n", 2, 1),
         ("x = 1\ny = = 2\n", 2, 5),
         ("if x\n  y = 1\nend\n", 2, 3),  # missing colon
         ("x = (1 + 2\n", 2, 1),
@@ -206,6 +208,13 @@ def test_syntax_error_names_line_and_column(text: str, line: int, column: int) -
         parse(text)
     assert (caught.value.line, caught.value.column) == (line, column)
     assert "syntax_error" in caught.value.message
+
+
+def test_a_missing_end_names_the_block_it_leaves_open() -> None:
+    with pytest.raises(ScriptCompileError) as caught:
+        parse("def f():\n  while x:\n    if y:\n      z = 1\n    end\n")
+    assert caught.value.message == "syntax_error_on_line:2: while block has no end"
+    assert (caught.value.line, caught.value.column) == (2, 3)
 
 
 @pytest.mark.parametrize(

@@ -424,6 +424,20 @@ def _source_line(text: str, line: int) -> str:
     return lines[line - 1] if 0 < line <= len(lines) else ""
 
 
+_BLOCK_OPENERS = frozenset({"DEF", "SEC", "THREAD", "IF", "WHILE"})
+
+
+def _unclosed_block(error: lark.UnexpectedInput) -> Token | None:
+    """The keyword of the innermost block still open when the program ended, if the parser knows it."""
+    interactive = getattr(error, "interactive_parser", None)
+    if interactive is None:
+        return None
+    for value in reversed(interactive.parser_state.value_stack):
+        if isinstance(value, Token) and value.type in _BLOCK_OPENERS:
+            return value
+    return None
+
+
 def parse(text: str) -> tuple[Function | Statement, ...]:
     """Top-level items of ``text``: definitions and statements, in order."""
     _check_ascii(text)
@@ -437,6 +451,10 @@ def parse(text: str) -> tuple[Function | Statement, ...]:
             line = text.count("\n") + 1
             column = len(text) - (text.rfind("\n") + 1) + 1
             message = "syntax_error_on_line: unexpected end of program"
+            opener = _unclosed_block(error)
+            if opener is not None:  # point at the block a missing `end` leaves open
+                line, column = opener.line or line, opener.column or column
+                message = f"syntax_error_on_line:{line}: {opener.value} block has no end"
         else:
             line, column = error.line, error.column
             message = f"syntax_error_on_line:{line}:{_source_line(text, line)}:"
