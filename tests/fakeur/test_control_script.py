@@ -558,6 +558,7 @@ async def test_script_commands_set_the_arm_state() -> None:
             sc.SetTcpOffset((0.0, 0.0, 0.15, 0.0, 0.0, 0.0)),
             sc.SetGravity((0.0, 9.82, 0.0)),
             force,
+            sc.SetFrictionScales((0.5,) * 6, (0.25,) * 6),  # the script does not implement it
             sc.ZeroFtSensor(),
         ):
             rig.daemon.send_command(command)
@@ -574,6 +575,8 @@ async def test_script_commands_set_the_arm_state() -> None:
         assert config.force_wrench == pytest.approx([0.0, 0.0, 5.0, 0.0, 0.0, 0.0])
         assert config.force_type == 2
         assert config.force_limits == pytest.approx([0.1] * 6)
+        ignored = "urdaemon: script command not supported by this program, ignored: "
+        assert rig.texts().count(f"{ignored}{int(sc.ScriptCommandId.SET_FRICTION_SCALES)}") == 1
         rig.daemon.send_command(sc.SetTargetPayload(1.0, (0.0, 0.0, 0.1), (0.01,) * 3 + (0.0,) * 3, 0.5))
         rig.daemon.send_command(sc.EndForceMode())
         await rig.until(lambda: not rig.arm.force_mode, 20)
