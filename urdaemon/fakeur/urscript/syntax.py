@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, TypeAlias
 
 import lark
-from lark import Token, Transformer, v_args
+from lark import Token, Transformer
 
 from urdaemon.fakeur.urscript.runtime import ScriptCompileError
 
@@ -248,16 +248,16 @@ Statement: TypeAlias = (
 
 @cache
 def _parser() -> lark.Lark:
+    """The LALR parser; the AST is built while parsing (no parse tree), positions come from tokens."""
     grammar = (Path(__file__).parent / "grammar.lark").read_text(encoding="ascii")
-    return lark.Lark(grammar, parser="lalr", propagate_positions=True, maybe_placeholders=True)
+    return lark.Lark(grammar, parser="lalr", maybe_placeholders=True, transformer=_Build())
 
 
-def _at(meta: Any) -> dict[str, int]:
-    return {"line": meta.line, "column": meta.column}
-
-
-def _tok(token: Token) -> dict[str, int]:
-    return {"line": token.line or 0, "column": token.column or 0}
+def _at(node: Any) -> dict[str, int]:
+    """The position of a token or of an AST node."""
+    if isinstance(node, Token):
+        return {"line": node.line or 0, "column": node.column or 0}
+    return {"line": node.line, "column": node.column}
 
 
 def _number(text: str) -> int | float:
@@ -266,136 +266,142 @@ def _number(text: str) -> int | float:
     return int(text)
 
 
-@v_args(meta=True)
-class _Build(Transformer[Token, tuple[Any, ...]]):
-    """Lark tree -> AST nodes."""
+def _no_brackets(children: list[Any]) -> list[Any]:
+    return [c for c in children if not (isinstance(c, Token) and c.type == "LSQB")]
 
-    def start(self, meta: Any, items: list[Any]) -> tuple[Any, ...]:
-        return tuple(items)
 
-    def function(self, meta: Any, children: list[Any]) -> Function:
+class _Build(Transformer[Token, Any]):
+    """Grammar rules -> AST nodes, called by the parser as it reduces (one pass, no tree)."""
+
+    def start(self, children: list[Any]) -> tuple[Any, ...]:
+        return tuple(children)
+
+    def function(self, children: list[Any]) -> Function:
         kind, name, *rest = children
         params = tuple(c for c in rest if isinstance(c, Param))
         body = tuple(c for c in rest if c is not None and not isinstance(c, Param))
-        return Function(str(kind), str(name), params, body, **_at(meta))
+        return Function(str(kind), str(name), params, body, **_at(kind))
 
-    def thread(self, meta: Any, children: list[Any]) -> Function:
-        name, *body = children
-        return Function("thread", str(name), (), tuple(body), **_at(meta))
+    def thread(self, children: list[Any]) -> Function:
+        keyword, name, *body = children
+        return Function("thread", str(name), (), tuple(body), **_at(keyword))
 
-    def param(self, meta: Any, children: list[Any]) -> Param:
-        return Param(str(children[0]), children[1], **_at(meta))
+    def param(self, children: list[Any]) -> Param:
+        return Param(str(children[0]), children[1], **_at(children[0]))
 
-    def assign(self, meta: Any, children: list[Any]) -> Assign:
-        return Assign(children[0], children[1], **_at(meta))
+    def assign(self, children: list[Any]) -> Assign:
+        return Assign(children[0], children[1], **_at(children[0]))
 
-    def declare(self, meta: Any, children: list[Any]) -> Declare:
-        return Declare(str(children[0]), str(children[1]), children[2], **_at(meta))
+    def declare(self, children: list[Any]) -> Declare:
+        return Declare(str(children[0]), str(children[1]), children[2], **_at(children[0]))
 
-    def call_statement(self, meta: Any, children: list[Any]) -> ExprStatement:
-        return ExprStatement(children[0], **_at(meta))
+    def call_statement(self, children: list[Any]) -> ExprStatement:
+        return ExprStatement(children[0], **_at(children[0]))
 
-    def run_statement(self, meta: Any, children: list[Any]) -> ExprStatement:
-        return ExprStatement(children[0], **_at(meta))
+    def run_statement(self, children: list[Any]) -> ExprStatement:
+        return ExprStatement(children[0], **_at(children[0]))
 
-    def return_statement(self, meta: Any, children: list[Any]) -> Return:
-        return Return(children[0], **_at(meta))
+    def return_statement(self, children: list[Any]) -> Return:
+        return Return(children[1], **_at(children[0]))
 
-    def break_statement(self, meta: Any, children: list[Any]) -> Break:
-        return Break(**_at(meta))
+    def break_statement(self, children: list[Any]) -> Break:
+        return Break(**_at(children[0]))
 
-    def continue_statement(self, meta: Any, children: list[Any]) -> Continue:
-        return Continue(**_at(meta))
+    def continue_statement(self, children: list[Any]) -> Continue:
+        return Continue(**_at(children[0]))
 
-    def halt_statement(self, meta: Any, children: list[Any]) -> Halt:
-        return Halt(**_at(meta))
+    def halt_statement(self, children: list[Any]) -> Halt:
+        return Halt(**_at(children[0]))
 
-    def enter_critical(self, meta: Any, children: list[Any]) -> EnterCritical:
-        return EnterCritical(**_at(meta))
+    def enter_critical(self, children: list[Any]) -> EnterCritical:
+        return EnterCritical(**_at(children[0]))
 
-    def exit_critical(self, meta: Any, children: list[Any]) -> ExitCritical:
-        return ExitCritical(**_at(meta))
+    def exit_critical(self, children: list[Any]) -> ExitCritical:
+        return ExitCritical(**_at(children[0]))
 
-    def kill_statement(self, meta: Any, children: list[Any]) -> Kill:
-        return Kill(children[0], **_at(meta))
+    def kill_statement(self, children: list[Any]) -> Kill:
+        return Kill(children[1], **_at(children[0]))
 
-    def join_statement(self, meta: Any, children: list[Any]) -> Join:
-        return Join(children[0], **_at(meta))
+    def join_statement(self, children: list[Any]) -> Join:
+        return Join(children[1], **_at(children[0]))
 
-    def target(self, meta: Any, children: list[Any]) -> Name:
-        return Name(str(children[0]), **_at(meta))
+    def target(self, children: list[Any]) -> Name:
+        return Name(str(children[0]), **_at(children[0]))
 
-    def target_index(self, meta: Any, children: list[Any]) -> Index:
-        return Index(children[0], tuple(children[1:]), **_at(meta))
+    def target_index(self, children: list[Any]) -> Index:
+        base, *indices = _no_brackets(children)
+        return Index(base, tuple(indices), **_at(base))
 
-    def target_attr(self, meta: Any, children: list[Any]) -> Attribute:
-        return Attribute(children[0], str(children[1]), **_at(meta))
+    def target_attr(self, children: list[Any]) -> Attribute:
+        return Attribute(children[0], str(children[1]), **_at(children[0]))
 
-    def if_statement(self, meta: Any, children: list[Any]) -> If:
-        condition, *rest = children
+    def if_statement(self, children: list[Any]) -> If:
+        keyword, condition, *rest = children
         orelse = rest.pop() if rest and (rest[-1] is None or isinstance(rest[-1], _Else)) else None
         elifs = [c for c in rest if isinstance(c, _Elif)]
         body = tuple(c for c in rest if not isinstance(c, _Elif))
         branches = ((condition, body), *((e.condition, e.body) for e in elifs))
-        return If(branches, orelse.body if isinstance(orelse, _Else) else None, **_at(meta))
+        return If(branches, orelse.body if isinstance(orelse, _Else) else None, **_at(keyword))
 
-    def elif_clause(self, meta: Any, children: list[Any]) -> _Elif:
+    def elif_clause(self, children: list[Any]) -> _Elif:
         return _Elif(children[0], tuple(children[1:]))
 
-    def else_clause(self, meta: Any, children: list[Any]) -> _Else:
+    def else_clause(self, children: list[Any]) -> _Else:
         return _Else(tuple(children))
 
-    def while_statement(self, meta: Any, children: list[Any]) -> While:
-        return While(children[0], tuple(children[1:]), **_at(meta))
+    def while_statement(self, children: list[Any]) -> While:
+        return While(children[1], tuple(children[2:]), **_at(children[0]))
 
-    def binary(self, meta: Any, children: list[Any]) -> Binary:
+    def binary(self, children: list[Any]) -> Binary:
         left, op, right = children
-        return Binary(str(op), left, right, **_at(meta))
+        return Binary(str(op), left, right, **_at(left))
 
-    def unary(self, meta: Any, children: list[Any]) -> Expr:
+    def unary(self, children: list[Any]) -> Expr:
         op, operand = children
         if str(op) == "-" and isinstance(operand, Number):
-            return Number(-operand.value, **_at(meta))
-        return Unary(str(op), operand, **_at(meta))
+            return Number(-operand.value, **_at(op))
+        return Unary(str(op), operand, **_at(op))
 
-    def index(self, meta: Any, children: list[Any]) -> Index:
-        return Index(children[0], tuple(children[1:]), **_at(meta))
+    def index(self, children: list[Any]) -> Index:
+        base, *indices = _no_brackets(children)
+        return Index(base, tuple(indices), **_at(base))
 
-    def attribute(self, meta: Any, children: list[Any]) -> Attribute:
-        return Attribute(children[0], str(children[1]), **_at(meta))
+    def attribute(self, children: list[Any]) -> Attribute:
+        return Attribute(children[0], str(children[1]), **_at(children[0]))
 
-    def number(self, meta: Any, children: list[Any]) -> Number:
-        return Number(_number(str(children[0])), **_tok(children[0]))
+    def number(self, children: list[Any]) -> Number:
+        return Number(_number(str(children[0])), **_at(children[0]))
 
-    def string(self, meta: Any, children: list[Any]) -> String:
-        return String(str(children[0])[1:-1], **_tok(children[0]))
+    def string(self, children: list[Any]) -> String:
+        return String(str(children[0])[1:-1], **_at(children[0]))
 
-    def true(self, meta: Any, children: list[Any]) -> Bool:
-        return Bool(True, **_tok(children[0]))
+    def true(self, children: list[Any]) -> Bool:
+        return Bool(True, **_at(children[0]))
 
-    def false(self, meta: Any, children: list[Any]) -> Bool:
-        return Bool(False, **_tok(children[0]))
+    def false(self, children: list[Any]) -> Bool:
+        return Bool(False, **_at(children[0]))
 
-    def name(self, meta: Any, children: list[Any]) -> Name:
-        return Name(str(children[0]), **_tok(children[0]))
+    def name(self, children: list[Any]) -> Name:
+        return Name(str(children[0]), **_at(children[0]))
 
-    def list_literal(self, meta: Any, children: list[Any]) -> ListLiteral:
-        return ListLiteral(tuple(c for c in children if c is not None), **_at(meta))
+    def list_literal(self, children: list[Any]) -> ListLiteral:
+        bracket, *items = children
+        return ListLiteral(tuple(c for c in items if c is not None), **_at(bracket))
 
-    def run_expr(self, meta: Any, children: list[Any]) -> Run:
-        return Run(str(children[0]), **_at(meta))
+    def run_expr(self, children: list[Any]) -> Run:
+        return Run(str(children[1]), **_at(children[0]))
 
-    def call(self, meta: Any, children: list[Any]) -> Call:
+    def call(self, children: list[Any]) -> Call:
         name, *arguments = children
         args = tuple(a for a in arguments if a is not None and not isinstance(a, Keyword))
         keywords = tuple(a for a in arguments if isinstance(a, Keyword))
-        return Call(str(name), args, keywords, **_at(meta))
+        return Call(str(name), args, keywords, **_at(name))
 
-    def argument(self, meta: Any, children: list[Any]) -> Any:
+    def argument(self, children: list[Any]) -> Any:
         return children[0]
 
-    def keyword_argument(self, meta: Any, children: list[Any]) -> Keyword:
-        return Keyword(str(children[0]), children[1], **_at(meta))
+    def keyword_argument(self, children: list[Any]) -> Keyword:
+        return Keyword(str(children[0]), children[1], **_at(children[0]))
 
 
 @dataclass(frozen=True, slots=True)
@@ -459,5 +465,5 @@ def parse(text: str) -> tuple[Function | Statement, ...]:
             line, column = error.line, error.column
             message = f"syntax_error_on_line:{line}:{_source_line(text, line)}:"
         raise ScriptCompileError(line, column, message) from None
-    items: tuple[Function | Statement, ...] = _Build().transform(tree)
+    items: tuple[Function | Statement, ...] = tree  # type: ignore[assignment] # the transformer's start
     return items
