@@ -36,6 +36,7 @@ from urdaemon.protocols.trajectory_point import (
 from urdaemon.urscript import ScriptParameters, render_control_script
 
 __all__ = [
+    "CB3_DT",
     "DT",
     "HOME",
     "NAMES",
@@ -56,7 +57,11 @@ __all__ = [
 DT: Final = 0.002
 """s: the e-Series controller cycle."""
 VERSION: Final = (5, 15)
-"""The controller version the script is rendered and compiled for."""
+"""The e-Series controller version the script is rendered and compiled for."""
+CB3_DT: Final = 0.008
+"""s: the CB3 controller cycle."""
+CB3_VERSION: Final = (3, 15)
+"""The CB3 controller version the script is rendered and compiled for."""
 HOME: Final = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0)
 ZERO: Final = (0.0,) * 6
 WAIT_S: Final = 20.0
@@ -78,8 +83,8 @@ def v0(value: float) -> tuple[float, ...]:
     return (value, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-def make_arm() -> FakeArm:
-    model = load_ur_model("ur10e")
+def make_arm(model_name: str = "ur10e") -> FakeArm:
+    model = load_ur_model(model_name)
     arm = FakeArm(model, model.dh, initial_positions=HOME, powered=True)
     assert arm.start_program() is None
     return arm
@@ -169,13 +174,17 @@ class Daemon:
 class Rig:
     """The program, its arm and host, the test daemon, and the controller's cycle."""
 
-    def __init__(self, daemon: Daemon, arm: FakeArm, text: str) -> None:
+    def __init__(self, daemon: Daemon, arm: FakeArm, text: str, series: str = "e") -> None:
         self.daemon = daemon
         self.arm = arm
         self.messages: list[tuple[str, str]] = []
         """Every ``host.message(kind, text)``: textmsg, popup and runtime messages."""
-        self.host = ScriptHost(arm, step_time=DT, series="e", version=VERSION, message=self._message)
-        self.program = compile_program(text, series="e", version=VERSION)
+        version = VERSION if series == "e" else CB3_VERSION
+        self.step_time = DT if series == "e" else CB3_DT
+        self.host = ScriptHost(
+            arm, step_time=self.step_time, series=series, version=version, message=self._message
+        )
+        self.program = compile_program(text, series=series, version=version)
         self.run: ScriptRun = self.program.start(self.host)
         self.cycles = 0
         self.history: list[list[float]] = []
@@ -208,7 +217,7 @@ class Rig:
             self._closed = True
             self.host.close()
             self.arm.stop_program()
-        self.arm.step(DT)
+        self.arm.step(self.step_time)
         self.cycles += 1
         self.history.append(list(self.arm.q))
         self.speeds.append(list(self.arm.qd))
@@ -283,20 +292,22 @@ class Rig:
         return self.run._namespace["v_" + name]  # the test looks inside the program
 
 
-def script_text(ports: dict[str, int], server_ip: str = "127.0.0.1") -> str:
+def script_text(ports: dict[str, int], server_ip: str = "127.0.0.1", series: str = "e") -> str:
+    version = VERSION if series == "e" else CB3_VERSION
     return render_control_script(
         ScriptParameters(
             server_ip,
             reverse_port=ports[REV],
             trajectory_port=ports[TRAJ],
             script_command_port=ports[SCRIPT],
-            controller_version=(*VERSION, 0),
+            controller_version=(*version, 0),
         )
     )
 
 
-def start_rig(daemon: Daemon, server_ip: str = "127.0.0.1") -> Rig:
-    return Rig(daemon, make_arm(), script_text(daemon.ports, server_ip))
+def start_rig(daemon: Daemon, server_ip: str = "127.0.0.1", series: str = "e") -> Rig:
+    arm = make_arm("ur10e" if series == "e" else "ur10")
+    return Rig(daemon, arm, script_text(daemon.ports, server_ip, series), series)
 
 
 async def connect(rig: Rig) -> None:
@@ -306,14 +317,14 @@ async def connect(rig: Rig) -> None:
 
 
 @contextlib.asynccontextmanager
-async def running_script(*, reverse_greeting: bytes = b"") -> AsyncIterator[Rig]:
+async def running_script(*, reverse_greeting: bytes = b"", series: str = "e") -> AsyncIterator[Rig]:
     """The rendered script, connected to a test daemon and in its control loop; closes everything after."""
     daemon = Daemon()
     if reverse_greeting:
         daemon.greeting[REV] = reverse_greeting
     for name in NAMES:
         await daemon.serve(name)
-    rig = start_rig(daemon)
+    rig = start_rig(daemon, series=series)
     try:
         await connect(rig)
         yield rig

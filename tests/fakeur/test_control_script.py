@@ -17,6 +17,7 @@ import struct
 import pytest
 
 from tests.fakeur.control_rig import (
+    CB3_DT,
     DT,
     HOME,
     NAMES,
@@ -186,13 +187,9 @@ async def test_a_servoj_target_beyond_the_joint_speed_limit_moves_the_arm_at_its
         assert max(moves) == pytest.approx(rig.arm.max_velocity[0] * DT, rel=1e-9)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="fakeur/arm.py FakeArm._step_play keeps the played motion's unlimited velocity as the "
-    "commanded one (_program_qd, 15 rad/s from servoj's ServoRamp) while the arm moves at 2.09 rad/s; "
-    "lib_motion's stopj starts its LinearStop from that: 3.75 s at the joint limit, over 5 rad of travel",
-)
 async def test_stopped_after_an_unreachable_servoj_stream_stops_within_the_stopping_distance() -> None:
+    """Before fd8f3a0 the arm kept servoj's unlimited 15 rad/s as its commanded velocity, and stopj
+    stopped from it: 3.75 s at the joint limit, over 5 rad of travel after STOPPED."""
     async with running_script() as rig:
         await servo_frames_15_rad_per_s_apart(rig)
         await rig.step(25)
@@ -204,13 +201,9 @@ async def test_stopped_after_an_unreachable_servoj_stream_stops_within_the_stopp
         assert rig.arm.q[0] - at <= speed * stopping / 2 + 2 * speed * DT
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="fakeur/arm.py FakeArm._step_play sets _target_q/_target_qd from the played motion unlimited "
-    "(servoj's ServoRamp: 15 rad/s) while _step_servo moves the arm at the joint limit; "
-    "get_target_joint_speeds() then reports 15 rad/s, and the script extrapolates its setpoint with it",
-)
 async def test_extrapolating_between_frames_never_outruns_the_joint_speed_limit() -> None:
+    """Before fd8f3a0 get_target_joint_speeds() reported servoj's unlimited 15 rad/s while the arm moved
+    at its 2.09 rad/s limit, and the script extrapolated its setpoint at 15 rad/s."""
     async with running_script() as rig:
         start = await servo_frames_15_rad_per_s_apart(rig)
         setpoints = []
@@ -607,3 +600,33 @@ async def test_an_unknown_script_command_is_reported_and_ignored() -> None:
         rig.daemon.send_command(sc.SetToolVoltage(12))  # the stream is still in step
         await rig.until(lambda: rig.arm.io.tool_voltage == 12, 20)
         assert rig.run.error is None
+
+
+# ---- CB3 -------------------------------------------------------------------------------------------------
+
+
+async def test_the_cb3_rendering_runs_at_8_ms() -> None:
+    """The script rendered for a CB3 (no set_target_payload, no tool_contact, no force gain scaling)."""
+    async with running_script(series="cb3") as rig:
+        assert rig.said("urdaemon: control active, steptime 0.008")
+        step = 0.008  # rad per frame: 1 rad/s at 125 Hz
+        for k in range(1, 26):
+            rig.daemon.send(ServoJ(j0(step * k), timeout=0.1))
+            await rig.step(1)
+            assert rig.arm.q[0] == pytest.approx(HOME[0] + step * k, abs=1e-9), "one frame a cycle"
+        rig.daemon.send(Idle(timeout=0.0))
+        await rig.until(rig.at_rest, 100)
+        point = SplinePoint(j0(0.0), ZERO, None, 0.4)
+        mark = len(rig.history)
+        assert await rig.trajectory(point) is TrajectoryResultCode.SUCCESS
+        await rig.until(rig.at_rest, 100)
+        start = rig.first_motion(mark)
+        assert rig.last_motion(start) - start + 1 == round(0.4 / CB3_DT)
+        # the spline's integration error grows with the cycle squared: 1.4e-4 rad here
+        assert rig.arm.q[0] == pytest.approx(point.positions[0], abs=2e-4)
+        force = sc.StartForceMode(ZERO, (0, 0, 1, 0, 0, 0), (0.0, 0.0, 5.0, 0.0, 0.0, 0.0), 2, (0.1,) * 6)
+        rig.daemon.send_command(force)
+        rig.daemon.send_command(sc.SetTargetPayload(1.0, (0.0, 0.0, 0.1), (0.01,) * 3 + (0.0,) * 3, 0.5))
+        await rig.until(lambda: rig.arm.force_mode and rig.arm.payload_mass == 1.0, 20)
+        assert rig.run.error is None
+        await stop(rig)
