@@ -221,7 +221,7 @@ async def test_extrapolating_between_frames_never_outruns_the_joint_speed_limit(
     reason="the script's ud_servo_loop extrapolates a stale setpoint by get_target_joint_speeds() * "
     "UD_STEP: after a frame that corrects an extrapolation, that is the speed of the correcting jump "
     "(-5 rad/s here), so the setpoint runs away from the last frame (-0.4 rad in 40 cycles) until the "
-    "next frame or the read timeout",
+    "next frame or the read timeout (urcl's extrapolate() does the same)",
 )
 async def test_a_frame_that_corrects_an_extrapolation_is_not_taken_for_the_arms_speed() -> None:
     """Frames bunched by a late daemon: after a gap, a frame says the trajectory stopped at the last
@@ -350,7 +350,8 @@ async def test_a_cubic_trajectory_reaches_each_point_at_its_time() -> None:
 @pytest.mark.xfail(
     strict=True,
     reason="the script integrates each spline segment open-loop with speedj ramps (ud_run_polynomial), "
-    "missing the last point by the trapezoid error, 8e-6 rad here; servoj to q(t) would land exactly",
+    "missing the last point by the trapezoid error, 8e-6 rad here (urcl's jointSplineRun does the "
+    "same); commanding each cycle's speed from the path's position minus the actual one would land",
 )
 async def test_a_cubic_trajectory_ends_exactly_on_its_last_point() -> None:
     async with running_script() as rig:
@@ -393,7 +394,7 @@ async def test_a_last_segment_that_ends_too_fast_slows_down_along_its_path() -> 
     strict=True,
     reason="the script's slow-down in ud_run_polynomial commands each cycle's speed as if the arm "
     "jumped to it, but speedj ramps from the previous one: the arm overshoots the path's end by 1.3e-3 "
-    "rad here (about half a cycle at the speed where the slow-down starts)",
+    "rad here (urcl's jointSplineStep does the same)",
 )
 async def test_a_last_segment_that_slows_down_still_ends_on_its_path_end() -> None:
     async with running_script() as rig:
@@ -477,7 +478,7 @@ async def test_a_paused_program_freezes_the_trajectory_until_resumed() -> None:
     strict=True,
     reason="the script's ud_run_polynomial integrates the segment's velocity open-loop (speedj per "
     "cycle, no position feedback within a segment): what the pause's stop lost is never made up, and "
-    "the trajectory answers SUCCESS 0.048 rad short of its target",
+    "the trajectory answers SUCCESS 0.048 rad short of its target (as urcl's jointSplineRun would)",
 )
 async def test_a_trajectory_paused_and_resumed_still_reaches_its_target() -> None:
     target = j0(0.1)
