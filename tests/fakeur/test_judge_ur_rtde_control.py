@@ -206,12 +206,19 @@ def test_get_inverse_kinematics_matches_the_forward_kinematics(judge: Judge) -> 
     q = list(judge.control.getInverseKinematics(pose, qnear, 1e-10, 1e-10))
     assert len(q) == 6, judge.explain(f"getInverseKinematics({pose}, {qnear})")
     assert _near(q, known, JOINT_TOL), f"the branch nearest {qnear} is {known}, got {q}"
-    for name, fk in (
-        ("the fake's get_forward_kin", list(judge.control.getForwardKinematics(q, [0.0] * 6))),
-        ("our forward kinematics", list(tcp_pose(MODEL, q))),
-    ):
-        off = pose_off(fk, pose, POSITION_TOL, ORIENTATION_TOL)
-        assert not off, f"{name} of the IK result: {off} (the pose asked for)"
+    off = pose_off(tcp_pose(MODEL, q), pose, POSITION_TOL, ORIENTATION_TOL)
+    assert not off, f"our forward kinematics of the IK result: {off} (the pose asked for)"
+    # the fake's get_forward_kin of the result, with a TCP offset: the pose asked for, moved by it.
+    # (Not getForwardKinematics(q): ur_rtde's script then reads the TCP offset from input registers
+    # 6-11 that the call leaves as the previous call wrote them; and with an all-zero offset ur_rtde
+    # 1.6.5 sends its q-only recipe with twelve doubles.)
+    tcp = [0.0, 0.02, 0.1, 0.0, 0.2, 0.0]
+    fk = list(judge.control.getForwardKinematics(q, tcp))
+    off = pose_off(fk, tcp_pose(MODEL, known, tcp), POSITION_TOL, ORIENTATION_TOL)
+    assert not off, f"get_forward_kin(q, tcp): {off}\n" + judge.explain("getForwardKinematics(q, tcp)")
+    here = list(judge.control.getForwardKinematics())
+    off = pose_off(here, tcp_pose(MODEL, judge.q()), POSITION_TOL, ORIENTATION_TOL)
+    assert not off, f"get_forward_kin() at the current joints: {off}"
     # without qnear the controller solves near the current joints
     q_here = list(judge.control.getInverseKinematics(list(tcp_pose(MODEL, judge.q()))))
     assert _near(q_here, judge.q(), JOINT_TOL), f"IK of the current pose: {q_here}, joints {judge.q()}"
