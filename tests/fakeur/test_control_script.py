@@ -216,13 +216,6 @@ async def test_extrapolating_between_frames_never_outruns_the_joint_speed_limit(
         assert setpoints[-1] - (HOME[0] + 0.03) < 0.5 * (rig.cycles - start) * 0.03, "not at 15 rad/s"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the script's ud_servo_loop extrapolates a stale setpoint by get_target_joint_speeds() * "
-    "UD_STEP: after a frame that corrects an extrapolation, that is the speed of the correcting jump "
-    "(-5 rad/s here), so the setpoint runs away from the last frame (-0.4 rad in 40 cycles) until the "
-    "next frame or the read timeout (urcl's extrapolate() does the same)",
-)
 async def test_a_frame_that_corrects_an_extrapolation_is_not_taken_for_the_arms_speed() -> None:
     """Frames bunched by a late daemon: after a gap, a frame says the trajectory stopped at the last
     frame; with no further frame, the setpoint must then stay there (the stream's rate is zero)."""
