@@ -340,12 +340,6 @@ async def test_a_cubic_trajectory_reaches_each_point_at_its_time() -> None:
         await stop(rig)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the script integrates each spline segment open-loop with speedj ramps (ud_run_polynomial), "
-    "missing the last point by the trapezoid error, 8e-6 rad here (urcl's jointSplineRun does the "
-    "same); commanding each cycle's speed from the path's position minus the actual one would land",
-)
 async def test_a_cubic_trajectory_ends_exactly_on_its_last_point() -> None:
     async with running_script() as rig:
         assert await rig.trajectory(*CUBIC_POINTS) is TrajectoryResultCode.SUCCESS
@@ -383,12 +377,6 @@ async def test_a_last_segment_that_ends_too_fast_slows_down_along_its_path() -> 
         assert rig.arm.q[0] == pytest.approx(point.positions[0], abs=0.01)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the script's slow-down in ud_run_polynomial commands each cycle's speed as if the arm "
-    "jumped to it, but speedj ramps from the previous one: the arm overshoots the path's end by 1.3e-3 "
-    "rad here (urcl's jointSplineStep does the same)",
-)
 async def test_a_last_segment_that_slows_down_still_ends_on_its_path_end() -> None:
     async with running_script() as rig:
         assert await rig.trajectory(TOO_FAST_AT_THE_END) is TrajectoryResultCode.SUCCESS
@@ -467,12 +455,6 @@ async def test_a_paused_program_freezes_the_trajectory_until_resumed() -> None:
         assert rig.daemon.results == [TrajectoryResultCode.SUCCESS]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the script's ud_run_polynomial integrates the segment's velocity open-loop (speedj per "
-    "cycle, no position feedback within a segment): what the pause's stop lost is never made up, and "
-    "the trajectory answers SUCCESS 0.048 rad short of its target (as urcl's jointSplineRun would)",
-)
 async def test_a_trajectory_paused_and_resumed_still_reaches_its_target() -> None:
     target = j0(0.1)
     async with running_script() as rig:
