@@ -744,13 +744,15 @@ def test_an_unterminated_line_or_block_waits_for_more() -> None:
     assert conn.receive_data(b"d\n") == [ProgramReceived("def", "p", "def p():\n  sync()\nend\n")]
 
 
-def test_robot_refuses_non_ascii_script_text() -> None:
+def test_robot_passes_non_ascii_script_text_on_for_the_compiler_to_refuse() -> None:
+    """A controller answers a non-ASCII character with a compile error naming its line and column;
+    the robot side used to fail the connection instead (the client never learnt why)."""
     conn = robot()
     conn.receive_data(b"power on\n")
-    with pytest.raises(RemoteProtocolError) as info:
-        conn.receive_data('textmsg("é")\n'.encode())
-    assert info.value.protocol == "primary"
-    assert info.value.offset == len(b"power on\n") + len('textmsg("')
+    assert conn.receive_data('textmsg("é")\n'.encode()) == [CommandReceived('textmsg("é")')]
+    assert conn.receive_data(b"def p():\n  x = 1\xff\nend\n") == [
+        ProgramReceived("def", "p", "def p():\n  x = 1\udcff\nend\n")
+    ]
 
 
 def test_robot_caps_a_line_without_newline() -> None:

@@ -1009,10 +1009,10 @@ class FakeController:
     def _play(self) -> str | None:
         """``play``: resume a paused program, or start the loaded one; a reason if it cannot."""
         arm, program = self.arm, self.loaded_program
+        if program is None:  # a headless program (sent, not loaded) cannot be played, not even resumed
+            return "no program loaded"
         if arm.runtime_state is RuntimeState.PAUSED:
             return arm.resume_program()
-        if program is None:
-            return "no program loaded"
         if program != self.default_program and not program.endswith(SCRIPT_SUFFIXES):
             return f"{program}: the fake plays only URScript files and the External Control program"
         reason = arm.start_program()

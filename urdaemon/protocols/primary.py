@@ -1084,10 +1084,10 @@ class PrimaryConnection:
 
     def _parse_lines(self, events: list[PrimaryEvent]) -> None:
         while (raw := self._buffer.take_line(MAX_SCRIPT_BYTES)) is not None:
-            try:
-                line = raw.decode("ascii").removesuffix("\n").removesuffix("\r")
-            except UnicodeDecodeError as err:
-                raise self._error("script text is not ASCII (§2.4)", err.start) from err
+            # Non-ASCII text is the controller's compiler's to refuse (with its line and column), not a
+            # reason to drop the connection: it is passed on as read (UTF-8; other bytes kept as
+            # surrogate escapes), one character per character sent.
+            line = raw.decode("utf-8", "surrogateescape").removesuffix("\n").removesuffix("\r")
             event = self._on_line(line)
             if event is not None:
                 events.append(event)
