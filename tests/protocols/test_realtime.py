@@ -43,7 +43,10 @@ def test_fields_sit_at_the_offsets_of_the_client_interface_table() -> None:
     robot = rt.RealtimeConnection(Side.ROBOT, (5, 15))
     robot.send(state)
     data = robot.data_to_send()
-    at = lambda offset, n=1: struct.unpack_from(f">{n}d", data, offset)  # noqa: E731
+
+    def at(offset: int, n: int = 1) -> tuple[float, ...]:
+        return struct.unpack_from(f">{n}d", data, offset)
+
     assert at(4) == (12.5,)
     assert at(252, 6) == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
     assert at(756) == (7.0,)
@@ -106,6 +109,6 @@ def test_scripts_arrive_on_the_robot_side_as_on_the_primary_interface() -> None:
 
 def test_each_side_sends_only_its_own_messages() -> None:
     with pytest.raises(LocalProtocolError):
-        rt.RealtimeConnection(Side.ROBOT).send(prim.Script("x"))  # type: ignore[arg-type]
+        rt.RealtimeConnection(Side.ROBOT).send(prim.Script("x"))
     with pytest.raises(LocalProtocolError):
         rt.RealtimeConnection(Side.DAEMON).send(rt.RealtimeState())
