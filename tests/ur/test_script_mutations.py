@@ -68,6 +68,8 @@ class Mutation:
     lines_after: int = 0
     """The fault may be reported this many lines later (a missing token is seen at the next one)."""
     any_column: bool = False
+    anywhere: bool = False
+    """Any line will do: where a missing ``end`` shows depends on how the parser pairs the others."""
 
     def apply(self, script: str) -> tuple[str, Where]:
         """The corrupted script and where its fault lies in the program the backend sends."""
@@ -78,6 +80,8 @@ class Mutation:
         column = at - (corrupted.rfind("\n", 0, at) + 1) + 1
         # as sent: "def externalControl():" is line 1 and every line of ours starts with a tab
         first = line + 1
+        if self.anywhere:
+            return corrupted, Where((1, corrupted.count("\n") + 3))
         if self.any_column:
             return corrupted, Where((first, first + self.lines_after))
         columns = (column + 1, column + len(self.fault))
@@ -90,8 +94,10 @@ MUTATIONS = [
         "raw[first + 2] / UD_MULT]\nend\n",
         "raw[first + 2] / UD_MULT]\n# end\n",
         "# end",
-        lines_after=10_000,  # seen where the program ends too early: anywhere after the missing `end`
-        any_column=True,
+        # blocks nest and indentation means nothing: each later `end` closes the wrong block, and
+        # the one left open may be reported (the program's own `def`, line 1) as well as the place
+        # where the pairing breaks
+        anywhere=True,
     ),
     Mutation("unknown builtin", "UD_STEP = get_steptime()", "UD_STEP = get_steptiem()", "get_steptiem"),
     Mutation(
