@@ -27,7 +27,9 @@ import pytest
 import urdaemon.urscript
 from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
-from tests.ur.test_links_harness import UrRun, program_is_running, ur_run
+from tests.ur.test_links_harness import JOINTS, UrRun, program_is_running, ur_run
+from urdaemon.backends.ur.backend import UrBackend
+from urdaemon.cell.load import parse_cell
 from urdaemon.errors import UrDaemonError
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.protocols import primary as prim
@@ -260,6 +262,69 @@ async def test_a_corrupted_control_script_is_refused_with_line_and_column(
         reason = run.backend.state.lifecycle_reason
         assert f"runtime exception at {line}:{column}" in reason, f"status reason: {reason!r}"
         assert not run.fake.arm.program_running
+
+
+CB3_MUTATIONS = [
+    MUTATIONS[1],  # unknown builtin
+    MUTATIONS[5],  # wrong socket name
+    Mutation(
+        "a builtin this controller does not have",
+        "local steps_back = 0",
+        "local steps_back = 0\n  direct_torque([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])",
+        "direct_torque",
+    ),
+]
+"""Corruptions of the CB3 rendering (controller 3.15): direct_torque came with e-Series 5.23. (Not
+tool_contact: CB3 3.14 compiles urcl's script, which names it behind a version check.)"""
+
+
+@contextlib.asynccontextmanager
+async def cb3_run() -> AsyncIterator[UrRun]:
+    """A CB3 UR10 fake (controller 3.15, 125 Hz) and a ``UrBackend`` for it, not started."""
+    address = fake_address()
+    ports = [free_tcp_port() for _ in range(4)]
+    robot = parse_cell(
+        f"""
+cell: cb3
+robots:
+  - name: alice
+    model: ur10
+    backend: ur
+    address: {address}
+    ports:
+      {{reverse: {ports[0]}, script_sender: {ports[1]}, trajectory: {ports[2]}, script_command: {ports[3]}}}
+    ur: {{startup: true, listen_address: 127.0.0.1}}
+"""
+    ).robots[0]
+    fake = FakeController(
+        "ur10", address=address, initial_positions=HOME, powered=True, controller_version=(3, 15, 7, 0)
+    )
+    await fake.start()
+    run = UrRun(UrBackend(robot, JOINTS, expected_hash=None), fake)
+    try:
+        yield run
+    finally:
+        await run.stop()
+        await fake.close()
+
+
+@pytest.mark.parametrize("mutation", CB3_MUTATIONS, ids=[m.name for m in CB3_MUTATIONS])
+async def test_a_corrupted_cb3_control_script_is_refused_with_line_and_column(
+    mutation: Mutation, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[Where] = []
+    monkeypatch.setattr(urdaemon.urscript, "render_control_script", corrupting(mutation, seen))
+    async with cb3_run() as run:
+        connected = _count_links(run)
+        run.start()
+        restarts: list[str] = []
+        await _until(run, lambda: len(_exceptions(run)) >= 2, "two refusals of the program", restarts)
+        line, column, _ = _exceptions(run)[0]
+        assert seen[0].matches(line, column), (
+            f"{mutation.name}: the fault is at {seen[0]}, the fake said {line}:{column}"
+        )
+        assert connected == [], f"the refused program connected back: {connected}"
+        assert f"runtime exception at {line}:{column}" in run.backend.state.lifecycle_reason
 
 
 async def test_the_uncorrupted_script_runs_and_connects_back(monkeypatch: pytest.MonkeyPatch) -> None:
