@@ -7,9 +7,14 @@ refuse it (e.g. brake release while powered off). Joint motion follows the activ
 stop with a given deceleration), always within the model's joint velocity limits; a command outside
 the joint position limits triggers a protective stop as on a real arm.
 
-A played motion advances ``dt × speed slider`` of program time per cycle (nothing while the arm cannot
-move): the controller's time scaling. When it is over and no new motion replaced it, the arm stops
-with the motion's deceleration (a speedj or servoj that is not renewed decelerates to rest).
+A played motion advances ``dt × speed slider × speed scaling`` of program time per cycle (nothing while
+the arm cannot move): the controller's time scaling. When it is over and no new motion replaced it, the
+arm stops with the motion's deceleration (a speedj or servoj that is not renewed decelerates to rest).
+
+Pausing a program (PLAYING → PAUSING → PAUSED) ramps the speed scaling to 0: the motion being played
+goes on along its path with time slowed to a stop, decelerating within the joint limits. Resuming
+(PAUSED → PLAYING) ramps it back to 1 the same way. The controller steps the program while it plays
+or pauses, never while it is PAUSED.
 
 State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
 POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
@@ -31,6 +36,7 @@ from urdaemon.fakeur.motion import (
     TIME_EPSILON_S,
     LinearStop,
     Motion,
+    ScalingRamp,
     compose,
     leading_stop_time,
     matrix_of_pose,
@@ -45,6 +51,7 @@ __all__ = [
     "BOOT_TIME_S",
     "BRAKE_RELEASE_TIME_S",
     "HISTORY_STEPS",
+    "PAUSE_ACCELERATION_SHARE",
     "PROTECTIVE_STOP_DECELERATION",
     "FakeArm",
     "IoState",
@@ -64,6 +71,9 @@ SPEEDJ_DEFAULT_ACCELERATION = 40.0
 """rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
+PAUSE_ACCELERATION_SHARE = 0.5
+"""The share of each joint's acceleration limit that the speed scaling's ramp may use when the
+controller pauses or resumes a program (the motion's own acceleration comes on top, scaled down)."""
 
 
 class RuntimeState(enum.IntEnum):
@@ -128,6 +138,7 @@ class FakeArm:
         self.qdd = [0.0] * 6
         self.current = [0.0] * 6
         self.max_velocity = [j.max_velocity for j in model.joints]
+        self.max_acceleration = [j.max_acceleration for j in model.joints]
         self.min_position = [
             j.min_position if j.min_position is not None else -math.inf for j in model.joints
         ]
@@ -146,7 +157,10 @@ class FakeArm:
         self.speed_slider = 1.0
         """RTDE ``target_speed_fraction``."""
         self.speed_scaling = 1.0
-        """RTDE ``speed_scaling``: the controller's own scaling (1 unless stopping or paused)."""
+        """RTDE ``speed_scaling``: the controller's own scaling (1 unless stopping or paused; ramped
+        while the program pauses and resumes)."""
+        self._scaling = ScalingRamp()
+        """The time scaling of played motions that pausing and resuming ramp."""
         self.io = IoState()
         self.payload_mass = 0.0
         self.payload_cog = [0.0, 0.0, 0.0]
@@ -172,6 +186,10 @@ class FakeArm:
         """rad/s of program time: the played motion's velocity before the speed slider's scaling."""
         self._history = [list(self.q) for _ in range(HISTORY_STEPS)]
         self._history_at = 0
+        self._last_dt = 0.002
+        """s: the last cycle's time (a pause or resume ramp shorter than one cycle happens at once)."""
+        self._carry = 0.0
+        """s of program time: how far the last cycle went on past the end of the motion it ended."""
         if powered:
             self.robot_mode = RobotMode.RUNNING
 
@@ -210,8 +228,9 @@ class FakeArm:
         if self.safety_mode is SafetyMode.NORMAL or self.safety_mode is SafetyMode.REDUCED:
             self.safety_mode = SafetyMode.PROTECTIVE_STOP
             self.stop(PROTECTIVE_STOP_DECELERATION)
-            if self.runtime_state is RuntimeState.PLAYING:
+            if self.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING):
                 self.runtime_state = RuntimeState.PAUSED
+                self._scaling.set(0.0)
 
     def unlock_protective_stop(self) -> str | None:
         """Clear a protective stop; a reason if there is none to clear or it is too early."""
@@ -252,25 +271,49 @@ class FakeArm:
         if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
             return f"safety mode is {self.safety_mode.name}"
         self.runtime_state = RuntimeState.PLAYING
+        self._scaling.set(1.0)
         return None
 
     def pause_program(self) -> None:
-        """Pause the program (motion stops)."""
-        if self.runtime_state is RuntimeState.PLAYING:
+        """Pause the program: a played motion slows down along its path (PAUSING) to rest (PAUSED).
+
+        Any other motion (a stop, a legacy servo or speed target) stops at once as a protective stop
+        does, and the program is PAUSED."""
+        if self.runtime_state is not RuntimeState.PLAYING:
+            return
+        if self._mode is MotionMode.PLAY:
+            self.runtime_state = RuntimeState.PAUSING
+            self._scaling.ramp_to(
+                0.0, self.qd, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt
+            )
+            if self._scaling.scale == 0.0:  # at rest: paused at once
+                self.runtime_state = RuntimeState.PAUSED
+            return
+        if self._mode is not MotionMode.HOLD:
             self.stop(PROTECTIVE_STOP_DECELERATION)
-            self.runtime_state = RuntimeState.PAUSED
+        self._scaling.set(0.0)
+        self.runtime_state = RuntimeState.PAUSED
 
     def resume_program(self) -> str | None:
-        """Resume a paused program."""
+        """Resume a paused program: PLAYING, the paused motion speeding up along its path."""
         if self.runtime_state is not RuntimeState.PAUSED:
             return "no paused program"
-        return self.start_program()
+        if self.robot_mode is not RobotMode.RUNNING:
+            return f"robot is {self.robot_mode.name}, not RUNNING"
+        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+            return f"safety mode is {self.safety_mode.name}"
+        self.runtime_state = RuntimeState.PLAYING
+        slider = self.speed_slider
+        velocity = [v * slider for v in self._program_qd] if self._mode is MotionMode.PLAY else [0.0] * 6
+        self._scaling.ramp_to(1.0, velocity, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt)
+        return None
 
     def stop_program(self) -> None:
         """Stop the program (motion stops)."""
         if self.runtime_state is not RuntimeState.STOPPED:
             self.stop(PROTECTIVE_STOP_DECELERATION)
             self.runtime_state = RuntimeState.STOPPED
+        self._scaling.set(1.0)
 
     @property
     def program_running(self) -> bool:
@@ -302,6 +345,7 @@ class FakeArm:
         self._servo_target = None
         self._motion = None
         self._played = None
+        self._carry = 0.0
 
     def play(self, motion: Motion, stop_deceleration: float) -> bool:
         """Follow ``motion`` from its start on the program's time; False (ignored) if the arm cannot move.
@@ -312,7 +356,8 @@ class FakeArm:
             return False
         self._mode = MotionMode.PLAY
         self._motion = self._played = motion
-        self._motion_time = 0.0
+        self._motion_time = self._carry  # program time the arm already went on past the last motion
+        self._carry = 0.0
         self._motion_stop = max(float(stop_deceleration), 1e-6)
         self._servo_target = None
         return True
@@ -377,6 +422,8 @@ class FakeArm:
     def step(self, dt: float) -> None:
         """Advance one controller cycle of ``dt`` seconds."""
         self.timestamp += dt
+        self._last_dt = dt
+        self._carry = 0.0
         self._advance_transitions()
         if self.robot_mode is not RobotMode.RUNNING and self._mode is not MotionMode.STOP:
             self._halt_motion()
@@ -385,10 +432,14 @@ class FakeArm:
             and self._mode is not MotionMode.STOP
         ):
             self.stop(PROTECTIVE_STOP_DECELERATION)
-        self.speed_scaling = 1.0 if self.runtime_state is RuntimeState.PLAYING else 0.0
+        runtime = self.runtime_state
+        scaling = self._scaling
+        scale = scaling.scale if scaling.settled else scaling.step(dt)
+        playing = runtime is RuntimeState.PLAYING or runtime is RuntimeState.PAUSING
+        self.speed_scaling = scale if playing else 0.0
         mode = self._mode
         if mode is MotionMode.PLAY:
-            self._step_play(dt)
+            self._step_play(dt, scale)
         elif mode is MotionMode.SERVO and self._servo_target is not None:
             self._step_servo(dt, self._servo_target)
         elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
@@ -398,6 +449,8 @@ class FakeArm:
         else:
             self.qd = [0.0] * 6
             self.qdd = [0.0] * 6
+        if runtime is RuntimeState.PAUSING and scale == 0.0 and self.runtime_state is RuntimeState.PAUSING:
+            self.runtime_state = RuntimeState.PAUSED  # the scaling has come to 0: at rest on the path
         self._check_limits()
         at = (self._history_at + 1) % HISTORY_STEPS
         self._history[at][:] = self.q
@@ -412,7 +465,7 @@ class FakeArm:
         elif self.robot_mode is RobotMode.POWER_ON:
             self.robot_mode = RobotMode.RUNNING
 
-    def _step_play(self, dt: float) -> None:
+    def _step_play(self, dt: float, scale: float) -> None:
         motion = self._motion
         if motion is None:
             return
@@ -431,15 +484,25 @@ class FakeArm:
                 self.qd = [0.0] * 6
                 self.qdd = [0.0] * 6
                 return
-        slider = self.speed_slider
+        slider = self.speed_slider * scale
         budget = dt * slider
-        elapsed = min(elapsed + budget, motion.duration)
+        wanted = elapsed + budget
+        elapsed = min(wanted, motion.duration)
         self._motion_time = elapsed
         target = motion.position(elapsed)
         self._target_q = target
         velocity = self._program_qd = motion.velocity(elapsed)
         self._target_qd = [v * slider for v in velocity]
-        if self._step_servo(dt, target):
+        goal = target
+        carry = wanted - elapsed
+        if carry > TIME_EPSILON_S and any(velocity):
+            # the motion ended within this cycle (its time is not a whole number of cycles at this
+            # scaling): the arm goes on at its end velocity for the rest of the cycle, and a motion
+            # played next starts that far into its own time (``play``), so a stream of short motions
+            # (one speedj per cycle) moves smoothly at any scaling. The target stays the motion's end.
+            self._carry = carry
+            goal = [q + v * carry for q, v in zip(target, velocity, strict=True)]
+        if self._step_servo(dt, goal):
             # the motion asks more than the joints can do: what is commanded is what the arm does
             # (the controller's target speeds never exceed the joint limits), and a following
             # motion or stop starts from that
