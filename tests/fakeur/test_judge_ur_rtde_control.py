@@ -36,7 +36,8 @@ rtde_receive = pytest.importorskip("rtde_receive")
 
 pytestmark = pytest.mark.timeout(180)
 
-MODEL = "ur10e"
+SERIES = [("ur10e", "5.15.0", 500.0), ("ur10", "3.15.7", 125.0)]
+"""(model, controller version, controller rate): an e-Series and a CB3 fake."""
 JOINT_TOL = 1e-3
 """rad: a target joint position is reached within this."""
 POSITION_TOL = 1e-4
@@ -55,6 +56,12 @@ class Judge:
     control: Any
     receiver: Any
     primary: PrimaryWatch
+    rate: float
+    """The controller's rate, Hz (ur_rtde paces initPeriod/waitPeriod at it)."""
+
+    @property
+    def model(self) -> str:
+        return self.fake.model
 
     def explain(self, call: str) -> str:
         """The failing call, the controller's messages and the fake's log: for the report."""
@@ -69,11 +76,12 @@ class Judge:
         return bool(max(abs(v) for v in self.receiver.getActualQd()) < STILL)
 
 
-@pytest.fixture
-def judge() -> Iterator[Judge]:
-    with fake_robot(MODEL, "--powered") as fake:
+@pytest.fixture(params=SERIES, ids=["e-series", "cb3"])
+def judge(request: pytest.FixtureRequest) -> Iterator[Judge]:
+    model, version, rate = request.param
+    with fake_robot(model, "--powered", "--controller-version", version) as fake:
         primary = PrimaryWatch(fake.address)
-        receiver = rtde_receive.RTDEReceiveInterface(fake.address, 500.0)
+        receiver = rtde_receive.RTDEReceiveInterface(fake.address, rate)
         try:
             try:
                 control = rtde_control.RTDEControlInterface(fake.address)
@@ -82,7 +90,7 @@ def judge() -> Iterator[Judge]:
                     f"RTDEControlInterface({fake.address!r}) raised {err}\n{primary.describe()}\n"
                     f"fake log:\n{fake.log_tail()}"
                 ) from None
-            judge = Judge(fake, control, receiver, primary)
+            judge = Judge(fake, control, receiver, primary, rate)
             try:
                 assert control.isProgramRunning(), judge.explain("isProgramRunning after connecting")
                 yield judge
@@ -149,19 +157,22 @@ def test_move_l_goes_in_a_straight_line_to_its_target(judge: Judge) -> None:
 def test_servo_j_streamed_for_two_seconds_is_followed(judge: Judge) -> None:
     start = judge.q()
     swing = (0.3, 0.0, -0.2, 0.0, 0.0, 0.25)
+    steps = round(2.0 * judge.rate)  # 2 s of the controller's cycles
 
     def target(k: int) -> list[float]:
-        s = 0.5 * (1 - math.cos(math.pi * min(k, 1000) / 1000))  # at rest at both ends
+        s = 0.5 * (1 - math.cos(math.pi * min(k, steps) / steps))  # at rest at both ends
         return [q + s * d for q, d in zip(start, swing, strict=True)]
 
     seen: list[float] = []
-    for k in range(1, 1251):  # 2 s of the swing at 500 Hz, then 0.5 s holding its end
+    for k in range(1, steps + steps // 4 + 1):  # 2 s of the swing, then 0.5 s holding its end
         t_start = judge.control.initPeriod()
-        assert judge.control.servoJ(target(k), 0.0, 0.0, 0.002, 0.1, 300), judge.explain(f"servoJ #{k}")
+        assert judge.control.servoJ(target(k), 0.0, 0.0, 1 / judge.rate, 0.1, 300), judge.explain(
+            f"servoJ #{k}"
+        )
         judge.control.waitPeriod(t_start)
         seen.append(judge.q()[0])
     assert judge.control.servoStop(10.0), judge.explain("servoStop")
-    end = target(1000)
+    end = target(steps)
     reached = _reach(judge, end)
     assert _near(reached, end, JOINT_TOL), f"servoJ ended at {reached}, last target {end}\n" + judge.explain(
         "servoJ"
@@ -201,12 +212,12 @@ def test_stop_j_ends_an_asynchronous_move_j_short_of_its_target(judge: Judge) ->
 
 def test_get_inverse_kinematics_matches_the_forward_kinematics(judge: Judge) -> None:
     known = [0.2, -1.3, 1.4, -1.6, -1.5, 0.3]
-    pose = list(tcp_pose(MODEL, known))
+    pose = list(tcp_pose(judge.model, known))
     qnear = [v + 0.05 for v in known]
     q = list(judge.control.getInverseKinematics(pose, qnear, 1e-10, 1e-10))
     assert len(q) == 6, judge.explain(f"getInverseKinematics({pose}, {qnear})")
     assert _near(q, known, JOINT_TOL), f"the branch nearest {qnear} is {known}, got {q}"
-    off = pose_off(tcp_pose(MODEL, q), pose, POSITION_TOL, ORIENTATION_TOL)
+    off = pose_off(tcp_pose(judge.model, q), pose, POSITION_TOL, ORIENTATION_TOL)
     assert not off, f"our forward kinematics of the IK result: {off} (the pose asked for)"
     # the fake's get_forward_kin of the result, with a TCP offset: the pose asked for, moved by it.
     # (Not getForwardKinematics(q): ur_rtde's script then reads the TCP offset from input registers
@@ -214,13 +225,13 @@ def test_get_inverse_kinematics_matches_the_forward_kinematics(judge: Judge) -> 
     # 1.6.5 sends its q-only recipe with twelve doubles.)
     tcp = [0.0, 0.02, 0.1, 0.0, 0.2, 0.0]
     fk = list(judge.control.getForwardKinematics(q, tcp))
-    off = pose_off(fk, tcp_pose(MODEL, known, tcp), POSITION_TOL, ORIENTATION_TOL)
+    off = pose_off(fk, tcp_pose(judge.model, known, tcp), POSITION_TOL, ORIENTATION_TOL)
     assert not off, f"get_forward_kin(q, tcp): {off}\n" + judge.explain("getForwardKinematics(q, tcp)")
     here = list(judge.control.getForwardKinematics())
-    off = pose_off(here, tcp_pose(MODEL, judge.q()), POSITION_TOL, ORIENTATION_TOL)
+    off = pose_off(here, tcp_pose(judge.model, judge.q()), POSITION_TOL, ORIENTATION_TOL)
     assert not off, f"get_forward_kin() at the current joints: {off}"
     # without qnear the controller solves near the current joints
-    q_here = list(judge.control.getInverseKinematics(list(tcp_pose(MODEL, judge.q()))))
+    q_here = list(judge.control.getInverseKinematics(list(tcp_pose(judge.model, judge.q()))))
     assert _near(q_here, judge.q(), JOINT_TOL), f"IK of the current pose: {q_here}, joints {judge.q()}"
 
 
@@ -229,13 +240,13 @@ def test_set_tcp_is_reflected_in_the_actual_tcp_pose(judge: Judge) -> None:
     assert judge.control.setTcp(tcp), judge.explain(f"setTcp({tcp})")
 
     def shows_tcp() -> bool:
-        expected = tcp_pose(MODEL, judge.q(), tcp)
+        expected = tcp_pose(judge.model, judge.q(), tcp)
         position, orientation = pose_error(judge.receiver.getActualTCPPose(), expected)
         return position < POSITION_TOL and orientation < ORIENTATION_TOL
 
     assert wait_until(shows_tcp, 10.0), (
         f"getActualTCPPose {list(judge.receiver.getActualTCPPose())}, expected "
-        f"{tcp_pose(MODEL, judge.q(), tcp)} with TCP {tcp}\n" + judge.explain("setTcp")
+        f"{tcp_pose(judge.model, judge.q(), tcp)} with TCP {tcp}\n" + judge.explain("setTcp")
     )
     assert _near(judge.control.getTCPOffset(), tcp, 1e-9)
 
