@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, HISTORY_STEPS, FakeArm, RuntimeState
-from urdaemon.fakeur.motion import SpeedRamp, matrix_of_pose
+from urdaemon.fakeur.motion import JointMove, SpeedRamp, joint_move, matrix_of_pose
 from urdaemon.model import RobotMode, SafetyMode
 
 DT = 0.002
@@ -26,6 +27,10 @@ def _mode(arm: FakeArm) -> RobotMode:
 
 def _safety(arm: FakeArm) -> SafetyMode:
     return arm.safety_mode
+
+
+def _state(arm: FakeArm) -> RuntimeState:
+    return arm.runtime_state
 
 
 def _run(arm: FakeArm, seconds: float) -> None:
@@ -203,3 +208,106 @@ def test_actual_tcp_pose_applies_the_tcp_offset() -> None:
         (x + 0.2 * rotation[2], y + 0.2 * rotation[5], z + 0.2 * rotation[8]), abs=1e-12
     )
     assert tool[3:] == pytest.approx(arm.tcp_pose()[3:], abs=1e-12)
+
+
+# ---- pausing and resuming along the path ------------------------------------------------------------------
+
+
+def _paused_and_resumed(arm: FakeArm, move: JointMove, pause_after: int) -> list[tuple[RuntimeState, float]]:
+    """Play ``move``, pause after ``pause_after`` cycles, resume 50 cycles after PAUSED, play it out;
+    (runtime state, speed scaling) after each cycle."""
+    seen = []
+    assert arm.start_program() is None
+    assert arm.play(move, 1.0)
+    for _ in range(pause_after):
+        arm.step(DT)
+        seen.append((arm.runtime_state, arm.speed_scaling))
+    arm.pause_program()
+    for _ in range(1000):
+        arm.step(DT)
+        seen.append((arm.runtime_state, arm.speed_scaling))
+        if arm.runtime_state is RuntimeState.PAUSED:
+            break
+    _run(arm, 50 * DT)
+    seen.extend([(arm.runtime_state, arm.speed_scaling)] * 50)
+    assert arm.resume_program() is None
+    for _ in range(2000):
+        arm.step(DT)
+        seen.append((arm.runtime_state, arm.speed_scaling))
+        if arm.motion is None:
+            break
+    return seen
+
+
+def test_a_pause_ramps_the_speed_scaling_down_along_the_path_and_resume_ramps_it_up() -> None:
+    """Before, ``pause_program`` stopped the arm as a protective stop does (10 rad/s², the motion
+    dropped): the arm came to rest off the motion's timing and never went on after resume."""
+    arm = _arm(powered=True)
+    start = list(arm.q)
+    target = [start[0] + 0.6, start[1] - 0.3, *start[2:]]
+    move = joint_move(start, target, velocity=1.0, acceleration=2.0, max_velocity=arm.max_velocity)
+    positions: list[list[float]] = [list(arm.q)]
+    original_step = arm.step
+
+    def step(dt: float) -> None:
+        original_step(dt)
+        positions.append(list(arm.q))
+
+    arm.step = step  # type: ignore[method-assign]
+    seen = _paused_and_resumed(arm, move, pause_after=300)  # mid-move, at its cruise speed
+    states = [state for state, _ in seen]
+    assert RuntimeState.PAUSING in states, "slows down first"
+    first_pausing = states.index(RuntimeState.PAUSING)
+    paused = states.index(RuntimeState.PAUSED)
+    ramp = [scaling for _, scaling in seen[first_pausing:paused]]
+    assert paused - first_pausing > 10, "a ramp, not a stop in a cycle"
+    assert all(b < a for a, b in itertools.pairwise(ramp)), "the scaling ramps down"
+    assert seen[paused][1] == 0.0
+    resumed = [scaling for state, scaling in seen[paused:] if state is RuntimeState.PLAYING]
+    assert resumed[0] < 0.2, "the scaling ramps back up"
+    assert resumed[-1] == 1.0
+    # every position lies on the move's path (a straight line in joint space), joint 0 never goes back
+    for q in positions:
+        fraction = (q[0] - start[0]) / 0.6
+        assert q[1] == pytest.approx(start[1] - 0.3 * fraction, abs=1e-12)
+    steps = [b[0] - a[0] for a, b in itertools.pairwise(positions)]
+    assert min(steps) >= 0.0
+    speeds = [s / DT for s in steps]
+    accelerations = [(b - a) / DT for a, b in itertools.pairwise(speeds)]
+    assert max(abs(a) for a in accelerations) <= arm.max_acceleration[0] + 1e-6, "within the joint limits"
+    assert arm.q == pytest.approx(target, abs=1e-12), "the move ends on its target"
+    assert arm.qd == [0.0] * 6
+
+
+def test_a_pause_at_rest_pauses_at_once_and_resume_plays_at_once() -> None:
+    arm = _arm(powered=True)
+    assert arm.start_program() is None
+    arm.pause_program()
+    assert arm.runtime_state is RuntimeState.PAUSED
+    arm.step(DT)
+    assert arm.speed_scaling == 0.0
+    assert arm.resume_program() is None
+    assert _state(arm) is RuntimeState.PLAYING
+    arm.step(DT)
+    assert arm.speed_scaling == 1.0
+
+
+def test_a_stream_of_one_cycle_speedj_moves_smoothly_at_any_speed_slider() -> None:
+    """A program plays one speedj of one cycle's program time per cycle (the control script's
+    spline). At a slider of 0.7 each takes 1.43 cycles: before, the arm stopped at each motion's end
+    and the next one began a cycle later, so the arm moved 0.7, 0.7, 0, 0.7, 0.7, 0.1 ... steps."""
+    arm = _arm(powered=True)
+    assert arm.start_program() is None
+    arm.speed_slider = 0.7
+    velocity = [0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
+    arm.play(SpeedRamp(arm.q, [0.0] * 6, velocity, 1e6, DT), 1.0)  # at speed at once
+    positions = []
+    for _ in range(200):
+        motion = arm.motion
+        assert motion is not None
+        if arm.motion_time >= motion.duration - 1e-9:  # what a speedj builtin sees: over, the next one
+            arm.play(SpeedRamp(arm.target_q, arm.commanded_velocity, velocity, 1e6, DT), 1.0)
+        arm.step(DT)
+        positions.append(arm.q[0])
+    steps = [b - a for a, b in itertools.pairwise(positions[1:])]
+    assert steps == pytest.approx([0.5 * 0.7 * DT] * len(steps), rel=1e-9)

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from urdaemon.fakeur.motion import (
     JointMove,
     LinearStop,
+    ScalingRamp,
     ServoRamp,
     SpeedRamp,
     compose,
@@ -116,3 +117,35 @@ def test_pose_matrix_round_trip_up_to_a_half_turn(
     assert list(again) == pytest.approx(list(matrix_of_pose(pose)), abs=1e-9)
     identity = compose(matrix_of_pose(pose), transposed(matrix_of_pose(pose)))
     assert list(identity[:9]) == pytest.approx([1, 0, 0, 0, 1, 0, 0, 0, 1], abs=1e-12)
+
+
+def _settled(ramp: ScalingRamp) -> bool:
+    """``ramp.settled``, read through a call so that the type checker does not pin it."""
+    return ramp.settled
+
+
+def test_scaling_ramp_takes_the_time_the_fastest_joint_needs_to_stop_at_its_share() -> None:
+    ramp = ScalingRamp()
+    assert ramp.scale == 1.0
+    assert _settled(ramp)
+    # joint 1 at 1 rad/s stopping at half of 5 rad/s^2: 0.4 s; joint 0 needs only 0.2 s
+    ramp.ramp_to(0.0, [0.5, -1.0, 0, 0, 0, 0], [5.0] * 6, 0.5, 0.002)
+    assert not _settled(ramp)
+    scales = [ramp.step(0.002) for _ in range(200)]
+    assert scales[0] == pytest.approx(1.0 - 0.002 / 0.4)
+    assert all(b < a for a, b in itertools.pairwise(scales))
+    assert scales[-1] == 0.0
+    assert _settled(ramp)
+    assert ramp.step(0.002) == 0.0
+    ramp.ramp_to(1.0, [0.0, 1.0, 0, 0, 0, 0], [5.0] * 6, 0.5, 0.002)
+    assert [ramp.step(0.002) for _ in range(200)][-1] == 1.0
+
+
+def test_scaling_ramp_within_one_cycle_happens_at_once() -> None:
+    ramp = ScalingRamp()
+    ramp.ramp_to(0.0, [0.001] + [0.0] * 5, [5.0] * 6, 0.5, 0.002)
+    assert ramp.scale == 0.0
+    assert _settled(ramp)
+    ramp.ramp_to(1.0, [0.0] * 6, [5.0] * 6, 0.5, 0.002)
+    assert ramp.scale == 1.0
+    assert _settled(ramp)
