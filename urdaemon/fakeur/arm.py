@@ -71,6 +71,8 @@ SPEEDJ_DEFAULT_ACCELERATION = 40.0
 """rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
+ACCELERATION_STEP_S = 1e-5
+"""s of program time: the backward difference over which a motion's acceleration at its end is taken."""
 PAUSE_ACCELERATION_SHARE = 0.5
 """The share of each joint's acceleration limit that the speed scaling's ramp may use when the
 controller pauses or resumes a program (the motion's own acceleration comes on top, scaled down)."""
@@ -501,7 +503,7 @@ class FakeArm:
             # played next starts that far into its own time (``play``), so a stream of short motions
             # (one speedj per cycle) moves smoothly at any scaling. The target stays the motion's end.
             self._carry = carry
-            goal = [q + v * carry for q, v in zip(target, velocity, strict=True)]
+            goal = _went_on(motion, target, velocity, carry)
         if self._step_servo(dt, goal):
             # the motion asks more than the joints can do: what is commanded is what the arm does
             # (the controller's target speeds never exceed the joint limits), and a following
@@ -625,6 +627,25 @@ class FakeArm:
         if mode is SafetyMode.ROBOT_EMERGENCY_STOP:
             bits |= (1 << 6) | (1 << 7)
         return bits
+
+
+def _went_on(motion: Motion, end: list[float], velocity: list[float], carry: float) -> list[float]:
+    """Where a motion that ended at ``end`` with ``velocity`` goes on to in ``carry`` s of program time:
+    at its end velocity, and a joint that was slowing down keeps slowing down (to rest at the most), so
+    the arm does not run past where a path that ends in a slow-down is heading."""
+    duration = motion.duration
+    h = min(duration, ACCELERATION_STEP_S)
+    before = motion.velocity(duration - h) if h > 0 else velocity
+    goal = []
+    for q, v, w in zip(end, velocity, before, strict=True):
+        a = (v - w) / h if h > 0 else 0.0
+        if a * v >= 0.0:  # cruising or speeding up: on at the end velocity
+            goal.append(q + v * carry)
+        elif v * (v + a * carry) <= 0.0:  # at rest before the carry is over
+            goal.append(q - v * v / (2.0 * a))
+        else:
+            goal.append(q + v * carry + 0.5 * a * carry * carry)
+    return goal
 
 
 def _rotation_vector(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
