@@ -12,10 +12,10 @@ Programs start in two ways, as on a real controller: a script arriving on the pr
 real-time interface (headless), or ``play`` on the dashboard with a loaded program: the default
 External Control program (which, like the URCap, fetches the script from the daemon's script-sender
 port) or a URScript file in the programs directory. With ``interpreter`` on, every script runs in the
-URScript interpreter (``fakeur.urscript``): a ``def`` program replaces the running one, a ``sec``
-program runs beside it, bare lines run as a program of their own; a compile or runtime error is a
-RUNTIME_EXCEPTION message naming line and column. Off, the Python stand-in ``ProgramRunner`` runs
-our control script (until the interpreter replaces it).
+URScript interpreter (``fakeur.urscript``, the default): a ``def`` program replaces the running
+one, a ``sec`` program runs beside it, bare lines run as a program of their own; a compile or
+runtime error is a RUNTIME_EXCEPTION message naming line and column. Off, the Python stand-in
+``ProgramRunner`` runs our control script (until it is retired).
 
 No client can stall the controller: a request/response service stops reading a client that does not
 read its replies (TCP flow control), a stream drops a client whose unsent backlog passes
@@ -69,8 +69,8 @@ SCRIPT_SUFFIXES = (".script", ".urscript")
 """Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
 MAX_BACKLOG_BYTES = 1 << 20
 """A streaming client that leaves more than this unsent (it does not read) is dropped."""
-INTERPRETER = False
-"""Run scripts in the URScript interpreter by default (else the ProgramRunner stand-in runs them)."""
+INTERPRETER = True
+"""Run scripts in the URScript interpreter by default (off: the ProgramRunner stand-in, to be retired)."""
 CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
 """The single-line commands a controller takes on its script ports besides URScript (§2.4 step 6)."""
 KINEMATICS_CALIBRATED = 0
