@@ -33,6 +33,7 @@ from tests.fakeur.control_rig import (
     start_rig,
     v0,
 )
+from urdaemon.fakeur.arm import RuntimeState
 from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
 from urdaemon.paths import resource_path
 from urdaemon.protocols import script_command as sc
@@ -606,3 +607,125 @@ async def test_the_cb3_rendering_runs_at_8_ms() -> None:
         await rig.until(lambda: rig.arm.force_mode and rig.arm.payload_mass == 1.0, 20)
         assert rig.run.error is None
         await stop(rig)
+
+
+# ---- fidelity: extrapolation, following the spline, time scaling ----------------------------------------
+
+SERVO_EXTRAPOLATE_CYCLES = round(0.05 / DT)
+"""The script's UD_SERVO_EXTRAPOLATE_S (0.05 s) in cycles: how long a stale servo stream goes on."""
+
+
+async def test_a_servo_stream_that_stops_is_extrapolated_for_a_bounded_time_only() -> None:
+    """Before, a stale setpoint was extrapolated at get_target_joint_speeds() until the read timeout:
+    with frames allowed 0.5 s apart, a stream that stopped sending ran on at its speed for 0.5 s."""
+    async with running_script() as rig:
+        speed = 0.5
+        for k in range(3):
+            rig.daemon.send(ServoJ(j0(k * speed * DT), timeout=0.5))
+            await rig.step(1)
+        setpoints = []
+        for _ in range(100):  # no frame for 0.2 s, within the frame's 0.5 s timeout
+            await rig.step(1)
+            setpoints.append(rig.variable("ud_servo_q")[0])
+        moves = [b - a for a, b in itertools.pairwise([HOME[0] + 2 * speed * DT, *setpoints])]
+        assert moves[:SERVO_EXTRAPOLATE_CYCLES] == pytest.approx([speed * DT] * SERVO_EXTRAPOLATE_CYCLES)
+        assert moves[SERVO_EXTRAPOLATE_CYCLES:] == [0.0] * (100 - SERVO_EXTRAPOLATE_CYCLES)
+        assert rig.at_rest()
+        assert rig.arm.q[0] == pytest.approx(setpoints[-1], abs=1e-12)
+        assert not rig.done
+
+
+def cubic_path(first: int, points: tuple[SplinePoint, ...]) -> dict[int, float]:
+    """Joint 0 of each cubic segment (from rest at HOME) at every cycle, by index in ``history``."""
+    path: dict[int, float] = {}
+    q, v, at = HOME[0], 0.0, first - 1
+    for point in points:
+        assert point.velocities is not None
+        T, q1, v1 = point.segment_time, point.positions[0], point.velocities[0]
+        c2 = (3 * (q1 - q) - (2 * v + v1) * T) / T**2
+        c3 = (-2 * (q1 - q) + (v + v1) * T) / T**3
+        cycles = round(T / DT)
+        for k in range(1, cycles + 1):
+            t = k * DT
+            path[at + k] = q + v * t + c2 * t * t + c3 * t**3
+        q, v, at = q1, v1, at + cycles
+    return path
+
+
+async def test_a_trajectory_is_on_its_spline_at_every_cycle() -> None:
+    """Before, each segment was integrated open-loop with speedj ramps and drifted from its spline
+    by the trapezoid rule's error, 8e-6 rad by the end of the last segment here."""
+    async with running_script() as rig:
+        assert await rig.trajectory(*CUBIC_POINTS) is TrajectoryResultCode.SUCCESS
+        await rig.until(rig.at_rest, 100)
+        path = cubic_path(rig.first_motion(), CUBIC_POINTS)
+        deviation = max(abs(rig.history[index][0] - q) for index, q in path.items())
+        assert deviation < 1e-6
+
+
+async def test_a_trajectory_at_a_speed_slider_of_0_7_moves_smoothly_and_lands_exactly() -> None:
+    """At 0.7 each one-cycle speedj takes 1.43 cycles. Before, the arm stood still for the rest of a
+    cycle in which a speedj ended (steps of 0.7, 0.7, 0.1 ... of a cycle's motion: an acceleration
+    of hundreds of rad/s²), and the trajectory missed its last point by the trapezoid error."""
+    async with running_script() as rig:
+        rig.arm.speed_slider = 0.7
+        assert await rig.trajectory(*CUBIC_POINTS) is TrajectoryResultCode.SUCCESS
+        await rig.until(rig.at_rest, 100)
+        assert rig.arm.q == pytest.approx(list(CUBIC_POINTS[-1].positions), abs=EXACT)
+        start, end = rig.first_motion(), rig.last_motion()
+        speeds = [(b[0] - a[0]) / DT for a, b in itertools.pairwise(rig.history[start - 2 : end + 2])]
+        assert min(speeds) >= 0.0, "never goes back"
+        accelerations = [(b - a) / DT for a, b in itertools.pairwise(speeds)]
+        # the last segment's own acceleration reaches -14 rad/s², 6.9 at 0.7² of it; the arm's
+        # sub-cycle time keeping adds a ripple of about 1 rad/s²
+        assert max(abs(a) for a in accelerations) < 9.0
+
+
+class RigSteppingWhilePausing(Rig):
+    """The rig, stepping the program while the controller pauses it too (PAUSING), as a controller
+    does: the program's motion goes on in slowed time until the speed scaling reaches 0."""
+
+    def cycle(self) -> None:
+        if not self.run.done and self.arm.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING):
+            self.run.step()
+        if self.run.done and not self._closed:
+            self._closed = True
+            self.host.close()
+            self.arm.stop_program()
+        self.arm.step(self.step_time)
+        self.cycles += 1
+        self.history.append(list(self.arm.q))
+        self.speeds.append(list(self.arm.qd))
+
+
+async def test_a_pause_slows_the_trajectory_down_along_its_path_and_resume_lands_it() -> None:
+    """Before, a pause stopped the arm at 10 rad/s² off the spline's timing and the script never made
+    up the motion lost: the trajectory answered SUCCESS 0.048 rad short of its target."""
+    target = j0(0.1)
+    async with running_script() as rig:
+        rig.__class__ = RigSteppingWhilePausing  # the same rig, stepping the program while PAUSING
+        states, scalings = [], []
+        rig.daemon.send(TrajectoryControl(TrajectoryAction.START, 1, timeout=0.0))
+        rig.daemon.send_points(SplinePoint(target, ZERO, None, 0.4))
+        await rig.until(lambda: rig.arm.q[0] > HOME[0] + 0.02, 1000)
+        rig.arm.pause_program()
+        for _ in range(300):
+            await rig.step(1)
+            states.append(rig.arm.runtime_state)
+            scalings.append(rig.arm.speed_scaling)
+        assert states[0] is RuntimeState.PAUSING
+        assert states[-1] is RuntimeState.PAUSED
+        ramp = scalings[: states.index(RuntimeState.PAUSED)]
+        assert len(ramp) > 10, "a ramp, not a stop in a cycle"
+        assert all(b < a for a, b in itertools.pairwise(ramp))
+        assert rig.at_rest()
+        assert rig.daemon.results == []
+        assert rig.arm.resume_program() is None
+        assert await rig.result() is TrajectoryResultCode.SUCCESS
+        await rig.until(rig.at_rest, 500)
+        assert rig.arm.q == pytest.approx(list(target), abs=EXACT)
+        start, end = rig.first_motion(), rig.last_motion()
+        speeds = [(b[0] - a[0]) / DT for a, b in itertools.pairwise(rig.history[start - 2 : end + 2])]
+        assert min(speeds) >= 0.0, "never goes back"
+        accelerations = [(b - a) / DT for a, b in itertools.pairwise(speeds)]
+        assert max(abs(a) for a in accelerations) <= rig.arm.max_acceleration[0], "within the joint limits"
