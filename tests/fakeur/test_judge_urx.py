@@ -11,8 +11,9 @@ with math3d 4.0 (``PoseVector`` is neither iterable nor has ``tolist``; math3d 3
 Python 3.10+): the Cartesian judges use urx's own math3d-free ``URRobot``, the same protocol code.
 
 These tests must not be weakened to pass: when one fails, the fake is wrong; the message carries the
-fake's primary-interface messages. Reproduction on the code before issue 14: ``robot.movej`` never
-moves the arm (the bare line was answered "compile_error_name_not_found:movej").
+fake's primary-interface messages. Reproduction on the code before issue 14: urx took the CB3 fake for
+stopped (its RobotModeData had the e-Series length) and ``robot.movej`` raised "Robot stopped"; a bare
+``movej`` line was answered "compile_error_name_not_found".
 """
 
 from __future__ import annotations
@@ -135,6 +136,7 @@ def test_movel_reaches_its_target_pose(judge: Judge) -> None:
 
 
 def test_set_digital_out_sets_the_output(judge: Judge) -> None:
+    """urx 0.11 sends ``digital_out[2]=True`` (not ``set_digital_out(2, True)``) on 30002."""
     judge.robot.set_digital_out(2, True)
     assert judge.rtde.wait_for(lambda: judge.rtde.sample["actual_digital_output_bits"] & 0b100 != 0, 10.0), (
         "urx's set_digital_out(2, True) (the line 'digital_out[2]=True') did not set output 2\n"
