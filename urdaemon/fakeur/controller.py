@@ -647,9 +647,7 @@ class FakeController:
                 self._broadcast(
                     prim.RuntimeExceptionMessage(1, 1, f"compile_error_name_not_found:{line.split()[0]}:")
                 )
-        elif self.interpreter:
-            self._start_script(event.name, event.text)
-        elif event.kind == "def":  # the stand-in runs no secondary program
+        elif self.interpreter or event.kind == "def":  # the stand-in runs no secondary program
             self._start_program(event.name, event.text)
 
     def _controller_command(self, line: str) -> None:
