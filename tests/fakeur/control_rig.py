@@ -211,7 +211,7 @@ class Rig:
 
     def cycle(self) -> None:
         """One controller cycle, as ``FakeController._cycle`` runs it."""
-        if not self.run.done and self.arm.runtime_state is RuntimeState.PLAYING:
+        if not self.run.done and self.arm.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING):
             self.run.step()
         if self.run.done and not self._closed:
             self._closed = True
