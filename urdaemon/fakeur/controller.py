@@ -590,7 +590,7 @@ class FakeController:
     def _realtime_state(self) -> rt.RealtimeState:
         arm = self.arm
         q, qd, qdd = tuple(arm.q), tuple(arm.qd), tuple(arm.qdd)
-        pose = arm.tcp_pose()
+        pose = arm.actual_tcp_pose()
         running = arm.robot_mode is RobotMode.RUNNING
         program_state = {RuntimeState.PLAYING: 2.0, RuntimeState.PAUSED: 3.0}.get(arm.runtime_state, 1.0)
         return rt.RealtimeState(
@@ -1067,7 +1067,7 @@ class FakeController:
                     t_micro=(30.0,) * 6,
                     joint_mode=(running_modes,) * 6,
                 ),
-                prim.CartesianInfo(tcp_pose=arm.tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
+                prim.CartesianInfo(tcp_pose=arm.actual_tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
                 prim.KinematicsInfo(
                     checksum=(0xFFFFFFFF,) * 6,
                     dh_theta=dh.theta,
@@ -1182,8 +1182,8 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "speed_scaling": lambda arm: arm.speed_scaling,
     "target_speed_fraction": lambda arm: arm.speed_slider,
     "runtime_state": lambda arm: int(arm.runtime_state),
-    "actual_TCP_pose": lambda arm: arm.tcp_pose(),
-    "target_TCP_pose": lambda arm: arm.tcp_pose(),
+    "actual_TCP_pose": lambda arm: arm.actual_tcp_pose(),
+    "target_TCP_pose": lambda arm: arm.actual_tcp_pose(),
     "actual_TCP_speed": lambda arm: (0.0,) * 6,
     "actual_TCP_force": lambda arm: (0.0,) * 6,
     "actual_digital_input_bits": lambda arm: arm.io.digital_in,
