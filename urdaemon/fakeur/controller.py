@@ -18,8 +18,9 @@ runtime error is a RUNTIME_EXCEPTION message naming line and column. Off, the Py
 ``ProgramRunner`` runs our control script (until it is retired).
 
 No client can stall the controller: a request/response service stops reading a client that does not
-read its replies (TCP flow control), a stream drops a client whose unsent backlog passes
-``MAX_BACKLOG_BYTES``, and scripts are handled one at a time between controller cycles.
+read its replies (TCP flow control), a stream skips its messages to a client whose unsent backlog
+passes ``MAX_BACKLOG_BYTES`` (it stays connected: ur_rtde sends scripts on 30003 and never reads
+it), and scripts are handled one at a time between controller cycles.
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ DEFAULT_URCAP_PROGRAM = f"{PROGRAMS_DIR}/{EXTERNAL_CONTROL_PROGRAM}"
 SCRIPT_SUFFIXES = (".script", ".urscript")
 """Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
 MAX_BACKLOG_BYTES = 1 << 20
-"""A streaming client that leaves more than this unsent (it does not read) is dropped."""
+"""A client that leaves more than this unsent (it does not read) misses messages until it catches up."""
 INTERPRETER = True
 """Run scripts in the URScript interpreter by default (off: the ProgramRunner stand-in, to be retired)."""
 CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
@@ -394,9 +395,7 @@ class FakeController:
         if not data or writer.is_closing():
             return
         if writer.transport.get_write_buffer_size() > MAX_BACKLOG_BYTES:
-            log.info("%s %s: dropping a client that does not read", self.address, service)
-            writer.close()
-            return
+            return  # whole messages are skipped, so what it reads later is still well framed
         mangled = self.faults.mangle(service, data)
         if mangled.delay_s <= 0.0 and len(mangled.pieces) == 1:
             writer.write(mangled.pieces[0])
@@ -562,13 +561,13 @@ class FakeController:
         conn: prim.PrimaryConnection | rt.RealtimeConnection,
     ) -> None:
         """Run the scripts a client sends, one at a time: between two, the controller's cycles and
-        other clients get their turn, and a client that does not read what it is sent is not read."""
+        other clients get their turn. Scripts get no replies, so reading never waits on the client
+        reading (ur_rtde reads nothing of 30003, where it sends its scripts)."""
         while data := await reader.read(READ_CHUNK):
             for event in conn.receive_data(data):
                 if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
                     self._on_script(event)
                     await asyncio.sleep(0)
-            await _paced(writer, data)
 
     # ---- real-time interface (30003) ---------------------------------------------------------------
 
