@@ -94,6 +94,8 @@ def judge(request: pytest.FixtureRequest) -> Iterator[Judge]:
             try:
                 assert control.isProgramRunning(), judge.explain("isProgramRunning after connecting")
                 yield judge
+                # ur_rtde's script ran without a runtime error in the interpreter all along
+                assert not primary.runtime_exceptions(), judge.explain("ur_rtde's script")
             finally:
                 control.stopScript()
                 control.disconnect()
