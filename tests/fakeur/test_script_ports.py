@@ -62,9 +62,10 @@ class Judge:
         return self.counter() > before
 
 
-@pytest.fixture
-def judge() -> Iterator[Judge]:
-    with fake_robot("ur10e", "--powered") as fake:
+@pytest.fixture(params=[("ur10e", "5.15.0"), ("ur10", "3.15.7")], ids=["e-series", "cb3"])
+def judge(request: pytest.FixtureRequest) -> Iterator[Judge]:
+    model, version = request.param
+    with fake_robot(model, "--powered", "--controller-version", version) as fake:
         primary = PrimaryWatch(fake.address)
         watch = RtdeWatch(fake.address, OUTPUTS, 125.0)
         try:
