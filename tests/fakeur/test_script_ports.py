@@ -180,3 +180,16 @@ def test_a_program_that_does_not_compile_never_starts(judge: Judge, port: int) -
     judge.rtde.next_samples(20)
     assert judge.rtde.sample["actual_digital_output_bits"] & 0b100000 == 0, "line 2 never ran"
     assert judge.rtde.sample["runtime_state"] != PLAYING, "no program runs"
+
+
+@PORTS
+def test_a_sec_program_that_moves_is_refused_and_the_def_program_runs_on(judge: Judge, port: int) -> None:
+    """A secondary program may not use a physical instruction (the manual: no motion, no sleep)."""
+    _start_counting(judge, port)
+    send_script(judge.fake.address, port, "sec mover():\n  movej([0.3, -1.4, 1.3, -1.5, -1.4, 0.2])\nend\n")
+    assert judge.primary.wait_for(lambda: bool(judge.primary.runtime_exceptions()), 10.0), judge.explain(
+        "a sec program calling movej was not refused"
+    )
+    error = judge.primary.runtime_exceptions()[0]
+    assert (error.line, error.column) == (2, 3), judge.explain("the error's line and column")
+    assert judge.counting(), judge.explain("the def program stopped when the sec program was refused")
