@@ -116,6 +116,12 @@ def _parser() -> argparse.ArgumentParser:
         help="several fakes: tick together, one burst of RTDE packages per period (default), or spread "
         "over the period, each at its own phase like independent controllers",
     )
+    fake.add_argument(
+        "--programs",
+        metavar="DIR",
+        help="program directory: 'load NAME' resolves NAME under it, URScript files (.script) play; "
+        "the default External Control program is always there",
+    )
 
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)

@@ -124,7 +124,7 @@ async def test_programs_load_from_a_directory_relative_names_resolved_under_it(t
     """Reproduction: ``load`` knew only ``/programs/external_control.urp``; a programs directory,
     relative names, ``isProgramSaved`` and a loaded script file did not exist."""
     (tmp_path / "pick.script").write_text('textmsg("picked")\n', encoding="ascii")
-    async with manual_fake(powered=True, programs=tmp_path, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True, programs=tmp_path) as (controller, clock):
         link = await _dashboard(controller.address)
         assert (await _ask(link, dash.GetLoadedProgram(), dash.LoadedProgramReply)).path is None
         missing = await _ask(link, dash.Load("missing.urp"), dash.CommandReply)

@@ -57,7 +57,7 @@ async def _message(link: Link, kind: type[Any], clock: ManualClock) -> Any:
 async def test_a_bare_urscript_line_runs_as_a_program(port: int) -> None:
     """Reproduction (python-urx): ``set_digital_out(2, True)`` on 30002 was refused as an unknown
     controller command, and 30003 did not exist."""
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         await _send(controller, port, "set_digital_out(2, True)\n")
         await _eventually(lambda: controller.program_name is not None)
         clock.turn(3)
@@ -65,7 +65,7 @@ async def test_a_bare_urscript_line_runs_as_a_program(port: int) -> None:
 
 
 async def test_a_def_program_replaces_the_running_one_and_a_sec_program_runs_beside_it() -> None:
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         link = await _primary(controller)
         await _send(controller, 30001, LOOP.format(name="first"))
         started = await link.next(prim.KeyMessage)
@@ -89,7 +89,7 @@ async def test_a_def_program_replaces_the_running_one_and_a_sec_program_runs_bes
 
 
 async def test_a_compile_error_names_line_and_column_and_nothing_starts() -> None:
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         link = await _primary(controller)
         await _send(controller, 30001, "def broken():\n  textmsg(1)\n  no_such_function(2)\nend\n")
         error = await link.next(prim.RuntimeExceptionMessage)
@@ -103,7 +103,7 @@ async def test_a_compile_error_names_line_and_column_and_nothing_starts() -> Non
 
 
 async def test_a_runtime_error_names_its_line_and_stops_the_program() -> None:
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         link = await _primary(controller)
         await _send(controller, 30001, "def failing():\n  sync()\n  x = [1, 2]\n  y = x[7]\nend\n")
         await link.next(prim.KeyMessage)  # started
@@ -117,7 +117,7 @@ async def test_a_runtime_error_names_its_line_and_stops_the_program() -> None:
 
 
 async def test_textmsg_and_popup_become_primary_messages() -> None:
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         link = await _primary(controller)
         await _send(controller, 30001, 'def talk():\n  textmsg("hello ", 42)\n  popup("look")\nend\n')
         await link.next(prim.KeyMessage)
@@ -134,7 +134,7 @@ async def test_a_paused_program_is_not_stepped_and_resumes_where_it_was() -> Non
         "def count():\n  i = 0\n  while True:\n    i = i + 1\n"
         "    write_output_integer_register(0, i)\n    sync()\n  end\nend\n"
     )
-    async with manual_fake(powered=True, interpreter=True, urcap=("127.0.0.1", 9)) as (controller, clock):
+    async with manual_fake(powered=True, urcap=("127.0.0.1", 9)) as (controller, clock):
         await _send(controller, 30001, program)
         await _eventually(lambda: controller._script is not None)
         clock.turn(10)
@@ -158,7 +158,7 @@ async def test_an_rtde_watchdog_stops_the_program_when_its_input_stops_arriving(
         'def watched():\n  rtde_set_watchdog("input_int_register_0", 10, "stop")\n'
         "  while True:\n    sync()\n  end\nend\n"
     )
-    async with manual_fake(powered=True, interpreter=True) as (controller, clock):
+    async with manual_fake(powered=True) as (controller, clock):
         link = await _primary(controller)
         await _send(controller, 30001, program)
         await link.next(prim.KeyMessage)  # started

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import itertools
 from pathlib import Path
@@ -11,8 +10,9 @@ from typing import Any
 import pytest
 
 from tests.helpers import fake_address
+from urdaemon.cli import _parser
 from urdaemon.errors import ConfigError
-from urdaemon.fakeur.cli import add_fake_arguments, build_fakes
+from urdaemon.fakeur.cli import build_fakes
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import rtde
@@ -87,27 +87,15 @@ async def test_the_fake_dashboard_refuses_a_line_it_does_not_know_as_a_controlle
             writer.close()
 
 
-def test_fake_robot_options_give_a_programs_directory_and_the_interpreter(tmp_path: Path) -> None:
-    """``--programs DIR`` and ``--interpreter`` (fakeur.cli.add_fake_arguments) reach every fake; a
-    programs path that is not a directory is refused before anything listens."""
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--model")
-    parser.add_argument("--address")
-    parser.add_argument("--controller-version", default="5.15.0")
-    parser.add_argument("--config")
-    parser.add_argument("--calibration")
-    parser.add_argument("--powered", action="store_true")
-    parser.add_argument("--urcap")
-    parser.add_argument("--refuse", action="append", default=[])
-    parser.add_argument("--split", action="append", default=[])
-    parser.add_argument("--delay", type=float, default=0.0)
-    add_fake_arguments(parser)
-    base = ["--model", "ur10e", "--address", fake_address()]
-    [fake] = build_fakes(parser.parse_args([*base, "--programs", str(tmp_path), "--interpreter"]))
+def test_fake_robot_programs_option_gives_every_fake_a_programs_directory(tmp_path: Path) -> None:
+    """``urdaemon fake-robot --programs DIR`` reaches every fake; a programs path that is not a directory
+    is refused before anything listens."""
+    parser = _parser()
+    base = ["fake-robot", "--model", "ur10e", "--address", fake_address()]
+    [fake] = build_fakes(parser.parse_args([*base, "--programs", str(tmp_path)]))
     assert fake.programs_dir == tmp_path
-    assert fake.interpreter is True
     assert fake.default_program == f"{tmp_path}/external_control.urp"
-    [fake] = build_fakes(parser.parse_args([*base, "--no-interpreter"]))
-    assert (fake.programs_dir, fake.interpreter) == (None, False)
+    [fake] = build_fakes(parser.parse_args(base))
+    assert fake.programs_dir is None
     with pytest.raises(ConfigError, match="not a directory"):
         build_fakes(parser.parse_args([*base, "--programs", str(tmp_path / "missing")]))

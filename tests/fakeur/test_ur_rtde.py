@@ -22,6 +22,7 @@ from urdaemon.model import RobotMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, rtde
 from urdaemon.protocols._buffer import Side
+from urdaemon.urscript import ScriptParameters, render_control_script
 
 rtde_receive = pytest.importorskip("rtde_receive")
 rtde_io = pytest.importorskip("rtde_io")
@@ -128,8 +129,8 @@ def test_rtde_receive_reads_joint_positions_and_modes_at_500_hz(powered_fake: st
 
 
 async def _move_the_fake(address: str, moved: Callable[[], bool], frames: int) -> None:
-    """Play the daemon: send a headless program, serve its reverse socket, stream SPEEDJ on joint 0
-    until ``moved()`` (at most ``frames`` frames)."""
+    """Play the daemon: send our control script headless, serve its reverse socket, stream SPEEDJ on
+    joint 0 until ``moved()`` (at most ``frames`` frames)."""
     accepted: asyncio.Queue[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = asyncio.Queue()
 
     async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -137,13 +138,10 @@ async def _move_the_fake(address: str, moved: Callable[[], bool], frames: int) -
 
     servers = [await asyncio.start_server(on_connect, "127.0.0.1", 0) for _ in range(3)]
     ports = [s.sockets[0].getsockname()[1] for s in servers]
-    program = "\n".join(
-        [
-            f'socket_open("127.0.0.1", {ports[0]}, "trajectory_socket")',
-            f'socket_open("127.0.0.1", {ports[1]}, "script_command_socket")',
-            f'socket_open("127.0.0.1", {ports[2]}, "reverse_socket")',
-            'textmsg("urdaemon test program")',
-        ]
+    program = render_control_script(
+        ScriptParameters(
+            "127.0.0.1", trajectory_port=ports[0], script_command_port=ports[1], reverse_port=ports[2]
+        )
     )
     _, pwriter = await asyncio.open_connection(address, 30001)
     pconn = prim.PrimaryConnection(Side.DAEMON)

@@ -14,6 +14,7 @@ from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, script_command, script_sender
 from urdaemon.protocols._buffer import Side
+from urdaemon.urscript import ScriptParameters, render_control_script
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -50,12 +51,14 @@ def _ports() -> dict[str, int]:
 
 
 def _program(ports: dict[str, int]) -> str:
-    return "\n".join(
-        [
-            f'socket_open("127.0.0.1", {ports["trajectory"]}, "trajectory_socket")',
-            f'socket_open("127.0.0.1", {ports["script_command"]}, "script_command_socket")',
-            f'socket_open("127.0.0.1", {ports["reverse"]}, "reverse_socket")',
-        ]
+    """Our control script, dialling these servers back (the fake runs it as a controller would)."""
+    return render_control_script(
+        ScriptParameters(
+            "127.0.0.1",
+            reverse_port=ports["reverse"],
+            trajectory_port=ports["trajectory"],
+            script_command_port=ports["script_command"],
+        )
     )
 
 

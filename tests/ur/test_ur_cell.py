@@ -126,8 +126,8 @@ def _count(cell: Cell, robot: str, text: str) -> int:
 
 
 def _program_settled(cell: Cell, robot: str) -> bool:
-    """Every program sent has started, and the newest has connected back (External control active)."""
-    marks = ("control program sent", "PROGRAM_XXX_STARTED", "External control active")
+    """Every program sent has started, and the newest has connected back ("control active")."""
+    marks = ("control program sent", "PROGRAM_XXX_STARTED", "urdaemon: control active")
     seen = [
         mark
         for m in (r.getMessage() for r in cell.caplog.records)
@@ -297,14 +297,15 @@ async def test_protective_stop_aborts_alice_only_and_motion_resumes_only_on_a_ne
         reply = await cell.alice.resend_program()
         assert reply["ok"] is True, reply
 
+        # what the program commands: the arm's target positions after every controller cycle
         commanded: list[list[float]] = []
-        servoj = fake.arm.servoj
+        step = fake.arm.step
 
-        def record(target: Sequence[float]) -> None:
-            commanded.append([float(v) for v in target])
-            servoj(target)
+        def record(dt: float) -> None:
+            step(dt)
+            commanded.append([float(v) for v in fake.arm.target_q])
 
-        monkeypatch.setattr(fake.arm, "servoj", record)
+        monkeypatch.setattr(fake.arm, "step", record)
         rest = list(fake.arm.q)
         await _ready(cell.alice, cell.client)
         # no motion while nobody commands any: 250 joint states (0.5 s at 500 Hz)

@@ -15,7 +15,7 @@ from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
 from urdaemon.scheduling import startup_objects_frozen
 
-__all__ = ["add_fake_arguments", "build_fakes", "parse_version", "run_fakes"]
+__all__ = ["build_fakes", "parse_version", "run_fakes"]
 
 DAEMON_HOST = "127.0.0.1"
 """Where a fake in URCap mode finds the daemon's script sender when built from a cell file."""
@@ -28,22 +28,6 @@ def parse_version(text: str) -> tuple[int, int, int, int]:
         raise ConfigError(f"--controller-version {text!r}: expected numbers like 5.15.0")
     numbers = [int(p) for p in parts] + [0] * (4 - len(parts))
     return (numbers[0], numbers[1], numbers[2], numbers[3])
-
-
-def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``urdaemon fake-robot`` that shape the controllers' programs."""
-    parser.add_argument(
-        "--programs",
-        metavar="DIR",
-        help="program directory: 'load NAME' resolves NAME under it, URScript files (.script) play; "
-        "the default External Control program is always there",
-    )
-    parser.add_argument(
-        "--interpreter",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="run every script in the URScript interpreter (default: the fake's built-in choice)",
-    )
 
 
 def _programs(args: argparse.Namespace) -> Path | None:
@@ -82,7 +66,6 @@ def build_fakes(args: argparse.Namespace) -> list[FakeController]:
                     urcap=urcap,
                     faults=_faults(args),
                     programs=_programs(args),
-                    interpreter=getattr(args, "interpreter", None),
                 )
             )
         if not fakes:
@@ -106,7 +89,6 @@ def build_fakes(args: argparse.Namespace) -> list[FakeController]:
             urcap=urcap,
             faults=_faults(args),
             programs=_programs(args),
-            interpreter=getattr(args, "interpreter", None),
         )
     ]
 

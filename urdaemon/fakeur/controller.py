@@ -11,11 +11,11 @@ real-time interface (30003) every cycle, encoded only while a client is connecte
 Programs start in two ways, as on a real controller: a script arriving on the primary, secondary or
 real-time interface (headless), or ``play`` on the dashboard with a loaded program: the default
 External Control program (which, like the URCap, fetches the script from the daemon's script-sender
-port) or a URScript file in the programs directory. With ``interpreter`` on, every script runs in the
-URScript interpreter (``fakeur.urscript``, the default): a ``def`` program replaces the running
+port) or a URScript file in the programs directory. Every script runs in the URScript interpreter
+(``fakeur.urscript``), compiled first as a controller does: a ``def`` program replaces the running
 one, a ``sec`` program runs beside it, bare lines run as a program of their own; a compile or
-runtime error is a RUNTIME_EXCEPTION message naming line and column. Off, the Python stand-in
-``ProgramRunner`` runs our control script (until it is retired).
+runtime error is a RUNTIME_EXCEPTION message naming line and column, and a program that does not
+compile never starts.
 
 No client can stall the controller: a request/response service stops reading a client that does not
 read its replies (TCP flow control), a stream skips its messages to a client whose unsent backlog
@@ -33,7 +33,7 @@ import socket
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from urdaemon.backends.clock import TickClock, tick_clock
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
@@ -48,9 +48,6 @@ from urdaemon.protocols import realtime as rt
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
-
-if TYPE_CHECKING:
-    from urdaemon.fakeur.program import ProgramRunner
 
 __all__ = ["FakeController", "FakePorts"]
 
@@ -70,8 +67,6 @@ SCRIPT_SUFFIXES = (".script", ".urscript")
 """Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
 MAX_BACKLOG_BYTES = 1 << 20
 """A client that leaves more than this unsent (it does not read) misses messages until it catches up."""
-INTERPRETER = True
-"""Run scripts in the URScript interpreter by default (off: the ProgramRunner stand-in, to be retired)."""
 CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
 """The single-line commands a controller takes on its script ports besides URScript (§2.4 step 6)."""
 KINEMATICS_CALIBRATED = 0
@@ -176,7 +171,6 @@ class FakeController:
         faults: FaultInjector | None = None,
         rtde_versions: tuple[int, ...] = (1, 2),
         programs: str | Path | None = None,
-        interpreter: bool | None = None,
     ) -> None:
         self.model = load_ur_model(model) if isinstance(model, str) else model
         self.address = address
@@ -199,8 +193,6 @@ class FakeController:
         base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
         self.default_program = f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
         self.loaded_program: str | None = self.default_program if urcap else None
-        self.interpreter = INTERPRETER if interpreter is None else interpreter
-        """Scripts run in the URScript interpreter (else in the ProgramRunner stand-in)."""
         self.input_registers = InputRegisters()
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
         self.program_name: str | None = None
@@ -211,8 +203,6 @@ class FakeController:
         self._release_when_idle = False
         """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
         self._realtime_clients: list[tuple[rt.RealtimeConnection, asyncio.StreamWriter]] = []
-        self._runner: ProgramRunner | None = None
-        self._runner_task: asyncio.Task[None] | None = None
         self._servers: list[asyncio.Server] = []
         self._tasks: set[asyncio.Task[Any]] = set()
         self._rtde_clients: list[_RtdeClient] = []
@@ -265,7 +255,7 @@ class FakeController:
         for writers in self._writers.values():
             for writer in list(writers):
                 writer.close()
-        tasks = [t for t in (self._clock, self._runner_task) if t is not None] + list(self._tasks)
+        tasks = [t for t in (self._clock,) if t is not None] + list(self._tasks)
         for task in tasks:
             task.cancel()
         for task in tasks:
@@ -326,20 +316,12 @@ class FakeController:
             clock.remove(self._tick)
 
     def _tick(self) -> None:
-        """One controller cycle: the program's reverse socket read, then (once the program has applied
-        what it read) program, arm and whatever streams are due."""
-        runner = self._runner
-        if runner is not None and runner.polls_reverse:
-            runner.poll()  # wakes the program's main loop, whose turn comes before _cycle's
-            asyncio.get_running_loop().call_soon(self._cycle)
-        else:
-            self._cycle()
+        """One controller cycle: the programs (which read their sockets themselves), the arm, and
+        whatever streams are due."""
+        self._cycle()
 
     def _cycle(self) -> None:
         arm, dt = self.arm, self.step_time
-        runner = self._runner
-        if runner is not None:
-            runner.step(dt)
         if self._script is not None or self._secondary:
             self._step_scripts()
         if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:
@@ -640,13 +622,9 @@ class FakeController:
             line = event.line.strip()
             if line in CONTROLLER_COMMANDS:
                 self._controller_command(line)
-            elif self.interpreter:
-                self._start_script("script", line + "\n")
             else:
-                self._broadcast(
-                    prim.RuntimeExceptionMessage(1, 1, f"compile_error_name_not_found:{line.split()[0]}:")
-                )
-        elif self.interpreter or event.kind == "def":  # the stand-in runs no secondary program
+                self._start_program("script", line + "\n")
+        else:
             self._start_program(event.name, event.text)
 
     def _controller_command(self, line: str) -> None:
@@ -675,62 +653,13 @@ class FakeController:
 
     # ---- programs ----------------------------------------------------------------------------------------
 
-    def _start_program(self, name: str, text: str) -> None:
-        if self.interpreter:
-            self._start_script(name, text)
-            return
-        reason = self.arm.start_program()
-        if reason is not None:
-            self._broadcast(prim.TextMessage(f"program {name} not started: {reason}"))
-            return
-        from urdaemon.fakeur.program import ProgramRunner
-
-        self._stop_runner()
-        self.program_name = name
-        runner = ProgramRunner(
-            self.arm,
-            text,
-            step_time=self.step_time,
-            name=name,
-            on_event=self._program_event,
-            local_address=self.address,  # a real robot's connections come from its own address
-            poll_reverse=True,  # read in the controller cycle: no wake-up per frame (issue 5)
-        )
-        self._runner = runner
-        self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))
-        self._runner_task = asyncio.get_running_loop().create_task(self._run_program(runner, name))
-
-    async def _run_program(self, runner: ProgramRunner, name: str) -> None:
-        try:
-            reason = await runner.run()
-        except Exception as err:  # the program's own failure is a runtime error, not the controller's
-            reason = f"{type(err).__name__}: {err}"
-            self._broadcast(prim.RuntimeExceptionMessage(0, 0, reason))
-        if self._runner is runner:
-            self._runner = None
-            self.arm.stop_program()
-        log.info("%s program %s ended: %s", self.address, name, reason)
-        self._broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STOPPED", name))
-
-    def _program_event(self, kind: str, text: str) -> None:
-        if kind == "runtime":
-            self._broadcast(prim.RuntimeExceptionMessage(0, 0, text))
-        else:
-            self._broadcast(prim.TextMessage(text))
-
-    def _stop_runner(self) -> None:
-        if self._runner_task is not None and not self._runner_task.done():
-            self._runner_task.cancel()
-        self._runner = None
-
     def _stop_program(self) -> None:
-        self._stop_runner()
         self._end_scripts()
         self.arm.stop_program()
 
     # ---- programs in the interpreter ---------------------------------------------------------------
 
-    def _start_script(self, name: str, text: str) -> None:
+    def _start_program(self, name: str, text: str) -> None:
         """Compile ``text``; a ``sec`` program runs beside the main one, any other replaces it."""
         from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
 
@@ -744,7 +673,6 @@ class FakeController:
             host = self._script_host()
             self._secondary.append(_Script(name, program.start(host), host))
             return
-        self._stop_runner()
         if self._script is not None:
             self._end_script(self._script)
         reason = self.arm.start_program()
@@ -777,16 +705,17 @@ class FakeController:
             self._broadcast(prim.TextMessage(text))
 
     def _step_scripts(self) -> None:
-        """One cycle of the programs: the main one while it plays (not while paused), then every
+        """One cycle of the programs: the main one while it plays or pauses (not once paused), then every
         ``sec`` program; a program that has ended is closed; the main one's RTDE watchdogs are checked."""
         script = self._script
         if script is not None:
             state = self.arm.runtime_state
-            if state is RuntimeState.PLAYING:
+            if state is RuntimeState.PLAYING or state is RuntimeState.PAUSING:
+                # while pausing the program's motion goes on in time slowed to 0 along its path
                 self._step(script)
                 if script.run.done or script.failure is not None:
                     self._end_script(script)
-                else:
+                elif state is RuntimeState.PLAYING:
                     self._check_watchdogs(script)
             elif state is RuntimeState.STOPPED:  # stopped from outside: power off, stop, ...
                 self._end_script(script)
@@ -1013,7 +942,7 @@ class FakeController:
         if program != self.default_program and not program.endswith(SCRIPT_SUFFIXES):
             return f"{program}: the fake plays only URScript files and the External Control program"
         reason = arm.start_program()
-        if reason is not None or self._runner is not None or self._script is not None:
+        if reason is not None or self._script is not None:
             return reason
         if program == self.default_program:
             task = asyncio.get_running_loop().create_task(self._play_urcap())
