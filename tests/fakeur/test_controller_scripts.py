@@ -164,7 +164,7 @@ async def test_an_rtde_watchdog_stops_the_program_when_its_input_stops_arriving(
         await link.next(prim.KeyMessage)  # started
         clock.turn(40)  # 80 ms < 100 ms: still running
         assert controller._script is not None
-        controller._apply_inputs({"input_int_register_0": 1})  # what an RTDE input package does
+        controller.rtde.apply_inputs({"input_int_register_0": 1})  # what an RTDE input package does
         clock.turn(40)
         assert controller._script is not None
         clock.turn(20)  # 120 ms since the last input

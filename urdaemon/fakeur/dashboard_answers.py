@@ -1,0 +1,171 @@
+"""A fake controller's dashboard server answers (29999): one reply line per command.
+
+``dashboard_reply`` answers from the controller's state (and acts on it: power, brakes, load, play,
+pause, stop); ``play`` starts the loaded program (the default External Control program fetches its
+script from the daemon, a URScript file runs as it is) or resumes a paused one. While a program is
+pausing (its speed scaling ramping to 0) it is reported as PLAYING until it is PAUSED, and ``play``
+is refused meanwhile: it neither resumes it nor starts the loaded program anew.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from urdaemon.fakeur.arm import RuntimeState
+from urdaemon.model import SafetyMode
+from urdaemon.protocols import dashboard as dash
+
+if TYPE_CHECKING:
+    from urdaemon.fakeur.controller import FakeController
+
+__all__ = ["PROGRAMS_DIR", "SCRIPT_SUFFIXES", "dashboard_reply", "play", "program_path"]
+
+PROGRAMS_DIR = "/programs"
+"""Where programs live when no directory is given (as on URSim); only the default program exists there."""
+SCRIPT_SUFFIXES = (".script", ".urscript")
+"""Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
+SERIAL_NUMBER = "20235500001"
+_PROGRAM_STATES = {
+    RuntimeState.PLAYING: dash.ProgramState.PLAYING,
+    RuntimeState.PAUSING: dash.ProgramState.PLAYING,  # playing until paused, as a controller says
+    RuntimeState.PAUSED: dash.ProgramState.PAUSED,
+}
+
+
+def dashboard_reply(fake: FakeController, command: Any) -> str:
+    """The dashboard's answer to ``command`` (and what it does to ``fake``)."""
+    arm = fake.arm
+    program = fake.loaded_program
+    if isinstance(command, dash.PowerOn):
+        return "Powering on" if arm.power_on() is None else "Failed to execute: power on"
+    if isinstance(command, dash.PowerOff):
+        fake._stop_program()
+        arm.power_off()
+        return "Powering off"
+    if isinstance(command, dash.BrakeRelease):
+        return "Brake releasing" if fake._brake_release() is None else "Failed to execute: brake release"
+    if isinstance(command, dash.UnlockProtectiveStop):
+        return (
+            "Protective stop releasing"
+            if arm.unlock_protective_stop() is None
+            else ("Cannot unlock protective stop: the robot is not in protective stop or still moving")
+        )
+    if isinstance(command, dash.Load):
+        path = program_path(fake, command.path)
+        if path is None:
+            return f"File not found: {command.path}"
+        fake._stop_program()
+        fake.loaded_program = path
+        return f"Loading program: {path}"
+    if isinstance(command, dash.Play):
+        return "Starting program" if play(fake) is None else "Failed to execute: play"
+    if isinstance(command, dash.RestartSafety):
+        fake._stop_program()
+        arm.power_off()
+        if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
+            arm.safety_mode = SafetyMode.NORMAL
+        return "Restarting safety"
+    if isinstance(command, dash.IsProgramSaved):
+        return dash.program_saved_text(program is not None, _basename(program))
+    if isinstance(command, dash.GetOperationalMode) and fake.controller_version[0] >= 5:
+        return dash.operational_mode_text(dash.OperationalMode.NONE)  # no mode password set
+    if isinstance(command, dash.GetUserRole) and fake.controller_version[0] < 5:
+        return dash.user_role_text(dash.UserRole.PROGRAMMER)  # no user password set
+    if isinstance(command, dash.Pause):
+        if arm.runtime_state is not RuntimeState.PLAYING:
+            return "Failed to execute: pause"
+        arm.pause_program()
+        return "Pausing program"
+    if isinstance(command, dash.Stop):
+        if arm.runtime_state is RuntimeState.STOPPED:
+            return "Failed to execute: stop"
+        fake._stop_program()
+        return "Stopped"
+    if isinstance(command, dash.GetRobotMode):
+        return dash.robot_mode_text(arm.robot_mode)
+    if isinstance(command, dash.GetSafetyMode):
+        return dash.safety_mode_text(arm.safety_mode)
+    if isinstance(command, dash.GetSafetyStatus):
+        return dash.safety_status_text(arm.safety_mode)
+    if isinstance(command, dash.GetProgramState):
+        state = {
+            RuntimeState.PLAYING: dash.ProgramState.PLAYING,
+            RuntimeState.PAUSED: dash.ProgramState.PAUSED,
+        }.get(arm.runtime_state, dash.ProgramState.STOPPED)
+        return dash.program_state_text(state, _basename(program))
+    if isinstance(command, dash.IsRunning):
+        return dash.running_text(arm.program_running)
+    if isinstance(command, dash.GetLoadedProgram):
+        return dash.loaded_program_text(program)
+    if isinstance(command, dash.IsInRemoteControl):
+        return dash.remote_control_text(arm.remote_control)
+    if isinstance(command, dash.GetPolyscopeVersion):
+        return dash.polyscope_version_text(fake.controller_version, "Jan 01 2026")
+    if isinstance(command, dash.GetVersion):
+        return dash.version_text(fake.controller_version)
+    if isinstance(command, dash.GetSerialNumber):
+        return SERIAL_NUMBER
+    if isinstance(command, dash.GetRobotModel):
+        return fake.model.model.upper().removesuffix("E")
+    if isinstance(command, dash.GetOperationalMode | dash.GetUserRole):  # not on this series
+        return dash.unknown_command_text(command.KEYWORD)
+    if isinstance(command, dash.Quit):
+        return "Disconnected"
+    if isinstance(command, dash.Shutdown):
+        arm.power_off()
+        return "Shutting down"
+    success = getattr(command, "success_text", None)
+    return success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
+
+
+def program_path(fake: FakeController, name: str) -> str | None:
+    """The program file ``name`` stands for (relative names under the programs directory), or None
+    if there is no such file. The default External Control program always exists."""
+    base = str(fake.programs_dir) if fake.programs_dir is not None else PROGRAMS_DIR
+    path = name if name.startswith("/") else f"{base.rstrip('/')}/{name}"
+    if path == fake.default_program:
+        return path
+    if fake.programs_dir is None or not Path(path).is_file():
+        return None
+    return path
+
+
+def play(fake: FakeController) -> str | None:
+    """``play``: resume a paused program, or start the loaded one; a reason if it cannot."""
+    arm, program = fake.arm, fake.loaded_program
+    if program is None:  # a headless program (sent, not loaded) cannot be played, not even resumed
+        return "no program loaded"
+    if arm.runtime_state is RuntimeState.PAUSED:
+        return arm.resume_program()
+    if arm.runtime_state is RuntimeState.PAUSING:  # still slowing down: neither resumed nor started anew
+        return "the program is pausing"
+    if arm.runtime_state is RuntimeState.PLAYING or fake.programs.busy:
+        return None  # already playing (or about to): nothing starts anew
+    if program != fake.default_program and not program.endswith(SCRIPT_SUFFIXES):
+        return f"{program}: the fake plays only URScript files and the External Control program"
+    reason = arm.start_program()
+    if reason is not None:
+        return reason
+    if program == fake.default_program:
+        if fake.urcap is None:
+            return None
+        task = asyncio.get_running_loop().create_task(
+            fake.programs.play_urcap(fake.urcap, fake._start_program)
+        )
+        fake._tasks.add(task)
+        task.add_done_callback(fake._tasks.discard)
+        return None
+    try:
+        text = Path(program).read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as err:
+        arm.stop_program()
+        return str(err)
+    arm.runtime_state = RuntimeState.STOPPED
+    fake._start_program(_basename(program) or program, text)
+    return None
+
+
+def _basename(path: str | None) -> str | None:
+    return None if path is None else path.rsplit("/", 1)[-1]

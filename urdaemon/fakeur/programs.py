@@ -1,0 +1,305 @@
+"""The programs a fake controller runs: compiled, started, stepped each cycle, and ended.
+
+Scripts arrive on the primary, secondary and real-time interfaces (or from ``play``) and are compiled
+as a controller compiles them before they run. Compiling (parsing) takes tens of milliseconds the
+first time a text is seen, so it runs in a worker thread, never on the event loop where every fake's
+clock ticks; what arrived is still handled strictly in its order of arrival (a ``def``, then a bare
+line, then a ``sec`` program start in that order), controller commands included. A ``def`` program
+or bare lines replace the running program, a ``sec`` program runs beside it. Every cycle the main
+program is stepped while it plays and while it is pausing (its motion slows to rest along its path),
+then every ``sec`` program; its RTDE watchdogs are checked while it plays. A compile or runtime error
+is a RUNTIME_EXCEPTION message naming line and column; a program that does not compile never starts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
+from urdaemon.protocols import primary as prim
+
+__all__ = ["MAX_PENDING_SCRIPTS", "Programs", "RunningScript"]
+
+log = logging.getLogger("urdaemon.fakeur")
+
+MAX_PENDING_SCRIPTS = 64
+"""Scripts waiting to be compiled before a script port stops reading its client (TCP flow control)."""
+URCAP_TIMEOUT_S = 5.0
+"""How long the External Control program waits to connect to the daemon and for the first line."""
+URCAP_MORE_S = 0.2
+"""The URCap keeps reading lines only while more arrive this soon (ur-protocols.md §4.3)."""
+
+
+@dataclass
+class RunningScript:
+    """A program the interpreter runs: its name, its run (``ScriptRun``) and the host its builtins use."""
+
+    name: str
+    run: Any
+    host: ScriptHost
+    failure: str | None = None
+    """Why the interpreter itself failed while running it (a bug there, not the program's error)."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Arrival:
+    name: str
+    text: str
+
+
+class Programs:
+    """The main program and the ``sec`` programs of one controller, and the scripts waiting to start."""
+
+    def __init__(
+        self,
+        arm: FakeArm,
+        *,
+        controller_version: tuple[int, int, int, int],
+        step_time: float,
+        address: str,
+        input_registers: InputRegisters,
+        broadcast: Callable[[Any], None],
+    ) -> None:
+        self.arm = arm
+        major, minor = controller_version[:2]
+        self.series = "e" if major >= 5 else "cb3"
+        self.version = (major, minor)
+        self.step_time = step_time
+        self.address = address
+        self.input_registers = input_registers
+        self.broadcast = broadcast
+        """Sends a robot message to every primary client."""
+        self.main: RunningScript | None = None
+        self.secondary: list[RunningScript] = []
+        self.name: str | None = None
+        """The name of the last main program started."""
+        self.input_times: dict[str, float] = {}
+        """Controller time each RTDE input variable last arrived (what the watchdogs check)."""
+        self.compiles = 0
+        """Scripts compiled (in the worker thread) so far."""
+        self._pending: deque[_Arrival | Callable[[], None]] = deque()
+        self._room = asyncio.Event()
+        self._room.set()
+        self._worker: asyncio.Task[None] | None = None
+
+    # ---- arrivals, in order ------------------------------------------------------------------------
+
+    def submit(self, name: str, text: str) -> None:
+        """Compile ``text`` off the event loop, then start it, after everything that arrived before."""
+        self._enqueue(_Arrival(name, text))
+
+    def then(self, action: Callable[[], None]) -> None:
+        """Do ``action`` (a controller command) now, or after the scripts still waiting to start."""
+        if not self._pending:
+            action()
+            return
+        self._enqueue(action)
+
+    @property
+    def busy(self) -> bool:
+        """Whether scripts are waiting to be compiled or started."""
+        return bool(self._pending)
+
+    async def room(self) -> None:
+        """Wait while too many scripts are waiting: the reader stops reading its client meanwhile."""
+        while len(self._pending) >= MAX_PENDING_SCRIPTS:
+            self._room.clear()
+            await self._room.wait()
+
+    def _enqueue(self, item: _Arrival | Callable[[], None]) -> None:
+        self._pending.append(item)
+        if self._worker is None:
+            self._worker = asyncio.get_running_loop().create_task(self._work())
+
+    async def _work(self) -> None:
+        try:
+            while self._pending:
+                item = self._pending[0]
+                if isinstance(item, _Arrival):
+                    program = await self._compile(item.text)
+                    if program is not None:
+                        self.start(item.name, program)
+                else:
+                    item()
+                self._pending.popleft()
+                if len(self._pending) < MAX_PENDING_SCRIPTS:
+                    self._room.set()
+        finally:
+            self._worker = None
+            self._room.set()
+
+    async def _compile(self, text: str) -> Any:
+        from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
+
+        try:
+            program = await asyncio.to_thread(compile_program, text, self.series, self.version)
+        except ScriptCompileError as err:
+            self.broadcast(prim.RuntimeExceptionMessage(err.line, err.column, err.message))
+            return None
+        self.compiles += 1
+        return program
+
+    async def close(self) -> None:
+        """Forget what waits to start, end every program."""
+        self._pending.clear()
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await worker
+        self.end_all()
+
+    # ---- starting and ending -------------------------------------------------------------------------
+
+    def start(self, name: str, program: Any) -> None:
+        """Start a compiled program: a ``sec`` one beside the main one, any other replacing it."""
+        if program.kind == "sec":
+            host = self._host()
+            self.secondary.append(RunningScript(name, program.start(host), host))
+            return
+        if self.main is not None:
+            self.end(self.main)
+        reason = self.arm.start_program()
+        if reason is not None:
+            self.broadcast(prim.TextMessage(f"program {name} not started: {reason}"))
+            return
+        host = self._host()
+        self.main = RunningScript(name, program.start(host), host)
+        self.name = name
+        self.broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))
+
+    def _host(self) -> ScriptHost:
+        return ScriptHost(
+            self.arm,
+            step_time=self.step_time,
+            series=self.series,
+            version=self.version,
+            local_address=self.address,  # a real robot's connections come from its own address
+            message=self._message,
+            input_registers=self.input_registers,
+        )
+
+    def _message(self, kind: str, text: str) -> None:
+        if kind == "popup":
+            self.broadcast(prim.popup_message(text))
+        elif kind == "runtime":
+            self.broadcast(prim.RuntimeExceptionMessage(0, 0, text))
+        else:
+            self.broadcast(prim.TextMessage(text))
+
+    def stop(self) -> None:
+        """``stop program``: every program ends and the arm stops."""
+        self.end_all()
+        self.arm.stop_program()
+
+    def end(self, script: RunningScript) -> None:
+        """``script`` ends (by itself, by an error or stopped): report why, close what it opened."""
+        run = script.run
+        if not run.done:
+            with contextlib.suppress(Exception):
+                run.stop()
+        script.host.close()
+        error = run.error
+        if error is not None:
+            self.broadcast(prim.RuntimeExceptionMessage(error.line, error.column, error.message))
+        elif script.failure is not None:
+            self.broadcast(prim.RuntimeExceptionMessage(0, 0, script.failure))
+        if script in self.secondary:
+            self.secondary.remove(script)
+            return
+        if self.main is script:
+            self.main = None
+            self.arm.stop_program()
+        log.info("%s program %s ended", self.address, script.name)
+        self.broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STOPPED", script.name))
+
+    def end_all(self) -> None:
+        for script in [*self.secondary, *([self.main] if self.main is not None else [])]:
+            self.end(script)
+
+    # ---- every cycle ---------------------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One cycle: the main program while it plays or pauses (not once paused), then every ``sec``
+        program; a program that has ended is closed; the main one's RTDE watchdogs are checked."""
+        script = self.main
+        if script is not None:
+            state = self.arm.runtime_state
+            if state is RuntimeState.PLAYING or state is RuntimeState.PAUSING:
+                # while pausing the program's motion goes on in time slowed to 0 along its path
+                self._step(script)
+                if script.run.done or script.failure is not None:
+                    self.end(script)
+                elif state is RuntimeState.PLAYING:
+                    self._check_watchdogs(script)
+            elif state is RuntimeState.STOPPED:  # stopped from outside: power off, stop, ...
+                self.end(script)
+        for sec in list(self.secondary):
+            self._step(sec)
+            if sec.run.done or sec.failure is not None:
+                self.end(sec)
+
+    def _step(self, script: RunningScript) -> None:
+        try:
+            script.run.step()
+        except Exception as err:  # the interpreter's own fault ends this program, not the controller
+            log.exception("%s program %s: the interpreter failed", self.address, script.name)
+            script.failure = f"{type(err).__name__}: {err}"
+
+    def _check_watchdogs(self, script: RunningScript) -> None:
+        watchdogs = script.host.watchdogs
+        if not watchdogs:
+            return
+        now = self.arm.timestamp
+        for watchdog in list(watchdogs.values()):
+            if watchdog.min_frequency <= 0 or watchdog.action == "ignore":
+                continue
+            last = max(self.input_times.get(watchdog.variable, -math.inf), watchdog.since)
+            if now - last <= 1.0 / watchdog.min_frequency + 1e-9:
+                continue
+            text = f"RTDE watchdog: {watchdog.variable} not updated at {watchdog.min_frequency:g} Hz"
+            self.broadcast(prim.TextMessage(text))
+            if watchdog.action == "pause":
+                self.arm.pause_program()
+            else:
+                self.stop()
+            return
+
+    # ---- the External Control program ------------------------------------------------------------------
+
+    async def play_urcap(self, urcap: tuple[str, int], start: Callable[[str, str], None]) -> None:
+        """What the External Control URCap does on play: fetch the script, then ``start`` it."""
+        host, port = urcap
+        try:
+            reader, writer = await asyncio.wait_for(
+                asyncio.open_connection(host, port, local_addr=(self.address, 0)), URCAP_TIMEOUT_S
+            )
+        except (OSError, TimeoutError) as err:
+            text = f"External Control: connection to {host}:{port} could not be established: {err}"
+            self.broadcast(prim.TextMessage(text))
+            self.arm.stop_program()
+            return
+        try:
+            writer.write(b"request_program\n")
+            await writer.drain()
+            chunks = [await asyncio.wait_for(reader.readline(), URCAP_TIMEOUT_S)]
+            while True:  # more lines only while they keep coming
+                try:
+                    line = await asyncio.wait_for(reader.readline(), URCAP_MORE_S)
+                except TimeoutError:
+                    break
+                if not line:
+                    break
+                chunks.append(line)
+        finally:
+            writer.close()
+        self.arm.runtime_state = RuntimeState.STOPPED
+        start("externalControl", b"".join(chunks).decode("utf-8", "replace"))

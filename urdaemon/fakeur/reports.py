@@ -1,0 +1,255 @@
+"""What a fake controller reports of its arm: the primary/secondary robot state (10 Hz), the real-time
+interface's state (every cycle) and the RTDE output variables (read per client recipe).
+
+Pure functions of the arm (and of the controller's RTDE input registers): no sockets, no clock. The
+target joint positions and speeds are the arm's own (``arm.target_q``/``target_qd``: where the played
+motion is now meant to be), the TCP speeds are the joint speeds through the arm's kinematics, and a
+program that is pausing (its speed scaling ramping to 0) is reported as playing until it is paused,
+as a controller reports it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from urdaemon.description.urmodels import UrModel
+from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.fakeur.urscript.lib_motion import tool_speed
+from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.protocols import primary as prim
+from urdaemon.protocols import realtime as rt
+
+__all__ = ["KINEMATICS_CALIBRATED", "output_getter", "realtime_state", "robot_state"]
+
+KINEMATICS_CALIBRATED = 0
+"""KINEMATICS_INFO ``calibration_status`` of a calibrated arm: what URSim sends (ur-protocols.md §2.2)."""
+_PROGRAM_STATES = {
+    RuntimeState.PLAYING: 2.0,
+    RuntimeState.PAUSING: 2.0,  # playing until paused, as a controller says
+    RuntimeState.PAUSED: 3.0,
+}
+"""Real-time interface ``program_state`` (1 stopped, 2 playing, 3 paused) by runtime state."""
+
+
+def realtime_state(arm: FakeArm) -> rt.RealtimeState:
+    """The real-time interface's (30003) state of ``arm``, sent every cycle."""
+    q, qd, qdd = tuple(arm.q), tuple(arm.qd), tuple(arm.qdd)
+    target_q, target_qd = tuple(arm.target_q), tuple(arm.target_qd)
+    pose = arm.actual_tcp_pose()
+    running = arm.robot_mode is RobotMode.RUNNING
+    program_state = _PROGRAM_STATES.get(arm.runtime_state, 1.0)
+    return rt.RealtimeState(
+        time=arm.timestamp,
+        q_target=target_q,
+        qd_target=target_qd,
+        qdd_target=qdd,
+        i_target=tuple(arm.current),
+        q_actual=q,
+        qd_actual=qd,
+        i_actual=tuple(arm.current),
+        i_control=tuple(arm.current),
+        tool_vector_actual=pose,
+        tool_vector_target=pose,
+        digital_input_bits=float(arm.io.digital_in),
+        motor_temperatures=(30.0,) * 6,
+        controller_timer=0.0002,
+        robot_mode=float(arm.robot_mode),
+        joint_modes=(253.0 if running else 255.0,) * 6,
+        safety_mode=float(arm.safety_mode),
+        tool_accelerometer_values=(0.0, 0.0, 9.82),
+        speed_scaling=arm.speed_scaling,
+        v_main=48.0,
+        v_robot=48.0 if running else 0.0,
+        v_actual=(48.0 if running else 0.0,) * 6,
+        digital_outputs=float(arm.io.digital_out),
+        program_state=program_state,
+        safety_status=float(arm.safety_mode),
+        payload_mass=arm.payload_mass,
+        payload_cog=tuple(arm.payload_cog),
+        payload_inertia=tuple(arm.payload_inertia),
+    )
+
+
+def robot_state(
+    arm: FakeArm, model: UrModel, controller_version: tuple[int, int, int, int]
+) -> prim.RobotState:
+    """The robot state of ``arm`` on the primary and secondary interfaces (10 Hz)."""
+    dh = arm.dh
+    q = tuple(arm.q)
+    powered = arm.robot_mode in (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON)
+    running_modes = 253 if arm.robot_mode is RobotMode.RUNNING else 255 if powered else 239
+    return prim.RobotState(
+        (
+            prim.RobotModeData(
+                timestamp=int(arm.timestamp * 1000),
+                is_real_robot_connected=True,
+                is_real_robot_enabled=True,
+                is_robot_power_on=powered,
+                is_emergency_stopped=arm.safety_mode
+                in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP),
+                is_protective_stopped=arm.safety_mode is SafetyMode.PROTECTIVE_STOP,
+                is_program_running=arm.program_running,
+                is_program_paused=arm.runtime_state is RuntimeState.PAUSED,
+                robot_mode=int(arm.robot_mode),
+                control_mode=0,
+                target_speed_fraction=arm.speed_slider,
+                speed_scaling=arm.speed_scaling,
+                target_speed_fraction_limit=1.0,
+                reserved=0 if controller_version[0] >= 5 else None,  # CB3: 46 bytes
+            ),
+            prim.JointData(
+                q_actual=q,
+                q_target=tuple(arm.target_q),
+                qd_actual=tuple(arm.qd),
+                i_actual=tuple(arm.current),
+                v_actual=(48.0,) * 6,
+                t_motor=(30.0,) * 6,
+                t_micro=(30.0,) * 6,
+                joint_mode=(running_modes,) * 6,
+            ),
+            prim.CartesianInfo(tcp_pose=arm.actual_tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
+            prim.KinematicsInfo(
+                checksum=(0xFFFFFFFF,) * 6,
+                dh_theta=dh.theta,
+                dh_a=dh.a,
+                dh_d=dh.d,
+                dh_alpha=dh.alpha,
+                calibration_status=KINEMATICS_CALIBRATED,
+            ),
+            prim.MasterboardData(
+                digital_input_bits=arm.io.digital_in & 0xFFFF,
+                digital_output_bits=arm.io.digital_out & 0xFFFF,
+                analog_output0=arm.io.analog_out[0],
+                analog_output1=arm.io.analog_out[1],
+                robot_voltage_48v=48.0 if powered else 0.0,
+                safety_mode=int(arm.safety_mode),
+            ),
+            prim.ToolData(tool_output_voltage=arm.io.tool_voltage, tool_mode=running_modes),
+            prim.ConfigurationData(
+                joint_min_limit=tuple(max(v, -6.335) for v in arm.min_position),
+                joint_max_limit=tuple(min(v, 6.335) for v in arm.max_position),
+                joint_max_speed=tuple(arm.max_velocity),
+                joint_max_acceleration=(40.0,) * 6,
+                v_joint_default=1.0472,
+                a_joint_default=1.3963,
+                v_tool_default=0.25,
+                a_tool_default=1.2,
+                eq_radius=0.25,
+                dh_a=dh.a,
+                dh_d=dh.d,
+                dh_alpha=dh.alpha,
+                dh_theta=dh.theta,
+                masterboard_version=6,
+                controller_box_type=4 if controller_version[0] >= 5 else 2,
+                robot_type=model.robot_type,
+                robot_sub_type=3 if controller_version[0] >= 5 else 2,
+            ),
+            prim.ForceModeData(),
+            prim.AdditionalInfo(),
+        )
+    )
+
+
+def output_getter(name: str, rtde_type: str, inputs: InputRegisters) -> Callable[[FakeArm], Any]:
+    """How to read output ``name`` off the arm (zero of its type for what the fake does not model)."""
+    getter = _OUTPUTS.get(name)
+    if getter is not None:
+        return getter
+    if "_bit_registers" in name:  # a UINT32 word of bits 0..31 or 32..63
+        low = 0 if name.endswith("0_to_31") else 32
+        if name.startswith("input_"):
+            return lambda arm: _word(inputs.bits, low)
+        return lambda arm: _word(arm.io.registers_bit, low)
+    if name.startswith("input_int_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.ints.get(at, 0)
+    if name.startswith("input_double_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.doubles.get(at, 0.0)
+    if name.startswith("input_bit_register_"):
+        at = int(name.rsplit("_", 1)[1])
+        return lambda arm: inputs.bits.get(at, False)
+    if name.startswith("output_int_register_"):
+        index = int(name.rsplit("_", 1)[1])
+        return lambda arm: arm.io.registers_int.get(index, 0)
+    if name.startswith("output_double_register_"):
+        index = int(name.rsplit("_", 1)[1])
+        return lambda arm: arm.io.registers_double.get(index, 0.0)
+    if name.startswith("output_bit_register_"):
+        index = int(name.rsplit("_", 1)[1])
+        return lambda arm: arm.io.registers_bit.get(index, False)
+    zero = _ZEROS[rtde_type]
+    return lambda arm: zero
+
+
+def _word(bits: dict[int, bool], low: int) -> int:
+    """Bits ``low``..``low + 31`` of ``bits`` as a UINT32 (bit ``low`` the least significant)."""
+    word = 0
+    for index, value in bits.items():
+        if value and low <= index < low + 32:
+            word |= 1 << (index - low)
+    return word
+
+
+_ZEROS: dict[str, Any] = {
+    "BOOL": False,
+    "UINT8": 0,
+    "UINT32": 0,
+    "UINT64": 0,
+    "INT32": 0,
+    "DOUBLE": 0.0,
+    "VECTOR3D": (0.0, 0.0, 0.0),
+    "VECTOR6D": (0.0,) * 6,
+    "VECTOR6INT32": (0,) * 6,
+    "VECTOR6UINT32": (0,) * 6,
+}
+
+_OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
+    "timestamp": lambda arm: arm.timestamp,
+    "actual_q": lambda arm: tuple(arm.q),
+    "actual_qd": lambda arm: tuple(arm.qd),
+    "actual_qdd": lambda arm: tuple(arm.qdd),
+    "target_q": lambda arm: tuple(arm.target_q),
+    "target_qd": lambda arm: tuple(arm.target_qd),
+    "target_qdd": lambda arm: tuple(arm.qdd),
+    "actual_current": lambda arm: tuple(arm.current),
+    "target_current": lambda arm: tuple(arm.current),
+    "joint_temperatures": lambda arm: (30.0,) * 6,
+    "joint_mode": lambda arm: (253 if arm.robot_mode is RobotMode.RUNNING else 255,) * 6,
+    "speed_scaling": lambda arm: arm.speed_scaling,
+    "target_speed_fraction": lambda arm: arm.speed_slider,
+    "runtime_state": lambda arm: int(arm.runtime_state),
+    "actual_TCP_pose": lambda arm: arm.actual_tcp_pose(),
+    "target_TCP_pose": lambda arm: arm.actual_tcp_pose(),
+    "actual_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.q, arm.qd)),
+    "target_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.target_q, arm.target_qd)),
+    "actual_TCP_force": lambda arm: (0.0,) * 6,
+    "actual_digital_input_bits": lambda arm: arm.io.digital_in,
+    "actual_digital_output_bits": lambda arm: arm.io.digital_out,
+    "standard_analog_input0": lambda arm: arm.io.analog_in[0],
+    "standard_analog_input1": lambda arm: arm.io.analog_in[1],
+    "standard_analog_output0": lambda arm: arm.io.analog_out[0],
+    "standard_analog_output1": lambda arm: arm.io.analog_out[1],
+    "analog_io_types": lambda arm: arm.io.analog_out_types,
+    "tool_analog_input0": lambda arm: arm.io.tool_analog_in[0],
+    "tool_analog_input1": lambda arm: arm.io.tool_analog_in[1],
+    "tool_output_voltage": lambda arm: arm.io.tool_voltage,
+    "tool_mode": lambda arm: 253 if arm.robot_mode is RobotMode.RUNNING else 255,
+    "tool_temperature": lambda arm: 30.0,
+    "robot_mode": lambda arm: int(arm.robot_mode),
+    "safety_mode": lambda arm: int(arm.safety_mode),
+    "safety_status": lambda arm: int(arm.safety_mode),
+    "robot_status_bits": lambda arm: arm.robot_status_bits,
+    "safety_status_bits": lambda arm: arm.safety_status_bits,
+    "tcp_offset": lambda arm: tuple(arm.tcp_offset),
+    "payload": lambda arm: arm.payload_mass,
+    "payload_cog": lambda arm: tuple(arm.payload_cog),
+    "payload_inertia": lambda arm: tuple(arm.payload_inertia),
+    "actual_main_voltage": lambda arm: 48.0,
+    "actual_robot_voltage": lambda arm: 48.0,
+    "actual_robot_current": lambda arm: 0.5,
+    "actual_joint_voltage": lambda arm: (48.0,) * 6,
+    "actual_execution_time": lambda arm: 0.1,
+}

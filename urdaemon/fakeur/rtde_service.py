@@ -1,0 +1,206 @@
+"""A fake controller's RTDE interface (30004): recipes, the output stream, and the inputs it applies.
+
+Each client sets up its output recipe (variables and frequency) and its input recipes; while it
+streams, ``send_due`` (called every controller cycle) sends it the outputs whose time has come on the
+controller's own time grid, drift-free. Input packages write the arm's IO, the speed slider and the
+RTDE input registers (``input_*_register_X`` and the words ``input_bit_registers0_to_31`` /
+``32_to_63``), and note when each variable last arrived (what a program's RTDE watchdogs check). An
+input variable belongs to the first client that sets it up (IN_USE for the others).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from urdaemon.errors import ProtocolError
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.reports import output_getter
+from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.protocols import rtde
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
+
+__all__ = ["RtdeService"]
+
+log = logging.getLogger("urdaemon.fakeur")
+
+Write = Callable[[str, asyncio.StreamWriter, bytes], None]
+"""The controller's guarded write: (service, writer, data)."""
+Paced = Callable[[asyncio.StreamWriter, bytes], Any]
+
+
+@dataclass
+class _RtdeClient:
+    conn: rtde.RtdeConnection
+    writer: asyncio.StreamWriter
+    period: float = 0.0
+    next_due: float = 0.0
+    streaming: bool = False
+    getters: list[Callable[[FakeArm], Any]] = field(default_factory=list)
+    inputs: dict[int, tuple[str, ...]] = field(default_factory=dict)
+
+
+class RtdeService:
+    """The RTDE clients of one controller."""
+
+    def __init__(
+        self,
+        arm: FakeArm,
+        *,
+        address: str,
+        rate_hz: float,
+        controller_version: tuple[int, int, int, int],
+        versions: tuple[int, ...],
+        input_registers: InputRegisters,
+        input_times: dict[str, float],
+        write: Write,
+    ) -> None:
+        self.arm = arm
+        self.address = address
+        self.rate_hz = rate_hz
+        self.controller_version = controller_version
+        self.versions = versions
+        self.input_registers = input_registers
+        self.input_times = input_times
+        self.write = write
+        self.clients: list[_RtdeClient] = []
+        """The clients that stream (or streamed and are still connected)."""
+        self.input_owner: dict[str, _RtdeClient] = {}
+
+    async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, paced: Paced) -> None:
+        conn = rtde.RtdeConnection(Side.ROBOT)
+        client = _RtdeClient(conn, writer)
+        try:
+            while data := await reader.read(4096):
+                for event in conn.receive_data(data):
+                    self._on_event(client, event)
+                self.write("rtde", writer, conn.data_to_send())
+                await paced(writer, data)
+        finally:
+            client.streaming = False
+            with contextlib.suppress(ValueError):
+                self.clients.remove(client)
+            for name in [n for n, owner in self.input_owner.items() if owner is client]:
+                del self.input_owner[name]
+
+    def send_due(self, now: float) -> None:
+        """Send every streaming client whose next output package is due at controller time ``now``."""
+        arm = self.arm
+        for client in self.clients:
+            if client.streaming and now + 1e-9 >= client.next_due:
+                client.next_due += client.period
+                if client.next_due < now:  # fell behind (a stall): resume on the grid, no burst
+                    client.next_due = now + client.period
+                self._send(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
+
+    def _send(self, client: _RtdeClient, message: Any) -> None:
+        try:
+            client.conn.send(message)
+        except ProtocolError as err:
+            log.info("%s rtde: not sent: %s", self.address, err)
+            return
+        self.write("rtde", client.writer, client.conn.data_to_send())
+
+    def _on_event(self, client: _RtdeClient, event: Any) -> None:
+        conn = client.conn
+        if isinstance(event, rtde.ProtocolVersionRequested):
+            conn.send(rtde.ProtocolVersionAccept(event.version in self.versions))
+        elif isinstance(event, rtde.ControllerVersionRequested):
+            conn.send(rtde.ControllerVersionReply(*self.controller_version))
+        elif isinstance(event, rtde.SetupOutputsRequested):
+            self._setup_outputs(client, event)
+        elif isinstance(event, rtde.SetupInputsRequested):
+            self._setup_inputs(client, event)
+        elif isinstance(event, rtde.StartRequested):
+            ok = bool(client.getters)
+            conn.send(rtde.StartAccept(ok))
+            if ok and not client.streaming:
+                client.streaming = True
+                client.next_due = self.arm.timestamp + client.period
+                if client not in self.clients:
+                    self.clients.append(client)
+        elif isinstance(event, rtde.PauseRequested):
+            client.streaming = False
+            conn.send(rtde.PauseAccept(True))
+        elif isinstance(event, rtde.InputDataReceived):
+            input_names = client.inputs.get(event.recipe_id)
+            if input_names is not None:
+                self.apply_inputs(dict(zip(input_names, event.values, strict=True)))
+        elif isinstance(event, rtde.TextReceived):
+            log.info("%s rtde text from client: %s", self.address, event.message)
+
+    def _setup_outputs(self, client: _RtdeClient, event: rtde.SetupOutputsRequested) -> None:
+        frequency = event.frequency if event.frequency is not None else self.rate_hz
+        names = event.names  # an empty name (from ``a,,b``) is answered NOT_FOUND like any unknown
+        types = tuple(OUTPUT_VARIABLES.get(name, NOT_FOUND) for name in names)
+        # A real controller refuses a frequency it cannot serve: no recipe (id 0), all NOT_FOUND.
+        if not (0 < frequency <= self.rate_hz) or NOT_FOUND in types:
+            client.getters = []
+            client.conn.send(rtde.OutputsSetup(0 if event.frequency is not None else None, types))
+            return
+        client.period = 1.0 / frequency
+        client.getters = [output_getter(name, OUTPUT_VARIABLES[name], self.input_registers) for name in names]
+        client.conn.send(rtde.OutputsSetup(1 if event.frequency is not None else None, types))
+
+    def _setup_inputs(self, client: _RtdeClient, event: rtde.SetupInputsRequested) -> None:
+        names = event.names
+        types = []
+        for name in names:
+            owner = self.input_owner.get(name)
+            if name not in INPUT_VARIABLES:
+                types.append(NOT_FOUND)
+            elif owner is not None and owner is not client:
+                types.append(IN_USE)
+            else:
+                types.append(INPUT_VARIABLES[name])
+        ok = all(t not in (NOT_FOUND, IN_USE) for t in types)
+        recipe_id = len(client.inputs) + 1 if ok else 0
+        if ok:
+            client.inputs[recipe_id] = names
+            for name in names:
+                self.input_owner[name] = client
+        client.conn.send(rtde.InputsSetup(recipe_id, tuple(types)))
+
+    def apply_inputs(self, values: dict[str, Any]) -> None:
+        """What an input package does: IO, the speed slider, the input registers."""
+        arm, io = self.arm, self.arm.io
+        now = arm.timestamp
+        for name in values:
+            self.input_times[name] = now
+        if values.get("speed_slider_mask"):
+            fraction = float(values.get("speed_slider_fraction", arm.speed_slider))
+            arm.speed_slider = min(max(fraction, 0.0), 1.0)
+        for kind, shift in (("standard", 0), ("configurable", 8), ("tool", 16)):
+            mask = int(values.get(f"{kind}_digital_output_mask", 0)) & 0xFF
+            if mask:
+                value = int(values.get(f"{kind}_digital_output", 0)) & mask
+                io.digital_out = (io.digital_out & ~(mask << shift)) | (value << shift)
+        analog_mask = int(values.get("standard_analog_output_mask", 0))
+        for pin in (0, 1):
+            if analog_mask & (1 << pin):
+                io.analog_out[pin] = float(values.get(f"standard_analog_output_{pin}", 0.0))
+                if (int(values.get("standard_analog_output_type", 0)) >> pin) & 1:
+                    io.analog_out_types |= 1 << (pin + 2)
+                else:
+                    io.analog_out_types &= ~(1 << (pin + 2))
+        self._apply_registers(values)
+
+    def _apply_registers(self, values: dict[str, Any]) -> None:
+        registers = self.input_registers
+        for name, value in values.items():
+            if name.startswith("input_int_register_"):
+                registers.ints[int(name.rsplit("_", 1)[1])] = int(value)
+            elif name.startswith("input_double_register_"):
+                registers.doubles[int(name.rsplit("_", 1)[1])] = float(value)
+            elif name.startswith("input_bit_register_"):
+                registers.bits[int(name.rsplit("_", 1)[1])] = bool(value)
+            elif name.startswith("input_bit_registers"):  # a word: bits 0..31 or 32..63
+                low = 0 if name.endswith("0_to_31") else 32
+                word = int(value)
+                for bit in range(32):
+                    registers.bits[low + bit] = bool((word >> bit) & 1)
