@@ -142,6 +142,7 @@ async def test_programs_load_from_a_directory_relative_names_resolved_under_it(t
         primary = await Link.open(prim.PrimaryConnection(Side.DAEMON), controller.address, 30001)
         await primary.next(prim.VersionMessage)
         assert (await _ask(link, dash.Play(), dash.CommandReply)).success
+        await controller.programs.settled()  # compiled off the event loop
         clock.turn(3)
         assert (await primary.next(prim.TextMessage)).text == "picked"
         primary.close()

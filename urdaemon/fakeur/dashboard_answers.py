@@ -90,10 +90,7 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
     if isinstance(command, dash.GetSafetyStatus):
         return dash.safety_status_text(arm.safety_mode)
     if isinstance(command, dash.GetProgramState):
-        state = {
-            RuntimeState.PLAYING: dash.ProgramState.PLAYING,
-            RuntimeState.PAUSED: dash.ProgramState.PAUSED,
-        }.get(arm.runtime_state, dash.ProgramState.STOPPED)
+        state = _PROGRAM_STATES.get(arm.runtime_state, dash.ProgramState.STOPPED)
         return dash.program_state_text(state, _basename(program))
     if isinstance(command, dash.IsRunning):
         return dash.running_text(arm.program_running)

@@ -88,6 +88,8 @@ class Programs:
         self._pending: deque[_Arrival | Callable[[], None]] = deque()
         self._room = asyncio.Event()
         self._room.set()
+        self._idle = asyncio.Event()
+        self._idle.set()
         self._worker: asyncio.Task[None] | None = None
 
     # ---- arrivals, in order ------------------------------------------------------------------------
@@ -108,6 +110,10 @@ class Programs:
         """Whether scripts are waiting to be compiled or started."""
         return bool(self._pending)
 
+    async def settled(self) -> None:
+        """Wait until every script that arrived has been compiled and started (or refused)."""
+        await self._idle.wait()
+
     async def room(self) -> None:
         """Wait while too many scripts are waiting: the reader stops reading its client meanwhile."""
         while len(self._pending) >= MAX_PENDING_SCRIPTS:
@@ -116,6 +122,7 @@ class Programs:
 
     def _enqueue(self, item: _Arrival | Callable[[], None]) -> None:
         self._pending.append(item)
+        self._idle.clear()
         if self._worker is None:
             self._worker = asyncio.get_running_loop().create_task(self._work())
 
@@ -135,6 +142,7 @@ class Programs:
         finally:
             self._worker = None
             self._room.set()
+            self._idle.set()
 
     async def _compile(self, text: str) -> Any:
         from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
