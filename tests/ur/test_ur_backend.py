@@ -18,15 +18,26 @@ from urdaemon.model import RobotMode
 pytestmark = pytest.mark.timeout(90)
 
 HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
+E_SERIES = (5, 15, 0, 0)
+CB3 = (3, 15, 7, 0)
+SERIES = pytest.mark.parametrize(
+    ("series", "version"), [("e", E_SERIES), ("cb3", CB3)], ids=["e-series", "cb3"]
+)
+"""The tests marked with it run our control script rendered for each series, in the fake's interpreter."""
 
 
-def _cell(address: str, *, headless: bool = True, startup: bool = True) -> str:
+def _model(name: str, series: str) -> str:
+    """``ur10e`` on e-Series, ``ur10`` on CB3."""
+    return name if series == "e" else name.removesuffix("e")
+
+
+def _cell(address: str, *, headless: bool = True, startup: bool = True, model: str = "ur10e") -> str:
     ports = [free_tcp_port() for _ in range(4)]
     return f"""
 cell: urcell
 robots:
   - name: alice
-    model: ur10e
+    model: {model}
     backend: ur
     address: {address}
     headless: {str(headless).lower()}
@@ -48,18 +59,22 @@ async def _until(client: Client, key: str, predicate: Any, limit: int = 400) -> 
         client.unsubscribe(sub)
 
 
-async def test_startup_from_powered_off_headless_then_a_move_succeeds() -> None:
-    fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME)
+@SERIES
+async def test_startup_from_powered_off_headless_then_a_move_succeeds(
+    series: str, version: tuple[int, int, int, int]
+) -> None:
+    model = _model("ur10e", series)
+    fake = FakeController(model, address=fake_address(), initial_positions=HOME, controller_version=version)
     await fake.start()
     try:
         assert fake.arm.robot_mode is RobotMode.POWER_OFF
-        async with running_daemon(_cell(fake.address)) as (daemon, client):
+        async with running_daemon(_cell(fake.address, model=model)) as (daemon, client):
             alice = await client.robot("alice")
             status = await _until(client, alice.keys.status, lambda s: s["ready"])
             assert status["backend"] == "ur"
             assert status["robot_mode"] == "RUNNING"
             assert status["program_running"] is True
-            assert status["rate_hz"] == 500.0
+            assert status["rate_hz"] == (500.0 if series == "e" else 125.0)
             target = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
             goal = await alice.move(target, duration=2.0)
             result = await goal.result(timeout=20)
@@ -75,7 +90,7 @@ async def test_startup_from_powered_off_headless_then_a_move_succeeds() -> None:
             assert io_state["digital_out"][4] is True
             assert fake.arm.speed_slider == pytest.approx(0.5)
             assert fake.arm.payload_mass == pytest.approx(1.25)
-            assert daemon.runtimes[0].backend.statistics().cycles > 500
+            assert daemon.runtimes[0].backend.statistics().cycles > (500 if series == "e" else 125)
     finally:
         await fake.close()
 
@@ -162,10 +177,14 @@ async def _next_kind(sub: Any, kind: str) -> dict[str, Any]:
     raise AssertionError(f"no {kind} event")
 
 
-def _two_robot_cell(alice: str, bob: str) -> str:
+def _two_robot_cell(alice: str, bob: str, series: str = "e") -> str:
     ports = [free_tcp_port() for _ in range(8)]
     robots = []
-    for name, model, address, p in (("alice", "ur10e", alice, ports[:4]), ("bob", "ur3e", bob, ports[4:])):
+    models = (_model("ur10e", series), _model("ur3e", series))
+    for name, model, address, p in (
+        ("alice", models[0], alice, ports[:4]),
+        ("bob", models[1], bob, ports[4:]),
+    ):
         robots.append(
             f"""  - name: {name}
     model: {model}
@@ -185,13 +204,21 @@ PASSTHROUGH_POINTS = [
 ]
 
 
-async def test_alice_servos_a_trajectory_while_bob_runs_a_passthrough_trajectory() -> None:
-    fake_a = FakeController("ur10e", address=fake_address(), initial_positions=HOME)
-    fake_b = FakeController("ur3e", address=fake_address(), initial_positions=HOME)
+@SERIES
+async def test_alice_servos_a_trajectory_while_bob_runs_a_passthrough_trajectory(
+    series: str, version: tuple[int, int, int, int]
+) -> None:
+    fakes = [
+        FakeController(
+            _model(name, series), address=fake_address(), initial_positions=HOME, controller_version=version
+        )
+        for name in ("ur10e", "ur3e")
+    ]
+    fake_a, fake_b = fakes
     await fake_a.start()
     await fake_b.start()
     try:
-        async with running_daemon(_two_robot_cell(fake_a.address, fake_b.address)) as (_, client):
+        async with running_daemon(_two_robot_cell(fake_a.address, fake_b.address, series)) as (_, client):
             alice, bob = await client.robot("alice"), await client.robot("bob")
             await _until(client, alice.keys.status, lambda s: s["ready"])
             await _until(client, bob.keys.status, lambda s: s["ready"])
