@@ -15,10 +15,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import math
+import sys
 from collections import deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +39,11 @@ URCAP_TIMEOUT_S = 5.0
 """How long the External Control program waits to connect to the daemon and for the first line."""
 URCAP_MORE_S = 0.2
 """The URCap keeps reading lines only while more arrive this soon (ur-protocols.md §4.3)."""
+
+_COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="urscript-compile")
+"""One thread compiles for every fake of the process: parsing is pure Python and holds the GIL, so
+with several compiling threads the event loop (and every fake's clock) would wait its turn behind
+each of them; with one it gets the GIL back at every switch interval (5 ms)."""
 
 
 @dataclass
@@ -148,7 +156,9 @@ class Programs:
         from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
 
         try:
-            program = await asyncio.to_thread(compile_program, text, self.series, self.version)
+            program = await asyncio.get_running_loop().run_in_executor(
+                _COMPILER, _compile_briefly, compile_program, text, self.series, self.version
+            )
         except ScriptCompileError as err:
             self.broadcast(prim.RuntimeExceptionMessage(err.line, err.column, err.message))
             return None
@@ -311,3 +321,25 @@ class Programs:
             writer.close()
         self.arm.runtime_state = RuntimeState.STOPPED
         start("externalControl", b"".join(chunks).decode("utf-8", "replace"))
+
+
+COMPILE_SWITCH_INTERVAL_S = 0.0005
+"""The GIL switch interval while a script compiles (Python's default: 5 ms)."""
+
+
+def _compile_briefly(compile_program: Callable[..., Any], text: str, *args: Any) -> Any:
+    """Compile in the compiler thread, handing the GIL back often meanwhile.
+
+    Parsing is pure Python: the event loop thread, which gives up the GIL at every system call (a
+    timer read, a socket write), waits up to a whole switch interval to get it back each time, so with
+    the default 5 ms a controller cycle of 2 ms is lost at almost every tick while a script compiles."""
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(min(previous, COMPILE_SWITCH_INTERVAL_S))
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return compile_program(text, *args)
+    finally:
+        if collecting:
+            gc.enable()
+        sys.setswitchinterval(previous)
