@@ -18,9 +18,13 @@ runtime error is a RUNTIME_EXCEPTION message naming line and column, and a progr
 compile never starts.
 
 No client can stall the controller: a request/response service stops reading a client that does not
-read its replies (TCP flow control), a stream skips its messages to a client whose unsent backlog
-passes ``MAX_BACKLOG_BYTES`` (it stays connected: ur_rtde sends scripts on 30003 and never reads
-it), and scripts are handled one at a time between controller cycles.
+read its replies, a stream skips its messages to a client that does not read (``fakeur.connections``),
+and scripts are compiled off the event loop (``fakeur.programs``).
+
+The controller composes one job per module: ``programs`` (the programs it runs), ``rtde_service``
+(30004), ``reports`` (what it reports of the arm), ``dashboard_answers`` (29999's replies and
+``play``), ``connections`` (guarded connections and writes), ``clock`` (the shared clock). This
+module keeps the robot's life: the ports, the cycle, the script ports and the controller commands.
 """
 
 from __future__ import annotations
@@ -28,16 +32,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import socket
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
-from urdaemon.errors import ProtocolError
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.clock import SharedClock
+from urdaemon.fakeur.connections import READ_CHUNK, Connections, paced
 from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_reply
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.fakeur.programs import Programs, RunningScript
@@ -56,13 +59,9 @@ log = logging.getLogger("urdaemon.fakeur")
 
 STATE_PERIOD_S = 0.1
 """Robot state on the primary/secondary interfaces: 10 Hz (ur-protocols.md §0)."""
-READ_CHUNK = 4096
-"""Bytes read from a client at a time: a few hundred requests at most are handled in one turn."""
 EXTERNAL_CONTROL_PROGRAM = "external_control.urp"
 """The default program: the External Control URCap's, which fetches its script from the daemon."""
 DEFAULT_URCAP_PROGRAM = f"{PROGRAMS_DIR}/{EXTERNAL_CONTROL_PROGRAM}"
-MAX_BACKLOG_BYTES = 1 << 20
-"""A client that leaves more than this unsent (it does not read) misses messages until it catches up."""
 CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
 """The single-line commands a controller takes on its script ports besides URScript (§2.4 step 6)."""
 
@@ -119,6 +118,8 @@ class FakeController:
         self.loaded_program: str | None = self.default_program if urcap else None
         self.input_registers = InputRegisters()
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
+        self.connections = Connections(address, self.faults)
+        self._write = self.connections.write
         self.programs = Programs(
             self.arm,
             controller_version=controller_version,
@@ -138,13 +139,13 @@ class FakeController:
             input_times=self.programs.input_times,
             write=self._write,
         )
+        """The RTDE interface: recipes, the output stream, the inputs."""
         self._release_when_idle = False
         """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
         self._realtime_clients: list[tuple[rt.RealtimeConnection, asyncio.StreamWriter]] = []
         self._servers: list[asyncio.Server] = []
-        self._tasks: set[asyncio.Task[Any]] = set()
         self._state_clients: list[tuple[prim.PrimaryConnection, asyncio.StreamWriter, str]] = []
-        self._writers: dict[str, set[asyncio.StreamWriter]] = {}
+        self._writers = self.connections.writers
         self._next_state = 0.0
         self._clock: asyncio.Task[None] | None = None
         self._shared_clock: tuple[SharedClock, int] | None = None
@@ -172,7 +173,7 @@ class FakeController:
         )
         for service, port, handler in handlers:
             server = await asyncio.start_server(
-                self._guard(service, handler), self.address, port, reuse_address=True
+                self.connections.guard(service, handler), self.address, port, reuse_address=True
             )
             self._servers.append(server)
         self._clock = asyncio.get_running_loop().create_task(self._run_clock())
@@ -191,7 +192,7 @@ class FakeController:
         for writers in self._writers.values():
             for writer in list(writers):
                 writer.close()
-        tasks = [t for t in (self._clock,) if t is not None] + list(self._tasks)
+        tasks = [t for t in (self._clock,) if t is not None] + list(self.connections.tasks)
         for task in tasks:
             task.cancel()
         for task in tasks:
@@ -213,13 +214,7 @@ class FakeController:
 
     def drop(self, service: str) -> int:
         """Close every open connection of ``service`` (or ``*``); how many were closed."""
-        closed = 0
-        for name, writers in self._writers.items():
-            if service in (name, "*"):
-                for writer in list(writers):
-                    writer.close()
-                    closed += 1
-        return closed
+        return self.connections.drop(service)
 
     def stall(self, seconds: float) -> None:
         """Send nothing on the RTDE and robot-state streams for ``seconds`` of controller time."""
@@ -279,55 +274,6 @@ class FakeController:
                 state = robot_state(arm, self.model, self.controller_version)
                 for conn, writer, service in self._state_clients:
                     self._send_primary(conn, writer, service, state)
-
-    # ---- connection plumbing -------------------------------------------------------------------------
-
-    def _guard(
-        self, service: str, handler: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Any]
-    ) -> Callable[[asyncio.StreamReader, asyncio.StreamWriter], Any]:
-        async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-            if self.faults.is_refused(service):
-                writer.close()
-                return
-            sock = writer.get_extra_info("socket")
-            if sock is not None:
-                with contextlib.suppress(OSError):
-                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._writers.setdefault(service, set()).add(writer)
-            try:
-                await handler(reader, writer)
-            except (ConnectionError, asyncio.IncompleteReadError):
-                pass
-            except ProtocolError as err:  # a client that breaks the protocol is dropped, as a real one is
-                log.info("%s %s: dropping client: %s", self.address, service, err)
-            finally:
-                self._writers[service].discard(writer)
-                writer.close()
-
-        return serve
-
-    def _write(self, service: str, writer: asyncio.StreamWriter, data: bytes) -> None:
-        if not data or writer.is_closing():
-            return
-        if writer.transport.get_write_buffer_size() > MAX_BACKLOG_BYTES:
-            return  # whole messages are skipped, so what it reads later is still well framed
-        mangled = self.faults.mangle(service, data)
-        if mangled.delay_s <= 0.0 and len(mangled.pieces) == 1:
-            writer.write(mangled.pieces[0])
-            return
-
-        async def later() -> None:
-            if mangled.delay_s > 0:
-                await asyncio.sleep(mangled.delay_s)
-            for piece in mangled.pieces:
-                if writer.is_closing():
-                    return
-                writer.write(piece)
-                await writer.drain()
-
-        task = asyncio.get_running_loop().create_task(later())
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
 
     # ---- primary (30001) and secondary (30002) ------------------------------------------------------
 
@@ -488,17 +434,9 @@ class FakeController:
                 ):
                     await writer.drain()
                     return
-            await _paced(writer, data)
+            await paced(writer, data)
 
     # ---- RTDE (30004) ------------------------------------------------------------------------------------
 
     async def _serve_rtde(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await self.rtde.serve(reader, writer, _paced)
-
-
-async def _paced(writer: asyncio.StreamWriter, data: bytes) -> None:
-    """After handling one read: wait while the client does not read its replies (TCP flow control:
-    it is not read meanwhile), and give others a turn when more is waiting (a full read)."""
-    await writer.drain()
-    if len(data) >= READ_CHUNK:
-        await asyncio.sleep(0)
+        await self.rtde.serve(reader, writer, paced)

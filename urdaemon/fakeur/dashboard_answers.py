@@ -9,7 +9,6 @@ is refused meanwhile: it neither resumes it nor starts the loaded program anew.
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -148,11 +147,7 @@ def play(fake: FakeController) -> str | None:
     if program == fake.default_program:
         if fake.urcap is None:
             return None
-        task = asyncio.get_running_loop().create_task(
-            fake.programs.play_urcap(fake.urcap, fake._start_program)
-        )
-        fake._tasks.add(task)
-        task.add_done_callback(fake._tasks.discard)
+        fake.connections.spawn(fake.programs.play_urcap(fake.urcap, fake._start_program))
         return None
     try:
         text = Path(program).read_text(encoding="ascii")
