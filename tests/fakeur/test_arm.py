@@ -7,9 +7,10 @@ import math
 
 import pytest
 
+from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, HISTORY_STEPS, FakeArm, RuntimeState
-from urdaemon.fakeur.motion import JointMove, SpeedRamp, joint_move, matrix_of_pose
+from urdaemon.fakeur.motion import JointMove, SpeedRamp, joint_move
 from urdaemon.model import RobotMode, SafetyMode
 
 DT = 0.002
@@ -201,7 +202,7 @@ def test_actual_tcp_pose_applies_the_tcp_offset() -> None:
     assert arm.actual_tcp_pose() == arm.tcp_pose(), "no offset: the flange"
     arm.tcp_offset = [0.0, 0.0, 0.2, 0.0, 0.0, 0.0]
     x, y, z, *_ = arm.tcp_pose()
-    rotation = matrix_of_pose(arm.tcp_pose())
+    rotation = frame_of_pose(arm.tcp_pose())
     tool = arm.actual_tcp_pose()
     # 0.2 m along the flange's z axis (the third column of its rotation)
     assert tool[:3] == pytest.approx(

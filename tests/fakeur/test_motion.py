@@ -15,13 +15,9 @@ from urdaemon.fakeur.motion import (
     ScalingRamp,
     ServoRamp,
     SpeedRamp,
-    compose,
     joint_move,
     leading_stop_time,
-    matrix_of_pose,
-    pose_of_matrix,
     profile,
-    transposed,
 )
 
 START = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0]
@@ -97,26 +93,6 @@ def test_linear_stop_and_servo_ramp() -> None:
     servo = ServoRamp(START, [0.01, *START[1:]], 0.004)
     assert servo.position(0.002)[0] == pytest.approx(0.005)
     assert servo.position(0.004) == [0.01, *START[1:]]
-
-
-@given(
-    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
-    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
-    st.floats(0.0, math.pi),
-)
-def test_pose_matrix_round_trip_up_to_a_half_turn(
-    position: list[float], axis: list[float], angle: float
-) -> None:
-    norm = math.sqrt(sum(v * v for v in axis))
-    if norm < 1e-3:
-        return
-    rotation = [v / norm * angle for v in axis]
-    pose = (*position, *rotation)
-    back = pose_of_matrix(matrix_of_pose(pose))
-    again = matrix_of_pose(back)
-    assert list(again) == pytest.approx(list(matrix_of_pose(pose)), abs=1e-9)
-    identity = compose(matrix_of_pose(pose), transposed(matrix_of_pose(pose)))
-    assert list(identity[:9]) == pytest.approx([1, 0, 0, 0, 1, 0, 0, 0, 1], abs=1e-12)
 
 
 def _settled(ramp: ScalingRamp) -> bool:

@@ -23,6 +23,15 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from urdaemon.description.frames import (
+    Frame,
+    Pose,
+    compose,
+    frame_of_pose,
+    inverse,
+    pose_of_frame,
+    rotation_vector,
+)
 from urdaemon.description.urmodels import DhParameters, UrModel
 from urdaemon.errors import DescriptionError
 
@@ -42,9 +51,6 @@ __all__ = [
 
 SHOULDER, WRIST, ELBOW = 4, 2, 1
 
-Frame = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
-"""Row-major rotation r00 r01 r02 r10 r11 r12 r20 r21 r22, then translation x y z."""
-Pose = tuple[float, float, float, float, float, float]
 Joints = tuple[float, float, float, float, float, float]
 Vector = Sequence[float] | NDArray[np.float64]
 """What the public methods accept for joints, poses and twists: any 6 numbers (list, tuple, array)."""
@@ -79,86 +85,6 @@ class IkSolution(NamedTuple):
 
     branch: int
     q: Joints
-
-
-def frame_of_pose(pose: Vector) -> Frame:
-    """The frame of a UR pose (x, y, z, rx, ry, rz) (Rodrigues)."""
-    x, y, z, rx, ry, rz = pose
-    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if angle < 1e-300:
-        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, float(x), float(y), float(z))
-    ux, uy, uz = rx / angle, ry / angle, rz / angle
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return (
-        t * ux * ux + c, t * ux * uy - s * uz, t * ux * uz + s * uy,
-        t * ux * uy + s * uz, t * uy * uy + c, t * uy * uz - s * ux,
-        t * ux * uz - s * uy, t * uy * uz + s * ux, t * uz * uz + c,
-        float(x), float(y), float(z),
-    )  # fmt: skip
-
-
-def pose_of_frame(f: Frame) -> Pose:
-    """The UR pose (x, y, z, rx, ry, rz) of a frame; the rotation angle is in [0, pi]."""
-    rx, ry, rz = _log(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8])
-    return (f[9], f[10], f[11], rx, ry, rz)
-
-
-def _log(
-    r00: float, r01: float, r02: float, r10: float, r11: float, r12: float, r20: float, r21: float, r22: float
-) -> tuple[float, float, float]:
-    """Rotation vector of a rotation matrix, accurate at every angle including near pi."""
-    vx, vy, vz = 0.5 * (r21 - r12), 0.5 * (r02 - r20), 0.5 * (r10 - r01)
-    s = math.sqrt(vx * vx + vy * vy + vz * vz)
-    c = 0.5 * (r00 + r11 + r22 - 1.0)
-    angle = math.atan2(s, c)
-    if c > -0.5:
-        # sin(angle) is accurate here (angle below 2pi/3): v = sin(angle) * axis.
-        scale = angle / s if s > 1e-300 else 1.0
-        return (vx * scale, vy * scale, vz * scale)
-    # Near pi: read the axis off the symmetric part (1 - c) * u u^T, largest diagonal first.
-    d = 1.0 - c
-    xx, yy, zz = (r00 - c) / d, (r11 - c) / d, (r22 - c) / d
-    if xx >= yy and xx >= zz:
-        ux = math.sqrt(max(xx, 0.0))
-        uy, uz = (r01 + r10) / (2.0 * d * ux), (r02 + r20) / (2.0 * d * ux)
-    elif yy >= zz:
-        uy = math.sqrt(max(yy, 0.0))
-        ux, uz = (r01 + r10) / (2.0 * d * uy), (r12 + r21) / (2.0 * d * uy)
-    else:
-        uz = math.sqrt(max(zz, 0.0))
-        ux, uy = (r02 + r20) / (2.0 * d * uz), (r12 + r21) / (2.0 * d * uz)
-    if ux * vx + uy * vy + uz * vz < 0.0:
-        ux, uy, uz = -ux, -uy, -uz
-    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
-    return (ux * angle / norm, uy * angle / norm, uz * angle / norm)
-
-
-def _compose(a: Frame, b: Frame) -> Frame:
-    a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = a
-    b00, b01, b02, b10, b11, b12, b20, b21, b22, bx, by, bz = b
-    return (
-        a00 * b00 + a01 * b10 + a02 * b20,
-        a00 * b01 + a01 * b11 + a02 * b21,
-        a00 * b02 + a01 * b12 + a02 * b22,
-        a10 * b00 + a11 * b10 + a12 * b20,
-        a10 * b01 + a11 * b11 + a12 * b21,
-        a10 * b02 + a11 * b12 + a12 * b22,
-        a20 * b00 + a21 * b10 + a22 * b20,
-        a20 * b01 + a21 * b11 + a22 * b21,
-        a20 * b02 + a21 * b12 + a22 * b22,
-        ax + a00 * bx + a01 * by + a02 * bz,
-        ay + a10 * bx + a11 * by + a12 * bz,
-        az + a20 * bx + a21 * by + a22 * bz,
-    )  # fmt: skip
-
-
-def _inverse(f: Frame) -> Frame:
-    r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = f
-    return (
-        r00, r10, r20, r01, r11, r21, r02, r12, r22,
-        -(r00 * x + r10 * y + r20 * z), -(r01 * x + r11 * y + r21 * z), -(r02 * x + r12 * y + r22 * z),
-    )  # fmt: skip
 
 
 def _branch_acos(value: float, negative: bool, slack: float) -> float | None:
@@ -228,7 +154,7 @@ class UrKinematics:
         """The TCP pose for joints ``q`` (URScript ``get_forward_kin(q, tcp)``)."""
         frame = self._frame(q)
         if tcp is not None:
-            frame = _compose(frame, frame_of_pose(tcp))
+            frame = compose(frame, frame_of_pose(tcp))
         return pose_of_frame(frame)
 
     def solutions(
@@ -328,7 +254,7 @@ class UrKinematics:
 
     def _flange_target(self, pose: Vector, tcp: Vector | None) -> Frame:
         target = frame_of_pose(pose)
-        return target if tcp is None else _compose(target, _inverse(frame_of_pose(tcp)))
+        return target if tcp is None else compose(target, inverse(frame_of_pose(tcp)))
 
     def _solve_branch(
         self,
@@ -361,11 +287,11 @@ class UrKinematics:
         sx, sy, sz = start[9], start[10], start[11]
         dx, dy, dz = target[9] - sx, target[10] - sy, target[11] - sz
         # The rotation from the start's orientation to the target's, in base, as a rotation vector.
-        rx, ry, rz = _log(*_compose(target, _inverse(start))[:9])
+        rx, ry, rz = rotation_vector(*compose(target, inverse(start))[:9])
         rotation: Frame = (*start[:9], 0.0, 0.0, 0.0)
         for k in range(1, _CONTINUATION_STEPS):
             s = k / _CONTINUATION_STEPS
-            turned = _compose(frame_of_pose((0.0, 0.0, 0.0, s * rx, s * ry, s * rz)), rotation)
+            turned = compose(frame_of_pose((0.0, 0.0, 0.0, s * rx, s * ry, s * rz)), rotation)
             waypoint: Frame = (*turned[:9], sx + s * dx, sy + s * dy, sz + s * dz)
             q, position, orientation = self._refine(waypoint, q)
             if position + orientation > _WAYPOINT_TOLERANCE:
@@ -481,7 +407,7 @@ class UrKinematics:
         r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = chain.frame
         ex, ey, ez = tx - px, ty - py, tz - pz
         # The rotation that takes the current tool to the target, in base: target * current^T.
-        wx, wy, wz = _log(
+        wx, wy, wz = rotation_vector(
             t00 * r00 + t01 * r01 + t02 * r02,
             t00 * r10 + t01 * r11 + t02 * r12,
             t00 * r20 + t01 * r21 + t02 * r22,
@@ -529,7 +455,7 @@ class UrKinematics:
             )  # fmt: skip
         frame: Frame = (xx, yx, zx, xy, yy, zy, xz, yz, zz, px, py, pz)
         if tcp is not None:
-            frame = _compose(frame, tcp)
+            frame = compose(frame, tcp)
         return _Chain(frame, tuple(axes), tuple(points))
 
     def _within_limits(self, q: Joints) -> Joints | None:

@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from urdaemon.description.frames import compose
 from urdaemon.description.urmodels import DhParameters
 from urdaemon.errors import DescriptionError
 
@@ -189,7 +190,7 @@ class KinematicTree:
         get = positions.get
         frames: list[Transform] = [_IDENTITY] * len(self._links)
         for parent, child, kind, origin, ax, ay, az, source, multiplier, offset in self._steps:
-            m = _compose(frames[parent], origin)
+            m = compose(frames[parent], origin)
             if kind != _FIXED:
                 value = multiplier * get(source, 0.0) + offset
                 if kind == _ROTATE_Z:
@@ -202,7 +203,7 @@ class KinematicTree:
                         x, y, z,
                     )  # fmt: skip
                 elif kind == _ROTATE:
-                    m = _compose(m, _axis_rotation(ax, ay, az, value))
+                    m = compose(m, _axis_rotation(ax, ay, az, value))
                 else:
                     r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = m
                     dx, dy, dz = ax * value, ay * value, az * value
@@ -218,25 +219,6 @@ class KinematicTree:
             qx, qy, qz, qw = quaternion_of(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8])
             result.append((name, (f[9], f[10], f[11], qx, qy, qz, qw)))
         return result
-
-
-def _compose(a: Transform, b: Transform) -> Transform:
-    a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = a
-    b00, b01, b02, b10, b11, b12, b20, b21, b22, bx, by, bz = b
-    return (
-        a00 * b00 + a01 * b10 + a02 * b20,
-        a00 * b01 + a01 * b11 + a02 * b21,
-        a00 * b02 + a01 * b12 + a02 * b22,
-        a10 * b00 + a11 * b10 + a12 * b20,
-        a10 * b01 + a11 * b11 + a12 * b21,
-        a10 * b02 + a11 * b12 + a12 * b22,
-        a20 * b00 + a21 * b10 + a22 * b20,
-        a20 * b01 + a21 * b11 + a22 * b21,
-        a20 * b02 + a21 * b12 + a22 * b22,
-        ax + a00 * bx + a01 * by + a02 * bz,
-        ay + a10 * bx + a11 * by + a12 * bz,
-        az + a20 * bx + a21 * by + a22 * bz,
-    )  # fmt: skip
 
 
 def _axis_rotation(x: float, y: float, z: float, angle: float) -> Transform:

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from urdaemon.description.frames import compose, frame_of_pose, pose_of_frame
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
 from urdaemon.fakeur.motion import (
@@ -37,10 +38,7 @@ from urdaemon.fakeur.motion import (
     LinearStop,
     Motion,
     ScalingRamp,
-    compose,
     leading_stop_time,
-    matrix_of_pose,
-    pose_of_matrix,
 )
 from urdaemon.model import RobotMode, SafetyMode
 
@@ -596,7 +594,7 @@ class FakeArm:
         key = (flange, tuple(offset))
         if cached is not None and cached[0] == key:
             return cached[1]
-        pose = pose_of_matrix(compose(matrix_of_pose(flange), matrix_of_pose(offset)))
+        pose = pose_of_frame(compose(frame_of_pose(flange), frame_of_pose(offset)))
         self._tcp_cache = (key, pose)
         return pose
 

@@ -28,7 +28,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Final, Protocol
 
-from urdaemon.description.kinematics import quaternion_of
+from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
 
 __all__ = [
     "JOINTS",
@@ -43,13 +43,9 @@ __all__ = [
     "ServoRamp",
     "SpeedRamp",
     "ToolSpeedRamp",
-    "compose",
     "joint_move",
     "leading_stop_time",
-    "matrix_of_pose",
-    "pose_of_matrix",
     "profile",
-    "transposed",
 ]
 
 JOINTS: Final = 6
@@ -57,7 +53,6 @@ TIME_EPSILON_S: Final = 1e-9
 """s: a motion with less than this left is over (float noise of summing cycle times)."""
 
 Vector = list[float]
-Matrix = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
 """Row-major rotation r00..r22, then translation x y z."""
 
 
@@ -364,66 +359,9 @@ def leading_stop_time(velocity: Sequence[float], deceleration: float) -> float:
     return max((abs(v) for v in velocity), default=0.0) / max(deceleration, 1e-9)
 
 
-# ---- poses: rotation vectors and homogeneous matrices (enough for movel without numpy) ---------------
-
-
-def matrix_of_pose(pose: Sequence[float]) -> Matrix:
-    """The transform of a UR pose (x, y, z, rx, ry, rz: rotation vector)."""
-    x, y, z, rx, ry, rz = (float(v) for v in pose)
-    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if angle < 1e-15:
-        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, x, y, z)
-    kx, ky, kz = rx / angle, ry / angle, rz / angle
-    c, s = math.cos(angle), math.sin(angle)
-    v = 1.0 - c
-    return (
-        c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s,
-        ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s,
-        kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v,
-        x, y, z,
-    )  # fmt: skip
-
-
-def pose_of_matrix(m: Matrix) -> tuple[float, float, float, float, float, float]:
-    """The UR pose of a transform (rotation vector of angle in [0, π]; through the quaternion, which
-    stays accurate near a half turn)."""
-    qx, qy, qz, qw = quaternion_of(*m[:9])
-    x, y, z = m[9], m[10], m[11]
-    norm = math.sqrt(qx * qx + qy * qy + qz * qz)
-    if norm < 1e-15:
-        return (x, y, z, 0.0, 0.0, 0.0)
-    scale = 2.0 * math.atan2(norm, qw) / norm
-    return (x, y, z, qx * scale, qy * scale, qz * scale)
-
-
-def compose(a: Matrix, b: Matrix) -> Matrix:
-    """a · b."""
-    a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = a
-    b00, b01, b02, b10, b11, b12, b20, b21, b22, bx, by, bz = b
-    return (
-        a00 * b00 + a01 * b10 + a02 * b20,
-        a00 * b01 + a01 * b11 + a02 * b21,
-        a00 * b02 + a01 * b12 + a02 * b22,
-        a10 * b00 + a11 * b10 + a12 * b20,
-        a10 * b01 + a11 * b11 + a12 * b21,
-        a10 * b02 + a11 * b12 + a12 * b22,
-        a20 * b00 + a21 * b10 + a22 * b20,
-        a20 * b01 + a21 * b11 + a22 * b21,
-        a20 * b02 + a21 * b12 + a22 * b22,
-        a00 * bx + a01 * by + a02 * bz + ax,
-        a10 * bx + a11 * by + a12 * bz + ay,
-        a20 * bx + a21 * by + a22 * bz + az,
-    )
-
-
-def transposed(m: Matrix) -> Matrix:
-    """The inverse rotation (translation dropped)."""
-    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8], 0.0, 0.0, 0.0)
-
-
-def _relative_rotation(a: Matrix, b: Matrix) -> tuple[float, float, float]:
+def _relative_rotation(a: Frame, b: Frame) -> tuple[float, float, float]:
     """The rotation vector of aᵀ·b (the rotation from a to b, in a's frame)."""
-    return pose_of_matrix(compose(transposed(a), b))[3:]
+    return pose_of_frame(compose(inverse(a), b))[3:]
 
 
 InverseKinematics = Callable[[Sequence[float], Sequence[float]], Sequence[float] | None]
@@ -464,8 +402,8 @@ class CartesianMove:
         start_velocity: Sequence[float] | None = None,
         fade_time: float = 0.0,
     ) -> None:
-        self._start = matrix_of_pose(start_pose)
-        end = matrix_of_pose(target_pose)
+        self._start = frame_of_pose(start_pose)
+        end = frame_of_pose(target_pose)
         self._move = (end[9] - self._start[9], end[10] - self._start[10], end[11] - self._start[11])
         self._axis = _relative_rotation(self._start, end)
         self._shape = shape
@@ -484,10 +422,10 @@ class CartesianMove:
         shape = self._shape
         f = shape.at(t)[0] / shape.distance if shape.distance > 0 else 1.0
         ax, ay, az = self._axis
-        m = compose(self._start, matrix_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
+        m = compose(self._start, frame_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
         dx, dy, dz = self._move
         s = self._start
-        return pose_of_matrix((*m[:9], s[9] + f * dx, s[10] + f * dy, s[11] + f * dz))
+        return pose_of_frame((*m[:9], s[9] + f * dx, s[10] + f * dy, s[11] + f * dz))
 
     def _path(self, t: float) -> Vector:
         """The joints on the straight path at ``t`` (solved near the previous sample)."""
@@ -589,12 +527,12 @@ class ArcMove(CartesianMove):
         point = [self._center[i] + c * self._u[i] + s_ * self._w[i] for i in range(3)]
         if self._fixed:
             nx, ny, nz = self._normal
-            turn = matrix_of_pose((0.0, 0.0, 0.0, nx * angle, ny * angle, nz * angle))
+            turn = frame_of_pose((0.0, 0.0, 0.0, nx * angle, ny * angle, nz * angle))
             m = compose(turn, self._start)  # turned about the circle's axis, in base
         else:
             ax, ay, az = self._axis
-            m = compose(self._start, matrix_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
-        return pose_of_matrix((*m[:9], point[0], point[1], point[2]))
+            m = compose(self._start, frame_of_pose((0.0, 0.0, 0.0, f * ax, f * ay, f * az)))
+        return pose_of_frame((*m[:9], point[0], point[1], point[2]))
 
 
 def _cross(a: Sequence[float], b: Sequence[float]) -> list[float]:

@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
+from urdaemon.description import frames
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur import motion
 from urdaemon.fakeur.arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.host import ScriptHost
@@ -63,7 +63,7 @@ def test_tcp_pose_applies_the_tcp_offset_to_the_flange() -> None:
     arm.tcp_offset = list(TOOL)
     tcp = lib_state.get_actual_tcp_pose(host)
     # the TCP point is the flange point plus the flange's rotation applied to the offset
-    rotation = motion.matrix_of_pose(flange)
+    rotation = frames.frame_of_pose(flange)
     expected = [flange[i] + sum(rotation[3 * i + k] * TOOL[k] for k in range(3)) for i in range(3)]
     assert list(tcp[:3]) == pytest.approx(expected, abs=1e-12)
     assert list(lib_state.get_target_tcp_pose(host)) == pytest.approx(list(tcp), abs=1e-12)
@@ -108,8 +108,8 @@ def test_tcp_speed_is_the_rate_of_the_tcp_pose() -> None:
     after = lib_state.get_actual_tcp_pose(host)
     linear = [(b - a) / DT for a, b in zip(before[:3], after[:3], strict=True)]
     assert list(speed[:3]) == pytest.approx(linear, abs=2e-3)
-    turn = motion.pose_of_matrix(
-        motion.compose(motion.matrix_of_pose(after), motion.transposed(motion.matrix_of_pose(before)))
+    turn = frames.pose_of_frame(
+        frames.compose(frames.frame_of_pose(after), frames.inverse(frames.frame_of_pose(before)))
     )
     assert list(speed[3:]) == pytest.approx([v / DT for v in turn[3:]], abs=2e-3)
     assert list(lib_state.get_actual_tcp_speed(host)) == pytest.approx(list(speed), abs=2e-3)

@@ -23,6 +23,7 @@ import math
 from collections.abc import Callable, Generator, Sequence
 from typing import Any, Final
 
+from urdaemon.description.frames import compose, frame_of_pose, inverse, pose_of_frame
 from urdaemon.fakeur.arm import PROTECTIVE_STOP_DECELERATION, FakeArm
 from urdaemon.fakeur.motion import (
     TIME_EPSILON_S,
@@ -33,13 +34,9 @@ from urdaemon.fakeur.motion import (
     ServoRamp,
     SpeedRamp,
     ToolSpeedRamp,
-    compose,
     joint_move,
     leading_stop_time,
-    matrix_of_pose,
-    pose_of_matrix,
     profile,
-    transposed,
 )
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
@@ -262,9 +259,7 @@ def flange_pose(arm: FakeArm, q: Sequence[float]) -> tuple[float, float, float, 
 
 def tcp_matrix(arm: FakeArm, q: Sequence[float], tcp: Sequence[float] | None = None) -> Any:
     """The TCP transform for joints ``q`` and TCP offset ``tcp`` (the arm's when None)."""
-    return compose(
-        matrix_of_pose(flange_pose(arm, q)), matrix_of_pose(arm.tcp_offset if tcp is None else tcp)
-    )
+    return compose(frame_of_pose(flange_pose(arm, q)), frame_of_pose(arm.tcp_offset if tcp is None else tcp))
 
 
 def tcp_pose(
@@ -273,7 +268,7 @@ def tcp_pose(
     """The TCP pose for joints ``q`` and TCP offset ``tcp`` (the arm's when None)."""
     if tcp is None and q is arm.q:
         return arm.actual_tcp_pose()  # cached per cycle
-    return pose_of_matrix(tcp_matrix(arm, q, tcp))
+    return pose_of_frame(tcp_matrix(arm, q, tcp))
 
 
 def _joint_target(host: ScriptHost, name: str, target: Any) -> list[float] | None:
@@ -309,7 +304,7 @@ def tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> UrList:
     here = tcp_matrix(arm, q)
     ahead = tcp_matrix(arm, [a + v * h for a, v in zip(q, qd, strict=True)])
     linear = [(b - a) / h for a, b in zip(here[9:], ahead[9:], strict=True)]
-    wx, wy, wz = pose_of_matrix(compose(ahead, transposed(here)))[3:]  # ahead · hereᵀ: the turn in base
+    wx, wy, wz = pose_of_frame(compose(ahead, inverse(here)))[3:]  # ahead · hereᵀ: the turn in base
     return UrList([*linear, wx / h, wy / h, wz / h])
 
 
@@ -399,8 +394,8 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
         start_pose = tcp_pose(arm, start)
         distance = math.dist(start_pose[:3], goal[:3])
         if distance < 1e-6:  # a pure rotation: v and a taken as rad/s and rad/s²
-            rel = compose(transposed(matrix_of_pose(start_pose)), matrix_of_pose(goal))
-            distance = math.sqrt(sum(c * c for c in pose_of_matrix(rel)[3:]))
+            rel = compose(inverse(frame_of_pose(start_pose)), frame_of_pose(goal))
+            distance = math.sqrt(sum(c * c for c in pose_of_frame(rel)[3:]))
         shape = profile(distance, velocity=velocity, acceleration=acceleration, duration=duration)
         # a blend: the joint velocity the arm has fades out decelerating at most at the joints' own
         # default acceleration (the tool acceleration a is not a joint-space one)
