@@ -21,19 +21,36 @@ from types import CodeType
 from typing import TYPE_CHECKING, Any, Final
 
 from urdaemon.fakeur.urscript import syntax as ast
+from urdaemon.fakeur.urscript.lib_io import IO_DIGITAL_IN_GET, IO_DIGITAL_OUT_GET, IO_DIGITAL_OUT_SET
 from urdaemon.fakeur.urscript.runtime import BUILTINS, Builtin, ScriptCompileError
 
 if TYPE_CHECKING:
     from urdaemon.fakeur.urscript.host import ScriptHost
     from urdaemon.fakeur.urscript.runtime import ScriptRun
 
-__all__ = ["CONSTANTS", "MAX_OPS_PER_CYCLE", "Program", "compile_program"]
+__all__ = ["CONSTANTS", "IO_VARIABLES", "MAX_OPS_PER_CYCLE", "Program", "compile_program"]
 
 MAX_OPS_PER_CYCLE: Final = 100_000
 """Loop iterations one thread may run in one controller cycle before the controller stops the program."""
 
 CONSTANTS: Final[dict[str, object]] = {"pi": 3.141592653589793}
 """Builtin variables of the language."""
+
+IO_VARIABLES: Final[dict[str, tuple[str, str | None]]] = {
+    "digital_out": (IO_DIGITAL_OUT_GET, IO_DIGITAL_OUT_SET),
+    "digital_in": (IO_DIGITAL_IN_GET, None),
+}
+"""The controller's legacy IO variables: name -> (reader, writer or None if read-only), lib_io builtins.
+
+``digital_out[n]`` (read and assigned) and ``digital_in[n]`` (read) are the IO as CB2-era programs
+address it, still accepted by CB3 controllers: python-urx's ``set_digital_out`` sends
+``digital_out[2]=True``, which drove a CB3's outputs (python-urx issue #8). They act on the arm's IO, as
+``set_standard_digital_out`` does (numbering: lib_io). Only the indexed form ``name[n]`` is accepted.
+
+A program's own variable of the same name shadows the controller's (a program-level assignment
+``digital_out = [...]``, a ``global``/``local`` declaration, a parameter or a local): the name is then
+the program's variable everywhere it is visible, as a program's own name shadows any builtin variable.
+"""
 
 DEFAULT_SOCKET: Final = "socket_0"
 _FILENAME: Final = "<urscript>"
@@ -129,7 +146,8 @@ def _compile(
     implementations = BUILTINS if builtins is None else builtins
     checker = _Checker(kind, body, signatures, known_anywhere, implementations)
     checker.check()
-    source, lines, used, constants = _Generator(checker).generate()
+    generator = _Generator(checker)
+    source, lines, used, constants = generator.generate()
     bound: dict[str, tuple[Callable[..., Any], bool]] = {}
     for builtin_name in used:
         implementation = checker.implementation(builtin_name)
@@ -139,6 +157,9 @@ def _compile(
             bound[builtin_name] = (_not_simulated(builtin_name), False)
         else:
             bound[builtin_name] = (implementation.function, implementation.blocking)
+    for io_name in generator.used_io:
+        io_builtin = implementations.get(io_name)
+        bound[io_name] = (_not_simulated(io_name) if io_builtin is None else io_builtin.function, False)
     try:
         code = compile(source, _FILENAME, "exec")
     except SyntaxError as error:  # a limit of Python's compiler, e.g. more than 20 nested loops
@@ -405,11 +426,25 @@ class _Checker:
     def _check_target(self, scope: Scope, target: Any) -> None:
         if isinstance(target, (ast.Index, ast.Attribute)):
             root = target_root(target)
+            if root in IO_VARIABLES and not self.is_variable(scope, root):
+                name = self.io_variable(scope, target)
+                if name is None or IO_VARIABLES[name][1] is None:
+                    self.error(target, f"compile_error: the controller's {root}[n] cannot be assigned")
+                return
             if root is not None and not self.is_variable(scope, root):
                 self.error(target, f"compile_error_name_not_found:{root}:")
 
     def is_variable(self, scope: Scope, name: str) -> bool:
         return name in scope.locals or name in self.globals
+
+    def io_variable(self, scope: Scope, node: Any) -> str | None:
+        """The controller IO variable ``node`` (``digital_out[n]``) uses, None if it is no such use."""
+        if not isinstance(node, ast.Index) or len(node.indices) != 1:
+            return None
+        base = node.base
+        if not isinstance(base, ast.Name) or base.name not in IO_VARIABLES:
+            return None
+        return None if self.is_variable(scope, base.name) else base.name
 
     def is_pose(self, scope: Scope, node: ast.Index) -> bool:
         """``p[...]`` is a pose literal unless ``p`` is a variable indexed with one index."""
@@ -421,11 +456,17 @@ class _Checker:
     def _check_expression(self, scope: Scope, expression: Any) -> None:
         pose_bases = set()
         for node in walk_expressions(expression):
-            if isinstance(node, ast.Index) and self.is_pose(scope, node):
+            if isinstance(node, ast.Index) and (
+                self.is_pose(scope, node) or self.io_variable(scope, node) is not None
+            ):
                 pose_bases.add(id(node.base))
         for node in walk_expressions(expression):
             if isinstance(node, ast.Name):
-                if (
+                if id(node) not in pose_bases and node.name in IO_VARIABLES:
+                    if not self.is_variable(scope, node.name):
+                        detail = f" (the controller's {node.name} is read as {node.name}[n])"
+                        self.error(node, f"compile_error_name_not_found:{node.name}:{detail}")
+                elif (
                     id(node) not in pose_bases
                     and not self.is_variable(scope, node.name)
                     and node.name not in CONSTANTS
@@ -550,6 +591,8 @@ class _Generator:
         self.out: list[str] = []
         self.lines: dict[int, tuple[int, int]] = {}
         self.used: set[str] = set()
+        self.used_io: set[str] = set()
+        """Registry names of the IO variables' readers and writers the program uses."""
         self.constants: dict[str, object] = {}
         self.scope = checker.main
 
@@ -604,7 +647,14 @@ class _Generator:
             self._emit(indent, "pass", None)
 
     def _statement(self, indent: int, node: Any) -> None:
-        if isinstance(node, ast.Assign):
+        io = self.checker.io_variable(self.scope, node.target) if isinstance(node, ast.Assign) else None
+        if io is not None:
+            writer = IO_VARIABLES[io][1]
+            assert writer is not None  # the checker refuses assigning a read-only one
+            self.used_io.add(writer)
+            index = self._expr(node.target.indices[0])
+            self._emit(indent, f"b_{writer}({index}, {self._expr(node.value)})", node)
+        elif isinstance(node, ast.Assign):
             self._emit(
                 indent, f"{self._target(node.target)} = {self._assigned(node.target, node.value)}", node
             )
@@ -703,6 +753,11 @@ class _Generator:
         if isinstance(node, ast.Index):
             if self._is_pose(node):
                 return "_P([" + ", ".join(self._float(i) for i in node.indices) + "])"
+            io = self.checker.io_variable(self.scope, node)
+            if io is not None:
+                reader = IO_VARIABLES[io][0]
+                self.used_io.add(reader)
+                return f"b_{reader}({self._expr(node.indices[0])})"
             return self._expr(node.base) + "".join(f"[{self._expr(i)}]" for i in node.indices)
         if isinstance(node, ast.Attribute):
             return self._attribute(self._expr(node.base), node.name)

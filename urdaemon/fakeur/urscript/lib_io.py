@@ -21,7 +21,14 @@ from typing import Any, Final
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
 
-__all__ = ["BIT_REGISTERS", "NUMBER_REGISTERS", "TOOL_VOLTAGES"]
+__all__ = [
+    "BIT_REGISTERS",
+    "IO_DIGITAL_IN_GET",
+    "IO_DIGITAL_OUT_GET",
+    "IO_DIGITAL_OUT_SET",
+    "NUMBER_REGISTERS",
+    "TOOL_VOLTAGES",
+]
 
 NUMBER_REGISTERS: Final = 48
 """Integer and float registers per direction: addresses 0..47."""
@@ -30,6 +37,13 @@ BIT_REGISTERS: Final = 128
 TOOL_VOLTAGES: Final = (0, 12, 24)
 """Volts ``set_tool_voltage`` accepts."""
 _INT32: Final = (-(2**31), 2**31 - 1)
+
+IO_DIGITAL_OUT_GET: Final = "_digital_out_get"
+"""Registry names of the controller's IO variables (``digital_out[n]`` read and write, ``digital_in[n]``
+read): not in the builtin table, so no program can call them by name; the compiler turns the variables'
+uses into calls of these."""
+IO_DIGITAL_OUT_SET: Final = "_digital_out_set"
+IO_DIGITAL_IN_GET: Final = "_digital_in_get"
 
 # (first bit in the word, how many) of each digital IO group
 _STANDARD: Final = (0, 8)
@@ -132,6 +146,44 @@ def get_tool_digital_in(host: ScriptHost, n: Any) -> bool:
 @builtin("get_digital_in")
 def get_digital_in(host: ScriptHost, n: Any) -> bool:
     return _get_bit(host.arm.io.digital_in, "get_digital_in", _ALL, n)
+
+
+# ---- the controller's IO variables (``digital_out[n]``) -----------------------------------------------
+
+_LEGACY: Final = ((0, 8), (16, 2))
+"""The legacy IO variables' numbering (CB2's): 0-7 the standard IO (bits 0-7), 8-9 the tool IO (bits
+16-17). Configurable IO has no number in it: it came with CB3, after this syntax.
+
+Evidence: python-urx's ``set_digital_out(8, True)`` sends ``digital_out[8]=True``, and a CB3 user drove
+the tool output with it (it opened and closed the gripper; python-urx issue #8, 2016) while bit 8 of the
+secondary interface's ``digitalOutputBits`` (configurable output 0 on CB3) stayed 0.
+"""
+
+
+def _legacy_bit(name: str, n: Any) -> int:
+    index = _index(name, n, 10)
+    group = _LEGACY[0] if index < 8 else _LEGACY[1]
+    return group[0] + index - (0 if index < 8 else 8)
+
+
+@builtin(IO_DIGITAL_OUT_GET)
+def digital_out_get(host: ScriptHost, n: Any) -> bool:
+    """``digital_out[n]`` read (n: 0-7 standard outputs, 8-9 tool outputs)."""
+    return bool(host.arm.io.digital_out >> _legacy_bit("digital_out", n) & 1)
+
+
+@builtin(IO_DIGITAL_OUT_SET)
+def digital_out_set(host: ScriptHost, n: Any, b: Any) -> None:
+    """``digital_out[n] = b`` (n: 0-7 standard outputs, 8-9 tool outputs; b True/False or 1/0)."""
+    bit = 1 << _legacy_bit("digital_out", n)
+    io = host.arm.io
+    io.digital_out = io.digital_out | bit if _level("digital_out", b) else io.digital_out & ~bit
+
+
+@builtin(IO_DIGITAL_IN_GET)
+def digital_in_get(host: ScriptHost, n: Any) -> bool:
+    """``digital_in[n]`` read (n: 0-7 standard inputs, 8-9 tool inputs)."""
+    return bool(host.arm.io.digital_in >> _legacy_bit("digital_in", n) & 1)
 
 
 # ---- analog and tool voltage -----------------------------------------------------------------------------

@@ -288,6 +288,17 @@ class ScriptRun:
         """The controller stops the program (stop program, a new program replacing it...)."""
         self._finish()
 
+    def variable(self, name: str) -> Any:
+        """The current value of the program's variable ``name``: a program-level or ``global`` one.
+
+        Raises ``KeyError(name)`` if the program has no such variable, or has not given it a value yet.
+        A function's locals are not visible (they live only while the function runs).
+        """
+        try:
+            return self._namespace["v_" + name]
+        except KeyError:
+            raise KeyError(name) from None
+
     @property
     def threads(self) -> tuple[int, ...]:
         """Handles of the live threads, main (0) first."""
