@@ -288,8 +288,8 @@ class Rig:
         return all(v == 0.0 for v in self.arm.qd)
 
     def variable(self, name: str) -> Any:
-        """A program variable's value (the interpreter keeps them in the generated module)."""
-        return self.run._namespace["v_" + name]  # the test looks inside the program
+        """A program-level or global variable's value now."""
+        return self.run.variable(name)
 
 
 def script_text(ports: dict[str, int], server_ip: str = "127.0.0.1", series: str = "e") -> str:
