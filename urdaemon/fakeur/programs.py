@@ -160,6 +160,7 @@ class Programs:
                 _COMPILER, _compile_briefly, compile_program, text, self.series, self.version
             )
         except ScriptCompileError as err:
+            log.info("%s program refused at %d:%d: %s", self.address, err.line, err.column, err.message)
             self.broadcast(prim.RuntimeExceptionMessage(err.line, err.column, err.message))
             return None
         self.compiles += 1
@@ -227,6 +228,14 @@ class Programs:
         script.host.close()
         error = run.error
         if error is not None:
+            log.info(
+                "%s program %s: runtime error at %d:%d: %s",
+                self.address,
+                script.name,
+                error.line,
+                error.column,
+                error.message,
+            )
             self.broadcast(prim.RuntimeExceptionMessage(error.line, error.column, error.message))
         elif script.failure is not None:
             self.broadcast(prim.RuntimeExceptionMessage(0, 0, script.failure))

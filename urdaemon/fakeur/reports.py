@@ -23,8 +23,9 @@ from urdaemon.protocols import realtime as rt
 
 __all__ = ["KINEMATICS_CALIBRATED", "output_getter", "realtime_state", "robot_state"]
 
-KINEMATICS_CALIBRATED = 0
-"""KINEMATICS_INFO ``calibration_status`` of a calibrated arm: what URSim sends (ur-protocols.md §2.2)."""
+KINEMATICS_CALIBRATED = 2
+"""KINEMATICS_INFO ``calibration_status`` of a calibrated arm: 2, "linearized", what a calibrated robot
+reports and urcl's calibration example checks for (URSim, which has no calibration, sends 0)."""
 _PROGRAM_STATES = {
     RuntimeState.PLAYING: 2.0,
     RuntimeState.PAUSING: 2.0,  # playing until paused, as a controller says

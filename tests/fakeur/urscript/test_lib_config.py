@@ -177,3 +177,16 @@ def test_a_script_configures_the_arm() -> None:
     assert arm.freedrive is True
     assert host.config.free_axes == [1, 0, 0, 0, 0, 1]
     assert set(host.watchdogs) == {"input_int_register_24"}
+
+
+def test_an_external_ft_sensor_is_recorded_while_enabled_and_bad_arguments_are_errors() -> None:
+    """urcl's external F/T example calls ft_rtde_input_enable first: it runs, and a disable forgets it."""
+    host = _host()
+    cfg.ft_rtde_input_enable(host, True, 0.5, [0.0, 0.0, 0.02], [0.0, 0.0, 0.01])
+    assert cfg._config(host).external_ft_sensor == (0.5, [0.0, 0.0, 0.02], [0.0, 0.0, 0.01])
+    cfg.enable_external_ft_sensor(host, False, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    assert cfg._config(host).external_ft_sensor is None
+    with pytest.raises(ScriptRuntimeError, match="sensor_mass"):
+        cfg.ft_rtde_input_enable(host, True, -1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    with pytest.raises(ScriptRuntimeError, match="enable"):
+        cfg.ft_rtde_input_enable(host, 1, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])

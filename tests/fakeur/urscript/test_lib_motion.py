@@ -165,6 +165,16 @@ def test_speedj_ramps_at_a_and_returns_after_t_or_once_at_speed() -> None:
     assert _run(host, lib_motion.speedj(host, [0.5, 0, 0, 0, 0, 0], 2.0, 0)) == 1, "at speed: one cycle"
 
 
+def test_speedj_with_no_acceleration_holds_the_speed_it_has_and_refuses_a_change() -> None:
+    """urcl's spline follower ends a segment with speedj(zeros, 0, t) at rest: a hold, not an error."""
+    host = _host()
+    before = list(host.arm.q)
+    assert _run(host, lib_motion.speedj(host, [0.0] * 6, 0.0, 1e-13)) == 1
+    assert host.arm.q == pytest.approx(before, abs=1e-12)
+    with pytest.raises(ScriptRuntimeError, match="acceleration must be > 0 to change speed"):
+        _run(host, lib_motion.speedj(host, [0.1, 0, 0, 0, 0, 0], 0.0, 0.1))
+
+
 def test_stopj_decelerates_the_leading_joint_at_a() -> None:
     host = _host()
     arm = host.arm
@@ -337,7 +347,7 @@ def test_bad_arguments_are_runtime_errors() -> None:
     with pytest.raises(ScriptRuntimeError, match="movej"):
         _run(host, lib_motion.movej(host, [0.0] * 5, 1.4, 1.05, 0, 0))
     with pytest.raises(ScriptRuntimeError, match="speedj"):
-        _run(host, lib_motion.speedj(host, [0.0] * 6, 0, 0))
+        _run(host, lib_motion.speedj(host, [0.0] * 6, -1.0, 0))
     with pytest.raises(ScriptRuntimeError, match="stopj"):
         _run(host, lib_motion.stopj(host, "fast"))
     with pytest.raises(ScriptRuntimeError, match="movel"):

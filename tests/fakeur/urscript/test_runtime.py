@@ -3,7 +3,7 @@ runtime errors with line and column, and URScript's value semantics."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from typing import Any, cast
 
 import pytest
@@ -260,6 +260,30 @@ def test_the_budget_is_per_cycle() -> None:
         run.step()
     assert not run.done
     assert run.error is None
+
+
+def _ready(host: Host, number: int, socket_name: str, timeout: float) -> Generator[None, None, int]:
+    """A socket read whose data is always there already: blocking, but it never has to wait."""
+    if number < 0:  # never: makes this a generator that returns at once
+        yield
+    return 1
+
+
+def test_a_waiting_loop_that_never_has_to_wait_sleeps_until_the_next_cycle() -> None:
+    """A thread that uses up its time slice in a loop that may wait (a client flooding the socket it
+    reads) is put aside until the next cycle, as the controller's scheduler does; the program goes on."""
+    program = compile_stub(
+        "n = 0\nwhile True:\n  n = n + socket_read_binary_integer(1)\nend\n",
+        socket_read_binary_integer=Builtin("socket_read_binary_integer", _ready, True),
+    )
+    run = program.start(Host())
+    run.step()
+    assert (run.done, run.error) == (False, None)
+    first = run.variable("n")
+    assert MAX_OPS_PER_CYCLE - 1 <= first <= MAX_OPS_PER_CYCLE + 1
+    run.step()
+    assert (run.done, run.error) == (False, None)
+    assert abs(run.variable("n") - 2 * first) <= 2  # one time slice more
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,10 @@ if TYPE_CHECKING:
 __all__ = ["CONSTANTS", "IO_VARIABLES", "MAX_OPS_PER_CYCLE", "Program", "compile_program"]
 
 MAX_OPS_PER_CYCLE: Final = 100_000
-"""Loop iterations one thread may run in one controller cycle before the controller stops the program."""
+"""Loop iterations one thread may run in one controller cycle. Past it, a loop that may wait (it calls a
+blocking builtin that happened not to block) puts its thread aside until the next cycle, as the
+controller's scheduler does with a thread that used up its time slice; a loop that can never wait
+stops the program with the controller's error."""
 
 CONSTANTS: Final[dict[str, object]] = {"pi": 3.141592653589793}
 """Builtin variables of the language."""
@@ -547,6 +550,21 @@ class _Checker:
         implementation = self.implementation(name) if name in self.signatures else None
         return implementation is not None and implementation.blocking
 
+    def body_blocks(self, body: tuple[Any, ...]) -> bool:
+        """Whether running ``body`` may block: a join, a blocking builtin or a function that blocks."""
+        for statement in walk_statements(body):
+            if isinstance(statement, ast.Join):
+                return True
+            for expression in statement_expressions(statement):
+                for node in walk_expressions(expression):
+                    if isinstance(node, ast.Call) and (
+                        node.name in self.blocking
+                        if node.name in self.functions
+                        else self.builtin_blocks(node.name)
+                    ):
+                        return True
+        return False
+
     def _find_blocking(self) -> None:
         direct: dict[str, set[str]] = {}
         for name, scope in self.scopes.items():
@@ -674,7 +692,13 @@ class _Generator:
                 self._block(indent + 1, node.orelse)
         elif isinstance(node, ast.While):
             self._emit(indent, f"while {self._expr(node.condition)}:", node)
-            self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: _too_long()", node)
+            if self.checker.body_blocks((node,)):
+                # a loop that waits on something (a socket read that keeps finding data, say) has used
+                # its time slice: the thread sleeps until the next cycle, as the controller's does
+                self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: yield", node)
+            else:
+                # a loop that can never wait would hold the controller: the controller's error
+                self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: _too_long()", node)
             self._block(indent + 1, node.body)
         elif isinstance(node, ast.Return):
             value = node.value

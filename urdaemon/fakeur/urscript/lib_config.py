@@ -46,6 +46,9 @@ class ConfigState:
     freedrive_feature: list[float] = field(default_factory=lambda: [0.0] * 6)
     ft_zeroed_at: float | None = None
     """Controller time of the last ``zero_ftsensor``."""
+    external_ft_sensor: tuple[float, list[float], list[float]] | None = None
+    """``ft_rtde_input_enable``'s (sensor mass, measuring offset, centre of gravity) while enabled: the
+    fake measures no force either way, so nothing reads it back."""
     tool_communication: tuple[bool, int, int, int, float, float] | None = None
     """``set_tool_communication``'s (enabled, baud rate, parity, stop bits, rx idle, tx idle)."""
     tool_output_modes: list[int] = field(default_factory=lambda: [2, 2])
@@ -267,6 +270,39 @@ def tool_contact(host: ScriptHost, direction: Any = (0, 0, 0, 0, 0, 0), force_th
     _vector("tool_contact", direction, 6)
     _number("tool_contact", force_threshold)
     return 0
+
+
+def _external_ft_sensor(
+    name: str, host: ScriptHost, enable: Any, sensor_mass: Any, sensor_measuring_offset: Any, sensor_cog: Any
+) -> None:
+    if not isinstance(enable, bool):
+        raise ScriptRuntimeError(f"{name}: enable must be True or False, got {enable!r}")
+    mass = _number(name, sensor_mass)
+    if mass < 0:
+        raise ScriptRuntimeError(f"{name}: sensor_mass must be >= 0, got {mass}")
+    offset = _vector(name, sensor_measuring_offset, 3)
+    cog = _vector(name, sensor_cog, 3)
+    _config(host).external_ft_sensor = (mass, offset, cog) if enable else None
+
+
+@builtin("ft_rtde_input_enable")
+def ft_rtde_input_enable(
+    host: ScriptHost, enable: Any, sensor_mass: Any, sensor_measuring_offset: Any, sensor_cog: Any
+) -> None:
+    """Take the F/T readings from RTDE's ``external_force_torque`` input (an external sensor)."""
+    _external_ft_sensor(
+        "ft_rtde_input_enable", host, enable, sensor_mass, sensor_measuring_offset, sensor_cog
+    )
+
+
+@builtin("enable_external_ft_sensor")
+def enable_external_ft_sensor(
+    host: ScriptHost, enable: Any, sensor_mass: Any, sensor_measuring_offset: Any, sensor_cog: Any
+) -> None:
+    """The deprecated name of ``ft_rtde_input_enable`` (before 5.9)."""
+    _external_ft_sensor(
+        "enable_external_ft_sensor", host, enable, sensor_mass, sensor_measuring_offset, sensor_cog
+    )
 
 
 # ---- tool IO configuration ------------------------------------------------------------------------------

@@ -166,12 +166,16 @@ def speedj(host: ScriptHost, qd: Any, a: Any, t: Any) -> Gen:
     velocity = _vector("speedj", qd)
     acceleration = _number("speedj a", a)
     duration = _number("speedj t", t)
-    if acceleration <= 0:
-        raise ScriptRuntimeError(f"speedj: acceleration must be > 0, got {acceleration}")
     arm = host.arm
     limits = arm.max_velocity
     velocity = [max(-limits[i], min(limits[i], velocity[i])) for i in range(6)]
     start, moving = _start(arm)
+    if acceleration <= 0:
+        # a = 0 with nothing to change is a hold at the present speed (urcl's spline follower sends
+        # that on a segment's last, zero-speed step); a change no acceleration can make is an error
+        if acceleration < 0 or any(abs(v - m) > 1e-12 for v, m in zip(velocity, moving, strict=True)):
+            raise ScriptRuntimeError(f"speedj: acceleration must be > 0 to change speed, got {acceleration}")
+        acceleration = 1e-9
     ramp = SpeedRamp(start, moving, velocity, acceleration, duration)
     if ramp.duration < host.step_time:  # t = 0 and already (nearly) at speed: one cycle at that speed
         ramp = SpeedRamp(start, moving, velocity, acceleration, host.step_time)
