@@ -163,6 +163,10 @@ class Programs:
             log.info("%s program refused at %d:%d: %s", self.address, err.line, err.column, err.message)
             self.broadcast(prim.RuntimeExceptionMessage(err.line, err.column, err.message))
             return None
+        except Exception as err:  # the compiler's own fault refuses this program, and the queue goes on
+            log.exception("%s program refused: the compiler failed", self.address)
+            self.broadcast(prim.RuntimeExceptionMessage(1, 1, f"compile_error: {type(err).__name__}: {err}"))
+            return None
         self.compiles += 1
         return program
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import inspect
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -236,7 +237,13 @@ def test_deep_nesting_is_a_compile_error_not_a_crash() -> None:
 
 
 def test_a_parameter_declared_global_stays_the_parameter() -> None:
-    compile_stub("g = 1\ndef f(g):\n  global g = 2\n  return g\nend\nx = f(3)\n")
+    program = compile_stub("g = 1\ndef f(g):\n  global g = 2\n  return g\nend\nx = f(3)\n")
+    host = SimpleNamespace(step_time=0.002, thread=0, message=lambda kind, text: None)
+    run = program.start(host)
+    run.step()
+    assert (run.done, run.error) == (True, None)
+    assert run.variable("x") == 2, "the assignment went to the parameter"
+    assert run.variable("g") == 1, "the program's g is untouched"
 
 
 def test_more_nested_loops_than_python_allows_is_a_compile_error() -> None:
@@ -245,3 +252,17 @@ def test_more_nested_loops_than_python_allows_is_a_compile_error() -> None:
     error = _refused(text)
     assert "nested" in error.message
     assert error.line > 1
+
+
+def test_a_function_defined_twice_is_refused_at_its_second_definition() -> None:
+    error = _refused("def f():\n  return 1\nend\ndef f():\n  return 2\nend\nf()\n")
+    assert (error.line, error.column) == (4, 1)
+    assert "f is already defined" in error.message
+
+
+def test_a_program_larger_than_the_fake_compiles_is_refused_before_parsing() -> None:
+    from urdaemon.fakeur.urscript.compiler import MAX_PROGRAM_CHARS
+
+    error = _refused("x = 1\n" * (MAX_PROGRAM_CHARS // 6 + 1))
+    assert (error.line, error.column) == (1, 1)
+    assert f"at most {MAX_PROGRAM_CHARS}" in error.message

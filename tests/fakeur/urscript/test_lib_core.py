@@ -165,3 +165,13 @@ def test_time_builtins() -> None:
     assert len(list(BUILTINS["sleep"].function(HOST, 0.016))) == 2
     assert list(BUILTINS["sleep"].function(HOST, 0)) == []
     assert len(list(BUILTINS["sync"].function(HOST))) == 1
+
+
+def test_str_cat_refuses_a_string_longer_than_the_fake_keeps() -> None:
+    """A loop doubling a string would otherwise fill the fake's memory."""
+    from urdaemon.fakeur.urscript.lib_core import MAX_STRING_CHARS, str_cat
+
+    half = "x" * (MAX_STRING_CHARS // 2)
+    assert len(str_cat(cast(Any, None), half, half)) == MAX_STRING_CHARS
+    with pytest.raises(ScriptRuntimeError, match="at most"):
+        str_cat(cast(Any, None), half, half + "x")

@@ -409,3 +409,12 @@ def test_a_servoj_beyond_the_speed_limit_commands_only_what_the_joints_can_do() 
     cycles = _run(host, lib_motion.stopj(host, 4.0))
     assert cycles <= round(stopping / DT) + 1
     assert arm.q[0] - at <= limit * stopping / 2 + 2 * limit * DT
+
+
+def test_servoj_refuses_a_lookahead_or_gain_outside_the_controllers_ranges() -> None:
+    host = _host()
+    target = list(host.arm.q)
+    with pytest.raises(ScriptRuntimeError, match=r"lookahead_time 0\.01 is outside"):
+        _run(host, lib_motion.servoj(host, target, 0, 0, DT, 0.01, 300))
+    with pytest.raises(ScriptRuntimeError, match="gain 5000"):
+        _run(host, lib_motion.servoj(host, target, 0, 0, DT, 0.1, 5000))

@@ -509,3 +509,12 @@ def test_a_script_echoes_frames_until_the_peer_stops(server: socket.socket) -> N
     assert run.done
     assert run.error is None
     assert host.sockets.get("reverse_socket") is None
+
+
+def test_a_read_of_more_values_than_the_fake_bounds_is_a_runtime_error() -> None:
+    """A script asking for 400 million integers would make the fake allocate them on a timeout."""
+    from urdaemon.fakeur.urscript import lib_sockets
+
+    with pytest.raises(ScriptRuntimeError, match="more than the 1000 values"):
+        lib_sockets._count("socket_read_binary_integer", 400_000_000)
+    assert lib_sockets._count("socket_read_binary_integer", 28) == 28

@@ -3,6 +3,7 @@ runtime errors with line and column, and URScript's value semantics."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Generator, Iterator
 from typing import Any, cast
 
@@ -483,3 +484,36 @@ def test_list_arithmetic_is_element_wise_on_either_side() -> None:
         _ = a + longer
     with pytest.raises(ScriptRuntimeError, match="different lengths"):
         _ = longer * a
+
+
+def _costly(host: Host, value: Any) -> None:
+    """A builtin that takes a while (inverse kinematics, say): 1 ms each."""
+    time.sleep(0.001)
+
+
+def test_a_loop_of_costly_calls_is_stopped_by_the_cycles_time_budget_not_after_100000_of_them() -> None:
+    """The budget is also the cycle's wall time: a loop calling a costly builtin cannot hold every fake's
+    clock for seconds before the controller's error."""
+    program = compile_stub(
+        "n = 0\nwhile True:\n  n = n + 1\n  record(n)\nend\n", record=Builtin("record", _costly, False)
+    )
+    run = program.start(Host())
+    run.step()
+    assert run.error is not None
+    assert run.error.message == TOO_LONG
+    assert run.variable("n") < MAX_OPS_PER_CYCLE // 10
+
+
+def test_a_list_default_is_made_anew_at_every_call() -> None:
+    run, host = start("def f(a=[1, 2]):\n  a[0] = a[0] + 1\n  return a[0]\nend\nrecord(f())\nrecord(f())\n")
+    run.step()
+    assert [value for _, value in host.records] == [2, 2]
+
+
+def test_a_thread_joining_itself_is_a_runtime_error_not_a_wait_for_ever() -> None:
+    run, _host = start("h = 0\nthread t():\n  join h\nend\nh = run t()\nsleep(1)\n")
+    for _ in range(3):
+        run.step()
+    assert run.error is not None
+    assert "cannot wait for itself" in run.error.message
+    assert (run.error.line, run.error.column) == (3, 3)

@@ -28,13 +28,28 @@ if TYPE_CHECKING:
     from urdaemon.fakeur.urscript.host import ScriptHost
     from urdaemon.fakeur.urscript.runtime import ScriptRun
 
-__all__ = ["CONSTANTS", "IO_VARIABLES", "MAX_OPS_PER_CYCLE", "Program", "compile_program"]
+__all__ = [
+    "CONSTANTS",
+    "IO_VARIABLES",
+    "MAX_OPS_PER_CYCLE",
+    "MAX_PROGRAM_CHARS",
+    "Program",
+    "compile_program",
+]
 
 MAX_OPS_PER_CYCLE: Final = 100_000
 """Loop iterations one thread may run in one controller cycle. Past it, a loop that may wait (it calls a
 blocking builtin that happened not to block) puts its thread aside until the next cycle, as the
 controller's scheduler does with a thread that used up its time slice; a loop that can never wait
 stops the program with the controller's error."""
+
+MAX_PROGRAM_CHARS: Final = 256 * 1024
+"""The longest program the fake compiles. Python's own compile step holds the interpreter lock
+(~0.4 s per MiB of program), stalling every fake's clock in the process; our control script is 25 KB,
+ur_rtde's 42 KB, so this leaves ample room while bounding that stall (~0.1 s) for a hostile client."""
+
+_SPENT: Final = f"(_n := _next(_tick)) > {MAX_OPS_PER_CYCLE} or (_n & 255 == 0 and _late())"
+"""A loop's test, each iteration, of whether its thread has used its time slice (inline: it is hot)."""
 
 CONSTANTS: Final[dict[str, object]] = {"pi": 3.141592653589793}
 """Builtin variables of the language."""
@@ -138,6 +153,13 @@ def _compile(
     signatures: Mapping[str, Any] | None,
     builtins: Mapping[str, Builtin] | None,
 ) -> Program:
+    if len(text) > MAX_PROGRAM_CHARS:
+        raise ScriptCompileError(
+            1,
+            1,
+            f"compile_error: program of {len(text)} characters; the fake compiles at most "
+            f"{MAX_PROGRAM_CHARS}",
+        )
     items = ast.parse(text)
     known_anywhere: Mapping[str, Any] = {}
     if signatures is None:
@@ -279,9 +301,14 @@ class _Checker:
         self.signatures = signatures
         self.known_anywhere = known_anywhere
         self.functions: dict[str, ast.Function] = {}
+        self.duplicates: list[ast.Function] = []
+        """Second definitions of a name: refused (the controller keeps one function per name)."""
         for statement in walk_statements(body, into_functions=True):
             if isinstance(statement, ast.Function):
-                self.functions[statement.name] = statement
+                if statement.name in self.functions:
+                    self.duplicates.append(statement)
+                else:
+                    self.functions[statement.name] = statement
         self.main_body = tuple(s for s in body if not isinstance(s, ast.Function))
         self.globals: set[str] = set()
         for statement in walk_statements(self.main_body):
@@ -330,6 +357,8 @@ class _Checker:
         self.errors.append(ScriptCompileError(node.line, node.column, message))
 
     def check(self) -> None:
+        for duplicate in self.duplicates:
+            self.error(duplicate, f"compile_error: {duplicate.name} is already defined")
         self._collect_sockets()
         for scope in (self.main, *self.scopes.values()):
             self._check_scope(scope)
@@ -644,11 +673,20 @@ class _Generator:
 
     def _function(self, function: ast.Function) -> None:
         params = []
+        fresh: list[tuple[str, str]] = []
         for param in function.params:
-            default = "" if param.default is None else "=" + self._expr(param.default)
-            params.append(f"v_{param.name}{default}")
+            if param.default is None:
+                params.append(f"v_{param.name}")
+            elif isinstance(param.default, (ast.ListLiteral, ast.Call)):
+                # a list, pose or struct default is made anew at every call, not shared between calls
+                params.append(f"v_{param.name}=_D")
+                fresh.append((param.name, self._expr(param.default)))
+            else:
+                params.append(f"v_{param.name}={self._expr(param.default)}")
         prefix = "t_" if function.kind == "thread" else "f_"
         self._emit(0, f"def {prefix}{function.name}({', '.join(params)}):", function)
+        for name, value in fresh:
+            self._emit(1, f"if v_{name} is _D: v_{name} = {value}", function)
         self._globals(1, self.scope.body)
         self._block(1, self.scope.body)
         if function.kind == "thread" or function.name in self.checker.blocking:
@@ -695,10 +733,18 @@ class _Generator:
             if self.checker.body_blocks((node,)):
                 # a loop that waits on something (a socket read that keeps finding data, say) has used
                 # its time slice: the thread sleeps until the next cycle, as the controller's does
-                self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: yield", node)
+                self._emit(
+                    indent + 1,
+                    f"if {_SPENT}: yield",
+                    node,
+                )
             else:
                 # a loop that can never wait would hold the controller: the controller's error
-                self._emit(indent + 1, f"if _next(_tick) > {MAX_OPS_PER_CYCLE}: _too_long()", node)
+                self._emit(
+                    indent + 1,
+                    f"if {_SPENT}: _too_long()",
+                    node,
+                )
             self._block(indent + 1, node.body)
         elif isinstance(node, ast.Return):
             value = node.value

@@ -73,9 +73,19 @@ def _string(name: str, value: Any) -> str:
     return value
 
 
+MAX_STRING_CHARS = 65536
+"""The longest string a program may build (the fake's own bound: memory and the primary interface's
+message size)."""
+
+
 @builtin("str_cat")
 def str_cat(host: ScriptHost, op1: Any, op2: Any) -> str:
-    return text(op1) + text(op2)
+    joined = text(op1) + text(op2)
+    if len(joined) > MAX_STRING_CHARS:
+        raise ScriptRuntimeError(
+            f"str_cat: a string of {len(joined)} characters; the fake keeps at most {MAX_STRING_CHARS}"
+        )
+    return joined
 
 
 @builtin("str_len")

@@ -41,6 +41,7 @@ from urdaemon.fakeur.motion import (
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed
+from urdaemon.urscript import SERVOJ_GAIN_RANGE, SERVOJ_LOOKAHEAD_RANGE_S
 
 __all__ = ["MotionState", "flange_pose", "inverse_near", "tcp_matrix", "tcp_pose", "tool_speed"]
 
@@ -147,8 +148,14 @@ def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any
     """servoj(q, a, v, t, lookahead_time, gain): reach ``q`` in ``t`` (whole cycles, at least one)."""
     target = _vector("servoj", q)
     duration = _number("servoj t", t)
-    _number("servoj lookahead_time", lookahead_time)
-    _number("servoj gain", gain)
+    lookahead = _number("servoj lookahead_time", lookahead_time)
+    proportional = _number("servoj gain", gain)
+    if not SERVOJ_LOOKAHEAD_RANGE_S[0] <= lookahead <= SERVOJ_LOOKAHEAD_RANGE_S[1]:
+        raise ScriptRuntimeError(
+            f"servoj: lookahead_time {lookahead} is outside {list(SERVOJ_LOOKAHEAD_RANGE_S)}"
+        )
+    if not SERVOJ_GAIN_RANGE[0] <= proportional <= SERVOJ_GAIN_RANGE[1]:
+        raise ScriptRuntimeError(f"servoj: gain {proportional} is outside {list(SERVOJ_GAIN_RANGE)}")
     arm = host.arm
     if not _within_limits(arm, target):
         _protective_stop(host, "servoj", target)

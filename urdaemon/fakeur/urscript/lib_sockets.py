@@ -25,6 +25,7 @@ import struct
 from collections.abc import Generator
 from typing import Any, Final
 
+from urdaemon.fakeur.urscript.compiler import DEFAULT_SOCKET
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_core import text as printed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, builtin
@@ -38,7 +39,6 @@ __all__ = [
     "SocketTable",
 ]
 
-DEFAULT_SOCKET: Final = "socket_0"
 CONNECT_TIMEOUT_S: Final = 2.0
 """s: how long ``socket_open`` tries before it returns False (UR's manual: it times out after 2 s)."""
 READ_CHUNK: Final = 4096
@@ -214,13 +214,22 @@ def _deadline(host: ScriptHost, timeout: Any) -> float:
     return host.now + seconds - _TIME_EPSILON if seconds > 0 else math.inf
 
 
+MAX_READ_COUNT = 1000
+"""The most values one socket read may ask for: the fake's own bound (memory), far above the 8-30
+values the scripts we know read at once."""
+
+
 def _count(function: str, number: Any) -> int:
-    if number.__class__ is int and number > 0:
+    if number.__class__ is int and 0 < number <= MAX_READ_COUNT:
         return int(number)
     if isinstance(number, float) and number.is_integer():
         number = int(number)
     if isinstance(number, bool) or not isinstance(number, int) or number < 1:
         raise ScriptRuntimeError(f"{function}: number must be a positive integer, got {number!r}")
+    if number > MAX_READ_COUNT:
+        raise ScriptRuntimeError(
+            f"{function}: number {number} is more than the {MAX_READ_COUNT} values the fake reads at once"
+        )
     return number
 
 

@@ -10,6 +10,7 @@ rest of the current controller cycle; its return value is the call's value.
 from __future__ import annotations
 
 import operator
+import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, Final
@@ -159,6 +160,14 @@ TOO_LONG: Final = (
 )
 """The controller's runtime error for a thread that loops too long within one cycle."""
 
+CYCLE_BUDGET_S: Final = 0.05
+"""Wall time one controller cycle's threads may take in total (checked every 256 loop iterations)
+before a looping thread is treated as having used its time slice: heavy builtins in a loop (inverse
+kinematics, say) reach it long before the loop budget's iterations."""
+
+_DEFAULT: Final = object()
+"""Marks a parameter left out whose default (a list, pose or struct) is made anew at each call."""
+
 MAIN: Final = 0
 """The main program's thread handle."""
 
@@ -231,6 +240,8 @@ class ScriptRun:
             "_next": next,
             "_tick": count(),
             "_too_long": self._too_long,
+            "_late": self._late,
+            "_D": _DEFAULT,
             "_start": self._start,
             "_kill": self._kill,
             "_join": self._join,
@@ -241,6 +252,7 @@ class ScriptRun:
             namespace["b_" + name] = partial(function, host)
         exec(program.code, namespace)
         self._namespace = namespace
+        self._deadline = time.perf_counter() + CYCLE_BUDGET_S
         main = _Thread(MAIN, namespace["_main"]())
         self._threads.append(main)
         self._alive.add(MAIN)
@@ -254,6 +266,7 @@ class ScriptRun:
         threads = self._threads
         namespace = self._namespace
         host = self.host
+        self._deadline = time.perf_counter() + CYCLE_BUDGET_S
         index = 0
         while index < len(threads):
             thread = threads[index]
@@ -339,6 +352,10 @@ class ScriptRun:
     def _too_long(self) -> None:
         raise ScriptRuntimeError(TOO_LONG)
 
+    def _late(self) -> bool:
+        """This cycle's threads have run past the cycle's wall-time budget."""
+        return time.perf_counter() > self._deadline
+
     def _start(self, function: Callable[[], Any]) -> int:
         handle = self._next_handle
         self._next_handle += 1
@@ -358,6 +375,8 @@ class ScriptRun:
                 thread.generator.close()
 
     def _join(self, handle: Any) -> Iterator[None]:
+        if self._current is not None and handle == self._current.handle and handle != MAIN:
+            raise ScriptRuntimeError("join: a thread cannot wait for itself to end")
         while handle in self._alive and handle != MAIN:
             yield
 
