@@ -517,3 +517,10 @@ def test_a_thread_joining_itself_is_a_runtime_error_not_a_wait_for_ever() -> Non
     assert run.error is not None
     assert "cannot wait for itself" in run.error.message
     assert (run.error.line, run.error.column) == (3, 3)
+
+
+def test_a_nested_list_is_copied_whole_on_assignment() -> None:
+    run, host = start("a = [[1, 2], [3, 4]]\nb = a\nb[0][0] = 9\nrecord(a[0][0])\nrecord(b[0][0])\n")
+    run.step()
+    assert run.error is None
+    assert [value for _, value in host.records] == [1, 9]

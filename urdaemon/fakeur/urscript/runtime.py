@@ -183,8 +183,13 @@ class _Killed(BaseException):
 def copy_value(value: Any) -> Any:
     """A URScript value as a new variable holds it: lists and structs are values, not references."""
     kind = type(value)
-    if kind is UrList or kind is UrPose:
-        return kind(value)
+    if kind is UrPose:
+        return UrPose(value)
+    if kind is UrList:
+        for item in value:
+            if isinstance(item, (list, UrStruct)):  # a matrix: its rows are values too
+                return UrList(copy_value(v) for v in value)
+        return UrList(value)
     if kind is UrStruct:
         return UrStruct((k, copy_value(v)) for k, v in vars(value).items())
     if isinstance(value, list):
