@@ -236,3 +236,26 @@ async def test_a_pausing_program_reads_playing_and_play_neither_restarts_nor_jum
         assert _state(controller) is RuntimeState.PLAYING
         assert controller.programs.main is script
         link.close()
+
+
+async def test_a_dashboard_stop_also_stops_a_script_still_being_compiled() -> None:
+    """On a controller the script would have started, then stopped: here it must not start afterwards."""
+    async with manual_fake(powered=True) as (controller, _):
+        controller.programs.submit("late", "def late():\n  while True:\n    sync()\n  end\nend\n")
+        assert controller.programs.busy
+        assert controller._dashboard_reply(dash.Stop()) == "Stopped"
+        await controller.programs.settled()
+        assert controller.programs.main is None
+        assert _state(controller) is RuntimeState.STOPPED
+
+
+async def test_a_queued_stop_program_stops_what_came_before_it_and_not_what_came_after() -> None:
+    async with manual_fake(powered=True) as (controller, _):
+        loop = "def {name}():\n  while True:\n    sync()\n  end\nend\n"
+        controller.programs.submit("first", loop.format(name="first"))
+        controller.programs.then(controller._stop_program)
+        controller.programs.submit("second", loop.format(name="second"))
+        await controller.programs.settled()
+        main = controller.programs.main
+        assert main is not None
+        assert main.name == "second"

@@ -78,7 +78,7 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
         arm.pause_program()
         return "Pausing program"
     if isinstance(command, dash.Stop):
-        if arm.runtime_state is RuntimeState.STOPPED:
+        if arm.runtime_state is RuntimeState.STOPPED and not fake.programs.busy:
             return "Failed to execute: stop"
         fake._stop_program()
         return "Stopped"

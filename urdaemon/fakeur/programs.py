@@ -61,6 +61,15 @@ class RunningScript:
 class _Arrival:
     name: str
     text: str
+    number: int
+    """Its place among the scripts that arrived (1, 2, ...)."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Action:
+    action: Callable[[], None]
+    after: int
+    """How many scripts had arrived before this command."""
 
 
 class Programs:
@@ -93,7 +102,12 @@ class Programs:
         """Controller time each RTDE input variable last arrived (what the watchdogs check)."""
         self.compiles = 0
         """Scripts compiled (in the worker thread) so far."""
-        self._pending: deque[_Arrival | Callable[[], None]] = deque()
+        self._pending: deque[_Arrival | _Action] = deque()
+        self._arrived = 0
+        self._dropped_through = 0
+        """Scripts up to this arrival number are not started: a stop came after them."""
+        self._acting_after: int | None = None
+        """While a queued command runs: how many scripts had arrived when it did."""
         self._room = asyncio.Event()
         self._room.set()
         self._idle = asyncio.Event()
@@ -104,14 +118,15 @@ class Programs:
 
     def submit(self, name: str, text: str) -> None:
         """Compile ``text`` off the event loop, then start it, after everything that arrived before."""
-        self._enqueue(_Arrival(name, text))
+        self._arrived += 1
+        self._enqueue(_Arrival(name, text, self._arrived))
 
     def then(self, action: Callable[[], None]) -> None:
         """Do ``action`` (a controller command) now, or after the scripts still waiting to start."""
         if not self._pending:
             action()
             return
-        self._enqueue(action)
+        self._enqueue(_Action(action, self._arrived))
 
     @property
     def busy(self) -> bool:
@@ -128,7 +143,7 @@ class Programs:
             self._room.clear()
             await self._room.wait()
 
-    def _enqueue(self, item: _Arrival | Callable[[], None]) -> None:
+    def _enqueue(self, item: _Arrival | _Action) -> None:
         self._pending.append(item)
         self._idle.clear()
         if self._worker is None:
@@ -140,10 +155,14 @@ class Programs:
                 item = self._pending[0]
                 if isinstance(item, _Arrival):
                     program = await self._compile(item.text)
-                    if program is not None:
+                    if program is not None and item.number > self._dropped_through:
                         self.start(item.name, program)
                 else:
-                    item()
+                    self._acting_after = item.after
+                    try:
+                        item.action()
+                    finally:
+                        self._acting_after = None
                 self._pending.popleft()
                 if len(self._pending) < MAX_PENDING_SCRIPTS:
                     self._room.set()
@@ -219,7 +238,9 @@ class Programs:
             self.broadcast(prim.TextMessage(text))
 
     def stop(self) -> None:
-        """``stop program``: every program ends and the arm stops."""
+        """``stop program``: every program ends and the arm stops; so do the scripts that arrived
+        before it and still wait to be compiled (on a controller they would have started, then stopped)."""
+        self._dropped_through = self._arrived if self._acting_after is None else self._acting_after
         self.end_all()
         self.arm.stop_program()
 
