@@ -113,6 +113,8 @@ class IoState:
     registers_int: dict[int, int] = field(default_factory=dict)
     registers_double: dict[int, float] = field(default_factory=dict)
     registers_bit: dict[int, bool] = field(default_factory=dict)
+    flags: int = 0
+    """The 32 program flags (``set_flag``): internal outputs that keep their value between programs."""
 
 
 class FakeArm:

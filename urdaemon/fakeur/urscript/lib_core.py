@@ -12,7 +12,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin, copy_value
+from urdaemon.fakeur.urscript.signatures import Computed
 
 __all__ = ["matrix_to_rotvec", "rotvec_to_matrix", "text"]
 
@@ -222,6 +223,39 @@ def length(host: ScriptHost, v: Any) -> int:
 @builtin("get_list_length")
 def get_list_length(host: ScriptHost, v: Any) -> int:
     return len(v)
+
+
+MAX_LIST_LENGTH = 100_000
+"""The longest list ``make_list`` makes (the fake's own bound: memory)."""
+
+
+@builtin("make_list")
+def make_list(host: ScriptHost, length: Any, initial_value: Any, capacity: Any) -> UrList:
+    """A list of ``length`` copies of ``initial_value``; ``capacity`` (default: ``length``) only bounds it."""
+    count = _whole("make_list length", length)
+    room = count if isinstance(capacity, Computed) else _whole("make_list capacity", capacity)
+    if not 0 <= count <= room <= MAX_LIST_LENGTH:
+        raise ScriptRuntimeError(
+            f"make_list: length {count} and capacity {room} must satisfy 0 <= length <= capacity <= "
+            f"{MAX_LIST_LENGTH}"
+        )
+    return UrList(copy_value(initial_value) for _ in range(count))
+
+
+@builtin("size")
+def size(host: ScriptHost, v: Any) -> int:
+    """The number of elements of a list (or characters of a string)."""
+    if not isinstance(v, (list, str)):
+        raise ScriptRuntimeError(f"size: expected a list, got {text(v)}")
+    return len(v)
+
+
+def _whole(name: str, value: Any) -> int:
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if value.__class__ is not int:
+        raise ScriptRuntimeError(f"{name} must be a whole number, got {text(value)}")
+    return int(value)
 
 
 @builtin("binary_list_to_integer")

@@ -88,6 +88,22 @@ def _get_bit(word: int, function: str, group: tuple[int, int], n: Any) -> bool:
     return bool(word >> (group[0] + _index(function, n, group[1])) & 1)
 
 
+FLAGS = 32
+"""Program flags 0-31: internal digital outputs that keep their value between programs."""
+
+
+@builtin("set_flag")
+def set_flag(host: ScriptHost, n: Any, b: Any) -> None:
+    index = _index("set_flag", n, FLAGS)
+    io = host.arm.io
+    io.flags = io.flags | (1 << index) if _level("set_flag", b) else io.flags & ~(1 << index)
+
+
+@builtin("get_flag")
+def get_flag(host: ScriptHost, n: Any) -> bool:
+    return bool(host.arm.io.flags >> _index("get_flag", n, FLAGS) & 1)
+
+
 @builtin("set_standard_digital_out")
 def set_standard_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
     _set_bit(host, "set_standard_digital_out", _STANDARD, n, b)
