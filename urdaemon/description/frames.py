@@ -18,6 +18,7 @@ __all__ = [
     "frame_of_pose",
     "inverse",
     "pose_of_frame",
+    "rotate",
     "rotation_vector",
 ]
 
@@ -107,3 +108,13 @@ def inverse(f: Frame) -> Frame:
         r00, r10, r20, r01, r11, r21, r02, r12, r22,
         -(r00 * x + r10 * y + r20 * z), -(r01 * x + r11 * y + r21 * z), -(r02 * x + r12 * y + r22 * z),
     )  # fmt: skip
+
+
+def rotate(f: Frame, v: Sequence[float]) -> tuple[float, float, float]:
+    """The vector ``v`` turned by ``f``'s rotation (its translation left out)."""
+    x, y, z = v[0], v[1], v[2]
+    return (
+        f[0] * x + f[1] * y + f[2] * z,
+        f[3] * x + f[4] * y + f[5] * z,
+        f[6] * x + f[7] * y + f[8] * z,
+    )

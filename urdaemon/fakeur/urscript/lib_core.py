@@ -11,13 +11,21 @@ import random as _random
 from collections.abc import Sequence
 from typing import Any
 
+from urdaemon.description.frames import (
+    Frame,
+    compose,
+    frame_of_pose,
+    inverse,
+    pose_of_frame,
+    rotate,
+    rotation_vector,
+)
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin, copy_value
 from urdaemon.fakeur.urscript.signatures import Computed
 
-__all__ = ["matrix_to_rotvec", "rotvec_to_matrix", "text"]
+__all__ = ["text"]
 
-Matrix = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
 
 # -- time and messages ----------------------------------------------------------------------------------
 
@@ -272,105 +280,47 @@ def integer_to_binary_list(host: ScriptHost, x: int) -> UrList:
 # -- pose maths -----------------------------------------------------------------------------------------
 
 
-def rotvec_to_matrix(rx: float, ry: float, rz: float) -> Matrix:
-    """Rotation matrix of a rotation vector (Rodrigues)."""
-    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if angle < 1e-12:
-        return ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    x, y, z = rx / angle, ry / angle, rz / angle
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return (
-        (t * x * x + c, t * x * y - s * z, t * x * z + s * y),
-        (t * x * y + s * z, t * y * y + c, t * y * z - s * x),
-        (t * x * z - s * y, t * y * z + s * x, t * z * z + c),
-    )
-
-
-def matrix_to_rotvec(m: Matrix) -> tuple[float, float, float]:
-    """Rotation vector (angle in [0, pi]) of a rotation matrix, accurate up to a half turn."""
-    sx, sy, sz = m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]
-    sine = 0.5 * math.sqrt(sx * sx + sy * sy + sz * sz)
-    cosine = (m[0][0] + m[1][1] + m[2][2] - 1.0) / 2.0
-    angle = math.atan2(sine, cosine)
-    if angle < 1e-12:
-        return (0.0, 0.0, 0.0)
-    if cosine > -0.5:
-        scale = angle / (2.0 * sine)
-        return (sx * scale, sy * scale, sz * scale)
-    # near a half turn the skew part vanishes: the axis from k k^T = (sym(R) - cos I) / (1 - cos)
-    outer = [
-        [((m[i][j] + m[j][i]) / 2.0 - (cosine if i == j else 0.0)) / (1.0 - cosine) for j in range(3)]
-        for i in range(3)
-    ]
-    column = max(range(3), key=lambda i: outer[i][i])
-    size = math.sqrt(outer[column][column])
-    axis = [outer[i][column] / size for i in range(3)]
-    if axis[0] * sx + axis[1] * sy + axis[2] * sz < 0.0:
-        axis = [-x for x in axis]
-    norm = math.sqrt(sum(x * x for x in axis))
-    return (axis[0] / norm * angle, axis[1] / norm * angle, axis[2] / norm * angle)
-
-
-def _multiply(a: Matrix, b: Matrix) -> Matrix:
-    return tuple(  # type: ignore[return-value]
-        tuple(sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)) for i in range(3)
-    )
-
-
-def _transpose(m: Matrix) -> Matrix:
-    return tuple(tuple(m[j][i] for j in range(3)) for i in range(3))  # type: ignore[return-value]
-
-
-def _apply(m: Matrix, v: Sequence[float]) -> tuple[float, float, float]:
-    return (
-        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
-        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
-        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
-    )
-
-
 def _pose(name: str, value: Any) -> Sequence[float]:
     if not isinstance(value, list) or len(value) != 6:
         raise ScriptRuntimeError(f"{name}: expected a pose p[x, y, z, rx, ry, rz], got {text(value)}")
     return value
 
 
-def _make_pose(position: Sequence[float], rotation: Matrix) -> UrPose:
-    return UrPose((*map(float, position), *matrix_to_rotvec(rotation)))
+def _frame(pose: Sequence[float]) -> Frame:
+    return frame_of_pose(pose)
+
+
+def _turn(pose: Sequence[float]) -> Frame:
+    """The rotation of ``pose`` alone (no translation)."""
+    return frame_of_pose((0.0, 0.0, 0.0, pose[3], pose[4], pose[5]))
+
+
+def _with_rotation(position: Sequence[float], rotation: Frame) -> UrPose:
+    return UrPose((*map(float, position), *rotation_vector(*rotation[:9])))
 
 
 @builtin("pose_trans")
 def pose_trans(host: ScriptHost, p_from: Any, p_from_to: Any) -> UrPose:
     a, b = _pose("pose_trans", p_from), _pose("pose_trans", p_from_to)
-    rotation = rotvec_to_matrix(a[3], a[4], a[5])
-    moved = _apply(rotation, b[:3])
-    position = (a[0] + moved[0], a[1] + moved[1], a[2] + moved[2])
-    return _make_pose(position, _multiply(rotation, rotvec_to_matrix(b[3], b[4], b[5])))
+    return UrPose(pose_of_frame(compose(_frame(a), _frame(b))))
 
 
 @builtin("pose_inv")
 def pose_inv(host: ScriptHost, p_from: Any) -> UrPose:
-    a = _pose("pose_inv", p_from)
-    inverse = _transpose(rotvec_to_matrix(a[3], a[4], a[5]))
-    position = _apply(inverse, a[:3])
-    return _make_pose((-position[0], -position[1], -position[2]), inverse)
+    return UrPose(pose_of_frame(inverse(_frame(_pose("pose_inv", p_from)))))
 
 
 @builtin("pose_add")
 def pose_add(host: ScriptHost, p_1: Any, p_2: Any) -> UrPose:
     a, b = _pose("pose_add", p_1), _pose("pose_add", p_2)
-    rotation = _multiply(rotvec_to_matrix(b[3], b[4], b[5]), rotvec_to_matrix(a[3], a[4], a[5]))
-    return _make_pose((a[0] + b[0], a[1] + b[1], a[2] + b[2]), rotation)
+    return _with_rotation((a[0] + b[0], a[1] + b[1], a[2] + b[2]), compose(_turn(b), _turn(a)))
 
 
 @builtin("pose_sub")
 def pose_sub(host: ScriptHost, p_to: Any, p_from: Any) -> UrPose:
     """The inverse of ``pose_add``: ``pose_add(pose_sub(p_to, p_from), p_from) == p_to``."""
     a, b = _pose("pose_sub", p_to), _pose("pose_sub", p_from)
-    inverse = _transpose(rotvec_to_matrix(b[3], b[4], b[5]))
-    rotation = _multiply(inverse, rotvec_to_matrix(a[3], a[4], a[5]))
-    return _make_pose((a[0] - b[0], a[1] - b[1], a[2] - b[2]), rotation)
+    return _with_rotation((a[0] - b[0], a[1] - b[1], a[2] - b[2]), compose(inverse(_turn(b)), _turn(a)))
 
 
 @builtin("point_dist")
@@ -383,48 +333,53 @@ def point_dist(host: ScriptHost, p_from: Any, p_to: Any) -> float:
 def pose_dist(host: ScriptHost, p_from: Any, p_to: Any) -> float:
     """Position distance and rotation angle between the poses, combined as sqrt(d^2 + angle^2)."""
     a, b = _pose("pose_dist", p_from), _pose("pose_dist", p_to)
-    relative = _multiply(_transpose(rotvec_to_matrix(a[3], a[4], a[5])), rotvec_to_matrix(b[3], b[4], b[5]))
-    angle = math.sqrt(sum(x * x for x in matrix_to_rotvec(relative)))
+    relative = compose(inverse(_turn(a)), _turn(b))
+    angle = math.sqrt(sum(x * x for x in rotation_vector(*relative[:9])))
     return math.sqrt(math.dist(a[:3], b[:3]) ** 2 + angle**2)
 
 
 @builtin("interpolate_pose")
 def interpolate_pose(host: ScriptHost, p_from: Any, p_to: Any, alpha: float) -> UrPose:
     a, b = _pose("interpolate_pose", p_from), _pose("interpolate_pose", p_to)
-    start = rotvec_to_matrix(a[3], a[4], a[5])
-    relative = matrix_to_rotvec(_multiply(_transpose(start), rotvec_to_matrix(b[3], b[4], b[5])))
-    partial = rotvec_to_matrix(*(alpha * x for x in relative))
+    start = _turn(a)
+    rx, ry, rz = rotation_vector(*compose(inverse(start), _turn(b))[:9])
+    partial = frame_of_pose((0.0, 0.0, 0.0, alpha * rx, alpha * ry, alpha * rz))
     position = tuple(a[i] + alpha * (b[i] - a[i]) for i in range(3))
-    return _make_pose(position, _multiply(start, partial))
+    return _with_rotation(position, compose(start, partial))
 
 
 @builtin("rotvec2rpy")
 def rotvec2rpy(host: ScriptHost, rotation_vector: Sequence[float]) -> UrList:
-    m = rotvec_to_matrix(rotation_vector[0], rotation_vector[1], rotation_vector[2])
-    pitch = math.atan2(-m[2][0], math.hypot(m[0][0], m[1][0]))
+    m = frame_of_pose((0.0, 0.0, 0.0, rotation_vector[0], rotation_vector[1], rotation_vector[2]))
+    r00, r01, _, r10, r11, _, r20, r21, r22 = m[:9]
+    pitch = math.atan2(-r20, math.hypot(r00, r10))
     if abs(math.cos(pitch)) < 1e-9:
-        return UrList((0.0, pitch, math.atan2(-m[0][1], m[1][1])))
-    return UrList((math.atan2(m[2][1], m[2][2]), pitch, math.atan2(m[1][0], m[0][0])))
+        return UrList((0.0, pitch, math.atan2(-r01, r11)))
+    return UrList((math.atan2(r21, r22), pitch, math.atan2(r10, r00)))
 
 
 @builtin("rpy2rotvec")
 def rpy2rotvec(host: ScriptHost, rpy_vector: Sequence[float]) -> UrList:
     roll, pitch, yaw = rpy_vector[0], rpy_vector[1], rpy_vector[2]
-    rx = rotvec_to_matrix(roll, 0.0, 0.0)
-    ry = rotvec_to_matrix(0.0, pitch, 0.0)
-    rz = rotvec_to_matrix(0.0, 0.0, yaw)
-    return UrList(matrix_to_rotvec(_multiply(rz, _multiply(ry, rx))))
+    rx = frame_of_pose((0.0, 0.0, 0.0, roll, 0.0, 0.0))
+    ry = frame_of_pose((0.0, 0.0, 0.0, 0.0, pitch, 0.0))
+    rz = frame_of_pose((0.0, 0.0, 0.0, 0.0, 0.0, yaw))
+    return UrList(_rotvec(compose(rz, compose(ry, rx))))
 
 
 @builtin("wrench_trans")
 def wrench_trans(host: ScriptHost, T_from_to: Any, w_from: Sequence[float]) -> UrList:
     """The wrench ``w_from`` (in frame A) expressed in frame B, ``T_from_to`` being B in A."""
     pose = _pose("wrench_trans", T_from_to)
-    inverse = _transpose(rotvec_to_matrix(pose[3], pose[4], pose[5]))
-    force = _apply(inverse, w_from[:3])
+    back = inverse(_turn(pose))
+    force = rotate(back, w_from[:3])
     # the torque about B's origin: the torque about A's minus (B's origin x force), in B's axes
     p = pose[:3]
     f = w_from[:3]
     moment = (p[1] * f[2] - p[2] * f[1], p[2] * f[0] - p[0] * f[2], p[0] * f[1] - p[1] * f[0])
-    torque = _apply(inverse, [w_from[3 + i] - moment[i] for i in range(3)])
+    torque = rotate(back, [w_from[3 + i] - moment[i] for i in range(3)])
     return UrList((*force, *torque))
+
+
+def _rotvec(frame: Frame) -> tuple[float, float, float]:
+    return rotation_vector(*frame[:9])
