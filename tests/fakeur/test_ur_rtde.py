@@ -9,15 +9,12 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import os
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 
 import pytest
 
-from tests.helpers import drain_in_background, fake_address
+from tests.fakeur.judges import start_fake
 from urdaemon.model import RobotMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import reverse, rtde
@@ -31,42 +28,18 @@ dashboard_client = pytest.importorskip("dashboard_client")
 pytestmark = pytest.mark.timeout(120)
 
 
-def _start_fake(*flags: str) -> tuple[subprocess.Popen[str], str]:
-    address = fake_address()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "urdaemon", "fake-robot", "--model", "ur10e", "--address", address, *flags],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    assert proc.stderr is not None
-    lines: list[str] = []
-    for _ in range(100):
-        line = proc.stderr.readline()
-        if not line:
-            raise AssertionError(f"fake-robot exited ({proc.poll()}): {''.join(lines)}")
-        lines.append(line)
-        if "serving 1 fake robot(s)" in line:
-            drain_in_background(proc, [])
-            return proc, address
-    raise AssertionError(f"fake-robot did not start: {''.join(lines)}")
-
-
 @pytest.fixture
 def powered_fake() -> Iterator[str]:
-    proc, address = _start_fake("--powered")
-    yield address
-    proc.terminate()
-    proc.wait(timeout=10)
+    fake = start_fake("ur10e", "--powered")
+    yield fake.address
+    fake.close()
 
 
 @pytest.fixture
 def unpowered_fake() -> Iterator[str]:
-    proc, address = _start_fake()
-    yield address
-    proc.terminate()
-    proc.wait(timeout=10)
+    fake = start_fake("ur10e")
+    yield fake.address
+    fake.close()
 
 
 async def _rtde_sample(address: str) -> dict[str, object]:
