@@ -169,6 +169,8 @@ class FakeArm:
         self.payload_inertia = [0.0] * 6
         self.tcp_offset = [0.0] * 6
         self.gravity = [0.0, 0.0, 9.82]
+        self.tcp_force = [0.0] * 6
+        """N, N·m in the base frame: the wrench measured at the TCP (RTDE ``actual_TCP_force``)."""
         self.force_mode = False
         self.freedrive = False
         self.remote_control = True
