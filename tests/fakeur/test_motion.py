@@ -13,7 +13,7 @@ from urdaemon.fakeur.motion import (
     JointMove,
     LinearStop,
     ScalingRamp,
-    ServoRamp,
+    ServoFilter,
     SpeedRamp,
     joint_move,
     leading_stop_time,
@@ -23,7 +23,7 @@ from urdaemon.fakeur.motion import (
 START = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0]
 
 
-def _samples(move: JointMove | SpeedRamp | LinearStop | ServoRamp, dt: float = 0.002) -> list[list[float]]:
+def _samples(move: JointMove | SpeedRamp | LinearStop | ServoFilter, dt: float = 0.002) -> list[list[float]]:
     count = math.ceil(move.duration / dt)
     return [move.position(min(k * dt, move.duration)) for k in range(count + 1)]
 
@@ -83,16 +83,61 @@ def test_speed_ramp_reaches_the_speed_with_the_leading_joint_at_a() -> None:
     assert ramp.position(1.0)[0] == pytest.approx(0.25 + 0.5)
 
 
-def test_linear_stop_and_servo_ramp() -> None:
+def test_linear_stop() -> None:
     stop = LinearStop(START, [1.0, 0.5, 0, 0, 0, 0], leading_stop_time([1.0, 0.5], 4.0))
     assert stop.duration == pytest.approx(0.25)
     assert stop.velocity(stop.duration) == [0.0] * 6
     assert stop.position(stop.duration)[0] == pytest.approx(0.125)
     assert stop.position(stop.duration)[1] == pytest.approx(START[1] + 0.0625)
     assert LinearStop(START, [0.0] * 6, 1.0).duration == 0.0
-    servo = ServoRamp(START, [0.01, *START[1:]], 0.004)
-    assert servo.position(0.002)[0] == pytest.approx(0.005)
-    assert servo.position(0.004) == [0.01, *START[1:]]
+
+
+SERVO_CASES = [(300.0, 0.1), (2000.0, 0.03), (100.0, 0.03), (100.0, 0.2), (1000.0, 0.2)]
+"""(gain, lookahead_time): under-damped (ζ 0.87, 0.67, 0.15), critically damped (ζ 1) and over-damped."""
+
+
+def _damping(gain: float, lookahead: float) -> float:
+    return 0.5 * lookahead * math.sqrt(gain)
+
+
+@pytest.mark.parametrize(("gain", "lookahead"), SERVO_CASES)
+def test_servo_filter_step_response_overshoots_as_its_damping_says(gain: float, lookahead: float) -> None:
+    """A step of 0.1 rad from rest: the peak overshoot is the second-order system's exp(-πζ/√(1-ζ²))
+    (none from ζ = 1 on), and position and velocity follow q'' = gain·(q* − q − lookahead·q').
+    On f5f0e26 servoj reached its target exactly (ServoRamp, no gain or lookahead): no overshoot."""
+    zeta = _damping(gain, lookahead)
+    target = [0.1, *START[1:]]
+    servo = ServoFilter(list(START), [0.0] * 6, target, 12.0, gain, lookahead)
+    samples = [servo.position(k * 1e-4)[0] for k in range(30001)]
+    overshoot = (max(samples) - 0.1) / 0.1
+    expected = math.exp(-math.pi * zeta / math.sqrt(1 - zeta * zeta)) if zeta < 1 else 0.0
+    assert overshoot == pytest.approx(expected, abs=2e-3)
+    assert servo.position(12.0)[0] == pytest.approx(0.1, abs=1e-6)
+    assert servo.position(12.0)[1:] == START[1:]  # joints at their setpoint stay there
+    h = 1e-6
+    for t in (0.01, 0.05, 0.2):
+        q, qd = servo.position(t)[0], servo.velocity(t)[0]
+        assert qd == pytest.approx((servo.position(t + h)[0] - servo.position(t - h)[0]) / (2 * h), rel=1e-5)
+        qdd = (servo.velocity(t + h)[0] - servo.velocity(t - h)[0]) / (2 * h)
+        assert qdd == pytest.approx(gain * (0.1 - q - lookahead * qd), rel=1e-4, abs=1e-6)
+
+
+@pytest.mark.parametrize(("gain", "lookahead"), SERVO_CASES)
+def test_servo_filter_lags_a_moving_setpoint_by_lookahead_times_speed(gain: float, lookahead: float) -> None:
+    """A setpoint moving at 0.5 rad/s, one servoj of 2 ms per step from the last filter state (as the
+    controller chains them): once settled the joint is lookahead × 0.5 rad behind (within the half
+    step the held setpoint adds). On f5f0e26 the joint was on the setpoint at the end of every step."""
+    speed, dt = 0.5, 0.002
+    q, qd = list(START), [0.0] * 6
+    lags = []
+    for k in range(1, 5001):
+        setpoint = [START[0] + speed * k * dt, *START[1:]]
+        servo = ServoFilter(q, qd, setpoint, dt, gain, lookahead)
+        q, qd = servo.position(dt), servo.velocity(dt)
+        lags.append(setpoint[0] - q[0])
+    assert lags[-1] == pytest.approx(lookahead * speed, abs=speed * dt)
+    assert max(lags[-100:]) - min(lags[-100:]) < 1e-7  # steady
+    assert qd[0] == pytest.approx(speed, rel=1e-3)
 
 
 def _settled(ramp: ScalingRamp) -> bool:

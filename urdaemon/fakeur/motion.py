@@ -10,7 +10,8 @@ lists of 6 floats (hot path: no numpy).
   under a cubic Hermite term decelerating at most at the move's acceleration, so the path is smooth.
 * ``SpeedRamp`` (speedj): accelerate linearly (``a`` of the leading joint, all joints reaching their
   speeds together) to the target joint speeds, then keep them.
-* ``ServoRamp`` (servoj): the joint target reached at constant speed over the servo time.
+* ``ServoFilter`` (servoj): the joints pulled toward the setpoint by the manual's gain and lookahead
+  (a model: a damped oscillator, solved in closed form), so the arm lags a moving setpoint.
 * ``LinearStop`` (stopj, stopl, a stop at the end of a motion): every joint decelerates linearly to rest
   in the same time, so the arm stops along the path it was on.
 * ``ToolSpeedRamp`` (speedl): the TCP twist ramped linearly to its target, joint speeds from the
@@ -40,6 +41,7 @@ __all__ = [
     "Motion",
     "Profile",
     "ScalingRamp",
+    "ServoFilter",
     "ServoRamp",
     "SpeedRamp",
     "ToolSpeedRamp",
@@ -251,28 +253,99 @@ class SpeedRamp:
         return [v + a * t for v, a in zip(self._v0, self._accel, strict=True)]
 
 
-class ServoRamp:
-    """servoj: from ``start`` to ``target`` at constant speed in ``duration`` s."""
+class ServoFilter:
+    """servoj: the joints pulled toward the setpoint ``target`` by the manual's PD law, for ``duration`` s.
 
-    __slots__ = ("_rate", "_start", "duration", "target")
+    A model of what the URScript manual says of servoj (the controller's own law is not published):
+    ``gain`` acts like the P-term of a PID controller and ``lookahead_time`` projects the position
+    forward with the current velocity. Per joint, toward a constant setpoint q*::
 
-    def __init__(self, start: list[float], target: list[float], duration: float) -> None:
-        """Keeps ``start`` and ``target`` (the caller gives lists it does not change afterwards)."""
-        self._start = start
+        q'' = gain · (q* − (q + lookahead_time · q'))
+
+    a damped oscillator of natural frequency ω = √gain (1/s) and damping ratio
+    ζ = lookahead_time·√gain / 2 (gain 300 / lookahead 0.1: ζ = 0.87; 2000 / 0.03: ζ = 0.67, a slight
+    overshoot; 100 / 0.03: ζ = 0.15, it oscillates). On setpoints moving at speed v the joints lag
+    ``lookahead_time × v`` behind. Solved in closed form from ``start`` and ``start_velocity``: with
+    e = q − q*, e(t) = e₀·f(t) + ė₀·h(t), where the basis f, h (and their derivatives) depend only on
+    gain and lookahead, so they are computed once per sample for all six joints.
+    """
+
+    __slots__ = ("_cache", "_e0", "_kind", "_r1", "_r2", "_sigma", "_v0", "_w", "_wd", "duration", "target")
+
+    def __init__(
+        self,
+        start: list[float],
+        start_velocity: list[float],
+        target: list[float],
+        duration: float,
+        gain: float,
+        lookahead_time: float,
+    ) -> None:
+        """Keeps ``target`` (the caller gives a list it does not change afterwards)."""
         self.target = target
         self.duration = duration
-        rate = 1.0 / duration
-        self._rate = [(b - a) * rate for a, b in zip(start, target, strict=True)]
+        self._e0 = [a - b for a, b in zip(start, target, strict=True)]
+        self._v0 = start_velocity
+        w = math.sqrt(gain)
+        zeta = 0.5 * lookahead_time * w
+        self._w = w
+        self._sigma = zeta * w
+        self._wd = self._r1 = self._r2 = 0.0
+        if zeta < 1.0 - 1e-9:
+            self._kind = 0  # under-damped
+            self._wd = w * math.sqrt(1.0 - zeta * zeta)
+        elif zeta > 1.0 + 1e-9:
+            self._kind = 2  # over-damped
+            root = w * math.sqrt(zeta * zeta - 1.0)
+            self._r1, self._r2 = -self._sigma + root, -self._sigma - root
+        else:
+            self._kind = 1  # critically damped
+        self._cache: tuple[float, float, float, float, float] = (-1.0, 1.0, 0.0, 0.0, 1.0)
+
+    def _basis(self, t: float) -> tuple[float, float, float, float, float]:
+        """(t, f, h, f', h') at ``t`` (clamped to [0, duration]); the last one is kept."""
+        t = min(max(t, 0.0), self.duration)
+        cache = self._cache
+        if cache[0] == t:
+            return cache
+        kind = self._kind
+        if kind == 0:
+            sigma, wd = self._sigma, self._wd
+            decay = math.exp(-sigma * t)
+            c, s = math.cos(wd * t) * decay, math.sin(wd * t) * decay
+            w2 = self._w * self._w
+            basis = (t, c + sigma / wd * s, s / wd, -w2 / wd * s, c - sigma / wd * s)
+        elif kind == 1:
+            w = self._w
+            decay = math.exp(-w * t)
+            basis = (t, (1.0 + w * t) * decay, t * decay, -w * w * t * decay, (1.0 - w * t) * decay)
+        else:
+            r1, r2 = self._r1, self._r2
+            e1, e2 = math.exp(r1 * t), math.exp(r2 * t)
+            k = 1.0 / (r1 - r2)
+            basis = (
+                t,
+                (r1 * e2 - r2 * e1) * k,
+                (e1 - e2) * k,
+                r1 * r2 * (e2 - e1) * k,
+                (r1 * e1 - r2 * e2) * k,
+            )
+        self._cache = basis
+        return basis
 
     def position(self, t: float) -> Vector:
         """Joint positions [rad] at ``t``."""
-        if t >= self.duration:
-            return list(self.target)
-        return [a + r * t for a, r in zip(self._start, self._rate, strict=True)]
+        _, f, h, _, _ = self._basis(t)
+        return [q + e * f + v * h for q, e, v in zip(self.target, self._e0, self._v0, strict=True)]
 
     def velocity(self, t: float) -> Vector:
         """Joint velocities [rad/s] at ``t``."""
-        return list(self._rate)
+        _, _, _, df, dh = self._basis(t)
+        return [e * df + v * dh for e, v in zip(self._e0, self._v0, strict=True)]
+
+
+ServoRamp = ServoFilter
+"""The former name (lib_state's ``get_target_waypoint`` still looks the servo target up by it)."""
 
 
 class LinearStop:

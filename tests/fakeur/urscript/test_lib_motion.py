@@ -11,6 +11,7 @@ import pytest
 
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.motion import ServoFilter
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
@@ -126,26 +127,56 @@ def test_movel_keeps_the_tcp_on_a_straight_line() -> None:
     assert cycles == pytest.approx((length / 0.25 + 0.25 / 1.2) / DT, abs=2)
 
 
-def test_servoj_reaches_each_target_in_its_time_rounded_to_cycles() -> None:
+def test_servoj_returns_after_its_time_rounded_to_cycles_with_the_arm_on_its_way() -> None:
+    """servoj blocks for ``t`` rounded to whole cycles; in that time the arm moves toward the target as
+    the gain/lookahead model says, not onto it (f5f0e26 put it exactly on the target)."""
     host = _host()
     arm = host.arm
     start = list(arm.q)
     target = _offset(start, j0=0.004)
     assert _run(host, lib_motion.servoj(host, target, 0, 0, 0.008, 0.1, 300)) == 4
-    assert arm.q[0] == pytest.approx(target[0], abs=1e-12)
+    model = ServoFilter(start, [0.0] * 6, target, 0.008, 300, 0.1).position(0.008)
+    assert arm.q[0] == pytest.approx(model[0], abs=1e-12)
+    assert start[0] < arm.q[0] < 0.5 * (start[0] + target[0])
     assert _run(host, lib_motion.servoj(host, _offset(target, j0=0.001), 0, 0, 0.0025, 0.1, 300)) == 1
 
 
-def test_a_servoj_stream_tracks_and_then_comes_to_rest_when_it_stops() -> None:
-    """servoj every cycle: the arm is on each setpoint; no further servoj: it decelerates to rest."""
+@pytest.mark.parametrize(("gain", "lookahead"), [(300, 0.1), (2000, 0.03)])
+def test_the_arm_converges_on_a_held_servoj_setpoint(gain: float, lookahead: float) -> None:
+    """The same setpoint sent every cycle (a stream that stopped moving): the arm approaches it as the
+    closed form of the model says and settles on it. On f5f0e26 it was there after one cycle."""
+    host = _host()
+    arm = host.arm
+    start = list(arm.q)
+    target = _offset(start, j0=0.05, j2=-0.03)
+    model = ServoFilter(list(start), [0.0] * 6, target, 1.0, gain, lookahead)
+    for k in range(1, 751):
+        _run(host, lib_motion.servoj(host, target, 0, 0, DT, lookahead, gain))
+        if k == 10:
+            assert arm.q == pytest.approx(model.position(10 * DT), abs=1e-9)
+            assert abs(arm.q[0] - target[0]) > 0.01
+    assert arm.q == pytest.approx(target, abs=1e-9)
+    assert max(abs(v) for v in arm.qd) < 1e-6
+
+
+def test_a_servoj_stream_lags_by_the_lookahead_and_then_comes_to_rest_when_it_stops() -> None:
+    """servoj every cycle along a sine: the arm (on the model's target_q) is behind each setpoint by
+    lookahead × speed, plus (1/gain − lookahead²) × acceleration (the model's steady-state error to
+    second order); no further servoj: it decelerates to rest. On f5f0e26 it was on every setpoint."""
     host = _host()
     arm = host.arm
     q0 = arm.q[0]
+    lag = 0.0
     for k in range(1, 200):
         setpoint = _offset(arm.q, j0=0.0)
         setpoint[0] = q0 + 0.5 * math.sin(k * DT * 2.0)
         _run(host, lib_motion.servoj(host, setpoint, 0, 0, DT, 0.1, 300))
-        assert arm.q[0] == pytest.approx(setpoint[0], abs=1e-12)
+        assert arm.q[0] == pytest.approx(arm.target_q[0], abs=1e-12)
+        lag = setpoint[0] - arm.q[0]
+    t = 199 * DT
+    speed, acceleration = math.cos(2.0 * t), -2.0 * math.sin(2.0 * t)
+    assert lag == pytest.approx(0.1 * speed + (1 / 300 - 0.1**2) * acceleration, abs=2e-3)
+    assert lag > 0.05
     moving = abs(arm.qd[0])
     assert moving > 0.1
     for _ in range(200):
@@ -393,15 +424,16 @@ def test_movec_keeps_the_tcp_on_the_circle_through_the_three_points() -> None:
 
 
 def test_a_servoj_beyond_the_speed_limit_commands_only_what_the_joints_can_do() -> None:
-    """A servoj target 15 rad/s away: target speeds within the limit, and stopj stops within the
-    stopping distance of the limit speed (reproduction: two servoj 0.03 rad apart, then stopj(4))."""
+    """Servoj targets 15 rad/s apart (gain 2000 / lookahead 0.03 to pull hard): target speeds within the
+    limit, and stopj stops within the stopping distance of the limit speed (reproduction: servoj
+    0.03 rad apart, then stopj(4))."""
     host = _host()
     arm = host.arm
     limit = arm.max_velocity[0]
     target = list(arm.q)
-    for _ in range(10):
+    for _ in range(30):
         target = _offset(target, j0=0.03)
-        _run(host, lib_motion.servoj(host, target, 0, 0, DT, 0.1, 300))
+        _run(host, lib_motion.servoj(host, target, 0, 0, DT, 0.03, 2000))
         assert abs(lib_state.get_target_joint_speeds(host)[0]) <= limit + 1e-9
     assert arm.qd[0] == pytest.approx(limit)
     at = arm.q[0]

@@ -13,8 +13,10 @@ follows one still moving (a blend, a servoj or speedj stream) continues smoothly
   returns without moving.
 * movej/movel with ``r`` > 0 return once the TCP is within ``r`` of the target; the arm goes on
   towards it until the next motion command blends out of it (or it arrives).
-* servoj: the target is reached in ``t`` rounded to whole cycles; ``lookahead_time`` and ``gain`` do
-  not shape the fake's tracking (it follows the target exactly, within the joint velocity limits).
+* servoj: for ``t`` rounded to whole cycles the joints are pulled toward the target by a model of the
+  manual's gain (a P-term) and lookahead_time (the position projected forward with the velocity):
+  ``q'' = gain·(q* − (q + lookahead_time·q'))`` (``ServoFilter``). The arm lags a moving target by
+  about ``lookahead_time × speed`` and settles on a held one; low gain with short lookahead oscillates.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from urdaemon.fakeur.motion import (
     CartesianMove,
     LinearStop,
     Motion,
-    ServoRamp,
+    ServoFilter,
     SpeedRamp,
     ToolSpeedRamp,
     joint_move,
@@ -145,7 +147,8 @@ def _protective_stop(host: ScriptHost, what: str, q: Sequence[float]) -> None:
 
 @builtin("servoj", blocking=True)
 def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any, gain: Any) -> Gen:
-    """servoj(q, a, v, t, lookahead_time, gain): reach ``q`` in ``t`` (whole cycles, at least one)."""
+    """servoj(q, a, v, t, lookahead_time, gain): pull the joints toward ``q`` for ``t`` (whole cycles, at
+    least one) with the gain and lookahead model of ``ServoFilter``."""
     target = _vector("servoj", q)
     duration = _number("servoj t", t)
     lookahead = _number("servoj lookahead_time", lookahead_time)
@@ -162,8 +165,9 @@ def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any
         return None
     step = host.step_time
     cycles = max(1, round(duration / step))
-    start, _ = _start(arm)
-    yield from _play(host, ServoRamp(start, target, cycles * step), SERVOJ_STOP_DECELERATION)
+    start, moving = _start(arm)
+    servo = ServoFilter(start, moving, target, cycles * step, proportional, lookahead)
+    yield from _play(host, servo, SERVOJ_STOP_DECELERATION)
     return None
 
 
