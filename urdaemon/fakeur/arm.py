@@ -44,6 +44,7 @@ from urdaemon.model import RobotMode, SafetyMode
 
 if TYPE_CHECKING:
     from urdaemon.description.ik import UrKinematics
+    from urdaemon.fakeur.contact import Surroundings
 
 __all__ = [
     "BOOT_TIME_S",
@@ -173,6 +174,8 @@ class FakeArm:
         """N, N·m in the base frame: the wrench measured at the TCP (RTDE ``actual_TCP_force``)."""
         self.force_mode = False
         self.freedrive = False
+        self.surroundings: Surroundings | None = None
+        """Walls and a push on the tool (fakeur/contact.py), stepped after the motion; None: free air."""
         self.remote_control = True
         self._transition_at: float | None = None
         self._mode = MotionMode.HOLD
@@ -455,6 +458,9 @@ class FakeArm:
             self.qdd = [0.0] * 6
         if runtime is RuntimeState.PAUSING and scale == 0.0 and self.runtime_state is RuntimeState.PAUSING:
             self.runtime_state = RuntimeState.PAUSED  # the scaling has come to 0: at rest on the path
+        surroundings = self.surroundings
+        if surroundings is not None:
+            surroundings.step(self, dt)
         self._check_limits()
         at = (self._history_at + 1) % HISTORY_STEPS
         self._history[at][:] = self.q

@@ -34,6 +34,10 @@ _PROGRAM_STATES = {
 """Real-time interface ``program_state`` (1 stopped, 2 playing, 3 paused) by runtime state."""
 
 
+def _six(values: list[float]) -> tuple[float, float, float, float, float, float]:
+    return (values[0], values[1], values[2], values[3], values[4], values[5])
+
+
 def realtime_state(arm: FakeArm) -> rt.RealtimeState:
     """The real-time interface's (30003) state of ``arm``, sent every cycle."""
     q, qd, qdd = tuple(arm.q), tuple(arm.qd), tuple(arm.qdd)
@@ -53,6 +57,7 @@ def realtime_state(arm: FakeArm) -> rt.RealtimeState:
         i_control=tuple(arm.current),
         tool_vector_actual=pose,
         tool_vector_target=pose,
+        tcp_force=_six(arm.tcp_force),
         digital_input_bits=float(arm.io.digital_in),
         motor_temperatures=(30.0,) * 6,
         controller_timer=0.0002,
@@ -147,7 +152,7 @@ def robot_state(
                 robot_type=model.robot_type,
                 robot_sub_type=3 if controller_version[0] >= 5 else 2,
             ),
-            prim.ForceModeData(),
+            prim.ForceModeData(wrench=_six(arm.tcp_force)),
             prim.AdditionalInfo(),
         )
     )
@@ -226,7 +231,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "target_TCP_pose": lambda arm: arm.actual_tcp_pose(),
     "actual_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.q, arm.qd)),
     "target_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.target_q, arm.target_qd)),
-    "actual_TCP_force": lambda arm: (0.0,) * 6,
+    "actual_TCP_force": lambda arm: tuple(arm.tcp_force),
     "actual_digital_input_bits": lambda arm: arm.io.digital_in,
     "actual_digital_output_bits": lambda arm: arm.io.digital_out,
     "standard_analog_input0": lambda arm: arm.io.analog_in[0],

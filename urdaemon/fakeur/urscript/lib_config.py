@@ -3,8 +3,10 @@
 What they set lives on the arm where RTDE and the primary interface report it (``payload_mass``,
 ``payload_cog``, ``payload_inertia``, ``tcp_offset``, ``gravity``, ``force_mode``, ``freedrive``); the
 parameters nothing reports (force mode's frame, damping and gain scaling, freedrive's free axes) are kept
-in ``host.config`` (a :class:`ConfigState`). The fake arm moves in free air: its TCP force is always zero
-(so ``zero_ftsensor`` has nothing to remove) and ``tool_contact`` never detects a contact (0).
+in ``host.config`` (a :class:`ConfigState`). Force mode, freedrive, ``zero_ftsensor`` and ``tool_contact``
+act on the arm's surroundings (fakeur/contact.py): the walls and the push a test or user put there move
+a compliant or free arm, and make the TCP force and contacts. Force mode's types 1 and 3 (frames that
+follow the TCP) are not simulated.
 ``rtde_set_watchdog`` records the request in ``host.watchdogs``; the controller enforces it.
 """
 
@@ -15,6 +17,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+from urdaemon.description.frames import IDENTITY, frame_of_pose
+from urdaemon.fakeur.arm import HISTORY_STEPS
+from urdaemon.fakeur.contact import ForceModeSettings, surroundings_of
 from urdaemon.fakeur.urscript.host import WATCHDOG_ACTIONS, ScriptHost, Watchdog
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed
@@ -27,6 +32,8 @@ DEFAULT_DAMPING: Final = 0.005
 DEFAULT_GAIN_SCALING: Final = 1.0
 """Force mode gain scaling until ``force_mode_set_gain_scaling`` (UR's manual)."""
 FORCE_MODE_TYPES: Final = (1, 2, 3)
+SIMULATED_FORCE_MODE_TYPES: Final = (2,)
+"""Type 2 (the task frame as given); 1 and 3 turn the frame with the TCP's position or motion."""
 TOOL_BAUD_RATES: Final = (9600, 19200, 38400, 57600, 115200, 1_000_000, 2_000_000, 5_000_000)
 """Baud rates the tool's RS-485 interface supports (UR's manual)."""
 
@@ -182,17 +189,23 @@ def get_gravity(host: ScriptHost) -> UrList:
 def force_mode(
     host: ScriptHost, task_frame: Any, selection_vector: Any, wrench: Any, type: Any, limits: Any
 ) -> None:
-    """Enter force mode (the fake records it; in free air a compliant axis meets no force)."""
+    """Enter force mode: the compliant axes move the arm against the wrench its surroundings put on the
+    TCP (fakeur/contact.py); type 2 only, 1 and 3 are not simulated."""
     frame = _vector("force_mode", task_frame, 6)
     selection = _flags("force_mode", selection_vector)
     forces = _vector("force_mode", wrench, 6)
     kind = _number("force_mode", type)
     if kind not in FORCE_MODE_TYPES:
         raise ScriptRuntimeError(f"force_mode: type {kind:g} is not 1, 2 or 3")
+    if kind not in SIMULATED_FORCE_MODE_TYPES:
+        raise ScriptRuntimeError(f"force_mode: type {kind:g} is not simulated by the fake (only 2)")
     bounds = _vector("force_mode", limits, 6)
     config = _config(host)
     config.force_frame, config.force_selection, config.force_wrench = frame, selection, forces
     config.force_type, config.force_limits = int(kind), bounds
+    surroundings_of(host.arm).force = ForceModeSettings(
+        frame, selection, forces, bounds, config.damping, config.gain_scaling
+    )
     host.arm.force_mode = True
 
 
@@ -204,7 +217,10 @@ def end_force_mode(host: ScriptHost) -> None:
 @builtin("force_mode_set_damping")
 def force_mode_set_damping(host: ScriptHost, damping: Any) -> None:
     """Force mode damping, 0 (none) to 1 (full)."""
-    _config(host).damping = _in_range("force_mode_set_damping", "damping", damping, 0.0, 1.0)
+    value = _config(host).damping = _in_range("force_mode_set_damping", "damping", damping, 0.0, 1.0)
+    surroundings = host.arm.surroundings
+    if surroundings is not None and surroundings.force is not None:
+        surroundings.force.damping = value
 
 
 @builtin("force_mode_get_damping")
@@ -215,7 +231,12 @@ def force_mode_get_damping(host: ScriptHost) -> float:
 @builtin("force_mode_set_gain_scaling")
 def force_mode_set_gain_scaling(host: ScriptHost, scaling: Any) -> None:
     """Force mode gain scaling, 0 to 2 (1 = nominal)."""
-    _config(host).gain_scaling = _in_range("force_mode_set_gain_scaling", "scaling", scaling, 0.0, 2.0)
+    value = _config(host).gain_scaling = _in_range(
+        "force_mode_set_gain_scaling", "scaling", scaling, 0.0, 2.0
+    )
+    surroundings = host.arm.surroundings
+    if surroundings is not None and surroundings.force is not None:
+        surroundings.force.gain_scaling = value
 
 
 @builtin("force_mode_get_gain_scaling")
@@ -225,8 +246,11 @@ def force_mode_get_gain_scaling(host: ScriptHost) -> float:
 
 @builtin("zero_ftsensor")
 def zero_ftsensor(host: ScriptHost) -> None:
-    """Zero the force/torque reading: the fake's reading is zero already (free air, no sensor offset)."""
+    """Zero the force/torque reading: the external wrench felt now reads as zero from here on."""
     _config(host).ft_zeroed_at = host.now
+    surroundings = host.arm.surroundings
+    if surroundings is not None:
+        surroundings.zero()
 
 
 # ---- freedrive, tool contact -------------------------------------------------------------------------------
@@ -234,10 +258,14 @@ def zero_ftsensor(host: ScriptHost) -> None:
 
 @builtin("freedrive_mode")
 def freedrive_mode(host: ScriptHost, free_axes: Any = (1, 1, 1, 1, 1, 1), feature: Any = None) -> None:
-    """Enter freedrive (nobody pushes the fake arm, so it stays where it is)."""
+    """Enter freedrive: a push on the tool moves the arm along the free axes (fakeur/contact.py); with
+    nothing pushing it stays where it is."""
     config = _config(host)
     config.free_axes = _flags("freedrive_mode", free_axes)
     config.freedrive_feature = [0.0] * 6 if feature is None else _vector("freedrive_mode", feature, 6)
+    surroundings = surroundings_of(host.arm)
+    surroundings.free_axes = list(config.free_axes)
+    surroundings.free_frame = IDENTITY if feature is None else frame_of_pose(config.freedrive_feature)
     host.arm.freedrive = True
 
 
@@ -250,6 +278,8 @@ def end_freedrive_mode(host: ScriptHost) -> None:
 def teach_mode(host: ScriptHost) -> None:
     """CB3's name for freedrive with every axis free."""
     _config(host).free_axes = [1] * 6
+    surroundings = surroundings_of(host.arm)
+    surroundings.free_axes, surroundings.free_frame = [1] * 6, IDENTITY
     host.arm.freedrive = True
 
 
@@ -266,10 +296,16 @@ def get_freedrive_status(host: ScriptHost) -> int:
 
 @builtin("tool_contact")
 def tool_contact(host: ScriptHost, direction: Any = (0, 0, 0, 0, 0, 0), force_threshold: Any = 0.0) -> int:
-    """Steps back to the first contact: always 0, the fake arm in free air never touches anything."""
-    _vector("tool_contact", direction, 6)
-    _number("tool_contact", force_threshold)
-    return 0
+    """Cycles back to just before the contact started, 0 if none: a contact is a measured TCP force that
+    opposes ``direction`` (base frame; any direction if zero) by more than ``force_threshold`` N (the
+    model's :data:`~urdaemon.fakeur.contact.TOOL_CONTACT_THRESHOLD_N` if 0)."""
+    towards = _vector("tool_contact", direction, 6)
+    threshold = _number("tool_contact", force_threshold)
+    arm = host.arm
+    surroundings = arm.surroundings
+    if surroundings is None:
+        return 0  # free air: nothing to touch
+    return surroundings.contact_steps(arm.tcp_force, towards, threshold, HISTORY_STEPS - 1)
 
 
 def _external_ft_sensor(
