@@ -2,29 +2,38 @@
 
 ``dashboard_reply`` answers from the controller's state (and acts on it: power, brakes, load, play,
 pause, stop); ``play`` starts the loaded program (the default External Control program fetches its
-script from the daemon, a URScript file runs as it is) or resumes a paused one. While a program is
+script from the daemon, a URScript file runs as it is, a ``.urp`` runs as the URScript ``fakeur.urp``
+translates it to when it is loaded) or resumes a paused one. While a program is
 pausing (its speed scaling ramping to 0) it is reported as PLAYING until it is PAUSED, and ``play``
 is refused meanwhile: it neither resumes it nor starts the loaded program anew.
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.fakeur.arm import RuntimeState
+from urdaemon.fakeur.urp import UrpProgram, UrpRefused, translate
 from urdaemon.model import SafetyMode
 from urdaemon.protocols import dashboard as dash
+from urdaemon.protocols import primary as prim
 
 if TYPE_CHECKING:
     from urdaemon.fakeur.controller import FakeController
 
-__all__ = ["PROGRAMS_DIR", "SCRIPT_SUFFIXES", "dashboard_reply", "play", "program_path"]
+__all__ = ["PROGRAMS_DIR", "SCRIPT_SUFFIXES", "URP_SUFFIX", "dashboard_reply", "play", "program_path"]
+
+log = logging.getLogger("urdaemon.fakeur")
 
 PROGRAMS_DIR = "/programs"
 """Where programs live when no directory is given (as on URSim); only the default program exists there."""
 SCRIPT_SUFFIXES = (".script", ".urscript")
-"""Program files the fake plays by running their text as URScript (a ``.urp`` is not readable here)."""
+"""Program files the fake plays by running their text as URScript."""
+URP_SUFFIX = ".urp"
+"""PolyScope program files: translated to URScript when loaded (``fakeur.urp``); one the fake cannot
+translate is refused at ``load`` with the dashboard's "Error while loading program"."""
 SERIAL_NUMBER = "20235500001"
 _PROGRAM_STATES = {
     RuntimeState.PLAYING: dash.ProgramState.PLAYING,
@@ -55,6 +64,11 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
         path = program_path(fake, command.path)
         if path is None:
             return f"File not found: {command.path}"
+        if path != fake.default_program and path.endswith(URP_SUFFIX):
+            translated = _read_urp(fake, path)
+            if translated is None:
+                return f"Error while loading program: {path}"
+            fake.programs.loaded_urp = (path, translated)
         fake._stop_program()
         fake.loaded_program = path
         return f"Loading program: {path}"
@@ -139,24 +153,52 @@ def play(fake: FakeController) -> str | None:
         return "the program is pausing"
     if arm.runtime_state is RuntimeState.PLAYING or fake.programs.busy:
         return None  # already playing (or about to): nothing starts anew
-    if program != fake.default_program and not program.endswith(SCRIPT_SUFFIXES):
-        return f"{program}: the fake plays only URScript files and the External Control program"
+    urp = _loaded_urp(fake, program) if program != fake.default_program else None
+    if program != fake.default_program and urp is None and not program.endswith(SCRIPT_SUFFIXES):
+        return f"{program}: the fake plays URScript files, .urp programs and the External Control program"
     reason = arm.start_program()
     if reason is not None:
         return reason
-    if program == fake.default_program:
+    if program == fake.default_program or (urp is not None and urp.external_control):
         if fake.urcap is None:
             return None
         fake.connections.spawn(fake.programs.play_urcap(fake.urcap, fake._start_program))
         return None
-    try:
-        text = Path(program).read_text(encoding="ascii")
-    except (OSError, UnicodeDecodeError) as err:
-        arm.stop_program()
-        return str(err)
+    if urp is not None:
+        text = urp.script or ""
+    else:
+        try:
+            text = Path(program).read_text(encoding="ascii")
+        except (OSError, UnicodeDecodeError) as err:
+            arm.stop_program()
+            return str(err)
     arm.runtime_state = RuntimeState.STOPPED
     fake._start_program(_basename(program) or program, text)
     return None
+
+
+def _read_urp(fake: FakeController, path: str) -> UrpProgram | None:
+    """The program a ``.urp`` file holds, or None (the reason logged and sent as a robot message, as
+    PolyScope shows why it could not load a program)."""
+    try:
+        return translate(Path(path).read_bytes(), path)
+    except OSError as err:
+        reason = str(err)
+    except UrpRefused as err:
+        reason = err.reason
+    log.info("%s cannot load %s: %s", fake.address, path, reason)
+    fake.programs.broadcast(prim.TextMessage(f"Error while loading program {path}: {reason}"))
+    return None
+
+
+def _loaded_urp(fake: FakeController, program: str) -> UrpProgram | None:
+    """The translation of the loaded ``.urp`` program (None for other files)."""
+    if not program.endswith(URP_SUFFIX):
+        return None
+    loaded = fake.programs.loaded_urp
+    if loaded is not None and loaded[0] == program:
+        return loaded[1]
+    return _read_urp(fake, program)
 
 
 def _basename(path: str | None) -> str | None:

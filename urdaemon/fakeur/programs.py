@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.urp import UrpProgram
 from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.protocols import primary as prim
 
@@ -102,6 +103,9 @@ class Programs:
         """Controller time each RTDE input variable last arrived (what the watchdogs check)."""
         self.compiles = 0
         """Scripts compiled (in the worker thread) so far."""
+        self.loaded_urp: tuple[str, UrpProgram] | None = None
+        """The ``.urp`` program ``load`` read last: its path and translation (what ``play`` runs, as
+        PolyScope plays the program it loaded, not the file as it is now)."""
         self._pending: deque[_Arrival | _Action] = deque()
         self._arrived = 0
         self._dropped_through = 0

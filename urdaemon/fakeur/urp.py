@@ -1,0 +1,340 @@
+"""PolyScope program files (``.urp``) -> the URScript a controller would run for them.
+
+A ``.urp`` is gzip-compressed XML: ``<URProgram>`` holds ``<children>`` with an optional
+``<SpecialSequence type="BeforeStart">`` and one ``<MainProgram>``, whose ``<children>`` are program
+nodes. PolyScope turns that tree into a ``def`` program when it plays it; :func:`translate` does the
+same for the nodes it knows and refuses the whole file, naming the node, for any other: the fake never
+plays a program with a node silently dropped. Pure: bytes in, a :class:`UrpProgram` or a
+:class:`UrpRefused` out; the caller reads the file.
+
+The node formats come from public PolyScope programs and generators (see docs/fake-robot.md, "Program
+files"); expressions are stored one ``<ExpressionChar character="x"/>`` per character. The URScript
+written here is our model of PolyScope's code generation, not a copy of it: statements in the same
+order, a ``$ n "label"`` step line before each (which the interpreter ignores as PolyScope's
+controller does), ``runOnlyOnce="false"`` looping the main body forever.
+
+A ``<name>.script`` that PolyScope saved next to the ``.urp`` is not read: a controller regenerates the
+script from the ``.urp`` when it plays it, so the ``.urp`` is what counts.
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from dataclasses import dataclass
+from xml.etree import ElementTree
+
+__all__ = ["MAX_URP_BYTES", "UrpProgram", "UrpRefused", "translate"]
+
+MAX_URP_BYTES = 16 * 1024 * 1024
+"""The largest decompressed program the fake reads (its own bound against a gzip bomb)."""
+
+EXTERNAL_CONTROL_NODE = "com.fzi.externalcontrol.ExternalControlNode"
+"""The ``strategyClass`` of the External Control URCap's program node."""
+
+_INDENT = "  "
+_PINS_IN = {
+    "digital_in": "get_standard_digital_in",
+    "tool_in": "get_tool_digital_in",
+    "config_in": "get_configurable_digital_in",
+}
+_PINS_OUT = {
+    "digital_out": "set_standard_digital_out",
+    "tool_out": "set_tool_digital_out",
+    "config_out": "set_configurable_digital_out",
+}
+_PIN = re.compile(r"^([a-z_]+)\[(\d+)\]$")
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_POPUPS = {  # type -> (title, warning, error)
+    "Message": ("Message", "False", "False"),
+    "Warning": ("Warning", "True", "False"),
+    "Error": ("Error", "False", "True"),
+}
+
+
+class UrpRefused(Exception):
+    """The file is not a program the fake can play; ``reason`` says why (naming the node)."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class UrpProgram:
+    """A translated program: its ``def`` name and script, or the External Control program."""
+
+    name: str
+    script: str | None
+    """The URScript to run; None for the External Control program (``external_control``)."""
+    external_control: bool = False
+    """The program is the External Control URCap's node alone: play fetches the daemon's script."""
+    loops: bool = False
+    """``runOnlyOnce="false"``: the main body runs again and again until stopped."""
+
+
+def translate(data: bytes, file_name: str) -> UrpProgram:
+    """The program a ``.urp`` file holds (``file_name`` names the def if the XML does not)."""
+    root = _parse(data)
+    if root.tag != "URProgram":
+        raise UrpRefused(f"not a PolyScope program: the root element is <{root.tag}>")
+    name = _identifier(root.get("name") or file_name.rsplit("/", 1)[-1].removesuffix(".urp"))
+    before: ElementTree.Element | None = None
+    main: ElementTree.Element | None = None
+    for node in _children(root):
+        if node.tag == "MainProgram":
+            main = node
+        elif node.tag == "SpecialSequence" and node.get("type") == "BeforeStart":
+            before = node
+        elif node.tag not in ("InitVariablesNode", "SubProgram"):
+            raise UrpRefused(f"program node <{node.tag}> is not simulated by the fake")
+    if main is None:
+        raise UrpRefused("no <MainProgram> in the program")
+    body = _children(main)
+    if not body:
+        raise UrpRefused("the program is empty")
+    loops = main.get("runOnlyOnce", "true").lower() == "false"
+    if any(_is_external_control(node) for node in body):
+        if len(body) != 1 or before is not None:
+            raise UrpRefused("the External Control node is simulated only as the program's one node")
+        return UrpProgram(name, None, external_control=True, loops=loops)
+    writer = _Writer()
+    writer.line(1, f"def {name}():")
+    if before is not None:
+        writer.step(2, "BeforeStart")
+        writer.nodes(2, _children(before))
+    writer.step(2, "Robot Program")
+    if loops:
+        writer.line(2, "while (True):")
+        writer.nodes(3, body)
+        writer.line(2, "end")
+    else:
+        writer.nodes(2, body)
+    writer.line(1, "end")
+    return UrpProgram(name, writer.text(), loops=loops)
+
+
+def _parse(data: bytes) -> ElementTree.Element:
+    try:
+        decompressor = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
+        xml = decompressor.decompress(data, MAX_URP_BYTES + 1)
+    except zlib.error as err:
+        raise UrpRefused(f"not a gzip-compressed program file: {err}") from None
+    if len(xml) > MAX_URP_BYTES:
+        raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
+    if not decompressor.eof:
+        raise UrpRefused("the compressed program is truncated")
+    try:
+        return ElementTree.fromstring(xml)
+    except ElementTree.ParseError as err:
+        raise UrpRefused(f"the program's XML is malformed: {err}") from None
+
+
+def _children(node: ElementTree.Element) -> list[ElementTree.Element]:
+    """The program nodes under ``node`` (those in its ``<children>``)."""
+    holder = node.find("children")
+    return [] if holder is None else list(holder)
+
+
+def _is_external_control(node: ElementTree.Element) -> bool:
+    return node.tag == "Contributed" and node.get("strategyClass") == EXTERNAL_CONTROL_NODE
+
+
+def _identifier(name: str) -> str:
+    """A def name from a program name: other characters become ``_``, a leading digit gets a ``p``."""
+    cleaned = re.sub(r"[^A-Za-z0-9_]", "_", name) or "program"
+    return f"p{cleaned}" if cleaned[0].isdigit() else cleaned
+
+
+def _ascii(text: str) -> str:
+    """Text for a step label or comment: ASCII, no quotes, one line."""
+    text = text.replace('"', "'").replace("\n", " ").replace("\r", " ")
+    return text.encode("ascii", "replace").decode("ascii")
+
+
+def _expression(node: ElementTree.Element, what: str) -> str:
+    """The expression a node stores one character per ``<ExpressionChar>``."""
+    holder = node.find("expression")
+    if holder is None:
+        raise UrpRefused(f"<{what}> without an <expression>")
+    text = "".join(char.get("character", "") for char in holder.iter("ExpressionChar"))
+    if not text.strip():
+        raise UrpRefused(f"<{what}> with an empty expression")
+    return text
+
+
+def _number(text: str | None, what: str) -> str:
+    if text is None or not _NUMBER.match(text.strip()):
+        raise UrpRefused(f"{what}: not a number: {text!r}")
+    return text.strip()
+
+
+def _pin(node: ElementTree.Element, table: dict[str, str], what: str) -> tuple[str, str]:
+    """The builtin and index of a node's ``<pin referencedName="digital_in[2]"/>``."""
+    pin = node.find("pin")
+    name = "" if pin is None else pin.get("referencedName", "")
+    match = _PIN.match(name)
+    if match is None or match.group(1) not in table:
+        raise UrpRefused(f"<{what}> on pin {name!r} is not simulated by the fake")
+    return table[match.group(1)], match.group(2)
+
+
+def _digital(node: ElementTree.Element, what: str) -> str:
+    value = (node.findtext("digitalValue") or "").strip()
+    if value not in ("0", "1"):
+        raise UrpRefused(f"<{what}>: digital value {value!r} is not 0 or 1")
+    return "True" if value == "1" else "False"
+
+
+class _Writer:
+    """URScript lines with their indentation and PolyScope's step numbers."""
+
+    def __init__(self) -> None:
+        self._lines: list[str] = []
+        self._steps = 0
+
+    def text(self) -> str:
+        return "\n".join(self._lines) + "\n"
+
+    def line(self, depth: int, text: str) -> None:
+        self._lines.append(_INDENT * (depth - 1) + text)
+
+    def step(self, depth: int, label: str) -> None:
+        self._steps += 1
+        self.line(depth, f'$ {self._steps} "{_ascii(label)}"')
+
+    def nodes(self, depth: int, nodes: list[ElementTree.Element]) -> None:
+        for node in nodes:
+            handler = _NODES.get(node.tag)
+            if handler is None:
+                what = node.get("strategyProgramNodeType") if node.tag == "Contributed" else None
+                named = f"<{node.tag}> ({what})" if what else f"<{node.tag}>"
+                raise UrpRefused(f"program node {named} is not simulated by the fake")
+            handler(self, depth, node)
+
+    # ---- one method per node ------------------------------------------------------------------------
+
+    def wait(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("type", "Sleep")
+        if kind == "Sleep":
+            seconds = _number(node.findtext("waitTime"), "<Wait> time")
+            self.step(depth, f"Wait: {seconds}")
+            self.line(depth, f"sleep({seconds})")
+            return
+        if kind == "DigitalInput":
+            getter, index = _pin(node, _PINS_IN, "Wait")
+            condition = f"{getter}({index}) == {_digital(node, 'Wait')}"
+        elif kind == "Condition":
+            condition = _expression(node, "Wait")
+        else:
+            raise UrpRefused(f'program node <Wait type="{kind}"> is not simulated by the fake')
+        self.step(depth, f"Wait {condition}")
+        self.line(depth, f"while (not({condition})):")
+        self.line(depth + 1, "sync()")
+        self.line(depth, "end")
+
+    def script(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("type", "Line")
+        if kind == "Line":
+            self.step(depth, "Script")
+            self.line(depth, _expression(node, "Script"))
+            return
+        contents = node.findtext("cachedContents")
+        if contents is None:
+            raise UrpRefused(f'<Script type="{kind}"> without <cachedContents>')
+        self.step(depth, f"Script: {node.findtext('file') or kind}")
+        for text in contents.splitlines():
+            self.line(depth, text)
+
+    def assignment(self, depth: int, node: ElementTree.Element) -> None:
+        source = node.get("valueSource", "Expression")
+        variable = node.find("variable")
+        name = "" if variable is None else variable.get("name", "")
+        if source != "Expression" or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+            raise UrpRefused(f'<Assignment valueSource="{source}"> to {name!r} is not simulated by the fake')
+        value = _expression(node, "Assignment")
+        self.step(depth, f"{name} = {value}")
+        self.line(depth, f"global {name} = {value}")
+
+    def set(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("type", "")
+        if kind == "NoAction" and node.find("pin") is None:
+            self.step(depth, "Set")
+            return
+        if kind != "DigitalOutput":
+            raise UrpRefused(f'program node <Set type="{kind}"> is not simulated by the fake')
+        setter, index = _pin(node, _PINS_OUT, "Set")
+        value = _digital(node, "Set")
+        self.step(depth, f"Set {setter}({index})={value}")
+        self.line(depth, f"{setter}({index}, {value})")
+
+    def popup(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("type", "Message")
+        if kind not in _POPUPS:
+            raise UrpRefused(f'program node <Popup type="{kind}"> is not simulated by the fake')
+        title, warning, error = _POPUPS[kind]
+        message = node.get("message", "").replace('"', "'")
+        self.step(depth, f"Popup: {message}")
+        self.line(depth, f'popup("{message}", "{title}", {warning}, {error}, blocking=True)')
+        if node.get("haltProgram", "false").lower() == "true":
+            self.line(depth, "halt")
+
+    def comment(self, depth: int, node: ElementTree.Element) -> None:
+        self.step(depth, f"'{node.get('comment', '')}'")
+
+    def folder(self, depth: int, node: ElementTree.Element) -> None:
+        self.step(depth, node.get("name", "Folder"))
+        self.nodes(depth, _children(node))
+
+    def halt(self, depth: int, node: ElementTree.Element) -> None:
+        self.step(depth, "Halt")
+        self.line(depth, "halt")
+
+    def move(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("motionType", "MoveJ")
+        if kind not in ("MoveJ", "MoveL"):
+            raise UrpRefused(f'program node <Move motionType="{kind}"> is not simulated by the fake')
+        function = "movej" if kind == "MoveJ" else "movel"
+        speed = _number(node.get("speed"), f"<Move> {kind} speed")
+        acceleration = _number(node.get("acceleration"), f"<Move> {kind} acceleration")
+        self.step(depth, kind)
+        for point in _children(node):
+            if point.tag != "Waypoint":
+                raise UrpRefused(f"program node <{point.tag}> in a <Move> is not simulated by the fake")
+            q = _joint_angles(point)
+            parameters = point.find("motionParameters")
+            blend = None if parameters is None else parameters.get("blendRadius")
+            radius = "" if blend is None else f", r={_number(blend, '<Waypoint> blend radius')}"
+            self.step(depth + 1, point.get("name", "Waypoint"))
+            self.line(depth + 1, f"{function}([{q}], a={acceleration}, v={speed}{radius})")
+
+
+def _joint_angles(point: ElementTree.Element) -> str:
+    """A fixed waypoint's joint angles, as the list literal of a movej/movel."""
+    name = point.get("name", "?")
+    if point.get("type", "Fixed") != "Fixed":
+        raise UrpRefused(f'<Waypoint type="{point.get("type")}"> {name} is not simulated by the fake')
+    position = point.find("position")
+    angles = None
+    if position is not None:
+        joints = position.find("JointAngles")
+        angles = joints.get("angles") if joints is not None else position.get("joints")
+    if angles is None:
+        raise UrpRefused(f"<Waypoint> {name} carries no joint angles")
+    values = [value.strip() for value in angles.split(",")]
+    if len(values) != 6:
+        raise UrpRefused(f"<Waypoint> {name}: {len(values)} joint angles, not 6")
+    return ", ".join(_number(value, f"<Waypoint> {name} joint angle") for value in values)
+
+
+_NODES = {
+    "Wait": _Writer.wait,
+    "Script": _Writer.script,
+    "Assignment": _Writer.assignment,
+    "Set": _Writer.set,
+    "Popup": _Writer.popup,
+    "Comment": _Writer.comment,
+    "Folder": _Writer.folder,
+    "Halt": _Writer.halt,
+    "Move": _Writer.move,
+}
