@@ -14,7 +14,17 @@ from urdaemon.fakeur.urscript.runtime import ScriptCompileError, ScriptRun, Scri
 
 __all__ = ["Program", "ScriptCompileError", "ScriptRun", "ScriptRuntimeError", "compile_program"]
 
-_LIBRARIES = ("lib_core", "lib_motion", "lib_state", "lib_io", "lib_sockets", "lib_config")
+_LIBRARIES = (
+    "lib_core",
+    "lib_motion",
+    "lib_state",
+    "lib_io",
+    "lib_ports",
+    "lib_settings",
+    "lib_sockets",
+    "lib_config",
+    "lib_unsimulated",  # last: stands in only for what no library above implements
+)
 
 for _library in _LIBRARIES:
     try:

@@ -383,3 +383,65 @@ def wrench_trans(host: ScriptHost, T_from_to: Any, w_from: Sequence[float]) -> U
 
 def _rotvec(frame: Frame) -> tuple[float, float, float]:
     return rotation_vector(*frame[:9])
+
+
+# -- matrices -------------------------------------------------------------------------------------------
+# A URScript matrix is a list of rows, each a list of numbers (``[[1, 2], [3, 4]]``); a flat list is an
+# array (a vector, no orientation). A pose given to ``inv`` is inverted as a transform (``pose_inv``).
+
+SINGULAR_PIVOT = 1e-12
+"""A pivot below this share of the matrix's largest element makes ``inv`` call the matrix singular."""
+
+
+def _matrix(name: str, m: Any) -> list[list[float]]:
+    """The rows of matrix ``m``; a runtime error unless it is a non-empty list of equal-length number rows."""
+    if not isinstance(m, list) or not m or not all(isinstance(row, list) and row for row in m):
+        raise ScriptRuntimeError(f"{name}: expected a matrix (a list of rows), got {text(m)}")
+    width = len(m[0])
+    if any(len(row) != width for row in m):
+        raise ScriptRuntimeError(f"{name}: the rows of {text(m)} have different lengths")
+    for row in m:
+        for value in row:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ScriptRuntimeError(f"{name}: {text(value)} in {text(m)} is not a number")
+    return [[float(value) for value in row] for row in m]
+
+
+def _rows(rows: list[list[float]]) -> UrList:
+    return UrList(UrList(row) for row in rows)
+
+
+@builtin("transpose")
+def transpose(host: ScriptHost, m: Any) -> UrList:
+    """The transpose of matrix ``m``; an array (a flat list) has no orientation and comes back as is."""
+    if isinstance(m, list) and m and not any(isinstance(item, list) for item in m):
+        return UrList(m)
+    rows = _matrix("transpose", m)
+    return _rows([list(column) for column in zip(*rows, strict=True)])
+
+
+@builtin("inv")
+def inv(host: ScriptHost, m: Any) -> Any:
+    """The inverse of a square, non-singular matrix (Gauss-Jordan with partial pivoting), or of a pose.
+
+    As the manual asks: a matrix that is not square, or is singular, is a runtime error."""
+    if isinstance(m, UrPose):
+        return pose_inv(host, m)
+    rows = _matrix("inv", m)
+    size = len(rows)
+    if any(len(row) != size for row in rows):
+        raise ScriptRuntimeError(f"inv: a {size}x{len(rows[0])} matrix is not square")
+    scale = max(abs(value) for row in rows for value in row)
+    work = [row + [1.0 if i == j else 0.0 for j in range(size)] for i, row in enumerate(rows)]
+    for column in range(size):
+        pivot = max(range(column, size), key=lambda r: abs(work[r][column]))
+        if abs(work[pivot][column]) <= SINGULAR_PIVOT * scale:
+            raise ScriptRuntimeError(f"inv: the matrix {text(m)} is singular")
+        work[column], work[pivot] = work[pivot], work[column]
+        lead = work[column][column]
+        work[column] = [value / lead for value in work[column]]
+        for r in range(size):
+            if r != column and work[r][column] != 0.0:
+                factor = work[r][column]
+                work[r] = [a - factor * b for a, b in zip(work[r], work[column], strict=True)]
+    return _rows([row[size:] for row in work])

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 from typing import Any, Final
 
+from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.lib_settings import INPUT_ACTIONS, settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
 
 __all__ = [
@@ -338,3 +340,151 @@ def write_output_float_register(host: ScriptHost, address: Any, value: Any) -> N
 def write_output_boolean_register(host: ScriptHost, address: Any, value: Any) -> None:
     index = _index("write_output_boolean_register", address, BIT_REGISTERS)
     host.arm.io.registers_bit[index] = _level("write_output_boolean_register", value)
+
+
+# ---- analog input ranges ----------------------------------------------------------------------------------
+
+
+@builtin("set_tool_analog_input_domain")
+def set_tool_analog_input_domain(host: ScriptHost, port: Any, domain: Any) -> None:
+    """Tool analog input ``port`` (0..1) in current (``domain`` 0, 4-20 mA) or voltage (1, 0-10 V) mode."""
+    pin = _index("set_tool_analog_input_domain", port, 2)
+    settings_of(host.arm).tool_analog_input_domain[pin] = _index("set_tool_analog_input_domain", domain, 2)
+
+
+@builtin("set_analog_inputrange")
+def set_analog_inputrange(host: ScriptHost, port: Any, range: Any) -> None:
+    """Deprecated numbering: ports 0-1 the controller's inputs (range 0 or 2: 0-10 V; the old bipolar
+    ranges 1 and 3 are refused as on e-Series), 2-3 the tool's (range 0 or 1: 0-10 V, 2: 4-20 mA)."""
+    pin = _index("set_analog_inputrange", port, 4)
+    code = _index("set_analog_inputrange", range, 4)
+    if pin < 2:
+        if code not in (0, 2):
+            raise ScriptRuntimeError(f"set_analog_inputrange: range {code} is refused (0-10 V: 0 or 2)")
+        _set_domain(host, "set_analog_inputrange", 0, pin, 1)
+    else:
+        if code == 3:
+            raise ScriptRuntimeError("set_analog_inputrange: tool inputs take range 0, 1 or 2, got 3")
+        settings_of(host.arm).tool_analog_input_domain[pin - 2] = 0 if code == 2 else 1
+
+
+# ---- input actions and run-state outputs ----------------------------------------------------------------
+
+_INPUT_GROUPS: Final = {"standard": 8, "configurable": 8, "tool": 2, "gp_boolean": BIT_REGISTERS}
+
+
+def _input_action(host: ScriptHost, function: str, group: str, port: Any, action: Any) -> None:
+    pin = _index(function, port, _INPUT_GROUPS[group])
+    if action not in INPUT_ACTIONS:
+        raise ScriptRuntimeError(f'{function}: action must be "default" or "freedrive", got {action!r}')
+    actions = settings_of(host.arm).input_actions
+    if action == "default":
+        actions.pop((group, pin), None)
+    else:
+        actions[(group, pin)] = action
+
+
+@builtin("set_standard_digital_input_action")
+def set_standard_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
+    """What standard input ``port`` (0..7) does when high: ``"default"`` or ``"freedrive"`` (recorded:
+    the fake's inputs change only when a test sets them, and nothing watches them for freedrive)."""
+    _input_action(host, "set_standard_digital_input_action", "standard", port, action)
+
+
+@builtin("set_configurable_digital_input_action")
+def set_configurable_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
+    _input_action(host, "set_configurable_digital_input_action", "configurable", port, action)
+
+
+@builtin("set_tool_digital_input_action")
+def set_tool_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
+    _input_action(host, "set_tool_digital_input_action", "tool", port, action)
+
+
+@builtin("set_gp_boolean_input_action")
+def set_gp_boolean_input_action(host: ScriptHost, port: Any, action: Any) -> None:
+    """The same for the general purpose boolean input registers (0..127)."""
+    _input_action(host, "set_gp_boolean_input_action", "gp_boolean", port, action)
+
+
+@builtin("set_input_actions_to_default")
+def set_input_actions_to_default(host: ScriptHost) -> None:
+    settings_of(host.arm).input_actions.clear()
+
+
+RUNSTATE_DIGITAL: Final = (0, 1, 2, 3)
+"""A digital output's run-state choice: 0 keep its value, 1 low while no program runs, 2 high while no
+program runs, 3 high while a program runs and low while none does."""
+RUNSTATE_ANALOG: Final = (0, 1, 2)
+"""An analog output's run-state choice: 0 keep its value, 1 its minimum while no program runs, 2 its
+maximum while no program runs."""
+_OUTPUT_GROUPS: Final = {
+    "standard": _STANDARD,
+    "configurable": _CONFIGURABLE,
+    "tool": _TOOL,
+    "gp_boolean": (0, BIT_REGISTERS),
+    "analog": (0, 2),
+}
+
+
+def _runstate(host: ScriptHost, function: str, group: str, output_id: Any, state: Any) -> None:
+    output = _index(function, output_id, _OUTPUT_GROUPS[group][1])
+    choices = RUNSTATE_ANALOG if group == "analog" else RUNSTATE_DIGITAL
+    choice = _index(function, state, len(choices))
+    outputs = settings_of(host.arm).runstate_outputs
+    if choice == 0:
+        outputs.pop((group, output), None)
+    else:
+        outputs[(group, output)] = choice
+
+
+def apply_runstate_outputs(arm: FakeArm, running: bool) -> None:
+    """Set every output that has a run-state choice as it says for a program ``running`` or not.
+
+    The controller calls this when a program starts (``running``) and when it stops (not ``running``).
+    """
+    outputs = settings_of(arm).runstate_outputs
+    if not outputs:
+        return
+    io = arm.io
+    for (group, output), choice in outputs.items():
+        if group == "analog":
+            if not running:
+                io.analog_out[output] = 0.0 if choice == 1 else 1.0
+            continue
+        if choice in (1, 2) and running:
+            continue
+        high = choice == 2 or (choice == 3 and running)
+        if group == "gp_boolean":
+            io.registers_bit[output] = high
+        else:
+            bit = 1 << (_OUTPUT_GROUPS[group][0] + output)
+            io.digital_out = io.digital_out | bit if high else io.digital_out & ~bit
+
+
+@builtin("set_runstate_standard_digital_output_to_value")
+def set_runstate_standard_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
+    """What standard output ``outputId`` (0..7) does as programs start and stop (:data:`RUNSTATE_DIGITAL`)."""
+    _runstate(host, "set_runstate_standard_digital_output_to_value", "standard", outputId, state)
+
+
+@builtin("set_runstate_configurable_digital_output_to_value")
+def set_runstate_configurable_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
+    _runstate(host, "set_runstate_configurable_digital_output_to_value", "configurable", outputId, state)
+
+
+@builtin("set_runstate_tool_digital_output_to_value")
+def set_runstate_tool_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
+    _runstate(host, "set_runstate_tool_digital_output_to_value", "tool", outputId, state)
+
+
+@builtin("set_runstate_gp_boolean_output_to_value")
+def set_runstate_gp_boolean_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
+    """The same for the general purpose boolean output registers (0..127)."""
+    _runstate(host, "set_runstate_gp_boolean_output_to_value", "gp_boolean", outputId, state)
+
+
+@builtin("set_runstate_standard_analog_output_to_value")
+def set_runstate_standard_analog_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
+    """What analog output ``outputId`` (0..1) does when programs stop (:data:`RUNSTATE_ANALOG`)."""
+    _runstate(host, "set_runstate_standard_analog_output_to_value", "analog", outputId, state)

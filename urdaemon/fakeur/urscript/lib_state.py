@@ -1,8 +1,9 @@
 """URScript state getters and kinematics builtins, read from the fake arm.
 
 Joint values come from ``FakeArm`` (actual: where the arm is; target: what the running motion
-commands); TCP values apply the arm's TCP offset (``set_tcp``) to the flange pose. Forces and torques
-are zero (the fake arm has no dynamics and touches nothing); joint temperatures are a constant 30 °C.
+commands); TCP values apply the arm's TCP offset (``set_tcp``) to the flange pose. The TCP wrench is
+the arm's measured one (``arm.tcp_force``, set by the contact model); joint torques beyond gravity are
+zero (no dynamics); temperatures are constants (no thermal model).
 Inverse kinematics is ``urdaemon.description.ik`` on the arm's calibrated model.
 """
 
@@ -11,16 +12,22 @@ from __future__ import annotations
 import math
 from typing import Any, Final
 
+from urdaemon.description.frames import frame_of_pose, inverse, rotate
+from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoRamp
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import flange_pose, inverse_near, tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed
 
-__all__: list[str] = []
+__all__ = ["tool_accelerometer"]
 
 JOINT_TEMPERATURE: Final = 30.0
 """°C: what every joint reports (the controller's primary and RTDE data say the same)."""
+CONTROLLER_TEMPERATURE: Final = 35.0
+"""°C: the control box of the model (a constant: the fake has no thermal model)."""
+NO_TOOL_CURRENT: Final = 0.0
+"""A: the tool connector's current with nothing connected to it."""
 
 
 def _joints(name: str, value: Any) -> list[float]:
@@ -122,8 +129,66 @@ def get_target_tcp_speed(host: ScriptHost) -> UrList:
 
 @builtin("get_tcp_force")
 def get_tcp_force(host: ScriptHost) -> UrPose:
-    """The wrench at the TCP: zero (the fake arm touches nothing)."""
-    return UrPose([0.0] * 6)
+    """The wrench at the TCP, p[Fx, Fy, Fz, Tx, Ty, Tz] (N, N·m, base frame): what the arm measures
+    (``arm.tcp_force``, zero in free air; the fake's contact model sets it)."""
+    return UrPose(host.arm.tcp_force)
+
+
+@builtin("force")
+def force(host: ScriptHost) -> float:
+    """The force at the TCP (N): the norm of the force part of ``get_tcp_force()``."""
+    fx, fy, fz = host.arm.tcp_force[:3]
+    return math.sqrt(fx * fx + fy * fy + fz * fz)
+
+
+@builtin("get_tool_accelerometer_reading")
+def get_tool_accelerometer_reading(host: ScriptHost) -> UrList:
+    """What the tool's accelerometer reads (m/s², TCP frame): see :func:`tool_accelerometer`."""
+    return UrList(tool_accelerometer(host.arm))
+
+
+def tool_accelerometer(arm: FakeArm) -> tuple[float, float, float]:
+    """The tool accelerometer's reading (m/s², TCP frame) of the arm standing still.
+
+    Model: an accelerometer at rest measures the reaction to gravity, which is the arm's gravity vector
+    as ``set_gravity`` takes it (pointing up, base frame), turned into the TCP frame; so an axis pointing
+    up reads +9.82. The acceleration of the arm's own motion is left out (a still robot's reading)."""
+    frame = frame_of_pose(tcp_pose(arm, arm.q))
+    return rotate(inverse(frame), arm.gravity)
+
+
+@builtin("get_tool_current")
+def get_tool_current(host: ScriptHost) -> float:
+    """The current the tool connector supplies (A): nothing is connected to the fake's tool, so no
+    current flows at any tool voltage."""
+    return NO_TOOL_CURRENT
+
+
+@builtin("get_controller_temp")
+def get_controller_temp(host: ScriptHost) -> float:
+    """The control box's temperature (°C): :data:`CONTROLLER_TEMPERATURE`."""
+    return CONTROLLER_TEMPERATURE
+
+
+@builtin("get_tool_temp")
+def get_tool_temp(host: ScriptHost) -> float:
+    """The tool flange's temperature (°C): the joints' (:data:`JOINT_TEMPERATURE`), as RTDE reports."""
+    return JOINT_TEMPERATURE
+
+
+@builtin("reset_revolution_counter")
+def reset_revolution_counter(host: ScriptHost, qNear: Any) -> None:
+    """Unwind joints whose safety limits are "unlimited" by whole turns towards ``qNear``.
+
+    The manual applies it only to such joints; every joint of the fake's models has finite limits
+    (±2π), so after checking ``qNear`` there is nothing to reset (refused if a model ever has one)."""
+    _joints("reset_revolution_counter qNear", qNear)
+    arm = host.arm
+    unlimited = [i for i in range(6) if math.isinf(arm.min_position[i]) or math.isinf(arm.max_position[i])]
+    if unlimited:
+        raise ScriptRuntimeError(
+            f"reset_revolution_counter: not simulated for the unlimited joints {unlimited} of this model"
+        )
 
 
 @builtin("get_joint_torques")
