@@ -4,6 +4,8 @@ pausing program reported as playing (the fake's clock turned by hand)."""
 
 from __future__ import annotations
 
+import asyncio
+import gzip
 import math
 import threading
 from pathlib import Path
@@ -259,3 +261,112 @@ async def test_a_queued_stop_program_stops_what_came_before_it_and_not_what_came
         main = controller.programs.main
         assert main is not None
         assert main.name == "second"
+
+
+WAIT_PROGRAM_URP = (
+    '<URProgram name="wait_program" installation="default" directory="/ursim/programs">'
+    '<children><MainProgram runOnlyOnce="false" InitVariablesNode="false"><children>'
+    '<Wait type="Sleep"><waitTime>0.01</waitTime></Wait>'
+    "</children></MainProgram></children></URProgram>"
+)
+"""A program shaped like urcl's test program wait_program.urp: a 10 ms wait, looping forever."""
+
+
+def _write_urp(path: Path, xml: str) -> None:
+    path.write_bytes(gzip.compress(xml.encode("utf-8"), mtime=0))
+
+
+def _main(controller: FakeController) -> object:
+    """The main program (a function: mypy would otherwise narrow the attribute for good)."""
+    return controller.programs.main
+
+
+async def _program_state(link: Link) -> tuple[dash.ProgramState | None, str | None]:
+    reply = await _ask(link, dash.GetProgramState(), dash.ProgramStateReply)
+    return reply.state, reply.program
+
+
+async def test_a_urp_program_plays_pauses_resumes_and_stops_as_on_ursim(tmp_path: Path) -> None:
+    """Reproduction: urcl's dashboard_example loads wait_program.urp, then plays, pauses, plays and
+    stops it; the fake answered ``play`` with "Failed to execute: play" (it could not read a .urp)."""
+    _write_urp(tmp_path / "wait_program.urp", WAIT_PROGRAM_URP)
+    async with manual_fake(powered=True, programs=tmp_path) as (controller, clock):
+        link = await _dashboard(controller.address)
+        assert (await _ask(link, dash.Load("wait_program.urp"), dash.CommandReply)).success
+        assert await _program_state(link) == (dash.ProgramState.STOPPED, "wait_program.urp")
+        assert (await _ask(link, dash.Play(), dash.CommandReply)).success
+        await controller.programs.settled()
+        assert await _program_state(link) == (dash.ProgramState.PLAYING, "wait_program.urp")
+        clock.turn(100)  # 0.2 s: the 10 ms wait ran many times and the loop goes on
+        assert controller.programs.main is not None
+        assert await _program_state(link) == (dash.ProgramState.PLAYING, "wait_program.urp")
+        assert (await _ask(link, dash.Pause(), dash.CommandReply)).success
+        clock.until(lambda: _state(controller) is RuntimeState.PAUSED)
+        assert await _program_state(link) == (dash.ProgramState.PAUSED, "wait_program.urp")
+        assert (await _ask(link, dash.Play(), dash.CommandReply)).success
+        assert await _program_state(link) == (dash.ProgramState.PLAYING, "wait_program.urp")
+        clock.turn(10)
+        assert (await _ask(link, dash.Stop(), dash.CommandReply)).success
+        assert await _program_state(link) == (dash.ProgramState.STOPPED, "wait_program.urp")
+        assert _main(controller) is None
+        link.close()
+
+
+async def test_a_urp_with_a_node_the_fake_cannot_run_is_refused_at_load_naming_it(tmp_path: Path) -> None:
+    """A program node the fake does not translate must not be dropped silently: ``load`` answers the
+    dashboard's "Error while loading program" and a robot message names the node; what was loaded
+    before stays loaded."""
+    _write_urp(tmp_path / "wait_program.urp", WAIT_PROGRAM_URP)
+    _write_urp(tmp_path / "grip.urp", WAIT_PROGRAM_URP.replace("<Wait", '<Loop type="Forever"/><Wait'))
+    async with manual_fake(powered=True, programs=tmp_path) as (controller, _):
+        primary = await _primary(controller)
+        link = await _dashboard(controller.address)
+        assert (await _ask(link, dash.Load("wait_program.urp"), dash.CommandReply)).success
+        refused = await _ask(link, dash.Load("grip.urp"), dash.CommandReply)
+        assert not refused.success
+        assert refused.text == f"Error while loading program: {tmp_path}/grip.urp"
+        message = await primary.next(prim.TextMessage)
+        assert "<Loop>" in message.text
+        assert "grip.urp" in message.text
+        loaded = await _ask(link, dash.GetLoadedProgram(), dash.LoadedProgramReply)
+        assert loaded.path == f"{tmp_path}/wait_program.urp"
+        link.close()
+        primary.close()
+
+
+async def test_a_urp_holding_the_external_control_node_fetches_the_daemons_script(tmp_path: Path) -> None:
+    """A saved External Control program (urcl's external_control.urp) plays as the URCap does: it
+    fetches the script from the daemon's script sender and runs it."""
+    requests: list[bytes] = []
+
+    async def sender(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        requests.append(await reader.readline())
+        writer.write(b"def fetched():\n  while True:\n    sync()\n  end\nend\n")
+        await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(sender, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    node = (
+        '<Contributed strategyClass="com.fzi.externalcontrol.ExternalControlNode" '
+        'strategyProgramNodeType="External Control"><dataModel/></Contributed>'
+    )
+    xml = WAIT_PROGRAM_URP.replace('<Wait type="Sleep"><waitTime>0.01</waitTime></Wait>', node)
+    _write_urp(tmp_path / "my_control.urp", xml.replace('"false" Init', '"true" Init'))
+    try:
+        async with manual_fake(powered=True, programs=tmp_path, urcap=("127.0.0.1", port)) as (controller, _):
+            primary = await _primary(controller)
+            link = await _dashboard(controller.address)
+            assert (await _ask(link, dash.Load("my_control.urp"), dash.CommandReply)).success
+            assert (await _ask(link, dash.Play(), dash.CommandReply)).success
+            started = await primary.next(prim.KeyMessage)  # the URCap's fetch runs on its own task
+            assert (started.title, started.text) == ("PROGRAM_XXX_STARTED", "externalControl")
+            main = controller.programs.main
+            assert main is not None
+            assert main.name == "externalControl"
+            assert requests == [b"request_program\n"]
+            link.close()
+            primary.close()
+    finally:
+        server.close()
+        await server.wait_closed()

@@ -1,0 +1,246 @@
+"""PolyScope ``.urp`` programs -> URScript (``fakeur.urp``): node by node, the whole file, refusals.
+
+The fixtures are written here: gzip-compressed XML shaped like the programs PolyScope saves (the
+layout of UR's client library's test programs ``wait_program.urp`` and ``external_control.urp``,
+urcl's tests/resources/dockerursim/programs, Apache-2.0), not copies of them.
+"""
+
+from __future__ import annotations
+
+import gzip
+
+import pytest
+
+from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpRefused, translate
+from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
+
+KINEMATICS = """<kinematics status="NOT_INITIALIZED" validChecksum="false">
+    <deltaTheta value="0.0, 0.0, 0.0, 0.0, 0.0, 0.0"/>
+    <a value="0.0, -0.425, -0.3922, 0.0, 0.0, 0.0"/>
+  </kinematics>"""
+
+
+def urp(nodes: str, *, once: bool = False, name: str = "demo", before: str = "") -> bytes:
+    """A gzipped program whose MainProgram holds ``nodes`` (and a BeforeStart sequence if given)."""
+    sequence = f'<SpecialSequence type="BeforeStart"><children>{before}</children></SpecialSequence>'
+    xml = (
+        f'<URProgram name="{name}" installation="default" directory="/ursim/programs" createdIn="5.12.4">'
+        f"{KINEMATICS}<children>{sequence if before else ''}"
+        f'<MainProgram runOnlyOnce="{str(once).lower()}" InitVariablesNode="false">'
+        f"<children>{nodes}</children></MainProgram></children></URProgram>"
+    )
+    return gzip.compress(xml.encode("utf-8"), mtime=0)
+
+
+def chars(text: str) -> str:
+    """An expression as PolyScope stores it: one ExpressionChar per character."""
+    escaped = {'"': "&quot;", "<": "&lt;", ">": "&gt;", "&": "&amp;"}
+    return "".join(f'<ExpressionChar character="{escaped.get(c, c)}"/>' for c in text)
+
+
+def body(nodes: str) -> list[str]:
+    """The statements (no step labels, no indentation) a run-once program of ``nodes`` translates to."""
+    script = translate(urp(nodes, once=True), "demo.urp").script
+    assert script is not None
+    lines = [line.strip() for line in script.splitlines()]
+    assert lines[0] == "def demo():"
+    assert lines[-1] == "end"
+    return [line for line in lines[1:-1] if not line.startswith("$")]
+
+
+WAIT_PROGRAM = '<Wait type="Sleep"><waitTime>0.01</waitTime></Wait>'
+EXTERNAL_CONTROL = (
+    '<Contributed strategyClass="com.fzi.externalcontrol.ExternalControlNode" '
+    'strategyProgramNodeType="External Control"><dataModel/></Contributed>'
+)
+WAYPOINT = (
+    '<Waypoint type="Fixed" name="Waypoint_1"><motionParameters{blend}/>'
+    '<position><JointAngles angles="0.1, -1.5, 1.2, -1.2, -1.57, 0.0"/>'
+    '<TCPOffset pose="0.0, 0.0, 0.0, 0.0, 0.0, 0.0"/></position></Waypoint>'
+)
+
+TABLE = [
+    ("wait sleep", WAIT_PROGRAM, ["sleep(0.01)"]),
+    (
+        "wait digital input",
+        '<Wait type="DigitalInput"><pin referencedName="digital_in[2]"/>'
+        "<digitalValue>1</digitalValue></Wait>",
+        ["while (not(get_standard_digital_in(2) == True)):", "sync()", "end"],
+    ),
+    (
+        "wait tool input low",
+        '<Wait type="DigitalInput"><pin referencedName="tool_in[0]"/><digitalValue>0</digitalValue></Wait>',
+        ["while (not(get_tool_digital_in(0) == False)):", "sync()", "end"],
+    ),
+    (
+        "wait condition",
+        f'<Wait type="Condition"><expression>{chars("x > 2")}</expression></Wait>',
+        ["while (not(x > 2)):", "sync()", "end"],
+    ),
+    (
+        "script line",
+        '<Script type="Line"><expression>' + chars('textmsg("hi")') + "</expression></Script>",
+        ['textmsg("hi")'],
+    ),
+    (
+        "script file",
+        '<Script type="File"><cachedContents>x = 1\ntextmsg(x)\n</cachedContents>'
+        '<file resolves-to="file">/programs/a.script</file></Script>',
+        ["x = 1", "textmsg(x)"],
+    ),
+    (
+        "assignment",
+        '<Assignment valueSource="Expression"><variable name="count" prefersPersistentValue="false">'
+        f"<initializeExpression/></variable><expression>{chars('count + 1')}</expression></Assignment>",
+        ["global count = count + 1"],
+    ),
+    (
+        "set digital output",
+        '<Set type="DigitalOutput"><pin referencedName="digital_out[3]"/>'
+        "<digitalValue>1</digitalValue></Set>",
+        ["set_standard_digital_out(3, True)"],
+    ),
+    (
+        "set configurable output",
+        '<Set type="DigitalOutput"><pin referencedName="config_out[1]"/><digitalValue>0</digitalValue></Set>',
+        ["set_configurable_digital_out(1, False)"],
+    ),
+    (
+        "set tool output",
+        '<Set type="DigitalOutput"><pin referencedName="tool_out[1]"/><digitalValue>1</digitalValue></Set>',
+        ["set_tool_digital_out(1, True)"],
+    ),
+    (
+        "popup message",
+        '<Popup type="Message" haltProgram="false" message="Hello"/>',
+        ['popup("Hello", "Message", False, False, blocking=True)'],
+    ),
+    (
+        "popup error that halts",
+        '<Popup type="Error" haltProgram="true" message="Stop &quot;now&quot;"/>',
+        ['popup("Stop \'now\'", "Error", False, True, blocking=True)', "halt"],
+    ),
+    ("comment", '<Comment comment="only a note"/>', []),
+    (
+        "folder",
+        f'<Folder name="Setup"><children>{WAIT_PROGRAM}<Comment comment="x"/></children></Folder>',
+        ["sleep(0.01)"],
+    ),
+    ("halt", "<Halt/>", ["halt"]),
+    (
+        "movej",
+        '<Move motionType="MoveJ" speed="1.0472" acceleration="1.3963" useActiveTCP="true">'
+        f"<children>{WAYPOINT.format(blend='')}</children></Move>",
+        ["movej([0.1, -1.5, 1.2, -1.2, -1.57, 0.0], a=1.3963, v=1.0472)"],
+    ),
+    (
+        "movel with a blend",
+        '<Move motionType="MoveL" speed="0.25" acceleration="1.2">'
+        "<children>" + WAYPOINT.format(blend=' blendRadius="0.01"') + "</children></Move>",
+        ["movel([0.1, -1.5, 1.2, -1.2, -1.57, 0.0], a=1.2, v=0.25, r=0.01)"],
+    ),
+    (
+        "old-style waypoint joints",
+        '<Move motionType="MoveJ" speed="1" acceleration="1"><children>'
+        '<Waypoint type="Fixed" name="W"><position joints="0, 0, 0, 0, 0, 1"/></Waypoint></children></Move>',
+        ["movej([0, 0, 0, 0, 0, 1], a=1, v=1)"],
+    ),
+]
+
+
+@pytest.mark.parametrize(("nodes", "expected"), [(n, e) for _, n, e in TABLE], ids=[t[0] for t in TABLE])
+def test_each_program_node_translates_to_its_urscript(nodes: str, expected: list[str]) -> None:
+    assert body(nodes) == expected
+
+
+@pytest.mark.parametrize("nodes", [n for _, n, _ in TABLE], ids=[t[0] for t in TABLE])
+@pytest.mark.parametrize("series", [("e", (5, 15)), ("cb3", (3, 15))])
+def test_every_translation_compiles_on_both_series(nodes: str, series: tuple[str, tuple[int, int]]) -> None:
+    """What the translator writes is URScript the interpreter accepts (``x`` and ``count`` defined first)."""
+    declare = chars("global x = 0 global count = 0")
+    setup = f'<Script type="Line"><expression>{declare}</expression></Script>'
+    script = translate(urp(setup + nodes, once=True), "demo.urp").script
+    assert script is not None
+    compile_program(script, *series)
+
+
+def test_a_looping_program_runs_its_body_forever_and_a_run_once_program_once() -> None:
+    """Reproduction: ``load wait_program.urp`` and ``play`` failed on the fake (a .urp was unreadable)."""
+    looping = translate(urp(WAIT_PROGRAM, name="wait_program"), "wait_program.urp")
+    assert looping.loops
+    assert not looping.external_control
+    assert looping.script == (
+        "def wait_program():\n"
+        '  $ 1 "Robot Program"\n'
+        "  while (True):\n"
+        '    $ 2 "Wait: 0.01"\n'
+        "    sleep(0.01)\n"
+        "  end\n"
+        "end\n"
+    )
+    once = translate(urp(WAIT_PROGRAM, once=True), "demo.urp")
+    assert not once.loops
+    assert once.script is not None
+    assert "while" not in once.script
+    assert compile_program(looping.script, "e", (5, 15)).kind == "def"
+
+
+def test_the_before_start_sequence_runs_once_before_the_loop() -> None:
+    script = translate(urp(WAIT_PROGRAM, before="<Halt/>"), "demo.urp").script
+    assert script is not None
+    assert script.index("halt") < script.index("while (True):")
+
+
+def test_the_program_name_becomes_a_def_name() -> None:
+    assert translate(urp(WAIT_PROGRAM, name="my program-2"), "x.urp").name == "my_program_2"
+    assert translate(urp(WAIT_PROGRAM, name="2nd"), "x.urp").name == "p2nd"
+
+
+def test_the_external_control_node_alone_is_the_external_control_program() -> None:
+    program = translate(urp(EXTERNAL_CONTROL, once=True, name="external_control"), "external_control.urp")
+    assert program.external_control
+    assert program.script is None
+
+
+@pytest.mark.parametrize(
+    ("data", "reason"),
+    [
+        (urp('<Loop type="Forever"><children/></Loop>'), "<Loop>"),
+        (
+            urp('<Contributed strategyClass="x.Grip" strategyProgramNodeType="RG Grip"/>'),
+            "<Contributed> (RG Grip)",
+        ),
+        (urp('<Wait type="AnalogInput"><pin referencedName="analog_in[0]"/></Wait>'), "AnalogInput"),
+        (urp('<Set type="AnalogOutput"/>'), "AnalogOutput"),
+        (urp('<Move motionType="MoveP" speed="1" acceleration="1"/>'), "MoveP"),
+        (
+            urp(
+                '<Move motionType="MoveL" speed="1" acceleration="1"><children>'
+                '<Waypoint type="Fixed" name="P1"><position><TCPOffset pose="0,0,0,0,0,0"/></position>'
+                "</Waypoint></children></Move>"
+            ),
+            "P1 carries no joint angles",
+        ),
+        (urp('<Set type="DigitalOutput"><pin referencedName="digital_out[x]"/></Set>'), "digital_out[x]"),
+        (urp(WAIT_PROGRAM + EXTERNAL_CONTROL), "External Control"),
+        (urp(""), "empty"),
+        (b"not gzip at all", "gzip"),
+        (gzip.compress(b"<URProgram><children>"), "malformed"),
+        (gzip.compress(b"<Installation/>"), "<Installation>"),
+        (gzip.compress(b"<URProgram><children/></URProgram>"), "MainProgram"),
+        (gzip.compress(b"<URProgram>" + b" " * (MAX_URP_BYTES + 1) + b"</URProgram>"), "larger"),
+        (gzip.compress(b"<URProgram/>")[:-6], "truncated"),
+    ],
+)
+def test_a_program_the_fake_cannot_play_is_refused_naming_why(data: bytes, reason: str) -> None:
+    with pytest.raises(UrpRefused) as refused:
+        translate(data, "bad.urp")
+    assert reason in refused.value.reason
+
+
+def test_a_script_node_with_an_error_compiles_to_the_controllers_refusal() -> None:
+    """The translation does not check URScript: the compiler refuses the program as it would any other."""
+    script = translate(urp(f'<Script type="Line"><expression>{chars("movej(")}</expression></Script>'), "x")
+    assert script.script is not None
+    with pytest.raises(ScriptCompileError):
+        compile_program(script.script, "e", (5, 15))
