@@ -175,3 +175,31 @@ def test_str_cat_refuses_a_string_longer_than_the_fake_keeps() -> None:
     assert len(str_cat(cast(Any, None), half, half)) == MAX_STRING_CHARS
     with pytest.raises(ScriptRuntimeError, match="at most"):
         str_cat(cast(Any, None), half, half + "x")
+
+
+def test_inv_inverts_a_square_matrix_and_refuses_singular_or_non_square_ones() -> None:
+    """On f5f0e26 ``inv`` and ``transpose`` stopped every program with "not simulated"."""
+    from urdaemon.fakeur.urscript import lib_core
+
+    m = UrList([UrList([4.0, 7.0, 2.0]), UrList([3.0, 6.0, 1.0]), UrList([2.0, 5.0, 3.0])])
+    inverse = lib_core.inv(None, m)
+    product = [[sum(m[i][k] * inverse[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    assert product == [[pytest.approx(1.0 if i == j else 0.0, abs=1e-12) for j in range(3)] for i in range(3)]
+    assert isinstance(inverse, UrList)
+    assert isinstance(inverse[0], UrList)
+    with pytest.raises(ScriptRuntimeError, match="singular"):
+        lib_core.inv(None, [[1.0, 2.0], [2.0, 4.0]])
+    with pytest.raises(ScriptRuntimeError, match="not square"):
+        lib_core.inv(None, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    with pytest.raises(ScriptRuntimeError, match="different lengths"):
+        lib_core.inv(None, [[1.0, 2.0], [3.0]])
+    pose = UrPose([0.1, -0.2, 0.3, 0.2, -0.4, 1.0])
+    assert list(lib_core.inv(None, pose)) == pytest.approx(list(lib_core.pose_inv(None, pose)))
+
+
+def test_transpose_swaps_rows_and_columns() -> None:
+    from urdaemon.fakeur.urscript import lib_core
+
+    assert lib_core.transpose(None, [[1, 2, 3], [4, 5, 6]]) == [[1, 4], [2, 5], [3, 6]]
+    assert lib_core.transpose(None, [1, 2, 3]) == [1, 2, 3]
+    assert lib_core.transpose(None, lib_core.transpose(None, [[1, 2]])) == [[1, 2]]

@@ -140,3 +140,75 @@ def test_a_bad_address_stops_the_script_with_line_and_column() -> None:
     assert isinstance(error, ScriptRuntimeError)
     assert (error.line, error.column) == (2, 3)
     assert "read_input_float_register" in error.message
+
+
+def test_input_actions_are_recorded_and_reset_to_default() -> None:
+    """On f5f0e26 the set_*_input_action family stopped the program with "not simulated"."""
+    from urdaemon.fakeur.urscript.lib_settings import settings_of
+
+    host = _host()
+    error = _run(
+        host,
+        'set_standard_digital_input_action(3, "freedrive")\n'
+        'set_tool_digital_input_action(1, "freedrive")\n'
+        'set_gp_boolean_input_action(100, "freedrive")\n'
+        'set_configurable_digital_input_action(0, "default")\n',
+    )
+    assert error is None
+    actions = settings_of(host.arm).input_actions
+    assert actions == {
+        ("standard", 3): "freedrive",
+        ("tool", 1): "freedrive",
+        ("gp_boolean", 100): "freedrive",
+    }
+    assert _run(host, "set_input_actions_to_default()\n") is None
+    assert actions == {}
+    error = _run(host, 'set_standard_digital_input_action(8, "freedrive")\n')
+    assert error is not None
+    assert "0..7" in error.message
+    error = _run(host, 'set_tool_digital_input_action(0, "start")\n')
+    assert error is not None
+    assert "freedrive" in error.message
+
+
+def test_runstate_outputs_apply_when_programs_start_and_stop() -> None:
+    """Recorded by the builtins; ``apply_runstate_outputs`` is what the controller calls at start/stop."""
+    host = _host()
+    arm = host.arm
+    error = _run(
+        host,
+        "set_runstate_standard_digital_output_to_value(0, 2)\n"  # high when stopped
+        "set_runstate_tool_digital_output_to_value(1, 3)\n"  # high while running, low when stopped
+        "set_runstate_gp_boolean_output_to_value(70, 1)\n"  # low when stopped
+        "set_runstate_standard_analog_output_to_value(1, 2)\n"  # maximum when stopped
+        "set_runstate_configurable_digital_output_to_value(4, 0)\n",  # keep its value
+    )
+    assert error is None
+    arm.io.registers_bit[70] = True
+    arm.io.digital_out = 1 << 12
+    io.apply_runstate_outputs(arm, running=True)
+    assert arm.io.digital_out == (1 << 12) | (1 << 17)
+    io.apply_runstate_outputs(arm, running=False)
+    assert arm.io.digital_out == (1 << 12) | (1 << 0)
+    assert arm.io.registers_bit[70] is False
+    assert arm.io.analog_out[1] == 1.0
+    error = _run(host, "set_runstate_standard_digital_output_to_value(0, 4)\n")
+    assert error is not None
+    assert "0..3" in error.message
+    error = _run(host, "set_runstate_standard_analog_output_to_value(0, 3)\n")
+    assert error is not None
+    assert "0..2" in error.message
+
+
+def test_analog_input_ranges_and_tool_domains() -> None:
+    from urdaemon.fakeur.urscript.lib_settings import settings_of
+
+    host = _host()
+    assert _run(host, "set_tool_analog_input_domain(1, 0)\nset_analog_inputrange(0, 2)\n") is None
+    assert settings_of(host.arm).tool_analog_input_domain == [1, 0]
+    assert host.arm.io.analog_out_types & 1 == 1  # standard input 0 in voltage mode
+    assert _run(host, "set_analog_inputrange(2, 2)\nset_analog_inputrange(3, 1)\n") is None
+    assert settings_of(host.arm).tool_analog_input_domain == [0, 1]
+    error = _run(host, "set_analog_inputrange(1, 3)\n")
+    assert error is not None
+    assert "refused" in error.message

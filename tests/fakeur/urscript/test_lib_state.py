@@ -140,3 +140,48 @@ def test_forces_torques_and_temperatures_are_those_of_an_arm_touching_nothing() 
     assert lib_state.get_joint_temp(host, 3) == lib_state.JOINT_TEMPERATURE
     with pytest.raises(ScriptRuntimeError):
         lib_state.get_joint_temp(host, 6)
+
+
+def test_tcp_force_and_force_read_the_arms_measured_wrench() -> None:
+    """On f5f0e26 get_tcp_force was always zero and force() was not simulated."""
+    host = _host()
+    assert list(lib_state.get_tcp_force(host)) == [0.0] * 6
+    assert lib_state.force(host) == 0.0
+    host.arm.tcp_force = [3.0, -4.0, 12.0, 0.5, 0.1, -0.2]
+    wrench = lib_state.get_tcp_force(host)
+    assert isinstance(wrench, UrPose)
+    assert list(wrench) == [3.0, -4.0, 12.0, 0.5, 0.1, -0.2]
+    assert lib_state.force(host) == pytest.approx(13.0)
+
+
+def test_tool_accelerometer_reads_gravity_in_the_tcp_frame() -> None:
+    """A still tool reads the reaction to gravity: +9.82 along whichever TCP axis points up."""
+    host = _host()
+    arm = host.arm
+    reading = lib_state.get_tool_accelerometer_reading(host)
+    assert math.sqrt(sum(a * a for a in reading)) == pytest.approx(9.82)
+    rotation = frames.frame_of_pose(lib_state.get_actual_tcp_pose(host))
+    up_in_base = [sum(rotation[3 * i + k] * reading[k] for k in range(3)) for i in range(3)]
+    assert up_in_base == pytest.approx([0.0, 0.0, 9.82], abs=1e-9)
+    arm.tcp_offset = [0.0, 0.0, 0.1, math.pi / 2, 0.0, 0.0]  # the TCP turned: the reading turns with it
+    turned = lib_state.get_tool_accelerometer_reading(host)
+    assert list(turned) != pytest.approx(list(reading), abs=1e-3)
+    assert math.sqrt(sum(a * a for a in turned)) == pytest.approx(9.82)
+    arm.gravity = [0.0, 9.82, 0.0]  # a robot mounted on a wall
+    walled = lib_state.get_tool_accelerometer_reading(host)
+    rotation = frames.frame_of_pose(lib_state.get_actual_tcp_pose(host))
+    assert [sum(rotation[3 * i + k] * walled[k] for k in range(3)) for i in range(3)] == pytest.approx(
+        [0.0, 9.82, 0.0], abs=1e-9
+    )
+
+
+def test_free_air_getters_of_a_still_robot() -> None:
+    host = _host()
+    assert lib_state.get_tool_current(host) == 0.0
+    assert lib_state.get_controller_temp(host) == lib_state.CONTROLLER_TEMPERATURE
+    assert lib_state.get_tool_temp(host) == lib_state.JOINT_TEMPERATURE
+    before = list(host.arm.q)
+    lib_state.reset_revolution_counter(host, [0.0] * 6)
+    assert host.arm.q == before, "every joint of the model is limited to ±2π: nothing to unwind"
+    with pytest.raises(ScriptRuntimeError, match="qNear"):
+        lib_state.reset_revolution_counter(host, [0.0] * 5)

@@ -1,0 +1,91 @@
+"""Controller settings a program changes for later, and powerdown (lib_settings)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.urscript import ScriptRun, compile_program
+from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.lib_settings import settings_of
+from urdaemon.model import RobotMode
+
+DT = 0.002
+
+
+def _host() -> ScriptHost:
+    model = load_ur_model("ur5e")
+    arm = FakeArm(model, model.dh, powered=True)
+    arm.start_program()
+    return ScriptHost(arm, step_time=DT, version=(5, 17))
+
+
+def _run(host: ScriptHost, text: str, cycles: int = 20) -> ScriptRun:
+    run = compile_program(text, series="e", version=host.version).start(host)
+    for _ in range(cycles):
+        if run.done:
+            break
+        run.step()
+        host.arm.step(DT)
+    assert run.done
+    return run
+
+
+def test_settings_are_recorded_for_later_programs() -> None:
+    """On f5f0e26 each of these stopped the program with "not simulated"."""
+    host = _host()
+    run = _run(
+        host,
+        "set_base_acceleration([0.1, 0, -0.2])\n"
+        "set_safety_mode_transition_hardness(1)\n"
+        "pause_on_error_code(173, 2)\n"
+        "position_deviation_warning(True, 0.5)\n"
+        "high_holding_torque_disable()\n"
+        "set_baselight_solid(255, 128, 0)\n",
+    )
+    assert run.error is None
+    settings = settings_of(host.arm)
+    assert settings.base_acceleration == [0.1, 0.0, -0.2]
+    assert settings.safety_transition_hardness == 1
+    assert settings.pause_on_error == {(173, 2)}
+    assert settings.deviation_warning == (True, 0.5)
+    assert settings.high_holding_torque is False
+    assert settings.baselight == ("solid", (255.0, 128.0, 0.0))
+    later = _run(host, "global a = get_base_acceleration()\nset_baselight_iec()\n")
+    assert later.variable("a") == [0.1, 0.0, -0.2]
+    assert settings.baselight[0] == "iec"
+    other = load_ur_model("ur5e")
+    assert settings_of(FakeArm(other, other.dh)).base_acceleration == [0.0, 0.0, 0.0], "per robot"
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ("set_base_acceleration([1, 2])", "expected \\[x, y, z\\]"),
+        ("set_safety_mode_transition_hardness(2)", "0 or 1"),
+        ("position_deviation_warning(True, 1.5)", "threshold"),
+        ("set_baselight_solid(300, 0, 0)", "0..255"),
+        ('pause_on_error_code("C173", 0)', "integer"),
+    ],
+)
+def test_bad_settings_are_runtime_errors(line: str, words: str) -> None:
+    run = _run(_host(), line + "\n")
+    error = run.error
+    assert error is not None
+    assert error.line == 1
+    assert re.search(words, error.message), error.message
+
+
+def test_powerdown_powers_the_arm_off_and_ends_the_program() -> None:
+    """As URSim: the arm is POWER_OFF, the program stops at once (the line after it never runs)."""
+    host = _host()
+    run = _run(host, "global before = 1\npowerdown()\nglobal after = 2\n", cycles=3)
+    assert run.error is None
+    assert host.arm.robot_mode is RobotMode.POWER_OFF
+    assert host.arm.runtime_state is RuntimeState.STOPPED
+    assert run.variable("before") == 1
+    with pytest.raises(KeyError):
+        run.variable("after")
