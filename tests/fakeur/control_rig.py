@@ -26,7 +26,13 @@ from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRun
 from urdaemon.protocols import script_command as sc
 from urdaemon.protocols._buffer import Side
-from urdaemon.protocols.reverse import ReverseCommand, ReverseConnection, TrajectoryAction, TrajectoryControl
+from urdaemon.protocols.reverse import (
+    ReverseCommand,
+    ReverseConnection,
+    ServoJ,
+    TrajectoryAction,
+    TrajectoryControl,
+)
 from urdaemon.protocols.trajectory_point import (
     TrajectoryPoint,
     TrajectoryPointConnection,
@@ -38,6 +44,7 @@ from urdaemon.urscript import ScriptParameters, render_control_script
 __all__ = [
     "CB3_DT",
     "DT",
+    "hold_servo",
     "HOME",
     "NAMES",
     "REV",
@@ -276,11 +283,12 @@ class Rig:
                 return index
         raise AssertionError("the arm never moved")
 
-    def last_motion(self, after: int = 0) -> int:
-        """Index in ``history`` of the last cycle (from ``after``) in which the arm moved."""
+    def last_motion(self, after: int = 0, tolerance: float = 0.0) -> int:
+        """Index in ``history`` of the last cycle (from ``after``) in which the arm moved (a joint by more
+        than ``tolerance``: float noise of a path that ends on its target is not a motion)."""
         history = self.history
         for index in range(len(history) - 1, max(after, 1) - 1, -1):
-            if history[index] != history[index - 1]:
+            if any(abs(a - b) > tolerance for a, b in zip(history[index], history[index - 1], strict=True)):
                 return index
         raise AssertionError("the arm never moved")
 
@@ -290,6 +298,19 @@ class Rig:
     def variable(self, name: str) -> Any:
         """A program-level or global variable's value now."""
         return self.run.variable(name)
+
+
+async def hold_servo(rig: Rig, q: Sequence[float], tolerance: float = 1e-9, max_cycles: int = 1000) -> int:
+    """Send servo frame ``q`` every cycle until the arm is within ``tolerance`` of it, at rest within
+    ``tolerance`` rad/s (servoj's gain and
+    lookahead make the arm settle on a held setpoint, not reach it at once); the cycles it took."""
+    for count in range(1, max_cycles + 1):
+        rig.daemon.send(ServoJ(tuple(q), timeout=0.1))
+        await rig.step(1)
+        near = max(abs(a - b) for a, b in zip(rig.arm.q, q, strict=True)) < tolerance
+        if near and max(abs(v) for v in rig.arm.qd) < tolerance:
+            return count
+    raise AssertionError(f"the arm did not settle on {list(q)} within {max_cycles} cycles")
 
 
 def script_text(ports: dict[str, int], server_ip: str = "127.0.0.1", series: str = "e") -> str:
