@@ -136,3 +136,40 @@ def test_split_pieces_join_to_the_data_and_garble_flips_exactly_one_byte() -> No
     everything = FaultInjector(refused={"*"})
     assert everything.is_refused("rtde")
     assert everything.is_refused("dashboard")
+
+
+def test_fake_robot_walls_from_the_command_line_reach_every_arm() -> None:
+    """``--wall X,Y,Z,NX,NY,NZ[,K]`` puts a wall around the fake arm (fakeur/contact.py); before the
+    option (f5f0e26) a user had nothing the fake arm could touch. A bad wall is refused with the reason."""
+    import argparse
+
+    from urdaemon.errors import ConfigError
+    from urdaemon.fakeur.cli import add_surroundings_arguments, build_fakes, parse_wall
+
+    parser = argparse.ArgumentParser()
+    add_surroundings_arguments(parser)
+    walls = parser.parse_args(["--wall", "0,0,0.1,0,0,1", "--wall", "0.5,0,0,-2,0,0,5000"]).wall
+    args = argparse.Namespace(
+        config=None,
+        model="ur10e",
+        address=fake_address(),
+        controller_version="5.15.0",
+        calibration=None,
+        powered=True,
+        urcap=None,
+        refuse=[],
+        split=[],
+        delay=0.0,
+        programs=None,
+        wall=walls,
+    )
+    (fake,) = build_fakes(args)
+    surroundings = fake.arm.surroundings
+    assert surroundings is not None
+    assert [(w.point, w.normal, w.stiffness) for w in surroundings.walls] == [
+        ((0.0, 0.0, 0.1), (0.0, 0.0, 1.0), 20_000.0),
+        ((0.5, 0.0, 0.0), (-1.0, 0.0, 0.0), 5000.0),
+    ]
+    for bad, reason in (("0,0,1", "6 or 7"), ("0,0,0,0,0,0", "normal"), ("a,0,0,0,0,1", "could not convert")):
+        with pytest.raises(ConfigError, match=reason):
+            parse_wall(bad)

@@ -16,6 +16,11 @@ goes on along its path with time slowed to a stop, decelerating within the joint
 (PAUSED → PLAYING) ramps it back to 1 the same way. The controller steps the program while it plays
 or pauses, never while it is PAUSED.
 
+What the arm touches (walls, a push on the tool: ``surroundings``, fakeur/contact.py) is stepped after
+the motion: it makes ``tcp_force``, moves the compliant axes in force mode and the free ones in
+freedrive, and protective-stops the arm when a wall pushes back harder than the force limit. Without
+surroundings (None) the arm moves in free air and the step costs one attribute check.
+
 State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
 POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
 Power off from anywhere → POWER_OFF. A protective stop keeps the mode but stops motion until

@@ -11,11 +11,12 @@ from urdaemon.cell import load_cell
 from urdaemon.description.calibration import load_calibration, robot_dh
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError
+from urdaemon.fakeur.contact import Wall, surroundings_of
 from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
 from urdaemon.scheduling import startup_objects_frozen
 
-__all__ = ["build_fakes", "parse_version", "run_fakes"]
+__all__ = ["add_surroundings_arguments", "build_fakes", "parse_version", "parse_wall", "run_fakes"]
 
 DAEMON_HOST = "127.0.0.1"
 """Where a fake in URCap mode finds the daemon's script sender when built from a cell file."""
@@ -28,6 +29,38 @@ def parse_version(text: str) -> tuple[int, int, int, int]:
         raise ConfigError(f"--controller-version {text!r}: expected numbers like 5.15.0")
     numbers = [int(p) for p in parts] + [0] * (4 - len(parts))
     return (numbers[0], numbers[1], numbers[2], numbers[3])
+
+
+def parse_wall(text: str) -> Wall:
+    """``X,Y,Z,NX,NY,NZ[,STIFFNESS]`` (m, a normal toward the free side, N/m) → a wall; ConfigError if not."""
+    parts = text.split(",")
+    try:
+        numbers = [float(p) for p in parts]
+        if len(numbers) not in (6, 7):
+            raise ValueError("expected 6 or 7 numbers")
+        return Wall.of(numbers[:3], numbers[3:6], *numbers[6:])
+    except ValueError as err:
+        raise ConfigError(f"--wall {text!r}: expected X,Y,Z,NX,NY,NZ[,STIFFNESS] ({err})") from None
+
+
+def add_surroundings_arguments(parser: argparse.ArgumentParser) -> None:
+    """``fake-robot``'s options for what the fake arms touch (fakeur/contact.py)."""
+    parser.add_argument(
+        "--wall",
+        action="append",
+        default=[],
+        metavar="X,Y,Z,NX,NY,NZ[,K]",
+        help="a wall every fake arm touches: a point and the normal toward the free side in the base frame "
+        "(m), optionally its stiffness K in N/m (default 20000); try tool contact and force mode on it",
+    )
+
+
+def _place_walls(fakes: list[FakeController], args: argparse.Namespace) -> list[FakeController]:
+    walls = [parse_wall(text) for text in getattr(args, "wall", None) or []]
+    if walls:
+        for fake in fakes:
+            surroundings_of(fake.arm).walls.extend(walls)
+    return fakes
 
 
 def _programs(args: argparse.Namespace) -> Path | None:
@@ -47,7 +80,11 @@ def _faults(args: argparse.Namespace) -> FaultInjector:
 
 
 def build_fakes(args: argparse.Namespace) -> list[FakeController]:
-    """The fakes the arguments describe."""
+    """The fakes the arguments describe, with the walls it names."""
+    return _place_walls(_build_fakes(args), args)
+
+
+def _build_fakes(args: argparse.Namespace) -> list[FakeController]:
     version = parse_version(args.controller_version)
     if args.config:
         cell = load_cell(args.config)
