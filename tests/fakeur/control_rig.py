@@ -44,7 +44,6 @@ from urdaemon.urscript import ScriptParameters, render_control_script
 __all__ = [
     "CB3_DT",
     "DT",
-    "hold_servo",
     "HOME",
     "NAMES",
     "REV",
@@ -54,6 +53,7 @@ __all__ = [
     "ZERO",
     "Daemon",
     "Rig",
+    "hold_servo",
     "j0",
     "make_arm",
     "running_script",

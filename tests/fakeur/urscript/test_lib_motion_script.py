@@ -112,3 +112,59 @@ def test_movej_out_of_the_joint_limits_is_a_protective_stop() -> None:
     run.step()
     arm.step(DT)
     assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+
+
+SERVO_STEP = """def servo_step():
+  target = get_actual_joint_positions()
+  target[0] = target[0] + 0.1
+  swings = 0
+  side = -1
+  peak = 0.0
+  i = 0
+  while i < 1000:
+    servoj(target, t=0.002, lookahead_time={lookahead}, gain={gain})
+    e = get_actual_joint_positions()[0] - target[0]
+    if e > 0.0001 and side < 0:
+      swings = swings + 1
+      side = 1
+    elif e < -0.0001 and side > 0:
+      swings = swings + 1
+      side = -1
+    end
+    if e > peak:
+      peak = e
+    end
+    i = i + 1
+  end
+  textmsg("swings ", swings)
+  textmsg("overshoot ", peak)
+end
+"""
+
+
+def _servo_step(lookahead: float, gain: int) -> tuple[int, float]:
+    """(times the joint swung past the setpoint by more than 0.1 mrad, peak overshoot in rad)."""
+    _, messages, _ = _run(SERVO_STEP.format(lookahead=lookahead, gain=gain))
+    texts = [text for _, text in messages]
+    swings = [int(t.removeprefix("swings ")) for t in texts if t.startswith("swings ")]
+    peaks = [float(t.removeprefix("overshoot ")) for t in texts if t.startswith("overshoot ")]
+    assert len(swings) == 1, texts
+    assert len(peaks) == 1, texts
+    return swings[0], peaks[0]
+
+
+def test_a_servoj_stream_with_low_gain_and_short_lookahead_oscillates_more() -> None:
+    """A program holding a 0.1 rad step with servoj for 1000 cycles, counting in URScript how often the
+    joint swings past the setpoint: the manual's gain/lookahead make 100 / 0.03 (damping ratio 0.15)
+    ring for several swings and 300 / 0.1 (0.87) overshoot at most once, by about exp(-πζ/√(1-ζ²)).
+    On f5f0e26 servoj reached the setpoint exactly in each call: no swing, no overshoot, either way."""
+    ringing, ringing_peak = _servo_step(0.03, 100)
+    damped, damped_peak = _servo_step(0.1, 300)
+    assert ringing >= 4
+    assert damped <= 1
+    assert ringing > damped
+    zeta = 0.5 * 0.03 * math.sqrt(100)
+    assert ringing_peak == pytest.approx(
+        0.1 * math.exp(-math.pi * zeta / math.sqrt(1 - zeta * zeta)), rel=0.05
+    )
+    assert damped_peak < 0.01 * ringing_peak
