@@ -181,23 +181,26 @@ def test_runstate_outputs_apply_when_programs_start_and_stop() -> None:
         "set_runstate_tool_digital_output_to_value(1, 3)\n"  # high while running, low when stopped
         "set_runstate_gp_boolean_output_to_value(70, 1)\n"  # low when stopped
         "set_runstate_standard_analog_output_to_value(1, 2)\n"  # maximum when stopped
+        "set_runstate_standard_analog_output_to_value(0, 3)\n"  # maximum while running, minimum when stopped
         "set_runstate_configurable_digital_output_to_value(4, 0)\n",  # keep its value
     )
     assert error is None
     arm.io.registers_bit[70] = True
     arm.io.digital_out = 1 << 12
+    arm.io.analog_out[1] = 0.25
     io.apply_runstate_outputs(arm, running=True)
     assert arm.io.digital_out == (1 << 12) | (1 << 17)
+    assert arm.io.analog_out == [1.0, 0.25]
     io.apply_runstate_outputs(arm, running=False)
     assert arm.io.digital_out == (1 << 12) | (1 << 0)
     assert arm.io.registers_bit[70] is False
-    assert arm.io.analog_out[1] == 1.0
+    assert arm.io.analog_out == [0.0, 1.0]
     error = _run(host, "set_runstate_standard_digital_output_to_value(0, 4)\n")
     assert error is not None
     assert "0..3" in error.message
-    error = _run(host, "set_runstate_standard_analog_output_to_value(0, 3)\n")
+    error = _run(host, "set_runstate_standard_analog_output_to_value(0, 4)\n")
     assert error is not None
-    assert "0..2" in error.message
+    assert "0..3" in error.message
 
 
 def test_analog_input_ranges_and_tool_domains() -> None:

@@ -10,7 +10,7 @@ from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
 from urdaemon.fakeur.urscript import ScriptRun, compile_program
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.lib_settings import settings_of
+from urdaemon.fakeur.urscript.lib_settings import pause_on_error_of, settings_of
 from urdaemon.model import RobotMode
 
 DT = 0.002
@@ -50,13 +50,16 @@ def test_settings_are_recorded_for_later_programs() -> None:
     settings = settings_of(host.arm)
     assert settings.base_acceleration == [0.1, 0.0, -0.2]
     assert settings.safety_transition_hardness == 1
-    assert settings.pause_on_error == {(173, 2)}
+    assert pause_on_error_of(host) == {(173, 2)}
     assert settings.deviation_warning == (True, 0.5)
     assert settings.high_holding_torque is False
     assert settings.baselight == ("solid", (255.0, 128.0, 0.0))
     later = _run(host, "global a = get_base_acceleration()\nset_baselight_iec()\n")
     assert later.variable("a") == [0.1, 0.0, -0.2]
     assert settings.baselight[0] == "iec"
+    assert pause_on_error_of(host) == {(173, 2)}, "the same program's host"
+    fresh = ScriptHost(host.arm, step_time=DT)
+    assert pause_on_error_of(fresh) == set(), "the manual resets it when the program stops"
     other = load_ur_model("ur5e")
     assert settings_of(FakeArm(other, other.dh)).base_acceleration == [0.0, 0.0, 0.0], "per robot"
 

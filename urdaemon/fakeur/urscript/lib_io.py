@@ -415,9 +415,9 @@ def set_input_actions_to_default(host: ScriptHost) -> None:
 RUNSTATE_DIGITAL: Final = (0, 1, 2, 3)
 """A digital output's run-state choice: 0 keep its value, 1 low while no program runs, 2 high while no
 program runs, 3 high while a program runs and low while none does."""
-RUNSTATE_ANALOG: Final = (0, 1, 2)
+RUNSTATE_ANALOG: Final = (0, 1, 2, 3)
 """An analog output's run-state choice: 0 keep its value, 1 its minimum while no program runs, 2 its
-maximum while no program runs."""
+maximum while no program runs, 3 its maximum while a program runs and its minimum while none does."""
 _OUTPUT_GROUPS: Final = {
     "standard": _STANDARD,
     "configurable": _CONFIGURABLE,
@@ -448,14 +448,12 @@ def apply_runstate_outputs(arm: FakeArm, running: bool) -> None:
         return
     io = arm.io
     for (group, output), choice in outputs.items():
-        if group == "analog":
-            if not running:
-                io.analog_out[output] = 0.0 if choice == 1 else 1.0
-            continue
         if choice in (1, 2) and running:
             continue
         high = choice == 2 or (choice == 3 and running)
-        if group == "gp_boolean":
+        if group == "analog":
+            io.analog_out[output] = 1.0 if high else 0.0
+        elif group == "gp_boolean":
             io.registers_bit[output] = high
         else:
             bit = 1 << (_OUTPUT_GROUPS[group][0] + output)

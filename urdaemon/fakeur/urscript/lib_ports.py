@@ -4,7 +4,8 @@ UR documents that map for its Modbus TCP server on port 502 ("Modbus server", un
 articles): the fake gives programs the part of it that is the arm's IO (``arm.io``) and state. Addresses
 the fake maps:
 
-Registers (16-bit, unsigned: a negative value reads as its two's complement)
+Registers (16 bits; ``read_port_register`` returns them signed, -32768..32767, as the manual says;
+``write_port_register`` takes -32768..65535)
   0 inputs (bits 0-7 standard, 8-9 tool; R) · 1 outputs (same bits; R/W) · 2 / 3 set / clear those
   outputs by mask (W) · 4, 6 analog inputs 0-1 and 8, 10 the tool's (mA or mV; R) · 5, 7, 9, 11 their
   domains (0 current, 1 voltage; R/W) · 16, 18 analog outputs 0-1 (mA or mV; R/W) · 17, 19 their domains
@@ -115,6 +116,12 @@ def _state_registers(arm: FakeArm) -> dict[int, Callable[[], float]]:
     return table
 
 
+def _signed(value: int) -> int:
+    """A register's 16 bits as the signed integer ``read_port_register`` returns (-32768..32767)."""
+    value &= 0xFFFF
+    return value - 0x10000 if value & 0x8000 else value
+
+
 def _read_register(host: ScriptHost, address: int) -> int:
     arm = host.arm
     io = arm.io
@@ -142,11 +149,11 @@ def _read_register(host: ScriptHost, address: int) -> int:
         257: lambda: host.version[1],
     }
     if address in GENERAL_PURPOSE:
-        return settings_of(arm).port_registers.get(address, 0)
+        return _signed(settings_of(arm).port_registers.get(address, 0))
     read = simple.get(address) or _state_registers(arm).get(address)
     if read is None:
         raise ScriptRuntimeError(f"read_port_register: address {address} is not readable on the fake's map")
-    return int(read()) & 0xFFFF
+    return _signed(int(read()))
 
 
 def _write_register(host: ScriptHost, address: int, value: int) -> None:
@@ -185,19 +192,19 @@ def _write_register(host: ScriptHost, address: int, value: int) -> None:
 
 @builtin("read_port_register")
 def read_port_register(host: ScriptHost, address: Any) -> int:
-    """The 16-bit register at ``address`` of the controller's Modbus map (see the module's table)."""
+    """The register at ``address`` of the controller's Modbus map, signed (see the module's table)."""
     return _read_register(host, _address("read_port_register", address))
 
 
 @builtin("write_port_register")
 def write_port_register(host: ScriptHost, address: Any, value: Any) -> None:
-    """Write ``value`` (0..65535) to the register at ``address`` (see the module's table)."""
+    """Write ``value`` (-32768..65535: its low 16 bits) to the register at ``address``."""
     index = _address("write_port_register", address)
     if isinstance(value, float) and value.is_integer():
         value = int(value)
-    if value.__class__ is not int or not 0 <= value <= 0xFFFF:
-        raise ScriptRuntimeError(f"write_port_register: {value!r} is not a 16-bit value (0..65535)")
-    _write_register(host, index, int(value))
+    if value.__class__ is not int or not -0x8000 <= value <= 0xFFFF:
+        raise ScriptRuntimeError(f"write_port_register: {value!r} is not a 16-bit value")
+    _write_register(host, index, int(value) & 0xFFFF)
 
 
 @builtin("read_port_bit")

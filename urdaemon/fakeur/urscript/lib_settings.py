@@ -19,7 +19,7 @@ from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, _Halt, builtin
 
-__all__ = ["BASELIGHT_MODES", "ControllerSettings", "settings_of"]
+__all__ = ["BASELIGHT_MODES", "ControllerSettings", "pause_on_error_of", "settings_of"]
 
 BASELIGHT_MODES: Final = ("iec", "off", "solid")
 """What the base light shows: the IEC status colours (the default), nothing, or one colour."""
@@ -33,10 +33,9 @@ class ControllerSettings:
 
     base_acceleration: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     """m/s² in the base frame (``set_base_acceleration``): the mobile platform's acceleration."""
-    safety_transition_hardness: int = 0
-    """``set_safety_mode_transition_hardness``: 0 or 1 as the manual numbers them."""
-    pause_on_error: set[tuple[int, int]] = field(default_factory=set)
-    """(code, argument) pairs that pause the program (``pause_on_error_code``)."""
+    safety_transition_hardness: int | None = None
+    """``set_safety_mode_transition_hardness``: 0 hard (maximum torque, like an emergency stop), 1 soft;
+    None until a program sets it (the installation's choice)."""
     deviation_warning: tuple[bool, float] = (False, 0.8)
     """``position_deviation_warning``: enabled, threshold (share of the protective-stop deviation)."""
     high_holding_torque: bool = True
@@ -56,6 +55,20 @@ class ControllerSettings:
 
 
 _SETTINGS: Final[weakref.WeakKeyDictionary[FakeArm, ControllerSettings]] = weakref.WeakKeyDictionary()
+
+
+_PAUSE_ON_ERROR: Final[weakref.WeakKeyDictionary[ScriptHost, set[tuple[int, int]]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def pause_on_error_of(host: ScriptHost) -> set[tuple[int, int]]:
+    """The (code, argument) pairs ``pause_on_error_code`` set in the program of ``host``: the manual
+    resets them when the program stops, so they belong to the program, not the robot."""
+    found = _PAUSE_ON_ERROR.get(host)
+    if found is None:
+        found = _PAUSE_ON_ERROR[host] = set()
+    return found
 
 
 def settings_of(arm: FakeArm) -> ControllerSettings:
@@ -106,8 +119,8 @@ def get_base_acceleration(host: ScriptHost) -> UrList:
 
 @builtin("set_safety_mode_transition_hardness")
 def set_safety_mode_transition_hardness(host: ScriptHost, type: Any) -> None:
-    """How hard the arm stops on a safety mode change: 0 or 1 (recorded; the fake's stops keep their
-    own decelerations, see fakeur/arm.py)."""
+    """How hard the arm stops between normal, reduced and safeguard stop: 0 hard, 1 soft (recorded;
+    the fake's stops keep their own decelerations, see fakeur/arm.py)."""
     hardness = _integer("set_safety_mode_transition_hardness", type)
     if hardness not in (0, 1):
         raise ScriptRuntimeError(f"set_safety_mode_transition_hardness: type must be 0 or 1, got {hardness}")
@@ -116,10 +129,10 @@ def set_safety_mode_transition_hardness(host: ScriptHost, type: Any) -> None:
 
 @builtin("pause_on_error_code")
 def pause_on_error_code(host: ScriptHost, code: Any, argument: Any) -> None:
-    """Pause the program when error ``code`` with ``argument`` occurs: recorded (the fake raises no
-    coded controller errors of its own, so it never matches)."""
+    """Pause the program when error ``code`` with ``argument`` occurs: recorded for this program (the
+    fake raises no coded controller errors of its own, so it never matches)."""
     pair = (_integer("pause_on_error_code code", code), _integer("pause_on_error_code argument", argument))
-    settings_of(host.arm).pause_on_error.add(pair)
+    pause_on_error_of(host).add(pair)
 
 
 @builtin("position_deviation_warning")
