@@ -92,3 +92,26 @@ def test_powerdown_powers_the_arm_off_and_ends_the_program() -> None:
     assert run.variable("before") == 1
     with pytest.raises(KeyError):
         run.variable("after")
+
+
+async def test_powerdown_on_the_controller_stops_the_program_and_powers_off() -> None:
+    """End to end on a fake controller whose clock the test turns: the program sent on the primary
+    interface starts, calls powerdown, and the controller reports it stopped with the arm POWER_OFF.
+    On f5f0e26 powerdown stopped the program with "not simulated" and the arm stayed RUNNING."""
+    from tests.fakeur.test_controller import Link
+    from tests.fakeur.test_controller_life import manual_fake
+    from urdaemon.protocols import primary as prim
+    from urdaemon.protocols._buffer import Side
+
+    async with manual_fake(powered=True) as (controller, clock):
+        link = await Link.open(prim.PrimaryConnection(Side.DAEMON), controller.address, 30001)
+        await link.next(prim.VersionMessage)
+        link.writer.write(b'def shutdown():\n  sync()\n  powerdown()\n  textmsg("still here")\nend\n')
+        started = await link.next(prim.KeyMessage)
+        assert (started.title, started.text) == ("PROGRAM_XXX_STARTED", "shutdown")
+        clock.until(lambda: controller.programs.main is None, limit=50)
+        stopped = await link.next(prim.KeyMessage)
+        assert (stopped.title, stopped.text) == ("PROGRAM_XXX_STOPPED", "shutdown")
+        assert controller.arm.robot_mode is RobotMode.POWER_OFF
+        assert controller.arm.runtime_state is RuntimeState.STOPPED
+        link.close()
