@@ -62,7 +62,8 @@ __all__ = [
 ]
 
 DEFAULT_WALL_STIFFNESS: Final = 20_000.0
-"""N/m: a wall's stiffness unless given (a stiff fixture felt through the arm's own compliance)."""
+"""N/m: a wall's stiffness unless given (a stiff fixture felt through the arm's own compliance). The
+admittances below stay stable against walls up to about 1e5 N/m at 2 ms and 5e4 N/m at 8 ms cycles."""
 FORCE_LIMIT_N: Final = 150.0
 """N: the e-Series safety configuration's default force limit (normal mode); a wall pressing harder
 than this protective-stops the arm."""
