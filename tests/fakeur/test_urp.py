@@ -148,6 +148,49 @@ TABLE = [
 ]
 
 
+IF_CHAIN = (
+    f'<If type="If" checkContinuously="false"><expression>{chars("x == 1")}</expression>'
+    "<children><Halt/></children></If>"
+    f'<If type="ElseIf" checkContinuously="false"><expression>{chars("x ≟ 2")}</expression>'
+    f"<children>{WAIT_PROGRAM}</children></If>"
+    '<If type="Else" checkContinuously="false"><expression/><children><Comment comment="x"/>'
+    "</children></If>"
+)
+VARIABLE = (
+    '<Assignment valueSource="Expression"><variable name="count" prefersPersistentValue="false">'
+    f"<initializeExpression/></variable><expression>{chars('0')}</expression></Assignment>"
+)
+TABLE += [
+    ("if elif else", IF_CHAIN, ["if (x == 1):", "halt", "elif (x == 2):", "sleep(0.01)", "else:", "end"]),
+    (
+        "if alone, then a node",
+        f'<If type="If"><expression>{chars("x ≠ 1")}</expression><children><Halt/></children></If><Halt/>',
+        ["if (x != 1):", "halt", "end", "halt"],
+    ),
+    (
+        "while loop",
+        f'<Loop type="While" checkContinuously="false"><expression>{chars("x ≤ 3")}</expression>'
+        f"<children>{WAIT_PROGRAM}</children></Loop>",
+        ["while (x <= 3):", "sleep(0.01)", "end"],
+    ),
+    (
+        "tokens and variable references",
+        VARIABLE + '<Assignment valueSource="Expression"><variable reference="../../Assignment/variable"/>'
+        "<expression><ExpressionVariable><ProgramVariable reference="
+        '"../../../../Assignment/variable"/></ExpressionVariable>'
+        f"{chars(' + 1')}</expression></Assignment>"
+        f'<If type="If"><expression><ExpressionToken token=" not "/>{chars("(count ≥ 1)")}</expression>'
+        "<children><Halt/></children></If>",
+        ["global count = 0", "global count = count + 1", "if ( not (count >= 1)):", "halt", "end"],
+    ),
+    (
+        "a suppressed node does not run",
+        f'<SuppressedNode><suppressedNode class="Halt"/></SuppressedNode>{WAIT_PROGRAM}',
+        ["sleep(0.01)"],
+    ),
+]
+
+
 @pytest.mark.parametrize(("nodes", "expected"), [(n, e) for _, n, e in TABLE], ids=[t[0] for t in TABLE])
 def test_each_program_node_translates_to_its_urscript(nodes: str, expected: list[str]) -> None:
     assert body(nodes) == expected
@@ -191,6 +234,19 @@ def test_the_before_start_sequence_runs_once_before_the_loop() -> None:
     assert script.index("halt") < script.index("while (True):")
 
 
+def test_a_thread_node_runs_beside_the_main_program() -> None:
+    xml = gzip.decompress(urp(WAIT_PROGRAM)).decode()
+    thread = f'<Thread name="Thread_1" runOnlyOnce="false"><children>{WAIT_PROGRAM}</children></Thread>'
+    data = gzip.compress(xml.replace("</MainProgram>", "</MainProgram>" + thread).encode())
+    script = translate(data, "demo.urp").script
+    assert script is not None
+    statements = [line.strip() for line in script.splitlines() if not line.strip().startswith("$")]
+    assert statements[1:6] == ["thread Thread_1():", "while (True):", "sleep(0.01)", "end", "end"]
+    assert statements[6] == "threadId_Thread_1 = run Thread_1()"
+    assert statements.index("threadId_Thread_1 = run Thread_1()") < statements.index("while (True):", 3)
+    compile_program(script, "e", (5, 15))
+
+
 def test_the_program_name_becomes_a_def_name() -> None:
     assert translate(urp(WAIT_PROGRAM, name="my program-2"), "x.urp").name == "my_program_2"
     assert translate(urp(WAIT_PROGRAM, name="2nd"), "x.urp").name == "p2nd"
@@ -205,7 +261,15 @@ def test_the_external_control_node_alone_is_the_external_control_program() -> No
 @pytest.mark.parametrize(
     ("data", "reason"),
     [
-        (urp('<Loop type="Forever"><children/></Loop>'), "<Loop>"),
+        (urp('<Loop type="Counting"><children/></Loop>'), '<Loop type="Counting">'),
+        (urp('<If type="Else"><children/></If>'), "follows no <If>"),
+        (urp('<If type="If" checkContinuously="true"><children/></If>'), "checkContinuously"),
+        (urp('<Timer action="Start"/>'), "<Timer>"),
+        (urp('<Assignment valueSource="Operator"><variable name="x"/></Assignment>'), "Operator"),
+        (
+            urp('<Assignment valueSource="Expression"><variable reference="../No/variable"/></Assignment>'),
+            "not in the program",
+        ),
         (
             urp('<Contributed strategyClass="x.Grip" strategyProgramNodeType="RG Grip"/>'),
             "<Contributed> (RG Grip)",

@@ -45,6 +45,8 @@ _PINS_OUT = {
 }
 _PIN = re.compile(r"^([a-z_]+)\[(\d+)\]$")
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_EDITOR_SYMBOLS = {"\u225f": "==", "\u2260": "!=", "\u2264": "<=", "\u2265": ">="}
+"""The expression editor's symbols (≟ ≠ ≤ ≥) stored in a program, and the operators they stand for."""
 _POPUPS = {  # type -> (title, warning, error)
     "Message": ("Message", "False", "False"),
     "Warning": ("Warning", "True", "False"),
@@ -76,16 +78,21 @@ class UrpProgram:
 def translate(data: bytes, file_name: str) -> UrpProgram:
     """The program a ``.urp`` file holds (``file_name`` names the def if the XML does not)."""
     root = _parse(data)
+    _PARENTS.clear()
+    _PARENTS.update({child: parent for parent in root.iter() for child in parent})
     if root.tag != "URProgram":
         raise UrpRefused(f"not a PolyScope program: the root element is <{root.tag}>")
     name = _identifier(root.get("name") or file_name.rsplit("/", 1)[-1].removesuffix(".urp"))
     before: ElementTree.Element | None = None
     main: ElementTree.Element | None = None
+    threads: list[ElementTree.Element] = []
     for node in _children(root):
         if node.tag == "MainProgram":
             main = node
         elif node.tag == "SpecialSequence" and node.get("type") == "BeforeStart":
             before = node
+        elif node.tag == "Thread":
+            threads.append(node)
         elif node.tag not in ("InitVariablesNode", "SubProgram"):
             raise UrpRefused(f"program node <{node.tag}> is not simulated by the fake")
     if main is None:
@@ -95,7 +102,7 @@ def translate(data: bytes, file_name: str) -> UrpProgram:
         raise UrpRefused("the program is empty")
     loops = main.get("runOnlyOnce", "true").lower() == "false"
     if any(_is_external_control(node) for node in body):
-        if len(body) != 1 or before is not None:
+        if len(body) != 1 or before is not None or threads:
             raise UrpRefused("the External Control node is simulated only as the program's one node")
         return UrpProgram(name, None, external_control=True, loops=loops)
     writer = _Writer()
@@ -103,6 +110,8 @@ def translate(data: bytes, file_name: str) -> UrpProgram:
     if before is not None:
         writer.step(2, "BeforeStart")
         writer.nodes(2, _children(before))
+    for thread in threads:
+        writer.thread(2, thread)
     writer.step(2, "Robot Program")
     if loops:
         writer.line(2, "while (True):")
@@ -152,12 +161,62 @@ def _ascii(text: str) -> str:
     return text.encode("ascii", "replace").decode("ascii")
 
 
+_PARENTS: dict[ElementTree.Element, ElementTree.Element] = {}
+"""Each element's parent in the program being translated (references are relative paths)."""
+
+
+def _resolve(node: ElementTree.Element) -> ElementTree.Element:
+    """The element a ``reference="../../If/children/Assignment[2]/variable"`` attribute points to
+    (PolyScope writes a variable once and refers to it by its path from then on)."""
+    seen = 0
+    while (path := node.get("reference")) is not None:
+        seen += 1
+        target: ElementTree.Element | None = node
+        for part in path.split("/"):
+            if target is None or seen > 32:
+                break
+            if part == "..":
+                target = _PARENTS.get(target)
+                continue
+            match = re.fullmatch(r"([A-Za-z_][\w.-]*)(?:\[(\d+)\])?", part)
+            if match is None:
+                target = None
+                break
+            matches = target.findall(match.group(1))
+            index = int(match.group(2) or 1) - 1
+            target = matches[index] if index < len(matches) else None
+        if target is None:
+            raise UrpRefused(f"<{node.tag}> refers to {path!r}, which is not in the program")
+        node = target
+    return node
+
+
+def _variable_name(node: ElementTree.Element | None, what: str) -> str:
+    name = "" if node is None else _resolve(node).get("name", "")
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise UrpRefused(f"<{what}> names no variable")
+    return name
+
+
 def _expression(node: ElementTree.Element, what: str) -> str:
-    """The expression a node stores one character per ``<ExpressionChar>``."""
+    """The expression a node stores one ``<ExpressionChar>`` per character, with
+    ``<ExpressionToken>`` words (`` True ``, `` not ``) and ``<ExpressionVariable>`` elements standing
+    for program variables."""
     holder = node.find("expression")
     if holder is None:
         raise UrpRefused(f"<{what}> without an <expression>")
-    text = "".join(char.get("character", "") for char in holder.iter("ExpressionChar"))
+    parts = []
+    for part in holder:
+        if part.tag == "ExpressionChar":
+            character = part.get("character", "")
+            parts.append(_EDITOR_SYMBOLS.get(character, character))
+        elif part.tag == "ExpressionToken":  # a word the expression editor inserted whole
+            parts.append(part.get("token", ""))
+        elif part.tag == "ExpressionVariable" and len(part) == 1:
+            parts.append(_variable_name(part[0], what))
+        else:
+            raise UrpRefused(f"<{what}>: expression part <{part.tag}> is not simulated by the fake")
+    text = "".join(parts)
     if not text.strip():
         raise UrpRefused(f"<{what}> with an empty expression")
     return text
@@ -192,6 +251,8 @@ class _Writer:
     def __init__(self) -> None:
         self._lines: list[str] = []
         self._steps = 0
+        self._open_if = False
+        """An ``If`` (or ``ElseIf``) was written and its ``end`` waits for the next sibling."""
 
     def text(self) -> str:
         return "\n".join(self._lines) + "\n"
@@ -204,7 +265,10 @@ class _Writer:
         self.line(depth, f'$ {self._steps} "{_ascii(label)}"')
 
     def nodes(self, depth: int, nodes: list[ElementTree.Element]) -> None:
-        for node in nodes:
+        for index, node in enumerate(nodes):
+            if node.tag == "If":
+                self.branch(depth, node, nodes[index + 1] if index + 1 < len(nodes) else None)
+                continue
             handler = _NODES.get(node.tag)
             if handler is None:
                 what = node.get("strategyProgramNodeType") if node.tag == "Contributed" else None
@@ -248,10 +312,9 @@ class _Writer:
 
     def assignment(self, depth: int, node: ElementTree.Element) -> None:
         source = node.get("valueSource", "Expression")
-        variable = node.find("variable")
-        name = "" if variable is None else variable.get("name", "")
-        if source != "Expression" or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-            raise UrpRefused(f'<Assignment valueSource="{source}"> to {name!r} is not simulated by the fake')
+        name = _variable_name(node.find("variable"), "Assignment")
+        if source != "Expression":
+            raise UrpRefused(f'<Assignment valueSource="{source}"> to {name} is not simulated by the fake')
         value = _expression(node, "Assignment")
         self.step(depth, f"{name} = {value}")
         self.line(depth, f"global {name} = {value}")
@@ -285,6 +348,57 @@ class _Writer:
     def folder(self, depth: int, node: ElementTree.Element) -> None:
         self.step(depth, node.get("name", "Folder"))
         self.nodes(depth, _children(node))
+
+    def branch(self, depth: int, node: ElementTree.Element, after: ElementTree.Element | None) -> None:
+        """One ``<If>`` of a chain: PolyScope saves ``If``, ``ElseIf`` and ``Else`` as siblings."""
+        kind = node.get("type", "If")
+        if node.get("checkContinuously", "false").lower() != "false":
+            raise UrpRefused(f'<If type="{kind}" checkContinuously="true"> is not simulated by the fake')
+        if kind == "If":
+            opens = f"if ({_expression(node, 'If')}):"
+        elif kind == "ElseIf":
+            opens = f"elif ({_expression(node, 'If')}):"
+        elif kind == "Else":
+            opens = "else:"
+        else:
+            raise UrpRefused(f'program node <If type="{kind}"> is not simulated by the fake')
+        if kind != "If" and not self._open_if:
+            raise UrpRefused(f'<If type="{kind}"> follows no <If>')
+        self.step(depth, kind)
+        self.line(depth, opens)
+        self.nodes(depth + 1, _children(node))
+        continues = after is not None and after.tag == "If" and after.get("type") in ("ElseIf", "Else")
+        self._open_if = continues and kind != "Else"
+        if not continues or kind == "Else":
+            self.line(depth, "end")
+
+    def loop(self, depth: int, node: ElementTree.Element) -> None:
+        kind = node.get("type", "")
+        if kind != "While" or node.get("checkContinuously", "false").lower() != "false":
+            raise UrpRefused(f'program node <Loop type="{kind}"> is not simulated by the fake')
+        condition = _expression(node, "Loop")
+        self.step(depth, f"Loop {condition}")
+        self.line(depth, f"while ({condition}):")
+        self.nodes(depth + 1, _children(node))
+        self.line(depth, "end")
+
+    def thread(self, depth: int, node: ElementTree.Element) -> None:
+        """A ``<Thread>``: defined, then started before the main program's body, looping unless
+        ``runOnlyOnce``."""
+        name = _identifier(node.get("name", "Thread"))
+        self.line(depth, f"thread {name}():")
+        self.step(depth + 1, name)
+        if node.get("runOnlyOnce", "false").lower() == "false":
+            self.line(depth + 1, "while (True):")
+            self.nodes(depth + 2, _children(node))
+            self.line(depth + 1, "end")
+        else:
+            self.nodes(depth + 1, _children(node))
+        self.line(depth, "end")
+        self.line(depth, f"threadId_{name} = run {name}()")
+
+    def suppressed(self, depth: int, node: ElementTree.Element) -> None:
+        """A node the programmer suppressed: PolyScope keeps it in the tree and does not run it."""
 
     def halt(self, depth: int, node: ElementTree.Element) -> None:
         self.step(depth, "Halt")
@@ -337,4 +451,6 @@ _NODES = {
     "Folder": _Writer.folder,
     "Halt": _Writer.halt,
     "Move": _Writer.move,
+    "Loop": _Writer.loop,
+    "SuppressedNode": _Writer.suppressed,
 }
