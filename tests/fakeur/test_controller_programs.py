@@ -317,7 +317,7 @@ async def test_a_urp_with_a_node_the_fake_cannot_run_is_refused_at_load_naming_i
     dashboard's "Error while loading program" and a robot message names the node; what was loaded
     before stays loaded."""
     _write_urp(tmp_path / "wait_program.urp", WAIT_PROGRAM_URP)
-    _write_urp(tmp_path / "grip.urp", WAIT_PROGRAM_URP.replace("<Wait", '<Loop type="Forever"/><Wait'))
+    _write_urp(tmp_path / "grip.urp", WAIT_PROGRAM_URP.replace("<Wait", '<Timer action="Start"/><Wait'))
     async with manual_fake(powered=True, programs=tmp_path) as (controller, _):
         primary = await _primary(controller)
         link = await _dashboard(controller.address)
@@ -326,7 +326,7 @@ async def test_a_urp_with_a_node_the_fake_cannot_run_is_refused_at_load_naming_i
         assert not refused.success
         assert refused.text == f"Error while loading program: {tmp_path}/grip.urp"
         message = await primary.next(prim.TextMessage)
-        assert "<Loop>" in message.text
+        assert "<Timer>" in message.text
         assert "grip.urp" in message.text
         loaded = await _ask(link, dash.GetLoadedProgram(), dash.LoadedProgramReply)
         assert loaded.path == f"{tmp_path}/wait_program.urp"
