@@ -26,7 +26,7 @@ a runtime error naming the address: the fake never answers with a made-up value.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 from urdaemon.fakeur.arm import FakeArm
@@ -108,12 +108,21 @@ def _state_registers(arm: FakeArm) -> dict[int, Callable[[], float]]:
         ),
     }
     for i in range(6):
-        table[270 + i] = lambda i=i: _milli(arm.q[i])  # type: ignore[misc]
-        table[280 + i] = lambda i=i: _milli(arm.qd[i])  # type: ignore[misc]
-        scale = 10000.0 if i < 3 else 1000.0
-        table[400 + i] = lambda i=i, s=scale: round(tcp_pose(arm, arm.q)[i] * s)  # type: ignore[misc]
-        table[410 + i] = lambda i=i: _milli(tool_speed(arm, arm.q, arm.qd)[i])  # type: ignore[misc]
+        table[270 + i] = _scaled(lambda: arm.q, i, 1000.0)
+        table[280 + i] = _scaled(lambda: arm.qd, i, 1000.0)
+        table[400 + i] = _scaled(lambda: tcp_pose(arm, arm.q), i, 10000.0 if i < 3 else 1000.0)
+        table[410 + i] = _scaled(lambda: tool_speed(arm, arm.q, arm.qd), i, 1000.0)
     return table
+
+
+def _scaled(values: Callable[[], Sequence[float]], index: int, scale: float) -> Callable[[], float]:
+    """Reads element ``index`` of ``values()`` times ``scale``, rounded (0 if it is not finite)."""
+
+    def read() -> float:
+        value = values()[index] * scale
+        return round(value) if math.isfinite(value) else 0
+
+    return read
 
 
 def _signed(value: int) -> int:
