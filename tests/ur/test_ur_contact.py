@@ -120,16 +120,20 @@ def _gap(wall: Wall, fake: FakeController) -> float:
 
 
 async def test_tool_contact_stops_a_goal_at_a_wall_and_goes_back_to_the_touch_point() -> None:
-    """Arm tool contact, move toward a wall: the robot reports the contact, the goal does not succeed,
-    the arm stops and rests at the wall's surface (within a millimetre), never protective-stopped."""
+    """Arm tool contact, move toward a wall: the robot reports the contact, the goal is aborted, the arm
+    stops and rests at the wall's surface (within a millimetre), never protective-stopped, and stays
+    there when detection ends."""
     async with _ready_alice() as (fake, _, client, alice):
         wall, event, result = await _touch_a_wall(fake, client, alice)
         assert event["text"] == "contact", event
-        assert result["status"] != "succeeded", result
+        assert result["status"] == "aborted", result
         assert not any(fake.arm.qd), "the robot stopped"
         assert fake.arm.safety_mode is SafetyMode.NORMAL, "stopped by the contact, not by a safety stop"
         assert abs(_gap(wall, fake)) < TOUCH_TOLERANCE_M, _gap(wall, fake)
+        rest = list(fake.arm.q)
         assert (await alice.end_tool_contact())["ok"] is True
+        await _cycles(fake, 500)  # 1 s: ending detection must not send the arm on toward the old goal
+        assert fake.arm.q == pytest.approx(rest, abs=1e-6)
 
 
 @pytest.mark.xfail(

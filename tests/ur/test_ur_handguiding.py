@@ -80,7 +80,7 @@ async def test_force_mode_and_tool_contact_reach_the_robot() -> None:
             if event["kind"] == "tool_contact":
                 break
         assert event["kind"] == "tool_contact"
-        assert event["text"] == "canceled", "the fake never detects contact: ending it cancels"
+        assert event["text"] == "canceled", "nothing around the fake arm to touch: ending it cancels"
 
 
 async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons() -> None:
