@@ -190,3 +190,34 @@ def test_an_external_ft_sensor_is_recorded_while_enabled_and_bad_arguments_are_e
         cfg.ft_rtde_input_enable(host, True, -1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
     with pytest.raises(ScriptRuntimeError, match="enable"):
         cfg.ft_rtde_input_enable(host, 1, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+
+
+def test_freedrive_free_axes_are_in_the_feature_frame_and_force_mode_settings_reach_the_model() -> None:
+    """``freedrive_mode``'s feature turns its free axes; damping and gain scaling set during force mode
+    reach the contact model (fakeur/contact.py). At f5f0e26 freedrive and force mode moved nothing."""
+    import math
+
+    from urdaemon.fakeur.contact import surroundings_of
+
+    host = _host()
+    arm = host.arm
+    surroundings = surroundings_of(arm)
+    turned = UrPose([0.0, 0.0, 0.0, 0.0, 0.0, math.pi / 2])  # its x is the base's y
+    cfg.freedrive_mode(host, [1, 0, 0, 0, 0, 0], turned)
+    surroundings.push[:] = [10.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # along base x: not free
+    start = arm.actual_tcp_pose()
+    arm.step(DT)
+    assert arm.actual_tcp_pose()[:3] == pytest.approx(start[:3], abs=1e-9)
+    surroundings.push[:] = [0.0, 10.0, 0.0, 0.0, 0.0, 0.0]  # along base y: the feature's free x
+    for _ in range(10):
+        arm.step(DT)
+    moved = [a - b for a, b in zip(arm.actual_tcp_pose()[:3], start[:3], strict=True)]
+    assert moved[1] == pytest.approx(10 * DT * 10.0 * 0.005, rel=0.05)
+    assert abs(moved[0]) < 1e-6
+    cfg.end_freedrive_mode(host)
+    cfg.force_mode(host, UrPose([0.0] * 6), [0, 0, 1, 0, 0, 0], [0, 0, -5, 0, 0, 0], 2, [0.1] * 6)
+    cfg.force_mode_set_damping(host, 0.5)
+    cfg.force_mode_set_gain_scaling(host, 1.5)
+    settings = surroundings.force
+    assert settings is not None
+    assert (settings.damping, settings.gain_scaling) == (0.5, 1.5)
