@@ -42,12 +42,14 @@ __all__ = [
     "Profile",
     "ScalingRamp",
     "ServoFilter",
+    "ServoModes",
     "ServoRamp",
     "SpeedRamp",
     "ToolSpeedRamp",
     "joint_move",
     "leading_stop_time",
     "profile",
+    "servo_modes",
 ]
 
 JOINTS: Final = 6
@@ -253,6 +255,79 @@ class SpeedRamp:
         return [v + a * t for v, a in zip(self._v0, self._accel, strict=True)]
 
 
+class ServoModes:
+    """The modal quantities of servoj's law for one (gain, lookahead_time), shared by every joint and
+    every servoj call with them (``servo_modes``): ω = √gain, ζ = lookahead_time·√gain / 2, and the
+    basis (f, h, f', h') of the free response, with the last sample kept (a stream samples the same
+    time, one cycle, every call)."""
+
+    __slots__ = ("_last", "kind", "r1", "r2", "sigma", "w", "wd", "zeta")
+
+    def __init__(self, gain: float, lookahead_time: float) -> None:
+        w = math.sqrt(gain)
+        zeta = 0.5 * lookahead_time * w
+        self.w = w
+        self.zeta = zeta
+        self.sigma = zeta * w
+        self.wd = self.r1 = self.r2 = 0.0
+        if zeta < 1.0 - 1e-9:
+            self.kind = 0  # under-damped
+            self.wd = w * math.sqrt(1.0 - zeta * zeta)
+        elif zeta > 1.0 + 1e-9:
+            self.kind = 2  # over-damped
+            root = w * math.sqrt(zeta * zeta - 1.0)
+            self.r1, self.r2 = -self.sigma + root, -self.sigma - root
+        else:
+            self.kind = 1  # critically damped
+        self._last: tuple[float, float, float, float, float] = (0.0, 1.0, 0.0, 0.0, 1.0)
+
+    def basis(self, t: float) -> tuple[float, float, float, float, float]:
+        """(t, f, h, f', h') at ``t`` >= 0: e(t) = e₀·f + ė₀·h and ė(t) = e₀·f' + ė₀·h'."""
+        last = self._last
+        if last[0] == t:
+            return last
+        kind = self.kind
+        if kind == 0:
+            sigma, wd = self.sigma, self.wd
+            decay = math.exp(-sigma * t)
+            c, s = math.cos(wd * t) * decay, math.sin(wd * t) * decay
+            w2 = self.w * self.w
+            basis = (t, c + sigma / wd * s, s / wd, -w2 / wd * s, c - sigma / wd * s)
+        elif kind == 1:
+            w = self.w
+            decay = math.exp(-w * t)
+            basis = (t, (1.0 + w * t) * decay, t * decay, -w * w * t * decay, (1.0 - w * t) * decay)
+        else:
+            r1, r2 = self.r1, self.r2
+            e1, e2 = math.exp(r1 * t), math.exp(r2 * t)
+            k = 1.0 / (r1 - r2)
+            basis = (
+                t,
+                (r1 * e2 - r2 * e1) * k,
+                (e1 - e2) * k,
+                r1 * r2 * (e2 - e1) * k,
+                (r1 * e1 - r2 * e2) * k,
+            )
+        self._last = basis
+        return basis
+
+
+_SERVO_MODES: dict[tuple[float, float], ServoModes] = {}
+_SERVO_MODES_KEPT: Final = 64
+"""Distinct (gain, lookahead_time) pairs kept; a program that uses more starts the table afresh."""
+
+
+def servo_modes(gain: float, lookahead_time: float) -> ServoModes:
+    """The shared ``ServoModes`` of (gain, lookahead_time)."""
+    key = (gain, lookahead_time)
+    modes = _SERVO_MODES.get(key)
+    if modes is None:
+        if len(_SERVO_MODES) >= _SERVO_MODES_KEPT:
+            _SERVO_MODES.clear()
+        modes = _SERVO_MODES[key] = ServoModes(gain, lookahead_time)
+    return modes
+
+
 class ServoFilter:
     """servoj: the joints pulled toward the setpoint ``target`` by the manual's PD law, for ``duration`` s.
 
@@ -267,10 +342,10 @@ class ServoFilter:
     overshoot; 100 / 0.03: ζ = 0.15, it oscillates). On setpoints moving at speed v the joints lag
     ``lookahead_time × v`` behind. Solved in closed form from ``start`` and ``start_velocity``: with
     e = q − q*, e(t) = e₀·f(t) + ė₀·h(t), where the basis f, h (and their derivatives) depend only on
-    gain and lookahead, so they are computed once per sample for all six joints.
+    gain and lookahead (``ServoModes``), so they are computed once per sample for all six joints.
     """
 
-    __slots__ = ("_cache", "_e0", "_kind", "_r1", "_r2", "_sigma", "_v0", "_w", "_wd", "duration", "target")
+    __slots__ = ("_e0", "_modes", "_v0", "duration", "target")
 
     def __init__(
         self,
@@ -281,67 +356,39 @@ class ServoFilter:
         gain: float,
         lookahead_time: float,
     ) -> None:
-        """Keeps ``target`` (the caller gives a list it does not change afterwards)."""
+        """Keeps ``target`` and ``start_velocity`` (the caller gives lists it does not change afterwards)."""
         self.target = target
         self.duration = duration
-        self._e0 = [a - b for a, b in zip(start, target, strict=True)]
+        s, g = start, target  # six joints, unrolled: this runs once per cycle of a servoj stream
+        self._e0 = [s[0] - g[0], s[1] - g[1], s[2] - g[2], s[3] - g[3], s[4] - g[4], s[5] - g[5]]
         self._v0 = start_velocity
-        w = math.sqrt(gain)
-        zeta = 0.5 * lookahead_time * w
-        self._w = w
-        self._sigma = zeta * w
-        self._wd = self._r1 = self._r2 = 0.0
-        if zeta < 1.0 - 1e-9:
-            self._kind = 0  # under-damped
-            self._wd = w * math.sqrt(1.0 - zeta * zeta)
-        elif zeta > 1.0 + 1e-9:
-            self._kind = 2  # over-damped
-            root = w * math.sqrt(zeta * zeta - 1.0)
-            self._r1, self._r2 = -self._sigma + root, -self._sigma - root
-        else:
-            self._kind = 1  # critically damped
-        self._cache: tuple[float, float, float, float, float] = (-1.0, 1.0, 0.0, 0.0, 1.0)
-
-    def _basis(self, t: float) -> tuple[float, float, float, float, float]:
-        """(t, f, h, f', h') at ``t`` (clamped to [0, duration]); the last one is kept."""
-        t = min(max(t, 0.0), self.duration)
-        cache = self._cache
-        if cache[0] == t:
-            return cache
-        kind = self._kind
-        if kind == 0:
-            sigma, wd = self._sigma, self._wd
-            decay = math.exp(-sigma * t)
-            c, s = math.cos(wd * t) * decay, math.sin(wd * t) * decay
-            w2 = self._w * self._w
-            basis = (t, c + sigma / wd * s, s / wd, -w2 / wd * s, c - sigma / wd * s)
-        elif kind == 1:
-            w = self._w
-            decay = math.exp(-w * t)
-            basis = (t, (1.0 + w * t) * decay, t * decay, -w * w * t * decay, (1.0 - w * t) * decay)
-        else:
-            r1, r2 = self._r1, self._r2
-            e1, e2 = math.exp(r1 * t), math.exp(r2 * t)
-            k = 1.0 / (r1 - r2)
-            basis = (
-                t,
-                (r1 * e2 - r2 * e1) * k,
-                (e1 - e2) * k,
-                r1 * r2 * (e2 - e1) * k,
-                (r1 * e1 - r2 * e2) * k,
-            )
-        self._cache = basis
-        return basis
+        self._modes = servo_modes(gain, lookahead_time)
 
     def position(self, t: float) -> Vector:
         """Joint positions [rad] at ``t``."""
-        _, f, h, _, _ = self._basis(t)
-        return [q + e * f + v * h for q, e, v in zip(self.target, self._e0, self._v0, strict=True)]
+        _, f, h, _, _ = self._modes.basis(min(max(t, 0.0), self.duration))
+        q, e, v = self.target, self._e0, self._v0
+        return [
+            q[0] + e[0] * f + v[0] * h,
+            q[1] + e[1] * f + v[1] * h,
+            q[2] + e[2] * f + v[2] * h,
+            q[3] + e[3] * f + v[3] * h,
+            q[4] + e[4] * f + v[4] * h,
+            q[5] + e[5] * f + v[5] * h,
+        ]
 
     def velocity(self, t: float) -> Vector:
         """Joint velocities [rad/s] at ``t``."""
-        _, _, _, df, dh = self._basis(t)
-        return [e * df + v * dh for e, v in zip(self._e0, self._v0, strict=True)]
+        _, _, _, df, dh = self._modes.basis(min(max(t, 0.0), self.duration))
+        e, v = self._e0, self._v0
+        return [
+            e[0] * df + v[0] * dh,
+            e[1] * df + v[1] * dh,
+            e[2] * df + v[2] * dh,
+            e[3] * df + v[3] * dh,
+            e[4] * df + v[4] * dh,
+            e[5] * df + v[5] * dh,
+        ]
 
 
 ServoRamp = ServoFilter
