@@ -78,8 +78,14 @@ class UrpProgram:
 def translate(data: bytes, file_name: str) -> UrpProgram:
     """The program a ``.urp`` file holds (``file_name`` names the def if the XML does not)."""
     root = _parse(data)
-    _PARENTS.clear()
     _PARENTS.update({child: parent for parent in root.iter() for child in parent})
+    try:
+        return _program(root, file_name)
+    finally:
+        _PARENTS.clear()
+
+
+def _program(root: ElementTree.Element, file_name: str) -> UrpProgram:
     if root.tag != "URProgram":
         raise UrpRefused(f"not a PolyScope program: the root element is <{root.tag}>")
     name = _identifier(root.get("name") or file_name.rsplit("/", 1)[-1].removesuffix(".urp"))
@@ -162,7 +168,8 @@ def _ascii(text: str) -> str:
 
 
 _PARENTS: dict[ElementTree.Element, ElementTree.Element] = {}
-"""Each element's parent in the program being translated (references are relative paths)."""
+"""Each element's parent in the program being translated (references are relative paths); filled
+and emptied by :func:`translate`, which the fake calls from its event loop thread only."""
 
 
 def _resolve(node: ElementTree.Element) -> ElementTree.Element:
