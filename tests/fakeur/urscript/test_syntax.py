@@ -219,10 +219,40 @@ def test_a_missing_end_names_the_block_it_leaves_open() -> None:
 
 @pytest.mark.parametrize(
     ("text", "line", "column"),
-    [("x = 1\ny = \u00e9\n", 2, 5), ("# caf\u00e9\nx = 1", 1, 6), ('textmsg("\u2013")', 1, 10)],
+    [
+        ("x = 1\ny = \u00e9\n", 2, 5),
+        ("# caf\u00e9\nx = 1", 1, 6),
+        ('textmsg("\u2013")', 1, 10),
+        ('$ 3 "a\u2254b" x = \u00e9\n', 1, 15),  # a label's text only, not what follows on its line
+        ('x = "$ 3 \u2254"\n', 1, 10),
+    ],
 )
 def test_non_ascii_is_refused_with_its_position(text: str, line: int, column: int) -> None:
     with pytest.raises(ScriptCompileError) as caught:
         parse(text)
     assert (caught.value.line, caught.value.column) == (line, column)
     assert "non-ASCII" in caught.value.message
+
+
+def test_step_labels_may_carry_the_pendants_symbols() -> None:
+    """Reproduction: PolyScope writes a node's text as the pendant shows it into its step labels
+    (UR's URScript_Examples, execution-time/timing_debug.script: ``$ 3 "var_4≔4"``,
+    ``$ 22 "If var_3≟0"``) and a controller runs the script; the fake refused any non-ASCII
+    character, so a script PolyScope generated was refused at 2:13."""
+    text = (
+        "def timing():\n"
+        '  $ 3 "var_4\u22544"\n'
+        "  global var_4=4\n"
+        "  while (True):\n"
+        '    $ 22 "If var_4\u225f0"\n'
+        "    if (var_4 == 0):\n"
+        '      $ 15 "Waypoint_1" "breakAfter"\n'
+        "      sync()\n"
+        "    end\n"
+        "    sync()\n"
+        "  end\n"
+        "end\n"
+    )
+    (function,) = parse(text)
+    assert isinstance(function, ast.Function)
+    assert [type(s).__name__ for s in function.body] == ["Declare", "While"]

@@ -1,12 +1,14 @@
 """URScript text -> AST: frozen dataclasses carrying the 1-based ``line`` and ``column`` of what they are.
 
-The grammar is ``grammar.lark`` (lark, LALR). Syntax errors and non-ASCII characters raise
+The grammar is ``grammar.lark`` (lark, LALR). Syntax errors and non-ASCII characters (outside the
+text of PolyScope's ``$ n "label"`` lines) raise
 :class:`~urdaemon.fakeur.urscript.runtime.ScriptCompileError` naming the line and column, the way the
 controller refuses a program before it starts.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -415,14 +417,25 @@ class _Else:
     body: tuple[Statement, ...]
 
 
+_STEP_LABEL = re.compile(r'\$[ \t]*\d+(?:[ \t]+"[^"\n]*")+')
+"""A step label: PolyScope writes the node's text there as the pendant shows it (``$ 3 "var_4≔4"``,
+``$ 22 "If var_3≟0"``), and a controller runs such scripts."""
+
+
 def _check_ascii(text: str) -> None:
+    """Refuse a non-ASCII character anywhere but in a step label's text."""
+    if text.isascii():
+        return
+    labels = [match.span() for match in _STEP_LABEL.finditer(text)]
     for offset, char in enumerate(text):
-        if ord(char) > 127:
-            line = text.count("\n", 0, offset) + 1
-            column = offset - (text.rfind("\n", 0, offset) + 1) + 1
-            raise ScriptCompileError(
-                line, column, f"syntax_error: non-ASCII character {char!r} (U+{ord(char):04X})"
-            )
+        if ord(char) <= 127 or any(start < offset < end for start, end in labels):
+            continue
+        start = text.rfind("\n", 0, offset) + 1
+        raise ScriptCompileError(
+            text.count("\n", 0, offset) + 1,
+            offset - start + 1,
+            f"syntax_error: non-ASCII character {char!r} (U+{ord(char):04X})",
+        )
 
 
 def _source_line(text: str, line: int) -> str:
