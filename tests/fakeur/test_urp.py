@@ -214,8 +214,8 @@ def test_a_looping_program_runs_its_body_forever_and_a_run_once_program_once() -
     assert not looping.external_control
     assert looping.script == (
         "def wait_program():\n"
-        '  $ 1 "Robot Program"\n'
         "  while (True):\n"
+        '    $ 1 "Robot Program"\n'
         '    $ 2 "Wait: 0.01"\n'
         "    sleep(0.01)\n"
         "  end\n"

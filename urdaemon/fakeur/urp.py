@@ -118,12 +118,13 @@ def _program(root: ElementTree.Element, file_name: str) -> UrpProgram:
         writer.nodes(2, _children(before))
     for thread in threads:
         writer.thread(2, thread)
-    writer.step(2, "Robot Program")
-    if loops:
+    if loops:  # PolyScope labels the program's start inside the loop, once per round
         writer.line(2, "while (True):")
+        writer.step(3, "Robot Program")
         writer.nodes(3, body)
         writer.line(2, "end")
     else:
+        writer.step(2, "Robot Program")
         writer.nodes(2, body)
     writer.line(1, "end")
     return UrpProgram(name, writer.text(), loops=loops)
@@ -161,10 +162,10 @@ def _identifier(name: str) -> str:
     return f"p{cleaned}" if cleaned[0].isdigit() else cleaned
 
 
-def _ascii(text: str) -> str:
-    """Text for a step label or comment: ASCII, no quotes, one line."""
-    text = text.replace('"', "'").replace("\n", " ").replace("\r", " ")
-    return text.encode("ascii", "replace").decode("ascii")
+def _label(text: str) -> str:
+    """Text for a step label: one line, no double quotes (the pendant's symbols stay, as PolyScope
+    writes them)."""
+    return text.replace('"', "'").replace("\n", " ").replace("\r", " ")
 
 
 _PARENTS: dict[ElementTree.Element, ElementTree.Element] = {}
@@ -269,7 +270,7 @@ class _Writer:
 
     def step(self, depth: int, label: str) -> None:
         self._steps += 1
-        self.line(depth, f'$ {self._steps} "{_ascii(label)}"')
+        self.line(depth, f'$ {self._steps} "{_label(label)}"')
 
     def nodes(self, depth: int, nodes: list[ElementTree.Element]) -> None:
         for index, node in enumerate(nodes):
@@ -393,8 +394,8 @@ class _Writer:
         """A ``<Thread>``: defined, then started before the main program's body, looping unless
         ``runOnlyOnce``."""
         name = _identifier(node.get("name", "Thread"))
+        self.step(depth, name)
         self.line(depth, f"thread {name}():")
-        self.step(depth + 1, name)
         if node.get("runOnlyOnce", "false").lower() == "false":
             self.line(depth + 1, "while (True):")
             self.nodes(depth + 2, _children(node))
