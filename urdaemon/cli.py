@@ -122,6 +122,14 @@ def _parser() -> argparse.ArgumentParser:
         help="program directory: 'load NAME' resolves NAME under it, URScript files (.script) play; "
         "the default External Control program is always there",
     )
+    fake.add_argument(
+        "--wall",
+        action="append",
+        default=[],
+        metavar="X,Y,Z,NX,NY,NZ[,K]",
+        help="a wall every fake arm touches: a point and the normal toward the free side in the base frame "
+        "(m), optionally its stiffness K in N/m (default 20000); try tool contact and force mode on it",
+    )
 
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)

@@ -16,7 +16,7 @@ from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
 from urdaemon.scheduling import startup_objects_frozen
 
-__all__ = ["add_surroundings_arguments", "build_fakes", "parse_version", "parse_wall", "run_fakes"]
+__all__ = ["build_fakes", "parse_version", "parse_wall", "run_fakes"]
 
 DAEMON_HOST = "127.0.0.1"
 """Where a fake in URCap mode finds the daemon's script sender when built from a cell file."""
@@ -41,18 +41,6 @@ def parse_wall(text: str) -> Wall:
         return Wall.of(numbers[:3], numbers[3:6], *numbers[6:])
     except ValueError as err:
         raise ConfigError(f"--wall {text!r}: expected X,Y,Z,NX,NY,NZ[,STIFFNESS] ({err})") from None
-
-
-def add_surroundings_arguments(parser: argparse.ArgumentParser) -> None:
-    """``fake-robot``'s options for what the fake arms touch (fakeur/contact.py)."""
-    parser.add_argument(
-        "--wall",
-        action="append",
-        default=[],
-        metavar="X,Y,Z,NX,NY,NZ[,K]",
-        help="a wall every fake arm touches: a point and the normal toward the free side in the base frame "
-        "(m), optionally its stiffness K in N/m (default 20000); try tool contact and force mode on it",
-    )
 
 
 def _place_walls(fakes: list[FakeController], args: argparse.Namespace) -> list[FakeController]:
