@@ -69,6 +69,8 @@ SHUTTING_DOWN = "daemon shutting down"
 """The reason every request gets once the daemon started to shut down."""
 STOPPED_WHILE_PLANNING = "stopped while it was being planned (stop, cancel, hand_back_control or freedrive)"
 """The reason a trajectory goal is refused when something ended motion while it was being planned."""
+TOOL_CONTACT_REASON = "tool contact: the tool touched something; the robot stopped and went back to it"
+"""The reason a goal or stream ends when the robot reports a tool contact."""
 
 Service = Callable[[bytes | None], Awaitable[dict[str, Any] | None]]
 """A service: the request's payload → what to add to its ``{"ok": true}`` reply (None: nothing)."""
@@ -765,6 +767,12 @@ class RobotRuntime:
         await self.backend.hand_back_control()
 
     def _publish_notice(self, kind: str, text: str) -> None:
+        if kind == "tool_contact" and text == "contact":
+            # the robot stopped on its own and goes back to where the tool touched: what we were sending
+            # is over now, not when the goal's time runs out
+            self.controller.abort(TOOL_CONTACT_REASON)
+            self._publish_events()
+            self._publish_status()
         if self._pub_events is not None:
             self._pub_events.put(codec.encode({"robot": self.robot.name, "kind": kind, "text": text}))
 
