@@ -8,6 +8,8 @@ urcl's tests/resources/dockerursim/programs, Apache-2.0), not copies of them.
 from __future__ import annotations
 
 import gzip
+import re
+from pathlib import Path
 
 import pytest
 
@@ -161,6 +163,21 @@ VARIABLE = (
     f"<initializeExpression/></variable><expression>{chars('0')}</expression></Assignment>"
 )
 TABLE += [
+    (
+        "set an output register to an expression reading it",
+        '<Set type="ExpressionOutput"><pin referencedName="GP_int_out[24]"/><expression>'
+        '<ExpressionIO><pin referencedName="GP_int_out[24]"/></ExpressionIO>'
+        f"{chars('+1')}</expression></Set>",
+        ["write_output_integer_register(24, read_output_integer_register(24)+1)"],
+    ),
+    (
+        "a node between waypoints",
+        '<Move motionType="MoveJ" speed="1" acceleration="2"><children>'
+        '<Set type="DigitalOutput"><pin referencedName="digital_out[0]"/><digitalValue>1</digitalValue></Set>'
+        + WAYPOINT.format(blend="")
+        + "</children></Move>",
+        ["set_standard_digital_out(0, True)", "movej([0.1, -1.5, 1.2, -1.2, -1.57, 0.0], a=2, v=1)"],
+    ),
     ("if elif else", IF_CHAIN, ["if (x == 1):", "halt", "elif (x == 2):", "sleep(0.01)", "else:", "end"]),
     (
         "if alone, then a node",
@@ -308,3 +325,38 @@ def test_a_script_node_with_an_error_compiles_to_the_controllers_refusal() -> No
     assert script.script is not None
     with pytest.raises(ScriptCompileError):
         compile_program(script.script, "e", (5, 15))
+
+
+UR_PROGRAM = Path(__file__).parents[1] / "data" / "urp"
+"""UR's timing_debug.urp and the script PolyScope generated for it (see its README.md)."""
+
+
+def _statements(script: str) -> list[str]:
+    """A script's statements without step labels, comments, blank lines or spacing."""
+    lines = (line.strip() for line in script.splitlines())
+    return [re.sub(r"\s+", "", line) for line in lines if line and not line.startswith(("$", "#"))]
+
+
+def test_a_polyscope_program_translates_as_polyscope_generates_it() -> None:
+    """The translation of UR's own saved program matches, statement for statement, the script
+    PolyScope wrote for it, from its BeforeStart sequence on (PolyScope's installation preamble and
+    waypoint variables aside), but for the waypoints: PolyScope moves to the inverse kinematics of
+    the taught pose near the taught joints, the fake to the taught joints themselves."""
+    program = translate((UR_PROGRAM / "timing_debug.urp").read_bytes(), "timing_debug.urp")
+    assert program.loops
+    assert program.script is not None
+    ours = _statements(program.script)
+    theirs = _statements((UR_PROGRAM / "timing_debug.script").read_text(encoding="utf-8"))
+    start = theirs.index("globalvar_4=4")
+    assert ours[0] == "deftiming_debug():"
+    assert len(ours[1:]) == len(theirs[start:]) == 75
+    moves = 0
+    for mine, polyscope in zip(ours[1:], theirs[start:], strict=True):
+        if polyscope.startswith("movej(get_inverse_kin(Waypoint_"):
+            moves += 1
+            assert mine.startswith("movej([")
+            assert mine.endswith("],a=1.3962634015954636,v=1.0471975511965976)")
+        else:
+            assert mine == polyscope
+    assert moves == 2
+    compile_program(program.script, "e", (5, 23))

@@ -43,7 +43,25 @@ _PINS_OUT = {
     "tool_out": "set_tool_digital_out",
     "config_out": "set_configurable_digital_out",
 }
-_PIN = re.compile(r"^([a-z_]+)\[(\d+)\]$")
+_PINS_READ = {  # a pin named in an expression (``<ExpressionIO>``) -> the builtin that reads it
+    **_PINS_IN,
+    "digital_out": "get_standard_digital_out",
+    "tool_out": "get_tool_digital_out",
+    "config_out": "get_configurable_digital_out",
+    "GP_int_out": "read_output_integer_register",
+    "GP_float_out": "read_output_float_register",
+    "GP_bool_out": "read_output_boolean_register",
+    "GP_int_in": "read_input_integer_register",
+    "GP_float_in": "read_input_float_register",
+    "GP_bool_in": "read_input_boolean_register",
+}
+_PINS_WRITE = {  # a pin a ``<Set type="ExpressionOutput">`` sets -> the builtin that writes it
+    **_PINS_OUT,
+    "GP_int_out": "write_output_integer_register",
+    "GP_float_out": "write_output_float_register",
+    "GP_bool_out": "write_output_boolean_register",
+}
+_PIN = re.compile(r"^([A-Za-z_]+)\[(\d+)\]$")
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 _EDITOR_SYMBOLS = {"\u225f": "==", "\u2260": "!=", "\u2264": "<=", "\u2265": ">="}
 """The expression editor's symbols (≟ ≠ ≤ ≥) stored in a program, and the operators they stand for."""
@@ -222,6 +240,9 @@ def _expression(node: ElementTree.Element, what: str) -> str:
             parts.append(part.get("token", ""))
         elif part.tag == "ExpressionVariable" and len(part) == 1:
             parts.append(_variable_name(part[0], what))
+        elif part.tag == "ExpressionIO":
+            reader, index = _pin(part, _PINS_READ, what)
+            parts.append(f"{reader}({index})")
         else:
             raise UrpRefused(f"<{what}>: expression part <{part.tag}> is not simulated by the fake")
     text = "".join(parts)
@@ -239,7 +260,7 @@ def _number(text: str | None, what: str) -> str:
 def _pin(node: ElementTree.Element, table: dict[str, str], what: str) -> tuple[str, str]:
     """The builtin and index of a node's ``<pin referencedName="digital_in[2]"/>``."""
     pin = node.find("pin")
-    name = "" if pin is None else pin.get("referencedName", "")
+    name = "" if pin is None else _resolve(pin).get("referencedName", "")
     match = _PIN.match(name)
     if match is None or match.group(1) not in table:
         raise UrpRefused(f"<{what}> on pin {name!r} is not simulated by the fake")
@@ -332,10 +353,14 @@ class _Writer:
         if kind == "NoAction" and node.find("pin") is None:
             self.step(depth, "Set")
             return
-        if kind != "DigitalOutput":
+        if kind == "DigitalOutput":
+            setter, index = _pin(node, _PINS_OUT, "Set")
+            value = _digital(node, "Set")
+        elif kind == "ExpressionOutput":
+            setter, index = _pin(node, _PINS_WRITE, "Set")
+            value = _expression(node, "Set")
+        else:
             raise UrpRefused(f'program node <Set type="{kind}"> is not simulated by the fake')
-        setter, index = _pin(node, _PINS_OUT, "Set")
-        value = _digital(node, "Set")
         self.step(depth, f"Set {setter}({index})={value}")
         self.line(depth, f"{setter}({index}, {value})")
 
@@ -421,8 +446,9 @@ class _Writer:
         acceleration = _number(node.get("acceleration"), f"<Move> {kind} acceleration")
         self.step(depth, kind)
         for point in _children(node):
-            if point.tag != "Waypoint":
-                raise UrpRefused(f"program node <{point.tag}> in a <Move> is not simulated by the fake")
+            if point.tag != "Waypoint":  # a node between waypoints runs there
+                self.nodes(depth + 1, [point])
+                continue
             q = _joint_angles(point)
             parameters = point.find("motionParameters")
             blend = None if parameters is None else parameters.get("blendRadius")
