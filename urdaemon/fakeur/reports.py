@@ -17,6 +17,7 @@ from urdaemon.description.urmodels import UrModel
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
 from urdaemon.fakeur.urscript.host import InputRegisters
 from urdaemon.fakeur.urscript.lib_motion import tool_speed
+from urdaemon.fakeur.urscript.lib_state import JOINT_TEMPERATURE, tool_accelerometer
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import realtime as rt
@@ -59,12 +60,12 @@ def realtime_state(arm: FakeArm) -> rt.RealtimeState:
         tool_vector_target=pose,
         tcp_force=_six(arm.tcp_force),
         digital_input_bits=float(arm.io.digital_in),
-        motor_temperatures=(30.0,) * 6,
+        motor_temperatures=(JOINT_TEMPERATURE,) * 6,
         controller_timer=0.0002,
         robot_mode=float(arm.robot_mode),
         joint_modes=(253.0 if running else 255.0,) * 6,
         safety_mode=float(arm.safety_mode),
-        tool_accelerometer_values=(0.0, 0.0, 9.82),
+        tool_accelerometer_values=tool_accelerometer(arm),
         speed_scaling=arm.speed_scaling,
         v_main=48.0,
         v_robot=48.0 if running else 0.0,
@@ -111,8 +112,8 @@ def robot_state(
                 qd_actual=tuple(arm.qd),
                 i_actual=tuple(arm.current),
                 v_actual=(48.0,) * 6,
-                t_motor=(30.0,) * 6,
-                t_micro=(30.0,) * 6,
+                t_motor=(JOINT_TEMPERATURE,) * 6,
+                t_micro=(JOINT_TEMPERATURE,) * 6,
                 joint_mode=(running_modes,) * 6,
             ),
             prim.CartesianInfo(tcp_pose=arm.actual_tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
@@ -222,7 +223,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "target_qdd": lambda arm: tuple(arm.qdd),
     "actual_current": lambda arm: tuple(arm.current),
     "target_current": lambda arm: tuple(arm.current),
-    "joint_temperatures": lambda arm: (30.0,) * 6,
+    "joint_temperatures": lambda arm: (JOINT_TEMPERATURE,) * 6,
     "joint_mode": lambda arm: (253 if arm.robot_mode is RobotMode.RUNNING else 255,) * 6,
     "speed_scaling": lambda arm: arm.speed_scaling,
     "target_speed_fraction": lambda arm: arm.speed_slider,
@@ -232,6 +233,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "actual_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.q, arm.qd)),
     "target_TCP_speed": lambda arm: tuple(tool_speed(arm, arm.target_q, arm.target_qd)),
     "actual_TCP_force": lambda arm: tuple(arm.tcp_force),
+    "actual_tool_accelerometer": tool_accelerometer,
     "actual_digital_input_bits": lambda arm: arm.io.digital_in,
     "actual_digital_output_bits": lambda arm: arm.io.digital_out,
     "standard_analog_input0": lambda arm: arm.io.analog_in[0],
@@ -243,7 +245,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "tool_analog_input1": lambda arm: arm.io.tool_analog_in[1],
     "tool_output_voltage": lambda arm: arm.io.tool_voltage,
     "tool_mode": lambda arm: 253 if arm.robot_mode is RobotMode.RUNNING else 255,
-    "tool_temperature": lambda arm: 30.0,
+    "tool_temperature": lambda arm: JOINT_TEMPERATURE,
     "robot_mode": lambda arm: int(arm.robot_mode),
     "safety_mode": lambda arm: int(arm.safety_mode),
     "safety_status": lambda arm: int(arm.safety_mode),

@@ -175,6 +175,20 @@ def test_tool_accelerometer_reads_gravity_in_the_tcp_frame() -> None:
     )
 
 
+def test_the_reports_read_the_same_accelerometer_as_the_builtin() -> None:
+    """RTDE ``actual_tool_accelerometer`` (not offered before) and the real-time interface's reading
+    (a constant (0, 0, 9.82) before) are the builtin's, for a turned TCP too."""
+    from urdaemon.fakeur.reports import output_getter, realtime_state
+
+    host = _host()
+    host.arm.tcp_offset = [0.0, 0.0, 0.1, math.pi / 2, 0.0, 0.0]
+    reading = tuple(lib_state.get_tool_accelerometer_reading(host))
+    getter = output_getter("actual_tool_accelerometer", "VECTOR3D", None)  # type: ignore[arg-type]
+    assert tuple(getter(host.arm)) == pytest.approx(reading)
+    assert tuple(realtime_state(host.arm).tool_accelerometer_values) == pytest.approx(reading)
+    assert reading != pytest.approx((0.0, 0.0, 9.82), abs=1e-3)
+
+
 def test_free_air_getters_of_a_still_robot() -> None:
     host = _host()
     assert lib_state.get_tool_current(host) == 0.0
