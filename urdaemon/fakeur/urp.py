@@ -26,8 +26,10 @@ from xml.etree import ElementTree
 
 __all__ = ["MAX_URP_BYTES", "UrpProgram", "UrpRefused", "translate"]
 
-MAX_URP_BYTES = 16 * 1024 * 1024
-"""The largest decompressed program the fake reads (its own bound against a gzip bomb)."""
+MAX_URP_BYTES = 256 * 1024
+"""The largest decompressed program the fake reads: ``load`` translates on the event loop, about
+45 ms per MiB of XML, so 256 KiB costs at most ~11 ms of every fake's clock in the process (UR's
+example programs are 10-70 KB, 0.2-1.5 ms). Also the bound against a gzip bomb."""
 
 EXTERNAL_CONTROL_NODE = "com.fzi.externalcontrol.ExternalControlNode"
 """The ``strategyClass`` of the External Control URCap's program node."""
