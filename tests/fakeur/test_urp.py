@@ -360,3 +360,12 @@ def test_a_polyscope_program_translates_as_polyscope_generates_it() -> None:
             assert mine == polyscope
     assert moves == 2
     compile_program(program.script, "e", (5, 23))
+
+
+def test_a_file_read_only_up_to_the_bound_is_refused_as_too_large() -> None:
+    """The dashboard reads at most MAX_URP_BYTES + 1 bytes of a file; a compressed program cut there
+    is refused as too large, not as truncated."""
+    data = gzip.compress(bytes(range(256)) * (MAX_URP_BYTES // 128), compresslevel=0)
+    with pytest.raises(UrpRefused) as refused:
+        translate(data[: MAX_URP_BYTES + 1], "big.urp")
+    assert "larger than" in refused.value.reason

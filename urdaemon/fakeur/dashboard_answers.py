@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.fakeur.arm import RuntimeState
-from urdaemon.fakeur.urp import UrpProgram, UrpRefused, translate
+from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpProgram, UrpRefused, translate
 from urdaemon.model import SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -181,7 +181,9 @@ def _read_urp(fake: FakeController, path: str) -> UrpProgram | None:
     """The program a ``.urp`` file holds, or None (the reason logged and sent as a robot message, as
     PolyScope shows why it could not load a program)."""
     try:
-        return translate(Path(path).read_bytes(), path)
+        with open(path, "rb") as file:  # no more than a program may hold, even compressed
+            data = file.read(MAX_URP_BYTES + 1)
+        return translate(data, path)
     except OSError as err:
         reason = str(err)
     except UrpRefused as err:

@@ -159,6 +159,8 @@ def _parse(data: bytes) -> ElementTree.Element:
     if len(xml) > MAX_URP_BYTES:
         raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
     if not decompressor.eof:
+        if len(data) > MAX_URP_BYTES:
+            raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
         raise UrpRefused("the compressed program is truncated")
     try:
         return ElementTree.fromstring(xml)
