@@ -28,6 +28,7 @@ from typing import Any
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
 from urdaemon.fakeur.urp import UrpProgram
 from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
+from urdaemon.fakeur.urscript.lib_io import apply_runstate_outputs
 from urdaemon.protocols import primary as prim
 
 __all__ = ["MAX_PENDING_SCRIPTS", "Programs", "RunningScript"]
@@ -220,6 +221,7 @@ class Programs:
         host = self._host()
         self.main = RunningScript(name, program.start(host), host)
         self.name = name
+        apply_runstate_outputs(self.arm, running=True)
         self.broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STARTED", name))
 
     def _host(self) -> ScriptHost:
@@ -274,6 +276,7 @@ class Programs:
         if self.main is script:
             self.main = None
             self.arm.stop_program()
+            apply_runstate_outputs(self.arm, running=False)
         log.info("%s program %s ended", self.address, script.name)
         self.broadcast(prim.KeyMessage(0, 0, "PROGRAM_XXX_STOPPED", script.name))
 

@@ -115,3 +115,29 @@ async def test_powerdown_on_the_controller_stops_the_program_and_powers_off() ->
         assert controller.arm.robot_mode is RobotMode.POWER_OFF
         assert controller.arm.runtime_state is RuntimeState.STOPPED
         link.close()
+
+
+async def test_run_state_outputs_apply_when_the_controller_starts_and_stops_a_program() -> None:
+    """A program asks standard output 3 to be high while a program runs and low when none does: the
+    controller applies it as the next program starts and as that one ends (before 2c358bb the choice was
+    only recorded)."""
+    from tests.fakeur.test_controller import Link
+    from tests.fakeur.test_controller_life import manual_fake
+    from urdaemon.protocols import primary as prim
+    from urdaemon.protocols._buffer import Side
+
+    bit = 1 << 3
+    async with manual_fake(powered=True) as (controller, clock):
+        link = await Link.open(prim.PrimaryConnection(Side.DAEMON), controller.address, 30001)
+        await link.next(prim.VersionMessage)
+        link.writer.write(b"def choose():\n  set_runstate_standard_digital_output_to_value(3, 3)\nend\n")
+        assert (await link.next(prim.KeyMessage)).title == "PROGRAM_XXX_STARTED"
+        clock.until(lambda: controller.programs.main is None, limit=50)
+        assert (await link.next(prim.KeyMessage)).title == "PROGRAM_XXX_STOPPED"
+        assert not controller.arm.io.digital_out & bit, "stopped: low"
+        link.writer.write(b"def wait():\n  while True:\n    sync()\n  end\nend\n")
+        assert (await link.next(prim.KeyMessage)).title == "PROGRAM_XXX_STARTED"
+        assert controller.arm.io.digital_out & bit, "running: high"
+        controller.programs.stop()
+        assert not controller.arm.io.digital_out & bit, "stopped again: low"
+        link.close()

@@ -17,7 +17,7 @@ from typing import Any, Final
 
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript.host import ScriptHost
-from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, _Halt, builtin
+from urdaemon.fakeur.urscript.runtime import ProgramHalt, ScriptRuntimeError, UrList, builtin
 
 __all__ = ["BASELIGHT_MODES", "ControllerSettings", "pause_on_error_of", "settings_of"]
 
@@ -191,4 +191,4 @@ def powerdown(host: ScriptHost) -> None:
     The arm's ``power_off`` stops the program's run state; the controller then ends every program
     (``fakeur/programs.py``). The program calling it ends at once, like ``halt``."""
     host.arm.power_off()
-    raise _Halt
+    raise ProgramHalt

@@ -20,6 +20,7 @@ __all__ = [
     "MAIN",
     "TOO_LONG",
     "Builtin",
+    "ProgramHalt",
     "ScriptCompileError",
     "ScriptRun",
     "ScriptRuntimeError",
@@ -173,7 +174,7 @@ MAIN: Final = 0
 """The main program's thread handle."""
 
 
-class _Halt(BaseException):
+class ProgramHalt(BaseException):
     """``halt``: ends the whole program (a BaseException so no builtin swallows it)."""
 
 
@@ -286,7 +287,7 @@ class ScriptRun:
                 self._ended(thread)
             except _Killed:
                 self._ended(thread)
-            except _Halt:
+            except ProgramHalt:
                 self._finish()
             except ScriptRuntimeError as error:
                 self._fail(error, error.__traceback__)
@@ -387,7 +388,7 @@ class ScriptRun:
             yield
 
     def _halt(self) -> None:
-        raise _Halt
+        raise ProgramHalt
 
 
 def _describe(error: Exception) -> str:
