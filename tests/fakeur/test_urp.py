@@ -306,12 +306,13 @@ def test_the_external_control_node_alone_is_the_external_control_program() -> No
         (urp(WAIT_PROGRAM + EXTERNAL_CONTROL), "External Control"),
         (urp(""), "empty"),
         (b"not gzip at all", "gzip"),
-        (gzip.compress(b"<URProgram><children>"), "malformed"),
-        (gzip.compress(b"<Installation/>"), "<Installation>"),
-        (gzip.compress(b"<URProgram><children/></URProgram>"), "MainProgram"),
-        (gzip.compress(b"<URProgram>" + b" " * (MAX_URP_BYTES + 1) + b"</URProgram>"), "larger"),
-        (gzip.compress(b"<URProgram/>")[:-6], "truncated"),
+        (gzip.compress(b"<URProgram><children>", mtime=0), "malformed"),
+        (gzip.compress(b"<Installation/>", mtime=0), "<Installation>"),
+        (gzip.compress(b"<URProgram><children/></URProgram>", mtime=0), "MainProgram"),
+        (gzip.compress(b"<URProgram>" + b" " * (MAX_URP_BYTES + 1) + b"</URProgram>", mtime=0), "larger"),
+        (gzip.compress(b"<URProgram/>", mtime=0)[:-6], "truncated"),
     ],
+    ids=lambda value: value if isinstance(value, str) else "urp",  # the same ids in every xdist worker
 )
 def test_a_program_the_fake_cannot_play_is_refused_naming_why(data: bytes, reason: str) -> None:
     with pytest.raises(UrpRefused) as refused:
