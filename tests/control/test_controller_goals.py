@@ -513,3 +513,55 @@ def test_a_preempt_that_could_not_continue_the_motion_at_low_speed_scaling_is_re
     before = sim.state.velocities[0]
     sim.step()
     assert sim.state.velocities[0] == pytest.approx(before, abs=5.0 * 0.002 * 1.05), "no velocity jump"
+
+
+def _lagging_step(robot: SimRobot, gain: float) -> None:
+    """One cycle of a robot that closes ``gain`` of its distance to the commanded position per cycle
+    (a UR's servoj lags like this), not landing on it."""
+    robot.controller.tick(robot.state, robot.command, robot.now)
+    robot.commands.append((robot.command.mode, tuple(robot.command.positions), ()))
+    if robot.command.mode is CommandMode.POSITION:
+        for i, target in enumerate(robot.command.positions):
+            step = gain * (target - robot.state.positions[i])
+            robot.state.positions[i] += step
+            robot.state.velocities[i] = step / PERIOD
+    else:
+        robot.state.velocities[:] = [0.0] * len(robot.state.velocities)
+    robot.events.extend(robot.controller.drain_events())
+    robot.now += PERIOD
+
+
+def test_after_a_goal_the_final_setpoint_is_held_until_a_lagging_robot_settles_on_it() -> None:
+    """The goal succeeds within its tolerance while the robot still lags; the controller keeps sending
+    the final point until the robot rests on it (within SETTLE_POSITION), and only then goes idle. Before
+    it held (972271b) it went idle at once and the robot stopped where the lag had it."""
+    from urdaemon.control.controller import SETTLE_POSITION
+
+    robot = SimRobot.create(UR10E_LIMITS)
+    goal = [0.3, -0.2, 0.1, 0.0, 0.0, 0.0]
+    robot.controller.accept_trajectory("g1", UR_JOINTS, [TrajectoryPoint(tuple(goal), 1.0)], robot.state, 0.0)
+    for _ in range(2000):
+        _lagging_step(robot, 0.1)
+        if robot.controller.mode == "idle":
+            break
+    (result,) = robot.results()
+    assert result.status is GoalStatus.SUCCEEDED
+    assert robot.controller.mode == "idle"
+    assert robot.state.positions == pytest.approx(goal, abs=2 * SETTLE_POSITION)
+    idle_at = next(k for k, c in enumerate(robot.commands) if c[0] is CommandMode.IDLE)
+    assert all(c[0] is CommandMode.POSITION for c in robot.commands[:idle_at])
+    assert idle_at > round(1.0 / PERIOD) + 10, "held for the robot, not let go at the goal's end"
+
+
+def test_a_robot_that_never_settles_is_let_go_after_the_settle_time() -> None:
+    """A robot that stays off its setpoint (a steady error) is held at most SETTLE_TIME after the stop."""
+    from urdaemon.control.controller import SETTLE_TIME
+
+    robot = SimRobot.create(UR10E_LIMITS)
+    robot.offset = [1e-3] + [0.0] * 5  # always 1 mrad off what it is told
+    robot.controller.accept_trajectory(
+        "g1", UR_JOINTS, [TrajectoryPoint((0.1, 0.0, 0.0, 0.0, 0.0, 0.0), 0.5)], robot.state, 0.0
+    )
+    robot.run_until_result("g1", 1000)
+    ticks = robot.run_until_idle(round(2 * SETTLE_TIME / PERIOD))
+    assert ticks == pytest.approx(SETTLE_TIME / PERIOD, abs=2)

@@ -299,16 +299,11 @@ async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
         await fake.close()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a goal that succeeds within its goal tolerance sends the robot IDLE at once; the script's "
-    "stopj(4.0) then stops the arm while servoj's lag still has it settling, short of or past the goal",
-)
 async def test_a_move_ends_with_the_arm_settled_on_its_goal() -> None:
     """move 1 rad in 2 s with the default servoj gain/lookahead (2000 / 0.03): once the goal succeeded
-    the arm should settle on the goal (UR's ROS 2 driver holds the last point), not freeze where the
-    goal tolerance (0.01 rad) let go of it. Measured: at rest 2.2e-4 rad past the goal (5.8e-3 rad short
-    with 300 / 0.1); exact on f5f0e26, whose servoj put the arm on every setpoint."""
+    the arm settles on the goal (the stop holds the last setpoint, as UR's ROS 2 driver does), not
+    frozen where the goal tolerance (0.01 rad) let go of it. Before the stop held it (972271b), it came
+    to rest 2.2e-4 rad past the goal (5.8e-3 rad short with 300 / 0.1)."""
     fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME, powered=True)
     await fake.start()
     try:

@@ -88,6 +88,15 @@ _PERM_CACHE_SIZE = 32
 RELEASE_SEGMENTS = 64
 """Segments of a finished goal's plan freed per tick (~20 µs): freeing a 5 000-point plan at once
 would hold the loop for ~1.5 ms."""
+SETTLE_POSITION = 1e-5
+"""rad: how close every joint must be to the held setpoint for a stop to end (see ``SETTLE_TIME``)."""
+SETTLE_VELOCITY = 1e-4
+"""rad/s: how slowly every joint must move for a stop to end."""
+SETTLE_TIME = 1.0
+"""s: how long a stop holds its final setpoint at most for the robot to settle on it. A robot follows
+its setpoint with a lag (a UR's servoj: lookahead time × speed), so ending when the setpoint comes to
+rest would leave it wherever the lag had it (the goal's tolerance, not its target); UR's ROS 2 driver
+holds the last point for the same reason."""
 MAX_JOINT_TOLERANCE = 2.0 * math.pi
 """Largest finite path or goal tolerance of a joint (rad): one turn; infinity switches the check off."""
 
@@ -235,6 +244,8 @@ class MotionController:
         self._effective_velocity = [0.0] * n
         self._latch = [0] * n
         self._last_stream_now = -math.inf
+        self._settle_ticks = 0
+        self._settle_limit = max(1, round(SETTLE_TIME / period))
 
         self._events: list[GoalFeedback | GoalResult] = []
         # Plans of ended goals, freed RELEASE_SEGMENTS a tick.
@@ -701,11 +712,24 @@ class MotionController:
 
     def _tick_stopping(self, state: RobotState, command: JointCommand) -> None:
         result = self._online_step()
-        if result == _FINISHED or result is None:
+        if result is None or (result == _FINISHED and self._settled(state)):
             self._go_idle()
             self._write_idle(state, command)
             return
         self._write_setpoint(command)
+
+    def _settled(self, state: RobotState) -> bool:
+        """Whether the robot rests on the stopped setpoint, or has been given all the time it gets."""
+        self._settle_ticks += 1
+        if self._settle_ticks > self._settle_limit:
+            return True
+        pos = self._pos
+        meas = state.positions
+        speed = state.velocities
+        for i in range(self._n):
+            if abs(pos[i] - meas[i]) > SETTLE_POSITION or abs(speed[i]) > SETTLE_VELOCITY:
+                return False
+        return True
 
     def _tick_stream_position(self, state: RobotState, command: JointCommand) -> None:
         inp = self._inp
@@ -965,6 +989,7 @@ class MotionController:
         inp.target_velocity = self._zeros
         inp.target_acceleration = self._zeros
         self._mode = _Mode.STOPPING
+        self._settle_ticks = 0
         self._last_stream_now = -math.inf
 
     def _go_idle(self) -> None:
