@@ -138,15 +138,11 @@ async def test_tool_contact_stops_a_goal_at_a_wall_and_goes_back_to_the_touch_po
         assert fake.arm.q == pytest.approx(rest, abs=1e-6)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the control script reads get_actual_joint_positions_history(steps_back) after stopl(3.0), "
-    "when steps_back no longer counts from now: it goes back to a pose inside the contact",
-)
 async def test_tool_contact_goes_back_to_before_the_force_rose() -> None:
     """After a contact the arm rests where the force had not yet risen: on the free side of the wall, no
-    force. Our control script (ud_check_tool_contact) stops first and reads the history after, so it goes
-    back to a pose ~0.5 mm inside the wall (10 N) at this goal's speed: a finding for the script."""
+    force. Our control script (ud_check_tool_contact) used to stop first and read the history after, when
+    steps_back no longer counted from the current cycle: it went back to a pose ~0.5 mm inside the wall
+    (10 N) at this goal's speed."""
     async with _ready_alice() as (fake, _, client, alice):
         wall, event, _ = await _touch_a_wall(fake, client, alice)
         assert event["text"] == "contact", event
