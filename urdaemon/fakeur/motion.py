@@ -43,7 +43,6 @@ __all__ = [
     "ScalingRamp",
     "ServoFilter",
     "ServoModes",
-    "ServoRamp",
     "SpeedRamp",
     "ToolSpeedRamp",
     "joint_move",
@@ -389,10 +388,6 @@ class ServoFilter:
             e[4] * df + v[4] * dh,
             e[5] * df + v[5] * dh,
         ]
-
-
-ServoRamp = ServoFilter
-"""The former name (lib_state's ``get_target_waypoint`` still looks the servo target up by it)."""
 
 
 class LinearStop:

@@ -14,7 +14,7 @@ from typing import Any, Final
 
 from urdaemon.description.frames import frame_of_pose, inverse, rotate
 from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoRamp
+from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoFilter
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import flange_pose, inverse_near, tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
@@ -228,7 +228,7 @@ def get_target_waypoint(host: ScriptHost) -> UrPose:
     motion = arm.motion
     if isinstance(motion, CartesianMove):
         return UrPose(motion.pose(motion.duration))
-    if isinstance(motion, (JointMove, ServoRamp)):
+    if isinstance(motion, (JointMove, ServoFilter)):
         return UrPose(tcp_pose(arm, motion.target))
     return UrPose(tcp_pose(arm, arm.target_q))
 
