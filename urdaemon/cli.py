@@ -119,8 +119,9 @@ def _parser() -> argparse.ArgumentParser:
     fake.add_argument(
         "--programs",
         metavar="DIR",
-        help="program directory: 'load NAME' resolves NAME under it, URScript files (.script) play; "
-        "the default External Control program is always there",
+        help="program directory: 'load NAME' resolves NAME under it; URScript files (.script) and "
+        "PolyScope programs (.urp, translated to URScript) play; the default External Control program "
+        "is always there",
     )
     fake.add_argument(
         "--wall",
