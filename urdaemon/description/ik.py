@@ -32,6 +32,7 @@ from urdaemon.description.frames import (
     pose_of_frame,
     rotation_vector,
 )
+from urdaemon.description.kinematics import dh_chain, dh_joints
 from urdaemon.description.urmodels import DhParameters, UrModel
 from urdaemon.errors import DescriptionError
 
@@ -141,10 +142,7 @@ class UrKinematics:
         self._d1, self._d4, self._d5, self._d6 = nominal.d[0], nominal.d[3], nominal.d[4], nominal.d[5]
         real = nominal if dh is None else dh
         self._calibrated = real != nominal
-        self._joints = tuple(
-            (real.theta[i], real.d[i], real.a[i], math.cos(real.alpha[i]), math.sin(real.alpha[i]))
-            for i in range(6)
-        )
+        self._joints = dh_joints(real)
         self._lower = tuple(-math.inf if j.min_position is None else j.min_position for j in model.joints)
         self._upper = tuple(math.inf if j.max_position is None else j.max_position for j in model.joints)
 
@@ -428,32 +426,9 @@ class UrKinematics:
         return self._chain(q, None).frame
 
     def _chain(self, q: Vector, tcp: Frame | None) -> _Chain:
-        cos, sin = math.cos, math.sin
-        xx, xy, xz = 1.0, 0.0, 0.0
-        yx, yy, yz = 0.0, 1.0, 0.0
-        zx, zy, zz = 0.0, 0.0, 1.0
-        px = py = pz = 0.0
-        axes = []
-        points = []
-        for (theta, d, a, ca, sa), qi in zip(self._joints, q, strict=True):
-            axes.append((zx, zy, zz))
-            points.append((px, py, pz))
-            angle = theta + qi
-            ct, st = cos(angle), sin(angle)
-            px += d * zx
-            py += d * zy
-            pz += d * zz
-            ux, uy, uz = ct * xx + st * yx, ct * xy + st * yy, ct * xz + st * yz
-            vx, vy, vz = ct * yx - st * xx, ct * yy - st * xy, ct * yz - st * xz
-            px += a * ux
-            py += a * uy
-            pz += a * uz
-            xx, xy, xz = ux, uy, uz
-            yx, yy, yz, zx, zy, zz = (
-                ca * vx + sa * zx, ca * vy + sa * zy, ca * vz + sa * zz,
-                ca * zx - sa * vx, ca * zy - sa * vy, ca * zz - sa * vz,
-            )  # fmt: skip
-        frame: Frame = (xx, yx, zx, xy, yy, zy, xz, yz, zz, px, py, pz)
+        axes: list[tuple[float, float, float]] = []
+        points: list[tuple[float, float, float]] = []
+        frame: Frame = dh_chain(self._joints, q, axes, points)
         if tcp is not None:
             frame = compose(frame, tcp)
         return _Chain(frame, tuple(axes), tuple(points))

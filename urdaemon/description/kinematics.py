@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,7 +16,7 @@ from urdaemon.description.frames import compose
 from urdaemon.description.urmodels import DhParameters
 from urdaemon.errors import DescriptionError
 
-__all__ = ["DhKinematics", "KinematicTree", "TreeJoint", "quaternion_of"]
+__all__ = ["DhJoint", "DhKinematics", "KinematicTree", "TreeJoint", "dh_chain", "dh_joints", "quaternion_of"]
 
 Transform = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
 """Row-major rotation r00 r01 r02 r10 r11 r12 r20 r21 r22, then translation x y z."""
@@ -49,47 +49,74 @@ def quaternion_of(
     return (qx, qy, qz, qw)
 
 
+DhJoint = tuple[float, float, float, float, float]
+"""One standard-DH joint, ready to walk: (theta offset, d, a, cos alpha, sin alpha)."""
+
+
+def dh_joints(dh: DhParameters) -> tuple[DhJoint, ...]:
+    """The six joints of ``dh`` as :func:`dh_chain` walks them."""
+    return tuple(
+        (dh.theta[i], dh.d[i], dh.a[i], math.cos(dh.alpha[i]), math.sin(dh.alpha[i])) for i in range(6)
+    )
+
+
+def dh_chain(
+    joints: Sequence[DhJoint],
+    q: Iterable[float],
+    axes: list[tuple[float, float, float]] | None = None,
+    points: list[tuple[float, float, float]] | None = None,
+) -> Transform:
+    """The flange (tool0) in the base frame for joint positions ``q`` (rad), as a row-major Transform.
+
+    With ``axes`` and ``points``, each joint's rotation axis and a point on it (base frame) are appended
+    in order (what a Jacobian needs). Plain float math: this runs every robot cycle.
+    """
+    cos, sin = math.cos, math.sin
+    # Columns of the running rotation: x = (xx, xy, xz), y = ..., z = ...; p is the origin.
+    xx, xy, xz = 1.0, 0.0, 0.0
+    yx, yy, yz = 0.0, 1.0, 0.0
+    zx, zy, zz = 0.0, 0.0, 1.0
+    px = py = pz = 0.0
+    for (theta, d, a, ca, sa), qi in zip(joints, q, strict=True):
+        if axes is not None and points is not None:
+            axes.append((zx, zy, zz))
+            points.append((px, py, pz))
+        angle = theta + qi
+        ct, st = cos(angle), sin(angle)
+        # Tz(d)·Rz(angle) first: the origin moves d along z, x and y turn about z.
+        px += d * zx
+        py += d * zy
+        pz += d * zz
+        ux, uy, uz = ct * xx + st * yx, ct * xy + st * yy, ct * xz + st * yz
+        vx, vy, vz = ct * yx - st * xx, ct * yy - st * xy, ct * yz - st * xz
+        # Then Tx(a)·Rx(alpha): the origin moves a along the new x, y and z turn about it.
+        px += a * ux
+        py += a * uy
+        pz += a * uz
+        xx, xy, xz = ux, uy, uz
+        yx, yy, yz, zx, zy, zz = (
+            ca * vx + sa * zx,
+            ca * vy + sa * zy,
+            ca * vz + sa * zz,
+            ca * zx - sa * vx,
+            ca * zy - sa * vy,
+            ca * zz - sa * vz,
+        )
+    return (xx, yx, zx, xy, yy, zy, xz, yz, zz, px, py, pz)
+
+
 class DhKinematics:
     """Standard-DH forward kinematics of a 6-joint UR arm: tool0 in the controller's base frame."""
 
     __slots__ = ("_joints",)
 
     def __init__(self, dh: DhParameters) -> None:
-        self._joints = tuple(
-            (dh.theta[i], dh.d[i], dh.a[i], math.cos(dh.alpha[i]), math.sin(dh.alpha[i])) for i in range(6)
-        )
+        self._joints = dh_joints(dh)
 
     def tool_pose(self, q: Sequence[float]) -> tuple[float, ...]:
         """(x, y, z, qx, qy, qz, qw) of tool0 in base for joint positions ``q`` (6 values, rad)."""
-        cos, sin = math.cos, math.sin
-        # Columns of the running rotation: x = (xx, xy, xz), y = ..., z = ...; p is the origin.
-        xx, xy, xz = 1.0, 0.0, 0.0
-        yx, yy, yz = 0.0, 1.0, 0.0
-        zx, zy, zz = 0.0, 0.0, 1.0
-        px = py = pz = 0.0
-        for (theta, d, a, ca, sa), qi in zip(self._joints, q, strict=True):
-            angle = theta + qi
-            ct, st = cos(angle), sin(angle)
-            # Tz(d)·Rz(angle) first: the origin moves d along z, x and y turn about z.
-            px += d * zx
-            py += d * zy
-            pz += d * zz
-            ux, uy, uz = ct * xx + st * yx, ct * xy + st * yy, ct * xz + st * yz
-            vx, vy, vz = ct * yx - st * xx, ct * yy - st * xy, ct * yz - st * xz
-            # Then Tx(a)·Rx(alpha): the origin moves a along the new x, y and z turn about it.
-            px += a * ux
-            py += a * uy
-            pz += a * uz
-            xx, xy, xz = ux, uy, uz
-            yx, yy, yz, zx, zy, zz = (
-                ca * vx + sa * zx,
-                ca * vy + sa * zy,
-                ca * vz + sa * zz,
-                ca * zx - sa * vx,
-                ca * zy - sa * vy,
-                ca * zz - sa * vz,
-            )
-        qx, qy, qz, qw = quaternion_of(xx, yx, zx, xy, yy, zy, xz, yz, zz)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = dh_chain(self._joints, q)
+        qx, qy, qz, qw = quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22)
         return (px, py, pz, qx, qy, qz, qw)
 
 
