@@ -32,7 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -151,6 +151,8 @@ class FakeController:
         self._shared_clock: tuple[SharedClock, int] | None = None
         """A clock shared with the other fakes of this process, and this fake's slot on it."""
         self.cycles = 0
+        self._changed: asyncio.Event | None = None
+        """Set (and dropped) after a cycle or a handled read; exists only while ``until`` waits."""
 
     # ---- lifecycle ---------------------------------------------------------------------------------
 
@@ -236,6 +238,46 @@ class FakeController:
         """Move the teach pendant's speed slider."""
         self.arm.speed_slider = min(max(float(fraction), 0.0), 1.0)
 
+    # ---- waiting on the controller (tests and tools) -------------------------------------------------
+
+    async def until(self, done: Callable[[], bool], *, cycles: int = 5000, timeout: float = 30.0) -> int:
+        """Wait until ``done()`` holds: checked now and after every controller cycle, every client read
+        the controller handled (a connection accepted, a line or request read) and every time its
+        script queue settles. TimeoutError once more than ``cycles`` cycles (0: on a clock turned by
+        hand) or ``timeout`` seconds passed without it; returns the cycles it took. Costs the cycle
+        one check while nobody waits."""
+        start = self.cycles
+        async with asyncio.timeout(timeout):
+            while not done():
+                if self.cycles - start > cycles:
+                    raise TimeoutError(f"not done within {cycles} controller cycles")
+                await self._change()
+        return self.cycles - start
+
+    async def cycles_pass(self, count: int, *, timeout: float = 30.0) -> None:
+        """Wait until ``count`` more controller cycles have run (TimeoutError after ``timeout`` s)."""
+        end = self.cycles + count
+        await self.until(lambda: self.cycles >= end, cycles=count, timeout=timeout)
+
+    async def _change(self) -> None:
+        if self._changed is None:
+            self._changed = asyncio.Event()
+        changed = asyncio.ensure_future(self._changed.wait())
+        if not self.programs.busy:
+            await changed
+            return
+        settled = asyncio.ensure_future(self.programs.settled())
+        try:
+            await asyncio.wait((changed, settled), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            changed.cancel()
+            settled.cancel()
+
+    def _wake(self) -> None:
+        if self._changed is not None:
+            self._changed.set()
+            self._changed = None
+
     # ---- the clock -----------------------------------------------------------------------------------
 
     async def _run_clock(self) -> None:
@@ -250,6 +292,8 @@ class FakeController:
         """One controller cycle: the programs (which read their sockets themselves), the arm, and
         whatever streams are due."""
         self._cycle()
+        if self._changed is not None:
+            self._wake()
 
     def _cycle(self) -> None:
         arm, dt = self.arm, self.step_time
@@ -311,11 +355,13 @@ class FakeController:
         event loop, then started. Scripts get no replies, so reading never waits on the client reading
         (ur_rtde reads nothing of 30003, where it sends its scripts); it waits while too many scripts
         wait to be compiled (TCP flow control holds the client back meanwhile)."""
+        self._wake()  # the client is connected (and listed)
         while data := await reader.read(READ_CHUNK):
             for event in conn.receive_data(data):
                 if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
                     self._on_script(event)
                     await self.programs.room()
+            self._wake()
 
     # ---- real-time interface (30003) ---------------------------------------------------------------
 
@@ -418,6 +464,7 @@ class FakeController:
         conn = dash.DashboardConnection(Side.ROBOT)
         conn.send(dash.Banner())
         self._write("dashboard", writer, conn.data_to_send())
+        self._wake()
         while data := await reader.read(READ_CHUNK):
             for event in conn.receive_data(data):
                 if isinstance(event, dash.CommandReceived):
@@ -434,9 +481,15 @@ class FakeController:
                 ):
                     await writer.drain()
                     return
-            await paced(writer, data)
+            await self._paced(writer, data)
 
     # ---- RTDE (30004) ------------------------------------------------------------------------------------
 
     async def _serve_rtde(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await self.rtde.serve(reader, writer, paced)
+        self._wake()
+        await self.rtde.serve(reader, writer, self._paced)
+
+    async def _paced(self, writer: asyncio.StreamWriter, data: bytes) -> None:
+        """``paced``, once what was read is handled: a waiting ``until`` looks again."""
+        self._wake()
+        await paced(writer, data)
