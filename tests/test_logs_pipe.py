@@ -111,7 +111,7 @@ async def _move_back_and_forth(robot: RobotClient, paused: asyncio.Event, outcom
         outcomes.append(str(result.get("status")) if result.get("status") == "succeeded" else str(result))
 
 
-async def _flood(client: Client, robot: RobotClient, paused: asyncio.Event) -> int:
+async def _flood(client: Client, robot: RobotClient, fake: FakeController, paused: asyncio.Event) -> int:
     """Goals the daemon rejects and logs (an unknown field name echoed), until the pause is over."""
     sent = 0
     body: dict[str, Any] = {"positions": HOME, FLOOD_FIELD: 1}
@@ -119,9 +119,10 @@ async def _flood(client: Client, robot: RobotClient, paused: asyncio.Event) -> i
         with contextlib.suppress(UrDaemonError):
             await client.query(robot.keys.goal_move, body, timeout=1.0)
         sent += 1
-        # ~200 a second: each logged 450 bytes, the 64 KiB pipe fills in under a second, and the
-        # flood tests the log, not how many queries a busy machine's daemon can decode
-        await asyncio.sleep(0.005)
+        # one per 3 of the robot's cycles (at most ~170 a second): each logged 450 bytes, the 64 KiB
+        # pipe fills in under a second, and the flood tests the log, not how many queries a busy
+        # machine's daemon can decode
+        await fake.cycles_pass(3)
     return sent
 
 
@@ -156,7 +157,7 @@ async def test_unread_stderr_for_10_s_halts_no_program_and_loses_no_goal(
                     asyncio.create_task(_move_back_and_forth(robot, paused, outcomes))
                     for robot in (alice, bob)
                 ]
-                flood = asyncio.create_task(_flood(client, alice, paused))
+                flood = asyncio.create_task(_flood(client, alice, fake_alice, paused))
                 await asyncio.sleep(PAUSE_S)  # the pause itself is the scenario
                 paused.set()
                 drain_in_background(daemon, stderr)  # the reader comes back

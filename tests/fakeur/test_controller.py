@@ -244,23 +244,15 @@ async def test_dashboard_bring_up_with_refusals_like_a_real_controller() -> None
         assert (await link.next(dash.CommandReply)).success is False, "play while powered off is refused"
         await link.send(dash.PowerOn())
         assert (await link.next(dash.CommandReply)).success is True
-        for _ in range(1000):  # bounded: 20 s even if a busy machine starves the fake's clock
-            await link.send(dash.GetRobotMode())
-            mode = (await link.next(dash.RobotModeReply)).mode
-            if mode is RobotMode.IDLE:
-                break
-            # the fake's boot takes 0.5 s of its own clock; poll like a client would
-            await asyncio.sleep(0.02)
-        assert mode is RobotMode.IDLE
+        # the fake's boot takes 0.5 s of its own clock (250 cycles); then the dashboard says IDLE
+        await controller.until(lambda: controller.arm.robot_mode is RobotMode.IDLE, cycles=2500)
+        await link.send(dash.GetRobotMode())
+        assert (await link.next(dash.RobotModeReply)).mode is RobotMode.IDLE
         await link.send(dash.BrakeRelease())
         assert (await link.next(dash.CommandReply)).success is True
-        for _ in range(1000):  # bounded: 20 s even if a busy machine starves the fake's clock
-            await link.send(dash.GetRobotMode())
-            mode = (await link.next(dash.RobotModeReply)).mode
-            if mode is RobotMode.RUNNING:
-                break
-            await asyncio.sleep(0.02)
-        assert mode is RobotMode.RUNNING
+        await controller.until(lambda: controller.arm.robot_mode is RobotMode.RUNNING, cycles=2500)
+        await link.send(dash.GetRobotMode())
+        assert (await link.next(dash.RobotModeReply)).mode is RobotMode.RUNNING
         await link.send(dash.GetSafetyStatus())
         assert "NORMAL" in (await link.next(dash.SafetyStatusReply)).text
         await link.send(dash.IsInRemoteControl())

@@ -99,10 +99,8 @@ async def test_set_robotmode_run_on_the_primary_interface_from_power_off_release
         _, writer = await asyncio.open_connection(controller.address, 30001)
         writer.write(b"set robotmode run\n")
         await writer.drain()
-        for _ in range(200):  # the fake reads it on its own task
-            if controller.arm.robot_mode is not RobotMode.POWER_OFF:
-                break
-            await asyncio.sleep(0.01)
+        # the fake reads it on its own task; no cycle runs meanwhile, the handled read wakes this
+        await controller.until(lambda: controller.arm.robot_mode is not RobotMode.POWER_OFF, cycles=0)
         clock.until(lambda: controller.arm.robot_mode is RobotMode.RUNNING)
         writer.close()
 
@@ -202,10 +200,7 @@ async def test_realtime_interface_streams_one_message_per_cycle_in_the_versions_
     model = "ur10e" if version[0] >= 5 else "ur10"
     async with manual_fake(model=model, controller_version=version, powered=True) as (controller, clock):
         reader, writer = await asyncio.open_connection(controller.address, 30003)
-        for _ in range(100):
-            if controller._realtime_clients:
-                break
-            await asyncio.sleep(0.01)
+        await controller.until(lambda: bool(controller._realtime_clients), cycles=0)  # accepted
         clock.turn(5)
         client = rt.RealtimeConnection(Side.DAEMON)
         states: list[Any] = []
@@ -237,10 +232,7 @@ async def test_realtime_state_is_encoded_only_while_a_client_is_connected() -> N
         clock.turn(20)
         assert built == 0
         _, writer = await asyncio.open_connection(controller.address, 30003)
-        for _ in range(100):
-            if controller._realtime_clients:
-                break
-            await asyncio.sleep(0.01)
+        await controller.until(lambda: bool(controller._realtime_clients), cycles=0)  # accepted
         clock.turn(20)
         assert built == 20
         writer.close()

@@ -191,10 +191,9 @@ async def test_rtde_bit_register_words_set_the_inputs_and_report_the_outputs() -
         controller.arm.io.registers_bit.update({0: True, 31: True, 33: True, 64: True})
         link = await _rtde(controller, outputs, words)
         await link.send(rtde.InputData((0b101, 1 << 31)))
-        for _ in range(100):  # the input is handled by the fake's reader task
-            sample = await _sample(link, clock)
-            if sample["input_bit_registers0_to_31"]:
-                break
+        # the input is handled by the fake's reader task, woken by that read (no cycle runs meanwhile)
+        await controller.until(lambda: controller.input_registers.bits.get(0, False), cycles=0)
+        sample = await _sample(link, clock)
         bits = controller.input_registers.bits
         assert (bits[0], bits[1], bits[2], bits[32], bits[63]) == (True, False, True, False, True)
         assert sample["input_bit_registers0_to_31"] == 0b101

@@ -21,13 +21,10 @@ pytestmark = pytest.mark.timeout(60)
 LOOP = "def {name}():\n  while True:\n    sync()\n  end\nend\n"
 
 
-async def _eventually(done: Callable[[], bool]) -> None:
-    """Wait (bounded) for the fake's reader task to have handled what was sent."""
-    for _ in range(500):
-        if done():
-            return
-        await asyncio.sleep(0.01)
-    raise AssertionError("the fake did not get there")
+async def _eventually(controller: FakeController, done: Callable[[], bool]) -> None:
+    """Until the fake's reader task has handled what was sent and its scripts were compiled: woken by
+    those events, with no cycle run meanwhile (the clock is turned by hand)."""
+    await controller.until(done, cycles=0)
 
 
 async def _send(controller: FakeController, port: int, text: str) -> None:
@@ -59,7 +56,7 @@ async def test_a_bare_urscript_line_runs_as_a_program(port: int) -> None:
     controller command, and 30003 did not exist."""
     async with manual_fake(powered=True) as (controller, clock):
         await _send(controller, port, "set_digital_out(2, True)\n")
-        await _eventually(lambda: controller.program_name is not None)
+        await _eventually(controller, lambda: controller.program_name is not None)
         clock.turn(3)
         assert controller.arm.io.digital_out & (1 << 2)
 
@@ -72,7 +69,7 @@ async def test_a_def_program_replaces_the_running_one_and_a_sec_program_runs_bes
         assert (started.title, started.text) == ("PROGRAM_XXX_STARTED", "first")
         clock.turn(5)
         await _send(controller, 30001, "sec beside():\n  set_digital_out(3, True)\nend\n")
-        await _eventually(lambda: bool(controller._secondary))
+        await _eventually(controller, lambda: bool(controller._secondary))
         clock.turn(2)
         assert controller.arm.io.digital_out & (1 << 3)
         assert controller.program_name == "first"
@@ -136,7 +133,7 @@ async def test_a_paused_program_is_not_stepped_and_resumes_where_it_was() -> Non
     )
     async with manual_fake(powered=True, urcap=("127.0.0.1", 9)) as (controller, clock):
         await _send(controller, 30001, program)
-        await _eventually(lambda: controller._script is not None)
+        await _eventually(controller, lambda: controller._script is not None)
         clock.turn(10)
         counted = controller.arm.io.registers_int[0]
         assert counted == 10

@@ -55,10 +55,8 @@ async def test_handshake_streams_the_standard_recipe_and_maps_it_into_the_state(
         assert state.ready_for_motion is False, "brakes released but no control program: not ready"
         assert state.not_ready_reason().startswith("control program is not running")
         fake.protective_stop()
-        for _ in range(100):
-            await asyncio.sleep(0.01)
-            if _lifecycle(state) is Lifecycle.PROTECTIVE_STOP:
-                break
+        # each cycle's package reaches the link between two cycles: a few cycles suffice
+        await fake.until(lambda: _lifecycle(state) is Lifecycle.PROTECTIVE_STOP, cycles=500)
         assert _lifecycle(state) is Lifecycle.PROTECTIVE_STOP
         # the input recipe: set the speed slider and digital output 2
         values = dict.fromkeys(input_recipe(), 0)
@@ -69,10 +67,9 @@ async def test_handshake_streams_the_standard_recipe_and_maps_it_into_the_state(
             "standard_analog_output_1": 0.0,
         }
         link.send_inputs([doubles.get(n, values[n]) for n in input_recipe()])
-        for _ in range(100):
-            await asyncio.sleep(0.01)
-            if state.digital_out[2] and state.speed_slider == pytest.approx(0.4):
-                break
+        await fake.until(
+            lambda: state.digital_out[2] and state.speed_slider == pytest.approx(0.4), cycles=500
+        )
         assert state.digital_out[2] is True
         assert state.speed_slider == pytest.approx(0.4)
         link.close()
@@ -131,25 +128,15 @@ async def test_packages_that_queued_up_are_delivered_in_order_all_but_the_newest
         link = await RtdeLink.connect(fake.address, on_package)
         await link.handshake(output_recipe(), input_recipe())
         await link.start()
-        for _ in range(500):  # streaming: a few packages in, one by one
-            if len(stamps) >= 5:
-                break
-            await asyncio.sleep(0.005)
+        await fake.until(lambda: len(stamps) >= 5, cycles=2500)  # streaming: packages in, one by one
         # a busy machine may already have bunched some start-up packages: count this window only
         superseded_before = link.superseded
         assert link.transport is not None
         link.transport.pause_reading()  # the loop is held up: packages queue in the socket
-        queued_from = fake.cycles
-        for _ in range(500):
-            if fake.cycles >= queued_from + 10:
-                break
-            await asyncio.sleep(0.005)
+        await fake.cycles_pass(10)
         calls = len(stamps)
         link.transport.resume_reading()
-        for _ in range(500):
-            if len(stamps) > calls + 10:
-                break
-            await asyncio.sleep(0.001)
+        await fake.until(lambda: len(stamps) > calls + 10, cycles=2500)
         link.close()
         times = [t for t, _ in stamps]
         assert {round(b - a, 6) for a, b in itertools.pairwise(times)} == {0.002}, "every package, in order"

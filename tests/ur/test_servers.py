@@ -90,15 +90,13 @@ async def test_a_headless_program_connects_back_and_the_daemon_drives_the_arm() 
         # the held target in about 0.3 s (0.03 / 2000), not reach it in one cycle
         for _ in range(2500):
             assert servers.reverse.send(reverse.ServoJ(target, 0.1))
-            await asyncio.sleep(0.002)
+            await fake.cycles_pass(1)
             if abs(fake.arm.q[0] - target[0]) < 1e-9:
                 break
         assert fake.arm.q[0] == pytest.approx(target[0], abs=1e-9)
         assert servers.script_command.send(script_command.SetPayload(2.5, (0.0, 0.0, 0.1)))
-        for _ in range(100):
-            await asyncio.sleep(0.002)
-            if fake.arm.payload_mass == 2.5:
-                break
+        # the program reads its script_command socket in its cycle: a few cycles after it arrives
+        await fake.until(lambda: fake.arm.payload_mass == 2.5, cycles=500)
         assert fake.arm.payload_mass == 2.5
         servers.reverse.send(reverse.Stopped())
         await hooks.wait_for(lambda: not servers.reverse.connected)

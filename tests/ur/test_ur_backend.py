@@ -313,10 +313,8 @@ async def test_a_move_ends_with_the_arm_settled_on_its_goal() -> None:
             target = [1.0, *HOME[1:]]
             goal = await alice.move(target, duration=2.0)
             assert (await goal.result(timeout=20))["status"] == "succeeded"
-            for _ in range(2000):  # bounded: until the arm is at rest (stopj or settled)
-                if fake.arm.steady or max(abs(v) for v in fake.arm.qd) < 1e-9:
-                    break
-                await asyncio.sleep(0.005)
+            # until the arm is at rest (stopj or settled): within 5 s of the fake's own time
+            await fake.until(lambda: fake.arm.steady or max(abs(v) for v in fake.arm.qd) < 1e-9, cycles=2500)
             assert fake.arm.q[0] == pytest.approx(target[0], abs=1e-5)
     finally:
         await fake.close()

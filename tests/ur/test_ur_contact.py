@@ -71,13 +71,8 @@ async def _tcp_force(address: str) -> tuple[float, ...]:
 
 
 async def _cycles(fake: FakeController, count: int) -> None:
-    """Until the fake has run ``count`` more cycles (bounded in time)."""
-    until = fake.cycles + count
-    for _ in range(20_000):
-        if fake.cycles >= until:
-            return
-        await asyncio.sleep(0.002)
-    raise AssertionError(f"the fake did not run {count} cycles")
+    """Until the fake has run ``count`` more cycles (woken by its ticks, bounded in time)."""
+    await fake.cycles_pass(count, timeout=40.0)
 
 
 async def _event(events: Any, kind: str) -> dict[str, Any]:
