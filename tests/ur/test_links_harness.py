@@ -2,7 +2,7 @@
 
 ``UrRun`` starts the fake (on a run-specific address, ``fake_address``) and the backend's ``run`` as a
 task, counts the cycles, and lets a test wait for a condition on the backend, cycle by cycle (events,
-never sleeps). It holds no tests of its own.
+never sleeps). Its one test is of ``UrRun`` itself: a failed ``run`` is reported at once.
 """
 
 from __future__ import annotations
@@ -12,9 +12,12 @@ import contextlib
 from collections.abc import AsyncIterator, Callable
 from typing import Any
 
+import pytest
+
 from tests.helpers import fake_address, free_tcp_port
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.cell.load import parse_cell
+from urdaemon.errors import ConnectionLostError
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.protocols import primary as prim
@@ -86,9 +89,11 @@ class UrRun:
     def start(self) -> None:
         """Start ``backend.run``."""
         self.task = asyncio.get_running_loop().create_task(self.backend.run(self._on_cycle))
+        self.task.add_done_callback(lambda _: self._tick.set())  # a failed run ticks no more
 
     async def until(self, predicate: Callable[[], bool], *, timeout: float = 30.0, what: str = "") -> None:
-        """Wait, cycle by cycle, until ``predicate()`` holds (AssertionError after ``timeout``)."""
+        """Wait, cycle by cycle, until ``predicate()`` holds (AssertionError after ``timeout``); if
+        ``run`` ends first, at once with its error."""
         try:
             async with asyncio.timeout(timeout):
                 while not predicate():
@@ -170,3 +175,18 @@ def program_is_running(run: UrRun) -> bool:
 def controller_command(run: UrRun, command: prim.ControllerCommand) -> None:
     """Have the fake execute a controller command, as if sent on its primary interface."""
     run.fake._controller_command(str(command))
+
+
+async def test_until_reports_a_failed_backend_at_once() -> None:
+    """Reproduction: the fake drops the backend's RTDE link, so ``run`` fails with ConnectionLostError
+    while a test waits for a condition that never holds. ``until`` woke only on ticks, and a failed run
+    ticks no more: it sat out its whole timeout, then blamed the condition (AssertionError, "not
+    within") instead of the failure. Now the run's end wakes it and it raises the run's own error."""
+    async with ur_run() as run:
+        await run.until(lambda: run.cycles >= 5, what="RTDE streams")
+        assert run.fake.drop("rtde") == 1
+        with pytest.raises(ConnectionLostError) as raised:
+            await run.until(lambda: False, timeout=10.0, what="a condition that never holds")
+        assert run.task is not None
+        assert run.task.done()
+        assert raised.value is run.task.exception(), "the run's own failure, not a new error"
