@@ -747,6 +747,7 @@ class RobotRuntime:
     def _check_freedrive_can_start(self) -> None:
         if self._closing:
             raise GoalRejected(SHUTTING_DOWN)
+        self.controller.release_hold()
         if self.controller.mode != "idle":
             raise GoalRejected(
                 f"busy: the robot is {self.controller.mode.replace('_', ' ')}; freedrive starts at rest"

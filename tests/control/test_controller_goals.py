@@ -565,3 +565,36 @@ def test_a_robot_that_never_settles_is_let_go_after_the_settle_time() -> None:
     robot.run_until_result("g1", 1000)
     ticks = robot.run_until_idle(round(2 * SETTLE_TIME / PERIOD))
     assert ticks == pytest.approx(SETTLE_TIME / PERIOD, abs=2)
+
+
+def test_a_cancel_lets_go_when_its_ramp_ends_even_if_the_robot_is_off_the_point() -> None:
+    """Only a succeeded goal's final point is held for the robot to settle: after a cancel (or a stop,
+    or the deadman) the controller goes idle when its stop ramp ends, so a robot that cannot reach the
+    point (blocked, in force mode) is not pushed toward it."""
+    robot = SimRobot.create(UR10E_LIMITS)
+    robot.offset = [1e-3] + [0.0] * 5  # always 1 mrad off what it is told
+    robot.controller.accept_trajectory(
+        "g1", UR_JOINTS, [TrajectoryPoint((0.5, 0.0, 0.0, 0.0, 0.0, 0.0), 2.0)], robot.state, 0.0
+    )
+    for _ in range(200):
+        robot.step()
+    assert robot.controller.cancel("g1")
+    ticks = robot.run_until_idle(2000)
+    (result,) = robot.results()
+    assert result.status is GoalStatus.CANCELED
+    assert ticks < 400, "let go as the stop ramp ended (it takes well under 0.8 s from this speed)"
+
+
+def test_freedrive_or_passthrough_right_after_a_goal_releases_the_hold() -> None:
+    """While a succeeded goal's final point is held for a lagging robot, release_hold (what freedrive and
+    a passthrough start call) goes idle at once, so they are not refused as busy."""
+    robot = SimRobot.create(UR10E_LIMITS)
+    robot.offset = [1e-3] + [0.0] * 5
+    robot.controller.accept_trajectory(
+        "g1", UR_JOINTS, [TrajectoryPoint((0.1, 0.0, 0.0, 0.0, 0.0, 0.0), 0.5)], robot.state, 0.0
+    )
+    robot.run_until_result("g1", 1000)
+    robot.step()
+    assert robot.controller.mode == "stopping", "held for the robot to settle"
+    robot.controller.release_hold()
+    assert robot.controller.mode == "idle"

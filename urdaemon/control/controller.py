@@ -88,15 +88,16 @@ _PERM_CACHE_SIZE = 32
 RELEASE_SEGMENTS = 64
 """Segments of a finished goal's plan freed per tick (~20 µs): freeing a 5 000-point plan at once
 would hold the loop for ~1.5 ms."""
-SETTLE_POSITION = 1e-5
-"""rad: how close every joint must be to the held setpoint for a stop to end (see ``SETTLE_TIME``)."""
-SETTLE_VELOCITY = 1e-4
-"""rad/s: how slowly every joint must move for a stop to end."""
+SETTLE_POSITION = 2e-5
+"""rad: how close every joint must be to a succeeded goal's final point for the hold to end."""
+SETTLE_VELOCITY = 1e-3
+"""rad/s: how slowly every joint must move for the hold to end."""
 SETTLE_TIME = 1.0
-"""s: how long a stop holds its final setpoint at most for the robot to settle on it. A robot follows
-its setpoint with a lag (a UR's servoj: lookahead time × speed), so ending when the setpoint comes to
-rest would leave it wherever the lag had it (the goal's tolerance, not its target); UR's ROS 2 driver
-holds the last point for the same reason."""
+"""s: how long the final point of a succeeded goal is held at most for the robot to settle on it. A
+robot follows its setpoint with a lag (a UR's servoj: lookahead time × speed), so letting go when the
+goal tolerance is met would leave it wherever the lag had it (the tolerance, not the target); UR's ROS 2
+driver holds the last point for the same reason. Only after success: a stop, cancel or deadman lets go
+once its ramp has ended, as a robot that cannot reach a point must not be pushed toward it."""
 MAX_JOINT_TOLERANCE = 2.0 * math.pi
 """Largest finite path or goal tolerance of a joint (rad): one turn; infinity switches the check off."""
 
@@ -244,6 +245,10 @@ class MotionController:
         self._effective_velocity = [0.0] * n
         self._latch = [0] * n
         self._last_stream_now = -math.inf
+        self._hold = False
+        """The stop that runs holds a succeeded goal's final point until the robot settles on it."""
+        self._ramp_done = False
+        """The stop's ramp has ended (only a hold keeps the controller out of IDLE)."""
         self._settle_ticks = 0
         self._settle_limit = max(1, round(SETTLE_TIME / period))
 
@@ -370,9 +375,16 @@ class MotionController:
         The robot follows its own interpolation, so no path tolerance applies; the goal ends with
         ``finish_external`` (the robot's result), a cancel, a stop, or the robot becoming not ready.
         """
-        if self._goal is not None or self._mode is not _Mode.IDLE:
-            active = self._goal.goal_id if self._goal is not None else self._mode.value
-            raise GoalRejected(f"busy: {active} is running; a passthrough trajectory starts from rest")
+        self.release_hold()
+        if self._goal is not None:
+            raise GoalRejected(
+                f"busy: goal {self._goal.goal_id} is running; a passthrough trajectory starts from rest"
+            )
+        if self._mode is not _Mode.IDLE:
+            raise GoalRejected(
+                f"busy: the robot is {self._mode.value.replace('_', ' ')}; a passthrough trajectory starts "
+                "from rest"
+            )
         self._check_can_start(goal_id, state, now, False)
         if planner.limits is not self.plan_limits:
             raise ValueError("the planner was prepared by another controller")
@@ -658,6 +670,7 @@ class MotionController:
             if worst < 0:
                 self._finish_goal(GoalStatus.SUCCEEDED, "reached the goal within tolerance", meas)
                 self._enter_stopping()
+                self._hold = True
                 self._tick_stopping(state, command)
                 return
             if now - goal.end_now > goal.goal_time:
@@ -712,14 +725,22 @@ class MotionController:
 
     def _tick_stopping(self, state: RobotState, command: JointCommand) -> None:
         result = self._online_step()
-        if result is None or (result == _FINISHED and self._settled(state)):
+        if result == _FINISHED:
+            self._ramp_done = True
+        if result is None or (result == _FINISHED and (not self._hold or self._settled(state))):
             self._go_idle()
             self._write_idle(state, command)
             return
         self._write_setpoint(command)
 
+    def release_hold(self) -> None:
+        """Go idle now if all that runs is the hold of a succeeded goal's final point (freedrive and
+        passthrough start from rest, and waiting for the robot to settle must not refuse them)."""
+        if self._mode is _Mode.STOPPING and self._hold and self._ramp_done:
+            self._go_idle()
+
     def _settled(self, state: RobotState) -> bool:
-        """Whether the robot rests on the stopped setpoint, or has been given all the time it gets."""
+        """Whether the robot rests on the held point, or has been given all the time it gets."""
         self._settle_ticks += 1
         if self._settle_ticks > self._settle_limit:
             return True
@@ -989,6 +1010,8 @@ class MotionController:
         inp.target_velocity = self._zeros
         inp.target_acceleration = self._zeros
         self._mode = _Mode.STOPPING
+        self._hold = False
+        self._ramp_done = False
         self._settle_ticks = 0
         self._last_stream_now = -math.inf
 
