@@ -71,6 +71,8 @@ STOPPED_WHILE_PLANNING = "stopped while it was being planned (stop, cancel, hand
 """The reason a trajectory goal is refused when something ended motion while it was being planned."""
 TOOL_CONTACT_REASON = "tool contact: the tool touched something; the robot stopped and went back to it"
 """The reason a goal or stream ends when the robot reports a tool contact."""
+TOOL_CONTACT_BUSY = "busy: tool contact: the robot rests where its tool touched; call end_tool_contact first"
+"""The reason motion is refused between a tool contact and ``end_tool_contact``."""
 
 Service = Callable[[bytes | None], Awaitable[dict[str, Any] | None]]
 """A service: the request's payload → what to add to its ``{"ok": true}`` reply (None: nothing)."""
@@ -117,6 +119,8 @@ class RobotRuntime:
         """Counts what ends motion (stop, cancel, hand_back_control, freedrive on): a trajectory being
         planned is accepted only if it is still the same as when its planning began."""
         self._closing = False
+        self._in_contact = False
+        """The robot reported a tool contact and rests where it touched until ``end_tool_contact``."""
         """Set first when the runtime shuts down: every new request is answered ``SHUTTING_DOWN``."""
         self._running_services: set[str] = set()
         self.service_names: frozenset[str] = frozenset()
@@ -189,7 +193,7 @@ class RobotRuntime:
             "zero_ft_sensor": lambda: backend.zero_ft_sensor(),
             "end_force_mode": lambda: backend.force_mode(None),
             "start_tool_contact": lambda: backend.tool_contact(True),
-            "end_tool_contact": lambda: backend.tool_contact(False),
+            "end_tool_contact": self._end_tool_contact,
         }
         for name in PAYLOADLESS_SERVICES:
             services[name] = _without_arguments(name, actions[name])
@@ -239,6 +243,7 @@ class RobotRuntime:
             await asyncio.sleep(delay)
 
     def _end_motion(self, reason: str) -> None:
+        self._in_contact = False  # a restarted control script has no contact to rest in
         self.controller.abort(reason)
         state = self.backend.state
         state.program_running = False
@@ -479,7 +484,7 @@ class RobotRuntime:
             raise GoalRejected(SHUTTING_DOWN)
         if generation != self._generation:
             raise GoalRejected(STOPPED_WHILE_PLANNING)
-        self._check_not_freedrive()
+        self._check_free_to_move()
 
     def _interrupt_planning(self) -> str | None:
         """Make the trajectory goal being planned (if any) be refused; what it was, for the reply."""
@@ -536,7 +541,7 @@ class RobotRuntime:
             if self._closing:
                 raise GoalRejected(SHUTTING_DOWN)
             goal = codec.decode_move_goal(_payload(query))
-            self._check_not_freedrive()
+            self._check_free_to_move()
             names = self._joint_names(goal.joint_names)
             goal_id = self._new_goal_id()
             duration = self.controller.accept_move(
@@ -724,13 +729,16 @@ class RobotRuntime:
         """Refuse a streaming command while shutting down or in freedrive."""
         if self._closing:
             raise GoalRejected(SHUTTING_DOWN)
-        self._check_not_freedrive()
+        self._check_free_to_move()
 
-    def _check_not_freedrive(self) -> None:
+    def _check_free_to_move(self) -> None:
+        """Refuse motion while freedrive is on or the robot rests where its tool touched something."""
         if self.backend.freedrive_active:
             raise GoalRejected(
                 "busy: freedrive is on (stop sending freedrive commands, or send active: false)"
             )
+        if self._in_contact:
+            raise GoalRejected(TOOL_CONTACT_BUSY)
 
     def _on_freedrive(self, key: str, payload: bytes) -> None:
         try:
@@ -747,6 +755,8 @@ class RobotRuntime:
     def _check_freedrive_can_start(self) -> None:
         if self._closing:
             raise GoalRejected(SHUTTING_DOWN)
+        if self._in_contact:
+            raise GoalRejected(TOOL_CONTACT_BUSY)
         self.controller.release_hold()
         if self.controller.mode != "idle":
             raise GoalRejected(
@@ -763,6 +773,13 @@ class RobotRuntime:
         ok, text = await self.backend.dashboard(line)
         return {"ok": ok, "reply": text}
 
+    async def _end_tool_contact(self) -> None:
+        await self.backend.tool_contact(False)
+        if self._in_contact:
+            # motion starts anew from where the robot rests, never from a setpoint of before the contact
+            self._in_contact = False
+            self.controller.abort(TOOL_CONTACT_REASON)
+
     async def _hand_back_control(self) -> None:
         self._interrupt_planning()  # the pendant program continues: nothing planned may start
         await self.backend.hand_back_control()
@@ -770,7 +787,9 @@ class RobotRuntime:
     def _publish_notice(self, kind: str, text: str) -> None:
         if kind == "tool_contact" and text == "contact":
             # the robot stopped on its own and goes back to where the tool touched: what we were sending
-            # is over now, not when the goal's time runs out
+            # is over now, not when the goal's time runs out, and nothing moves it until end_tool_contact
+            self._in_contact = True
+            self._interrupt_planning()
             self.controller.abort(TOOL_CONTACT_REASON)
             self._publish_events()
             self._publish_status()
