@@ -142,27 +142,31 @@ def test_a_bad_address_stops_the_script_with_line_and_column() -> None:
     assert "read_input_float_register" in error.message
 
 
-def test_input_actions_are_recorded_and_reset_to_default() -> None:
-    """On f5f0e26 the set_*_input_action family stopped the program with "not simulated"."""
+def test_input_actions_default_is_accepted_and_freedrive_is_refused_as_not_simulated() -> None:
+    """On f5f0e26 the set_*_input_action family stopped the program with "not simulated"; "default" (what
+    PolyScope's installation preamble writes) runs; "freedrive" would need something watching the inputs,
+    so it stops the program saying so rather than being recorded and ignored."""
     from urdaemon.fakeur.urscript.lib_settings import settings_of
 
     host = _host()
     error = _run(
         host,
-        'set_standard_digital_input_action(3, "freedrive")\n'
-        'set_tool_digital_input_action(1, "freedrive")\n'
-        'set_gp_boolean_input_action(100, "freedrive")\n'
+        'set_standard_digital_input_action(3, "default")\n'
+        'set_tool_digital_input_action(1, "default")\n'
+        'set_gp_boolean_input_action(100, "default")\n'
         'set_configurable_digital_input_action(0, "default")\n',
     )
     assert error is None
-    actions = settings_of(host.arm).input_actions
-    assert actions == {
-        ("standard", 3): "freedrive",
-        ("tool", 1): "freedrive",
-        ("gp_boolean", 100): "freedrive",
-    }
+    assert settings_of(host.arm).input_actions == {}
     assert _run(host, "set_input_actions_to_default()\n") is None
-    assert actions == {}
+    for call in (
+        'set_standard_digital_input_action(3, "freedrive")',
+        'set_tool_digital_input_action(1, "freedrive")',
+        'set_gp_boolean_input_action(100, "freedrive")',
+    ):
+        error = _run(host, call + "\n")
+        assert error is not None
+        assert "not simulated" in error.message, call
     error = _run(host, 'set_standard_digital_input_action(8, "freedrive")\n')
     assert error is not None
     assert "0..7" in error.message

@@ -58,6 +58,9 @@ def test_settings_are_recorded_for_later_programs() -> None:
     assert later.variable("a") == [0.1, 0.0, -0.2]
     assert settings.baselight[0] == "iec"
     assert pause_on_error_of(host) == {(173, 2)}, "the same program's host"
+    hard = _run(host, "set_safety_mode_transition_hardness(0)\n")
+    assert hard.error is not None
+    assert "not simulated" in hard.error.message, "the fake's stops are soft: a hard one is not faked"
     fresh = ScriptHost(host.arm, step_time=DT)
     assert pause_on_error_of(fresh) == set(), "the manual resets it when the program stops"
     other = load_ur_model("ur5e")

@@ -377,6 +377,11 @@ def _input_action(host: ScriptHost, function: str, group: str, port: Any, action
     pin = _index(function, port, _INPUT_GROUPS[group])
     if action not in INPUT_ACTIONS:
         raise ScriptRuntimeError(f'{function}: action must be "default" or "freedrive", got {action!r}')
+    if action == "freedrive":
+        raise ScriptRuntimeError(
+            f'{function}: the "freedrive" action is not simulated by the fake controller: nothing watches '
+            "its inputs to start freedrive"
+        )
     actions = settings_of(host.arm).input_actions
     if action == "default":
         actions.pop((group, pin), None)
@@ -386,8 +391,8 @@ def _input_action(host: ScriptHost, function: str, group: str, port: Any, action
 
 @builtin("set_standard_digital_input_action")
 def set_standard_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
-    """What standard input ``port`` (0..7) does when high: ``"default"`` or ``"freedrive"`` (recorded:
-    the fake's inputs change only when a test sets them, and nothing watches them for freedrive)."""
+    """What standard input ``port`` (0..7) does when high: ``"default"`` (nothing); ``"freedrive"`` stops
+    the program with "not simulated" (nothing watches the fake's inputs to start freedrive)."""
     _input_action(host, "set_standard_digital_input_action", "standard", port, action)
 
 

@@ -119,11 +119,16 @@ def get_base_acceleration(host: ScriptHost) -> UrList:
 
 @builtin("set_safety_mode_transition_hardness")
 def set_safety_mode_transition_hardness(host: ScriptHost, type: Any) -> None:
-    """How hard the arm stops between normal, reduced and safeguard stop: 0 hard, 1 soft (recorded;
-    the fake's stops keep their own decelerations, see fakeur/arm.py)."""
+    """How hard the arm stops between normal, reduced and safeguard stop: 1 soft, what the fake's stops
+    do (fakeur/arm.py); 0 hard stops the program with "not simulated"."""
     hardness = _integer("set_safety_mode_transition_hardness", type)
     if hardness not in (0, 1):
         raise ScriptRuntimeError(f"set_safety_mode_transition_hardness: type must be 0 or 1, got {hardness}")
+    if hardness == 0:
+        raise ScriptRuntimeError(
+            "set_safety_mode_transition_hardness: a hard transition (0) is not simulated by the fake "
+            "controller: its stops always decelerate softly"
+        )
     settings_of(host.arm).safety_transition_hardness = hardness
 
 
