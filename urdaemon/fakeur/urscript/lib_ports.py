@@ -98,31 +98,60 @@ def _milli(value: float) -> int:
     return round(value * 1000.0) if math.isfinite(value) else 0
 
 
-def _state_registers(arm: FakeArm) -> dict[int, Callable[[], float]]:
-    table: dict[int, Callable[[], float]] = {
-        258: lambda: int(arm.robot_mode),
-        260: lambda: int(arm.robot_mode not in (RobotMode.POWER_OFF, RobotMode.BOOTING)),
-        261: lambda: int(arm.safety_mode is SafetyMode.PROTECTIVE_STOP),
-        262: lambda: int(
-            arm.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP)
-        ),
-    }
-    for i in range(6):
-        table[270 + i] = _scaled(lambda: arm.q, i, 1000.0)
-        table[280 + i] = _scaled(lambda: arm.qd, i, 1000.0)
-        table[400 + i] = _scaled(lambda: tcp_pose(arm, arm.q), i, 10000.0 if i < 3 else 1000.0)
-        table[410 + i] = _scaled(lambda: tool_speed(arm, arm.q, arm.qd), i, 1000.0)
-    return table
+Reader = Callable[[ScriptHost], float]
+"""How one register of the map is read from the host's arm."""
 
 
-def _scaled(values: Callable[[], Sequence[float]], index: int, scale: float) -> Callable[[], float]:
-    """Reads element ``index`` of ``values()`` times ``scale``, rounded (0 if it is not finite)."""
+def _scaled(values: Callable[[FakeArm], Sequence[float]], index: int, scale: float) -> Reader:
+    """Reads element ``index`` of ``values(arm)`` times ``scale``, rounded (0 if it is not finite)."""
 
-    def read() -> float:
-        value = values()[index] * scale
+    def read(host: ScriptHost) -> float:
+        value = values(host.arm)[index] * scale
         return round(value) if math.isfinite(value) else 0
 
     return read
+
+
+def _readers() -> dict[int, Reader]:
+    """Every readable register but the general purpose ones, built once."""
+    table: dict[int, Reader] = {
+        0: lambda h: _box_word(h.arm.io.digital_in),
+        1: lambda h: _box_word(h.arm.io.digital_out),
+        4: lambda h: _milli(h.arm.io.analog_in[0]),
+        5: lambda h: _domain_bit(h.arm, 0),
+        6: lambda h: _milli(h.arm.io.analog_in[1]),
+        7: lambda h: _domain_bit(h.arm, 1),
+        8: lambda h: _milli(h.arm.io.tool_analog_in[0]),
+        9: lambda h: settings_of(h.arm).tool_analog_input_domain[0],
+        10: lambda h: _milli(h.arm.io.tool_analog_in[1]),
+        11: lambda h: settings_of(h.arm).tool_analog_input_domain[1],
+        16: lambda h: _analog_out(h.arm, 0),
+        17: lambda h: _domain_bit(h.arm, 2),
+        18: lambda h: _analog_out(h.arm, 1),
+        19: lambda h: _domain_bit(h.arm, 3),
+        20: lambda h: h.arm.io.tool_voltage,
+        21: lambda h: h.arm.io.digital_in >> _TOOL_SHIFT & 0x3,
+        22: lambda h: h.arm.io.digital_out >> _TOOL_SHIFT & 0x3,
+        30: lambda h: h.arm.io.digital_in >> _CONFIGURABLE_SHIFT & 0xFF,
+        31: lambda h: h.arm.io.digital_out >> _CONFIGURABLE_SHIFT & 0xFF,
+        256: lambda h: h.version[0],
+        257: lambda h: h.version[1],
+        258: lambda h: int(h.arm.robot_mode),
+        260: lambda h: int(h.arm.robot_mode not in (RobotMode.POWER_OFF, RobotMode.BOOTING)),
+        261: lambda h: int(h.arm.safety_mode is SafetyMode.PROTECTIVE_STOP),
+        262: lambda h: int(
+            h.arm.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP)
+        ),
+    }
+    for i in range(6):
+        table[270 + i] = _scaled(lambda arm: arm.q, i, 1000.0)
+        table[280 + i] = _scaled(lambda arm: arm.qd, i, 1000.0)
+        table[400 + i] = _scaled(lambda arm: tcp_pose(arm, arm.q), i, 10000.0 if i < 3 else 1000.0)
+        table[410 + i] = _scaled(lambda arm: tool_speed(arm, arm.q, arm.qd), i, 1000.0)
+    return table
+
+
+_READERS: Final = _readers()
 
 
 def _signed(value: int) -> int:
@@ -132,37 +161,12 @@ def _signed(value: int) -> int:
 
 
 def _read_register(host: ScriptHost, address: int) -> int:
-    arm = host.arm
-    io = arm.io
-    simple: dict[int, Callable[[], float]] = {
-        0: lambda: _box_word(io.digital_in),
-        1: lambda: _box_word(io.digital_out),
-        4: lambda: _milli(io.analog_in[0]),
-        5: lambda: _domain_bit(arm, 0),
-        6: lambda: _milli(io.analog_in[1]),
-        7: lambda: _domain_bit(arm, 1),
-        8: lambda: _milli(io.tool_analog_in[0]),
-        9: lambda: settings_of(arm).tool_analog_input_domain[0],
-        10: lambda: _milli(io.tool_analog_in[1]),
-        11: lambda: settings_of(arm).tool_analog_input_domain[1],
-        16: lambda: _analog_out(arm, 0),
-        17: lambda: _domain_bit(arm, 2),
-        18: lambda: _analog_out(arm, 1),
-        19: lambda: _domain_bit(arm, 3),
-        20: lambda: io.tool_voltage,
-        21: lambda: io.digital_in >> _TOOL_SHIFT & 0x3,
-        22: lambda: io.digital_out >> _TOOL_SHIFT & 0x3,
-        30: lambda: io.digital_in >> _CONFIGURABLE_SHIFT & 0xFF,
-        31: lambda: io.digital_out >> _CONFIGURABLE_SHIFT & 0xFF,
-        256: lambda: host.version[0],
-        257: lambda: host.version[1],
-    }
     if address in GENERAL_PURPOSE:
-        return _signed(settings_of(arm).port_registers.get(address, 0))
-    read = simple.get(address) or _state_registers(arm).get(address)
+        return _signed(settings_of(host.arm).port_registers.get(address, 0))
+    read = _READERS.get(address)
     if read is None:
         raise ScriptRuntimeError(f"read_port_register: address {address} is not readable on the fake's map")
-    return _signed(int(read()))
+    return _signed(int(read(host)))
 
 
 def _write_register(host: ScriptHost, address: int, value: int) -> None:
