@@ -262,10 +262,10 @@ class FakeController:
     async def _change(self) -> None:
         if self._changed is None:
             self._changed = asyncio.Event()
-        changed = asyncio.ensure_future(self._changed.wait())
         if not self.programs.busy:
-            await changed
+            await self._changed.wait()
             return
+        changed = asyncio.ensure_future(self._changed.wait())
         settled = asyncio.ensure_future(self.programs.settled())
         try:
             await asyncio.wait((changed, settled), return_when=asyncio.FIRST_COMPLETED)
