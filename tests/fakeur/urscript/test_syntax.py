@@ -6,7 +6,7 @@ import pytest
 
 from urdaemon.fakeur.urscript import ScriptCompileError
 from urdaemon.fakeur.urscript import syntax as ast
-from urdaemon.fakeur.urscript.syntax import parse
+from urdaemon.fakeur.urscript.syntax import _parser, parse, step_label
 
 
 def _expr(text: str) -> ast.Expr:
@@ -256,3 +256,52 @@ def test_step_labels_may_carry_the_pendants_symbols() -> None:
     (function,) = parse(text)
     assert isinstance(function, ast.Function)
     assert [type(s).__name__ for s in function.body] == ["Declare", "While"]
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "column"),
+    [
+        ('# $ 1 "\u00e9"\n', 1, 8),  # a comment that looks like a label is a comment
+        ('x = 1 $ 1 "\u00e9"\n', 1, 12),  # a label is a line of its own
+        ('x = 1\ny = 2 # $ 2 "\u2254"\n', 2, 14),
+    ],
+)
+def test_a_label_only_starts_a_line(text: str, line: int, column: int) -> None:
+    """Reproduction: the ASCII check found labels anywhere (``_STEP_LABEL``, unanchored), so the
+    comment ``# $ 1 "é"`` let ``é`` through and the script compiled; its pattern (``+``) also
+    differed from the grammar's ``LABEL`` (``*``)."""
+    with pytest.raises(ScriptCompileError) as caught:
+        parse(text)
+    assert (caught.value.line, caught.value.column) == (line, column)
+    assert "non-ASCII" in caught.value.message
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '$ 1 "BeforeStart"',
+        '  $ 2 "Robot Program" "breakAfter"',
+        "\t$ 3",
+        '$4 "var_4\u22544"',
+        '    $ 22 "If var_3\u225f0"',
+    ],
+)
+def test_the_ascii_check_and_the_grammar_share_one_label(text: str) -> None:
+    """One definition: the ASCII check's pattern is the grammar's ``LABEL`` terminal, and a line the
+    check takes for a label is one the parser skips (before the fix they were two patterns)."""
+    assert step_label().pattern == _parser().get_terminal("LABEL").pattern.to_regexp()
+    script = f"x = 1\n{text}\ny = 2\n"
+    (match,) = step_label().finditer(script)
+    assert match.group() == text
+    first, second = parse(script)
+    assert isinstance(first, ast.Assign)
+    assert isinstance(second, ast.Assign)
+    assert (second.line, second.column) == (3, 1)
+
+
+@pytest.mark.parametrize("text", ['x = 1 $ 1 "a"\n', "f() $ 2\n", '# c\nx = 1 \t$ 3 "b"\n'])
+def test_a_label_after_a_statement_is_a_syntax_error(text: str) -> None:
+    """The grammar's label also starts a line only: mid-line, ``$`` is no token of URScript."""
+    with pytest.raises(ScriptCompileError) as caught:
+        parse(text)
+    assert "syntax_error" in caught.value.message

@@ -51,6 +51,7 @@ __all__ = [
     "Unary",
     "While",
     "parse",
+    "step_label",
 ]
 
 
@@ -417,16 +418,19 @@ class _Else:
     body: tuple[Statement, ...]
 
 
-_STEP_LABEL = re.compile(r'\$[ \t]*\d+(?:[ \t]+"[^"\n]*")+')
-"""A step label: PolyScope writes the node's text there as the pendant shows it (``$ 3 "var_4≔4"``,
-``$ 22 "If var_3≟0"``), and a controller runs such scripts."""
+@cache
+def step_label() -> re.Pattern[str]:
+    """A step label: the grammar's ``LABEL`` terminal, the one definition of it (a line of its own,
+    ``$ 3 "var_4≔4"``). PolyScope writes the node's text there as the pendant shows it (``$ 22 "If
+    var_3≟0"``), and a controller runs such scripts."""
+    return re.compile(_parser().get_terminal("LABEL").pattern.to_regexp())
 
 
 def _check_ascii(text: str) -> None:
     """Refuse a non-ASCII character anywhere but in a step label's text."""
     if text.isascii():
         return
-    labels = [match.span() for match in _STEP_LABEL.finditer(text)]
+    labels = [match.span() for match in step_label().finditer(text)]
     for offset, char in enumerate(text):
         if ord(char) <= 127 or any(start < offset < end for start, end in labels):
             continue
