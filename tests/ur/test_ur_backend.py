@@ -10,6 +10,7 @@ import pytest
 from tests.helpers import fake_address, free_tcp_port, run_cli_in_thread
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
+from urdaemon.control.controller import SETTLE_POSITION
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import GoalRejected
 from urdaemon.fakeur.controller import FakeController
@@ -315,6 +316,8 @@ async def test_a_move_ends_with_the_arm_settled_on_its_goal() -> None:
             assert (await goal.result(timeout=20))["status"] == "succeeded"
             # until the arm is at rest (stopj or settled): within 5 s of the fake's own time
             await fake.until(lambda: fake.arm.steady or max(abs(v) for v in fake.arm.qd) < 1e-9, cycles=2500)
-            assert fake.arm.q[0] == pytest.approx(target[0], abs=1e-5)
+            # the hold lets go within SETTLE_POSITION; the script's stopj then stops the arm from under
+            # SETTLE_VELOCITY, a further few µrad at most
+            assert fake.arm.q[0] == pytest.approx(target[0], abs=1.5 * SETTLE_POSITION)
     finally:
         await fake.close()
