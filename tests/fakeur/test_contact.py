@@ -213,3 +213,142 @@ def test_surroundings_without_anything_are_idle() -> None:
         Wall.of((0, 0, 0), (0, 0, 0))
     with pytest.raises(ValueError, match="stiffness"):
         Wall.of((0, 0, 0), (0, 0, 1), -1.0)
+
+
+def _approach_until_contact(host: ScriptHost, direction: list[float]) -> int:
+    """Drive the TCP along ``direction`` (m/s, base frame) polling ``tool_contact`` once a cycle."""
+    arm = host.arm
+    for _ in range(400):
+        arm.speedj(arm.ik.joint_velocity(arm.q, direction), 100.0)
+        arm.step(E_SERIES_DT)
+        steps: int = cfg.tool_contact(host, direction)
+        if steps:
+            return steps
+    raise AssertionError("no contact within 400 cycles")
+
+
+@pytest.mark.parametrize("zeroed", [True, False], ids=["zeroed", "not-zeroed"])
+def test_tool_contact_counts_from_the_touch_not_from_a_steady_force_felt_before(zeroed: bool) -> None:
+    """A steady 2 N on the tool (a payload mismatch, a cable), zeroed or not, standing 1.2 s, then a
+    touch of a wall: the contact started at the touch. On 0dd9381 the count ran from when the steady
+    force began (about 615 cycles instead of about 4), and a program that moves back by it went to a
+    pose from 1.2 s before."""
+    host = _host()
+    arm = host.arm
+    surroundings = surroundings_of(arm)
+    surroundings.push[:] = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    arm.step(E_SERIES_DT)
+    if zeroed:
+        cfg.zero_ftsensor(host)
+    for _ in range(600):
+        arm.step(E_SERIES_DT)
+    wall = _wall_below(arm, 0.001)
+    steps = _approach_until_contact(host, [0.0, 0.0, -0.05, 0.0, 0.0, 0.0])
+    assert 1 < steps < 20
+    touched, inside = arm.history(steps), arm.history(steps - 1)
+    assert wall.depth(arm.kinematics.tool_pose(touched)[:3]) == 0.0, "just before the contact"
+    assert wall.depth(arm.kinematics.tool_pose(inside)[:3]) > 0.0, "the first cycle of the contact"
+
+
+def test_tool_contact_without_a_wall_starts_where_the_force_rises_beyond_its_zeroed_level() -> None:
+    """Resting on a table with the sensor zeroed, then a hand presses the tool down: the contact
+    starts at the press. On 0dd9381 it dated from the table's first touch, 500 cycles earlier."""
+    host = _host()
+    arm = host.arm
+    _wall_below(arm, -0.0005)  # the tool rests 0.5 mm into a table: 10 N
+    surroundings = surroundings_of(arm)
+    arm.step(E_SERIES_DT)
+    cfg.zero_ftsensor(host)
+    for _ in range(500):
+        arm.step(E_SERIES_DT)
+    assert cfg.tool_contact(host, [0.0] * 6) == 0, "resting, zeroed: no contact"
+    surroundings.push[:] = [0.0, 0.0, 3.0, 0.0, 0.0, 0.0]  # the tool held still, pressed from below
+    arm.step(E_SERIES_DT)
+    assert cfg.tool_contact(host, [0.0] * 6) == 0, "below the threshold"
+    for press in (6.0, 9.0):
+        surroundings.push[2] = press
+        arm.step(E_SERIES_DT)
+    assert cfg.tool_contact(host, [0.0, 0.0, -0.05, 0, 0, 0]) == 3, "counted from the first rise"
+
+
+@pytest.mark.parametrize(
+    ("dt", "stiffness"),
+    [(E_SERIES_DT, 2e5), (E_SERIES_DT, 1e7), (CB3_DT, 5e4), (CB3_DT, 1e7)],
+    ids=["e-series-bound", "e-series-beyond", "cb3-bound", "cb3-beyond"],
+)
+def test_freedrive_pushed_into_a_wall_of_any_stiffness_comes_to_rest(dt: float, stiffness: float) -> None:
+    """A hand pushes the freedriven tool 20 N into a wall: it sinks in until the wall pushes back 20 N
+    and stops. On 0dd9381 the admittance was stepped explicitly against the wall: at a loop gain
+    ``dt * 0.005 * stiffness`` of 2 (2e5 N/m at 2 ms, 5e4 N/m at CB3's 8 ms, the bound our docs gave)
+    the force swung -20..+20 N forever, and beyond it the first cycle's sink tripped a protective stop."""
+    host = _host(dt)
+    arm = host.arm
+    wall = _wall_below(arm, 0.0, stiffness)
+    surroundings_of(arm).push[:] = [0.0, 0.0, -20.0, 0.0, 0.0, 0.0]
+    cfg.freedrive_mode(host)
+    felt = []
+    for _ in range(round(0.5 / dt)):
+        arm.step(dt)
+        felt.append(arm.tcp_force[2])
+        assert arm.safety_mode is SafetyMode.NORMAL
+    assert max(abs(f) for f in felt[-10:]) < 0.01, "the wall balances the push"
+    assert max(abs(v) for v in arm.qd) < 1e-6, "at rest"
+    assert wall.depth(_xyz(arm)) == pytest.approx(20.0 / stiffness, rel=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("dt", "stiffness"),
+    [(E_SERIES_DT, 1e8), (CB3_DT, 1e6), (CB3_DT, 1e8)],
+    ids=["e-series", "cb3", "cb3-stiffer"],
+)
+def test_force_mode_against_a_stiff_wall_settles_at_the_commanded_force(dt: float, stiffness: float) -> None:
+    """Force mode pressing 30 N into a wall far stiffer than the 1e5 / 5e4 N/m our docs allowed, the
+    tool starting at its surface: the force settles at 30 N. On 0dd9381 (explicit against the wall) the
+    first cycle's sink tripped a protective stop, or at CB3's 8 ms into 1e6 N/m the force kept
+    swinging."""
+    host = _host(dt)
+    arm = host.arm
+    _wall_below(arm, 0.0, stiffness)
+    cfg.force_mode(host, UrPose([0.0] * 6), [0, 0, 1, 0, 0, 0], [0.0, 0.0, -30.0, 0, 0, 0], 2, [0.1] * 6)
+    felt = []
+    for _ in range(round(2.0 / dt)):
+        arm.step(dt)
+        felt.append(arm.tcp_force[2])
+        assert arm.safety_mode is SafetyMode.NORMAL
+    assert felt[-10:] == pytest.approx([30.0] * 10, abs=0.05)
+    assert max(felt) < FORCE_LIMIT_N
+
+
+def test_with_nothing_around_the_arm_a_step_reallocates_nothing_and_still_sees_changes() -> None:
+    """After freedrive has come and gone (the arm keeps its surroundings) and with nothing around it, a
+    step only counts the cycle: the reported force is the same object cycle after cycle (on 0dd9381 each
+    step built a new force list, wrench and twist). A push, a wall or ``zero_ftsensor`` is seen at once."""
+    host = _host()
+    arm = host.arm
+    cfg.freedrive_mode(host)
+    cfg.end_freedrive_mode(host)
+    surroundings = surroundings_of(arm)
+    arm.step(E_SERIES_DT)
+    reported = arm.tcp_force
+    for _ in range(5):
+        arm.step(E_SERIES_DT)
+    assert arm.tcp_force is reported
+    assert reported == [0.0] * 6
+    surroundings.push[0] = 3.0
+    arm.step(E_SERIES_DT)
+    assert arm.tcp_force[0] == 3.0
+    cfg.zero_ftsensor(host)
+    arm.step(E_SERIES_DT)
+    assert arm.tcp_force[0] == 0.0
+    surroundings.push[0] = 0.0  # the zeroed push lets go: the tool feels its absence
+    arm.step(E_SERIES_DT)
+    released = arm.tcp_force
+    arm.step(E_SERIES_DT)
+    assert arm.tcp_force is released
+    assert released[0] == -3.0
+    cfg.zero_ftsensor(host)
+    arm.step(E_SERIES_DT)
+    assert arm.tcp_force[0] == 0.0, "zeroing is seen with nothing around"
+    _wall_below(arm, -0.001)
+    arm.step(E_SERIES_DT)
+    assert arm.tcp_force[2] == pytest.approx(20.0)

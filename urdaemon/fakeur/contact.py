@@ -30,9 +30,23 @@ pulls the compliant axes back to it; force mode in our control script runs with 
 at ``external wrench * FREEDRIVE_ADMITTANCE``, its joint velocities scaled down together to the joint
 limits; with nothing pushing it stays still.
 
-**Tool contact** (``tool_contact``): the model counts the cycles since the external force last rose
-from zero; a contact is detected when the measured force opposes the given direction by more than a
-threshold, and the answer is the cycles back to just before the force rose.
+Against walls both admittances are integrated implicitly (:class:`_Admittance`): a cycle's speed is
+solved with the walls' force where that cycle's motion leaves the tool, not where it starts, walls the
+tool enters during the cycle included. Pushed or pressing into a wall of any stiffness, freedrive and
+force mode come to rest where the forces balance (stepped explicitly, a loop gain
+``dt * admittance * stiffness`` of 2, 5e4 N/m at CB3's 8 ms, chattered forever, and more diverged).
+Walls exert no torque (the force acts at the TCP), so rotations stay explicit. What remains is the
+model's own dynamics: force mode's lag carries the approach speed into a wall, so with little damping
+(the default) a fast approach to a stiff wall overshoots the commanded force, at 1e6 N/m into a
+protective stop; damping 1 or a lower speed limit keeps it near the commanded force.
+
+**Tool contact** (``tool_contact``, a model: the controller's detection is not documented): a contact
+starts when a wall starts pushing on the tool, or when, after a cycle with the tool feeling no more than
+:data:`CONTACT_ONSET_N` beyond its zeroed level (``arm.tcp_force``) and no wall pressing harder, the
+felt force rises past it or a wall presses harder. A steady force from before, zeroed or not (a payload
+mismatch, a cable, a table the tool rests on), does not date a contact. A contact is detected when
+the measured force opposes the given direction by more than a threshold, and the answer is the cycles
+back to just before the contact started.
 """
 
 from __future__ import annotations
@@ -48,6 +62,7 @@ if TYPE_CHECKING:
     from urdaemon.fakeur.arm import FakeArm
 
 __all__ = [
+    "CONTACT_ONSET_N",
     "DEFAULT_WALL_STIFFNESS",
     "FORCE_LIMIT_N",
     "FORCE_MODE_ADMITTANCE",
@@ -62,14 +77,17 @@ __all__ = [
 ]
 
 DEFAULT_WALL_STIFFNESS: Final = 20_000.0
-"""N/m: a wall's stiffness unless given (a stiff fixture felt through the arm's own compliance). The
-admittances below stay stable against walls up to about 1e5 N/m at 2 ms and 5e4 N/m at 8 ms cycles."""
+"""N/m: a wall's stiffness unless given (a stiff fixture felt through the arm's own compliance). Any
+stiffness is stable: force mode and freedrive are integrated implicitly against walls (see the module)."""
 FORCE_LIMIT_N: Final = 150.0
 """N: the e-Series safety configuration's default force limit (normal mode); a wall pressing harder
 than this protective-stops the arm."""
 TOOL_CONTACT_THRESHOLD_N: Final = 5.0
 """N: the force against the direction of motion above which ``tool_contact`` reports a contact when
 the program gives no threshold (a model: the controller's own detection is not documented)."""
+CONTACT_ONSET_N: Final = 0.5
+"""N: the force beyond the zeroed level at which a contact without a wall starts, for ``tool_contact``'s
+count (a model)."""
 FORCE_MODE_ADMITTANCE: Final = 0.005
 """m/s per N: force mode's TCP speed along a compliant axis per newton of force error (gain scaling 1)."""
 FORCE_MODE_TORQUE_ADMITTANCE: Final = 0.05
@@ -84,6 +102,7 @@ FREEDRIVE_TORQUE_ADMITTANCE: Final = 0.05
 """rad/s per N·m: freedrive's TCP rotation speed per newton metre about a free axis."""
 
 _ZERO6: Final = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_ONSET_SQUARED: Final = CONTACT_ONSET_N * CONTACT_ONSET_N
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,9 +128,13 @@ class Wall:
 
     def depth(self, position: Sequence[float]) -> float:
         """m: how far ``position`` is on the wrong side (0 on the free side)."""
-        p, n = self.point, self.normal
-        d = (p[0] - position[0]) * n[0] + (p[1] - position[1]) * n[1] + (p[2] - position[2]) * n[2]
+        d = self.signed_depth(position)
         return d if d > 0.0 else 0.0
+
+    def signed_depth(self, position: Sequence[float]) -> float:
+        """m: how far ``position`` is on the wrong side, negative on the free side (minus the clearance)."""
+        p, n = self.point, self.normal
+        return (p[0] - position[0]) * n[0] + (p[1] - position[1]) * n[1] + (p[2] - position[2]) * n[2]
 
 
 @dataclass(slots=True)
@@ -144,55 +167,72 @@ class Surroundings:
     """N, N·m: the external wrench on the TCP at the last step (before the offset)."""
     cycle: int = 0
     touched_at: int | None = None
-    """The cycle at which the external force last rose from zero (None while there is none)."""
+    """The cycle at which the current contact started (None while there is none; see the module)."""
+    _walled: float = 0.0
+    """N: the sum of the walls' forces at the last step."""
+    _quiet: bool = False
+    """The last step had nothing around the arm and no mode on: its outputs stand until that changes."""
     _twist: list[float] = field(default_factory=lambda: [0.0] * 6)
     """Force mode's TCP twist in the task frame (the lag's state)."""
 
     def step(self, arm: FakeArm, dt: float) -> None:
         """One controller cycle, after the arm's own motion: the wrench, the safety limit, force mode or
-        freedrive motion, and ``arm.tcp_force``."""
+        freedrive motion, and ``arm.tcp_force``. With nothing around the arm, no mode on and nothing
+        changed since the last step, it only counts the cycle."""
         self.cycle += 1
         walls, push = self.walls, self.push
+        if self._quiet and not walls and not arm.force_mode and not arm.freedrive and not any(push):
+            return
         fx, fy, fz = push[0], push[1], push[2]
-        pressing = 0.0
+        pressing = walled = 0.0
+        depths: list[float] = []
         if walls:
             pose = arm.actual_tcp_pose()
             for wall in walls:
-                depth = wall.depth(pose)
+                depth = wall.signed_depth(pose)
+                depths.append(depth)
                 if depth > 0.0:
                     f = wall.stiffness * depth
                     pressing = max(pressing, f)
+                    walled += f
                     fx, fy, fz = fx + f * wall.normal[0], fy + f * wall.normal[1], fz + f * wall.normal[2]
-        wrench = (fx, fy, fz, push[3], push[4], push[5])
-        if fx or fy or fz:
+        wrench = self.wrench = (fx, fy, fz, push[3], push[4], push[5])
+        offset = self.offset
+        felt = arm.tcp_force = [wrench[i] - offset[i] for i in range(6)]
+        self._track_contact(felt, walled)
+        self._quiet = not walls and not arm.force_mode and not arm.freedrive and not any(push)
+        if pressing > FORCE_LIMIT_N and arm.can_move:
+            arm.protective_stop()
+        if arm.can_move and arm.force_mode and self.force is not None:
+            self._move(arm, self._force_twist(felt, depths, dt), dt)
+        elif arm.can_move and arm.freedrive:
+            self._move(arm, self._free_twist(felt, depths, dt), dt)
+        elif any(self._twist):
+            self._twist[:] = _ZERO6
+
+    def _track_contact(self, felt: Sequence[float], walled: float) -> None:
+        """Where ``tool_contact`` counts from (``walled``: the walls' force now): a wall starting to push,
+        or, after a cycle where the tool felt no more than :data:`CONTACT_ONSET_N` beyond its zeroed
+        level and no wall pressed harder, the felt force rising past it or a wall pressing harder. A
+        steady force from before, zeroed or not, does not date a contact."""
+        if walled > 0.0 and not self._walled > 0.0:
+            self.touched_at = self.cycle
+        elif walled > self._walled or felt[0] ** 2 + felt[1] ** 2 + felt[2] ** 2 > _ONSET_SQUARED:
             if self.touched_at is None:
                 self.touched_at = self.cycle
         else:
             self.touched_at = None
-        self.wrench = wrench
-        offset = self.offset
-        arm.tcp_force = [wrench[i] - offset[i] for i in range(6)]
-        if pressing > FORCE_LIMIT_N and arm.can_move:
-            arm.protective_stop()
-        if not arm.can_move:
-            self._twist = [0.0] * 6
-            return
-        measured = arm.tcp_force
-        if arm.force_mode and self.force is not None:
-            self._move(arm, self._force_twist(measured, dt), dt)
-        elif arm.freedrive:
-            self._move(arm, self._free_twist(measured), dt)
-        else:
-            self._twist = [0.0] * 6
+        self._walled = walled
 
     def zero(self) -> None:
         """``zero_ftsensor``: the wrench now reads as zero from here on."""
         self.offset = list(self.wrench)
+        self._quiet = False
 
     def contact_steps(
         self, force: Sequence[float], direction: Sequence[float], threshold: float, history: int
     ) -> int:
-        """``tool_contact``: cycles back to just before the force rose (at most ``history``), or 0.
+        """``tool_contact``: cycles back to just before the contact started (at most ``history``), or 0.
 
         ``force`` is the measured TCP force; a contact is a force opposing ``direction`` (its first three
         elements, base frame; any direction if they are zero) by more than ``threshold`` N
@@ -218,40 +258,83 @@ class Surroundings:
 
     # ---- motion ----------------------------------------------------------------------------------
 
-    def _force_twist(self, measured: Sequence[float], dt: float) -> list[float]:
+    def _force_twist(self, measured: Sequence[float], depths: Sequence[float], dt: float) -> list[float]:
         settings = self.force
         assert settings is not None
         frame = frame_of_pose(settings.frame)
-        f = _unrotate(frame, measured[0], measured[1], measured[2])
         t = _unrotate(frame, measured[3], measured[4], measured[5])
-        felt = (*f, *t)
         lag = FORCE_MODE_MIN_LAG_S + (1.0 - settings.damping) * (FORCE_MODE_LAG_S - FORCE_MODE_MIN_LAG_S)
         keep = math.exp(-dt / lag)
-        twist = self._twist
-        for i in range(6):
-            if not settings.selection[i]:
+        twist, selection, wrench, limits = self._twist, settings.selection, settings.wrench, settings.limits
+        law = _Admittance(selection, FORCE_MODE_ADMITTANCE * settings.gain_scaling, keep, dt)
+        law.bounds = [abs(limits[i]) for i in range(3)]
+        law.previous = twist[:3]
+        twist[:3] = self._wall_speed(law, frame, measured, depths, wrench)
+        gain = FORCE_MODE_TORQUE_ADMITTANCE * settings.gain_scaling
+        for i in range(3, 6):
+            if not selection[i]:
                 twist[i] = 0.0
                 continue
-            admittance = FORCE_MODE_ADMITTANCE if i < 3 else FORCE_MODE_TORQUE_ADMITTANCE
-            limit = abs(settings.limits[i])
-            wanted = (settings.wrench[i] + felt[i]) * admittance * settings.gain_scaling
-            wanted = max(-limit, min(limit, wanted))
+            limit = abs(limits[i])
+            wanted = max(-limit, min(limit, (wrench[i] + t[i - 3]) * gain))
             twist[i] = wanted + (twist[i] - wanted) * keep
         return [*rotate(frame, twist[:3]), *rotate(frame, twist[3:])]
 
-    def _free_twist(self, measured: Sequence[float]) -> list[float]:
+    def _free_twist(self, measured: Sequence[float], depths: Sequence[float], dt: float) -> list[float]:
         frame, axes = self.free_frame, self.free_axes
-        f = _unrotate(frame, measured[0], measured[1], measured[2])
         t = _unrotate(frame, measured[3], measured[4], measured[5])
-        local = [f[i] * FREEDRIVE_ADMITTANCE if axes[i] else 0.0 for i in range(3)] + [
-            t[i] * FREEDRIVE_TORQUE_ADMITTANCE if axes[i + 3] else 0.0 for i in range(3)
-        ]
-        return [*rotate(frame, local[:3]), *rotate(frame, local[3:])]
+        law = _Admittance(axes, FREEDRIVE_ADMITTANCE, 0.0, dt)
+        local = self._wall_speed(law, frame, measured, depths, _ZERO6)
+        turn = [t[i] * FREEDRIVE_TORQUE_ADMITTANCE if axes[i + 3] else 0.0 for i in range(3)]
+        return [*rotate(frame, local), *rotate(frame, turn)]
+
+    def _wall_speed(
+        self,
+        law: _Admittance,
+        frame: Frame,
+        measured: Sequence[float],
+        depths: Sequence[float],
+        commanded: Sequence[float],
+    ) -> list[float]:
+        """m/s in ``frame``: the admittance's TCP speed, solved against every wall where the cycle's motion
+        leaves the tool (``depths``: each wall's signed depth now). A wall counts when the tool ends the
+        cycle inside it, whether it is inside now or enters during the cycle; the set is found by trying
+        the walls the tool is in now, then those the resulting motion ends in, until it holds."""
+        felt = _unrotate(frame, measured[0], measured[1], measured[2])
+        target = [commanded[i] + felt[i] for i in range(3)]
+        if not depths:
+            return law.solve(target, None)
+        walls = []
+        for wall, depth in zip(self.walls, depths, strict=True):
+            n, k = _unrotate(frame, *wall.normal), wall.stiffness
+            walls.append((n, k, depth))
+            if depth > 0.0:  # out of the target: added back below while the tool ends the cycle inside
+                target = [target[i] - k * depth * n[i] for i in range(3)]
+        inside = [w for w in walls if w[2] > 0.0]
+        speed = law.solve(target, None) if not inside else []
+        for _ in range(len(walls) + 1):
+            if inside:
+                pushed, stiffness = list(target), [[0.0] * 3 for _ in range(3)]
+                for n, k, depth in inside:
+                    for r in range(3):
+                        pushed[r] += k * depth * n[r]
+                        row = stiffness[r]
+                        for c in range(3):
+                            row[c] += k * n[r] * n[c]
+                speed = law.solve(pushed, stiffness)
+            ends = [w for w in walls if w[2] - law.dt * _dot(w[0], speed) > 0.0]
+            if ends == inside:
+                break
+            inside = ends
+            if not inside:
+                speed = law.solve(target, None)
+        return speed
 
     @staticmethod
     def _move(arm: FakeArm, twist: Sequence[float], dt: float) -> None:
-        """Drive the joints at the velocities that give the TCP ``twist``, scaled into the joint limits."""
-        if not any(twist):
+        """Drive the joints at the velocities that give the TCP ``twist``, scaled into the joint limits;
+        a twist below :data:`_STILL` (round-off where the forces balance) moves nothing."""
+        if max(abs(v) for v in twist) < _STILL:
             return
         qd = arm.ik.joint_velocity(arm.q, twist, arm.tcp_offset)
         vmax = arm.max_velocity
@@ -264,6 +347,83 @@ class Surroundings:
             v = qd[i] * scale
             q[i] += v * dt
             actual[i] += v
+
+
+_UNBOUNDED: Final = (math.inf, math.inf, math.inf)
+_STILL: Final = 1e-9
+"""m/s, rad/s: a compliant twist this small is the round-off of balanced forces, not motion."""
+
+
+class _Admittance:
+    """One cycle of a translational admittance with a first-order lag, solved implicitly against walls.
+
+    Along each ``active`` axis of a frame the speed ``u`` (m/s) solves ``u = keep·previous + (1 −
+    keep)·clamp(gain·(target − dt·K·u))``, ``K`` the stiffness matrix of the walls the tool ends the cycle
+    in: their force is taken where the cycle's motion leaves the tool, not where it starts, so the
+    admittance cannot overshoot a wall however stiff (implicit Euler: stable for any ``gain·K·dt``,
+    where the explicit step chatters from 2). ``clamp`` keeps ``gain·(…)`` within ``±bounds``; an axis
+    whose bound binds is fixed there and the others are solved again. Inactive axes do not move."""
+
+    __slots__ = ("active", "bounds", "dt", "gain", "keep", "previous")
+
+    def __init__(self, active: Sequence[int], gain: float, keep: float, dt: float) -> None:
+        self.active, self.gain, self.keep, self.dt = active, gain, keep, dt
+        self.bounds: Sequence[float] = _UNBOUNDED
+        self.previous: Sequence[float] = _ZERO6
+
+    def solve(self, target: Sequence[float], stiffness: list[list[float]] | None) -> list[float]:
+        """m/s: the speeds for ``target`` (N, in the frame) against ``stiffness`` (N/m; None: no wall)."""
+        gain, keep, bounds, previous = self.gain, self.keep, self.bounds, self.previous
+        speed = [0.0, 0.0, 0.0]
+        free = [i for i in range(3) if self.active[i]]
+        if stiffness is None:
+            for i in free:
+                wanted = max(-bounds[i], min(bounds[i], gain * target[i]))
+                speed[i] = wanted + (previous[i] - wanted) * keep
+            return speed
+        k, blend = stiffness, 1.0 - keep
+        step = blend * gain * self.dt
+        start = [keep * previous[i] + blend * gain * target[i] for i in range(3)]
+        while free:
+            for i in free:
+                speed[i] = 0.0
+            matrix = [[step * k[r][c] + (1.0 if r == c else 0.0) for c in free] for r in free]
+            rhs = [start[r] - step * _dot(k[r], speed) for r in free]
+            for i, value in zip(free, _solve(matrix, rhs), strict=True):
+                speed[i] = value
+            bound = []
+            for i in free:
+                asked = gain * (target[i] - self.dt * _dot(k[i], speed))
+                if abs(asked) > bounds[i]:
+                    speed[i] = keep * previous[i] + blend * math.copysign(bounds[i], asked)
+                    bound.append(i)
+            if not bound:
+                break
+            free = [i for i in free if i not in bound]
+        return speed
+
+
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _solve(m: list[list[float]], b: list[float]) -> list[float]:
+    """``x`` with ``m·x = b`` for a 1×1 to 3×3 ``m`` (Cramer's rule; ``m`` is here always symmetric
+    positive definite: the identity plus a positive multiple of a stiffness matrix)."""
+    if len(b) == 1:
+        return [b[0] / m[0][0]]
+    if len(b) == 2:
+        det = m[0][0] * m[1][1] - m[0][1] * m[1][0]
+        return [(b[0] * m[1][1] - m[0][1] * b[1]) / det, (m[0][0] * b[1] - b[0] * m[1][0]) / det]
+    (a, b_, c), (d, e, f), (g, h, i) = m
+    co = (e * i - f * h, f * g - d * i, d * h - e * g)
+    det = a * co[0] + b_ * co[1] + c * co[2]
+    x, y, z = b
+    return [
+        (x * co[0] + b_ * (z * f - y * i) + c * (y * h - z * e)) / det,
+        (a * (y * i - z * f) + x * co[1] + c * (z * d - y * g)) / det,
+        (a * (e * z - h * y) + b_ * (g * y - d * z) + x * co[2]) / det,
+    ]
 
 
 def _unrotate(frame: Frame, x: float, y: float, z: float) -> tuple[float, float, float]:
