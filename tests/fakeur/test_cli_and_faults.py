@@ -13,6 +13,7 @@ import yaml
 
 from tests.helpers import drain_in_background, fake_address, run_cli, wait_for_line
 from urdaemon.description.urmodels import load_ur_model
+from urdaemon.fakeur.contact import DEFAULT_WALL_STIFFNESS
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -167,9 +168,19 @@ def test_fake_robot_walls_from_the_command_line_reach_every_arm() -> None:
     surroundings = fake.arm.surroundings
     assert surroundings is not None
     assert [(w.point, w.normal, w.stiffness) for w in surroundings.walls] == [
-        ((0.0, 0.0, 0.1), (0.0, 0.0, 1.0), 20_000.0),
+        ((0.0, 0.0, 0.1), (0.0, 0.0, 1.0), DEFAULT_WALL_STIFFNESS),
         ((0.5, 0.0, 0.0), (-1.0, 0.0, 0.0), 5000.0),
     ]
     for bad, reason in (("0,0,1", "6 or 7"), ("0,0,0,0,0,0", "normal"), ("a,0,0,0,0,1", "could not convert")):
         with pytest.raises(ConfigError, match=reason):
             parse_wall(bad)
+
+
+def test_the_wall_option_help_names_the_fakes_default_stiffness() -> None:
+    """``--wall``'s help states the default stiffness as a literal (the CLI does not import the fake);
+    this holds it to ``DEFAULT_WALL_STIFFNESS`` so the two cannot drift apart."""
+    run = run_cli("fake-robot", "--help")
+    assert run.code == 0
+    text = " ".join(run.stdout.split())
+    assert "--wall X,Y,Z,NX,NY,NZ[,K]" in text
+    assert f"its stiffness K in N/m (default {DEFAULT_WALL_STIFFNESS:g})" in text
