@@ -6,7 +6,7 @@ import pytest
 
 from urdaemon.fakeur.urscript import ScriptCompileError
 from urdaemon.fakeur.urscript import syntax as ast
-from urdaemon.fakeur.urscript.syntax import _parser, parse, step_label
+from urdaemon.fakeur.urscript.syntax import parse
 
 
 def _expr(text: str) -> ast.Expr:
@@ -289,9 +289,9 @@ def test_a_label_only_starts_a_line(text: str, line: int, column: int) -> None:
 def test_the_ascii_check_and_the_grammar_share_one_label(text: str) -> None:
     """One definition: the ASCII check's pattern is the grammar's ``LABEL`` terminal, and a line the
     check takes for a label is one the parser skips (before the fix they were two patterns)."""
-    assert step_label().pattern == _parser().get_terminal("LABEL").pattern.to_regexp()
+    assert ast.step_label().pattern == ast._parser().get_terminal("LABEL").pattern.to_regexp()
     script = f"x = 1\n{text}\ny = 2\n"
-    (match,) = step_label().finditer(script)
+    (match,) = ast.step_label().finditer(script)
     assert match.group() == text
     first, second = parse(script)
     assert isinstance(first, ast.Assign)
