@@ -7,14 +7,22 @@ urcl's tests/resources/dockerursim/programs, Apache-2.0), not copies of them.
 
 from __future__ import annotations
 
+import asyncio
 import gzip
 import re
+import threading
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpRefused, translate
+from tests.helpers import fake_address
+from urdaemon.fakeur import dashboard_answers
+from urdaemon.fakeur import urp as urp_module
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpProgram, UrpRefused, translate
 from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
+from urdaemon.protocols import dashboard as dash
 
 KINEMATICS = """<kinematics status="NOT_INITIALIZED" validChecksum="false">
     <deltaTheta value="0.0, 0.0, 0.0, 0.0, 0.0, 0.0"/>
@@ -370,3 +378,103 @@ def test_a_file_read_only_up_to_the_bound_is_refused_as_too_large() -> None:
     with pytest.raises(UrpRefused) as refused:
         translate(data[: MAX_URP_BYTES + 1], "big.urp")
     assert "larger than" in refused.value.reason
+
+
+def _pins_to_the_last_sibling(pins: int, siblings: int) -> bytes:
+    """``pins`` Wait nodes whose pin refers to the last of ``siblings`` elements outside the program
+    tree (the reviewer's file: a reference resolved by searching every sibling, once per pin)."""
+    wait = (
+        f'<Wait type="DigitalInput"><pin reference="../../../../../z/a[{siblings}]"/>'
+        "<digitalValue>1</digitalValue></Wait>"
+    )
+    target = '<a referencedName="digital_in[1]"/>'  # the last sibling: the others are <a/>
+    xml = (
+        '<URProgram name="demo"><children><MainProgram runOnlyOnce="true"><children>'
+        f"{wait * pins}</children></MainProgram></children>"
+        f"<z>{'<a/>' * (siblings - 1)}{target}</z></URProgram>"
+    )
+    return gzip.compress(xml.encode(), mtime=0)
+
+
+def test_a_program_with_too_many_elements_is_refused() -> None:
+    """Reproduction: a 720-byte gzip within MAX_URP_BYTES (800 pins referring to the last of 40 001
+    siblings, the reviewer's file) translated, searching all siblings for each pin: 0.17 s of every
+    fake's clock per ``load`` on the old code."""
+    data = _pins_to_the_last_sibling(800, 40_001)
+    assert len(data) < 1000
+    assert len(gzip.decompress(data)) <= MAX_URP_BYTES
+    with pytest.raises(UrpRefused) as refused:
+        translate(data, "flood.urp")
+    assert f"more than {urp_module.MAX_URP_ELEMENTS} XML elements" in refused.value.reason
+
+
+def test_references_are_resolved_in_time_linear_in_the_program(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Reproduction: each reference searched all its siblings (``findall``), references x siblings
+    steps. Now each parent's children are indexed once per translation and each path followed once:
+    the work is counted, and bounded by the program's size."""
+    trees: list[Any] = []
+
+    class Counting(urp_module._Tree):
+        def __init__(self, root: Any) -> None:
+            super().__init__(root)
+            trees.append(self)
+
+    monkeypatch.setattr(urp_module, "_Tree", Counting)
+    pins, siblings = 1500, 3000
+    program = translate(_pins_to_the_last_sibling(pins, siblings), "many.urp")
+    assert program.script is not None
+    assert program.script.count("while (not(get_standard_digital_in(1) == True)):") == pins
+    (tree,) = trees
+    elements = 6 + 3 * pins + siblings
+    assert tree.indexed <= elements  # every element indexed at most once, not once per reference
+    assert tree.lookups == 7 * pins  # the path's seven steps, once per pin
+
+
+def test_a_chain_of_references_is_followed_once_and_a_cycle_is_refused() -> None:
+    """A reference to a reference resolves to the element the last one names; a loop of them is
+    refused, naming the element."""
+    variable = '<variable name="n"/>'
+    first = (
+        '<Assignment><variable reference="../../Assignment/variable"/>'
+        f"<expression>{chars('1')}</expression></Assignment>"
+    )
+    declared = f"<Assignment>{variable}<expression>{chars('2')}</expression></Assignment>"
+    assert body(declared + first) == ["global n = 2", "global n = 1"]
+    cycle = (
+        '<Assignment><variable reference="../../Assignment[2]/variable"/>'
+        f"<expression>{chars('1')}</expression></Assignment>"
+        '<Assignment><variable reference="../../Assignment[1]/variable"/>'
+        f"<expression>{chars('2')}</expression></Assignment>"
+    )
+    with pytest.raises(UrpRefused) as refused:
+        translate(urp(cycle, once=True), "cycle.urp")
+    assert "references in a row" in refused.value.reason
+
+
+async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Reproduction: ``load`` translated a ``.urp`` on the event loop, so a slow translation (0.17 s
+    for the reviewer's file) held every fake's clock. Here the translation waits until the clock
+    has ticked on: it would wait in vain (5 s, then fail) if it ran on the loop."""
+    (tmp_path / "slow.urp").write_bytes(urp(WAIT_PROGRAM))
+    started, release = threading.Event(), threading.Event()
+    ticks: list[int] = []
+
+    def slow_translate(data: bytes, file_name: str) -> UrpProgram:
+        started.set()
+        before = fake.cycles
+        release.wait(5.0)
+        ticks.append(fake.cycles - before)
+        return translate(data, file_name)
+
+    monkeypatch.setattr(dashboard_answers, "translate", slow_translate)
+    async with FakeController("ur10e", address=fake_address(), programs=tmp_path) as fake:
+        answer = asyncio.ensure_future(dashboard_answers.dashboard_answer(fake, dash.Load("slow.urp")))
+        await fake.cycles_pass(5, timeout=10.0)
+        release.set()
+        reply = await asyncio.wait_for(answer, 10.0)
+        assert started.is_set()
+        assert reply == f"Loading program: {tmp_path}/slow.urp"
+        assert len(ticks) == 1
+        assert ticks[0] >= 5
+        assert fake.loaded_program == f"{tmp_path}/slow.urp"
+        assert fake.programs.loaded_urp is not None

@@ -6,6 +6,11 @@ script from the daemon, a URScript file runs as it is, a ``.urp`` runs as the UR
 translates it to when it is loaded) or resumes a paused one. While a program is
 pausing (its speed scaling ramping to 0) it is reported as PLAYING until it is PAUSED, and ``play``
 is refused meanwhile: it neither resumes it nor starts the loaded program anew.
+
+``dashboard_answer`` is the same answer with ``load`` of a ``.urp`` read and translated in the
+compiler thread (up to ~12 ms of pure Python within the file's bounds): that connection's reply waits
+for it, every fake's clock and every other connection go on. ``dashboard_reply`` still translates on
+the calling thread, for callers that cannot wait.
 """
 
 from __future__ import annotations
@@ -23,7 +28,15 @@ from urdaemon.protocols import primary as prim
 if TYPE_CHECKING:
     from urdaemon.fakeur.controller import FakeController
 
-__all__ = ["PROGRAMS_DIR", "SCRIPT_SUFFIXES", "URP_SUFFIX", "dashboard_reply", "play", "program_path"]
+__all__ = [
+    "PROGRAMS_DIR",
+    "SCRIPT_SUFFIXES",
+    "URP_SUFFIX",
+    "dashboard_answer",
+    "dashboard_reply",
+    "play",
+    "program_path",
+]
 
 log = logging.getLogger("urdaemon.fakeur")
 
@@ -64,14 +77,8 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
         path = program_path(fake, command.path)
         if path is None:
             return f"File not found: {command.path}"
-        if path != fake.default_program and path.endswith(URP_SUFFIX):
-            translated = _read_urp(fake, path)
-            if translated is None:
-                return f"Error while loading program: {path}"
-            fake.programs.loaded_urp = (path, translated)
-        fake._stop_program()
-        fake.loaded_program = path
-        return f"Loading program: {path}"
+        translated = _read_urp(fake, path) if _is_urp(fake, path) else None
+        return _load(fake, path, translated)
     if isinstance(command, dash.Play):
         return "Starting program" if play(fake) is None else "Failed to execute: play"
     if isinstance(command, dash.RestartSafety):
@@ -130,6 +137,34 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
     return success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
 
 
+async def dashboard_answer(fake: FakeController, command: Any) -> str:
+    """The dashboard's answer to ``command``, as :func:`dashboard_reply`, but ``load`` reads and
+    translates a ``.urp`` off the event loop (in the compiler thread): the reply waits for it, every
+    fake's clock and every other connection do not."""
+    if isinstance(command, dash.Load):
+        path = program_path(fake, command.path)
+        if path is not None and _is_urp(fake, path):
+            translated = _refused(fake, path, await fake.programs.off_loop(_read_and_translate, path))
+            return _load(fake, path, translated)
+    return dashboard_reply(fake, command)
+
+
+def _is_urp(fake: FakeController, path: str) -> bool:
+    return path != fake.default_program and path.endswith(URP_SUFFIX)
+
+
+def _load(fake: FakeController, path: str, translated: UrpProgram | None) -> str:
+    """``load`` of ``path`` once read: refused if it is a ``.urp`` the fake could not translate
+    (``translated`` None), else the loaded program, the running one stopped."""
+    if _is_urp(fake, path):
+        if translated is None:
+            return f"Error while loading program: {path}"
+        fake.programs.loaded_urp = (path, translated)
+    fake._stop_program()
+    fake.loaded_program = path
+    return f"Loading program: {path}"
+
+
 def program_path(fake: FakeController, name: str) -> str | None:
     """The program file ``name`` stands for (relative names under the programs directory), or None
     if there is no such file. The default External Control program always exists."""
@@ -179,17 +214,29 @@ def play(fake: FakeController) -> str | None:
 
 def _read_urp(fake: FakeController, path: str) -> UrpProgram | None:
     """The program a ``.urp`` file holds, or None (the reason logged and sent as a robot message, as
-    PolyScope shows why it could not load a program)."""
+    PolyScope shows why it could not load a program). Read on the event loop: :func:`dashboard_answer`
+    reads off it."""
+    return _refused(fake, path, _read_and_translate(path))
+
+
+def _read_and_translate(path: str) -> UrpProgram | str:
+    """The program a ``.urp`` file holds, or why it cannot be loaded (pure but for the read)."""
     try:
         with open(path, "rb") as file:  # no more than a program may hold, even compressed
             data = file.read(MAX_URP_BYTES + 1)
         return translate(data, path)
     except OSError as err:
-        reason = str(err)
+        return str(err)
     except UrpRefused as err:
-        reason = err.reason
-    log.info("%s cannot load %s: %s", fake.address, path, reason)
-    fake.programs.broadcast(prim.TextMessage(f"Error while loading program {path}: {reason}"))
+        return err.reason
+
+
+def _refused(fake: FakeController, path: str, read: UrpProgram | str) -> UrpProgram | None:
+    """The program read, or None once the reason it was not is logged and sent as a robot message."""
+    if isinstance(read, UrpProgram):
+        return read
+    log.info("%s cannot load %s: %s", fake.address, path, read)
+    fake.programs.broadcast(prim.TextMessage(f"Error while loading program {path}: {read}"))
     return None
 
 

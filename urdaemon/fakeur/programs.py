@@ -194,6 +194,11 @@ class Programs:
         self.compiles += 1
         return program
 
+    async def off_loop(self, work: Callable[..., Any], *args: Any) -> Any:
+        """``work(*args)`` done in the compiler thread, as compiling is: pure-Python work that would
+        hold every fake's clock on the event loop (a ``.urp`` translated at ``load``)."""
+        return await asyncio.get_running_loop().run_in_executor(_COMPILER, _compile_briefly, work, *args)
+
     async def close(self) -> None:
         """Forget what waits to start, end every program."""
         self._pending.clear()
@@ -368,8 +373,8 @@ COMPILE_SWITCH_INTERVAL_S = 0.0005
 """The GIL switch interval while a script compiles (Python's default: 5 ms)."""
 
 
-def _compile_briefly(compile_program: Callable[..., Any], text: str, *args: Any) -> Any:
-    """Compile in the compiler thread, handing the GIL back often meanwhile.
+def _compile_briefly(compile_program: Callable[..., Any], *args: Any) -> Any:
+    """Compile (or other work) in the compiler thread, handing the GIL back often meanwhile.
 
     Parsing is pure Python: the event loop thread, which gives up the GIL at every system call (a
     timer read, a socket write), waits up to a whole switch interval to get it back each time, so with
@@ -379,7 +384,7 @@ def _compile_briefly(compile_program: Callable[..., Any], text: str, *args: Any)
     collecting = gc.isenabled()
     gc.disable()
     try:
-        return compile_program(text, *args)
+        return compile_program(*args)
     finally:
         if collecting:
             gc.enable()

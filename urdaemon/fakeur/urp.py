@@ -24,12 +24,17 @@ import zlib
 from dataclasses import dataclass
 from xml.etree import ElementTree
 
-__all__ = ["MAX_URP_BYTES", "UrpProgram", "UrpRefused", "translate"]
+__all__ = ["MAX_URP_BYTES", "MAX_URP_ELEMENTS", "UrpProgram", "UrpRefused", "translate"]
 
 MAX_URP_BYTES = 256 * 1024
-"""The largest decompressed program the fake reads: ``load`` translates on the event loop, about
-45 ms per MiB of XML, so 256 KiB costs at most ~11 ms of every fake's clock in the process (UR's
-example programs are 10-70 KB, 0.2-1.5 ms). Also the bound against a gzip bomb."""
+"""The largest decompressed program the fake reads (UR's example programs hold 10-70 KB); also the
+bound against a gzip bomb."""
+MAX_URP_ELEMENTS = 8192
+"""The most XML elements a program the fake reads may hold. UR's example programs hold 176-1330, at
+50-150 bytes each, so a program written like them that fills :data:`MAX_URP_BYTES` holds about
+5 000; a file with more elements is not such a program. Within both bounds a translation costs up
+to ~12 ms (2 400 pin references, 256 KiB; UR's timing_debug.urp 1.3 ms), more than a controller
+cycle: ``load`` translates in the compiler thread (``dashboard_answers.dashboard_answer``)."""
 
 EXTERNAL_CONTROL_NODE = "com.fzi.externalcontrol.ExternalControlNode"
 """The ``strategyClass`` of the External Control URCap's program node."""
@@ -97,12 +102,7 @@ class UrpProgram:
 
 def translate(data: bytes, file_name: str) -> UrpProgram:
     """The program a ``.urp`` file holds (``file_name`` names the def if the XML does not)."""
-    root = _parse(data)
-    _PARENTS.update({child: parent for parent in root.iter() for child in parent})
-    try:
-        return _program(root, file_name)
-    finally:
-        _PARENTS.clear()
+    return _program(_parse(data), file_name)
 
 
 def _program(root: ElementTree.Element, file_name: str) -> UrpProgram:
@@ -131,7 +131,7 @@ def _program(root: ElementTree.Element, file_name: str) -> UrpProgram:
         if len(body) != 1 or before is not None or threads:
             raise UrpRefused("the External Control node is simulated only as the program's one node")
         return UrpProgram(name, None, external_control=True, loops=loops)
-    writer = _Writer()
+    writer = _Writer(_Tree(root))
     writer.line(1, f"def {name}():")
     if before is not None:
         writer.step(2, "BeforeStart")
@@ -163,9 +163,12 @@ def _parse(data: bytes) -> ElementTree.Element:
             raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
         raise UrpRefused("the compressed program is truncated")
     try:
-        return ElementTree.fromstring(xml)
+        root = ElementTree.fromstring(xml)
     except ElementTree.ParseError as err:
         raise UrpRefused(f"the program's XML is malformed: {err}") from None
+    if any(count >= MAX_URP_ELEMENTS for count, _ in enumerate(root.iter())):
+        raise UrpRefused(f"the program has more than {MAX_URP_ELEMENTS} XML elements")
+    return root
 
 
 def _children(node: ElementTree.Element) -> list[ElementTree.Element]:
@@ -190,45 +193,76 @@ def _label(text: str) -> str:
     return text.replace('"', "'").replace("\n", " ").replace("\r", " ")
 
 
-_PARENTS: dict[ElementTree.Element, ElementTree.Element] = {}
-"""Each element's parent in the program being translated (references are relative paths); filled
-and emptied by :func:`translate`, which the fake calls from its event loop thread only."""
+_REFERENCE_STEP = re.compile(r"([A-Za-z_][\w.-]*)(?:\[(\d+)\])?")
+_MAX_HOPS = 32
+"""References followed from one element (a reference may point at another reference)."""
 
 
-def _resolve(node: ElementTree.Element) -> ElementTree.Element:
-    """The element a ``reference="../../If/children/Assignment[2]/variable"`` attribute points to
-    (PolyScope writes a variable once and refers to it by its path from then on)."""
-    seen = 0
-    while (path := node.get("reference")) is not None:
-        seen += 1
+class _Tree:
+    """The program's elements by parent, for resolving ``reference`` paths in time linear in the
+    program: each element's parent, and each parent's children by tag, indexed when first needed."""
+
+    def __init__(self, root: ElementTree.Element) -> None:
+        self._parents = {child: parent for parent in root.iter() for child in parent}
+        self._by_tag: dict[ElementTree.Element, dict[str, list[ElementTree.Element]]] = {}
+        self._resolved: dict[ElementTree.Element, ElementTree.Element] = {}
+        self.lookups = 0
+        """Path steps followed so far (the work references cost, for tests)."""
+        self.indexed = 0
+        """Children indexed so far: each element at most once per translation."""
+
+    def resolve(self, node: ElementTree.Element) -> ElementTree.Element:
+        """The element a ``reference="../../If/children/Assignment[2]/variable"`` attribute points
+        to (PolyScope writes a variable once and refers to it by its path from then on). Each path is
+        followed once per translation: a reference to a reference reuses what the second resolved to."""
+        chain: list[ElementTree.Element] = []
+        while (path := node.get("reference")) is not None and node not in self._resolved:
+            if len(chain) == _MAX_HOPS:
+                raise UrpRefused(f"<{node.tag}>: more than {_MAX_HOPS} references in a row")
+            chain.append(node)
+            target = self._follow(node, path)
+            if target is None:
+                raise UrpRefused(f"<{node.tag}> refers to {path!r}, which is not in the program")
+            node = target
+        node = self._resolved.get(node, node)
+        self._resolved.update(dict.fromkeys(chain, node))
+        return node
+
+    def _follow(self, node: ElementTree.Element, path: str) -> ElementTree.Element | None:
         target: ElementTree.Element | None = node
         for part in path.split("/"):
-            if target is None or seen > 32:
-                break
+            self.lookups += 1
+            if target is None:
+                return None
             if part == "..":
-                target = _PARENTS.get(target)
+                target = self._parents.get(target)
                 continue
-            match = re.fullmatch(r"([A-Za-z_][\w.-]*)(?:\[(\d+)\])?", part)
+            match = _REFERENCE_STEP.fullmatch(part)
             if match is None:
-                target = None
-                break
-            matches = target.findall(match.group(1))
+                return None
+            matches = self._children(target).get(match.group(1), [])
             index = int(match.group(2) or 1) - 1
             target = matches[index] if index < len(matches) else None
-        if target is None:
-            raise UrpRefused(f"<{node.tag}> refers to {path!r}, which is not in the program")
-        node = target
-    return node
+        return target
+
+    def _children(self, parent: ElementTree.Element) -> dict[str, list[ElementTree.Element]]:
+        index = self._by_tag.get(parent)
+        if index is None:
+            index = self._by_tag[parent] = {}
+            for child in parent:
+                index.setdefault(child.tag, []).append(child)
+            self.indexed += len(parent)
+        return index
 
 
-def _variable_name(node: ElementTree.Element | None, what: str) -> str:
-    name = "" if node is None else _resolve(node).get("name", "")
+def _variable_name(tree: _Tree, node: ElementTree.Element | None, what: str) -> str:
+    name = "" if node is None else tree.resolve(node).get("name", "")
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
         raise UrpRefused(f"<{what}> names no variable")
     return name
 
 
-def _expression(node: ElementTree.Element, what: str) -> str:
+def _expression(tree: _Tree, node: ElementTree.Element, what: str) -> str:
     """The expression a node stores one ``<ExpressionChar>`` per character, with
     ``<ExpressionToken>`` words (`` True ``, `` not ``) and ``<ExpressionVariable>`` elements standing
     for program variables."""
@@ -243,9 +277,9 @@ def _expression(node: ElementTree.Element, what: str) -> str:
         elif part.tag == "ExpressionToken":  # a word the expression editor inserted whole
             parts.append(part.get("token", ""))
         elif part.tag == "ExpressionVariable" and len(part) == 1:
-            parts.append(_variable_name(part[0], what))
+            parts.append(_variable_name(tree, part[0], what))
         elif part.tag == "ExpressionIO":
-            reader, index = _pin(part, _PINS_READ, what)
+            reader, index = _pin(tree, part, _PINS_READ, what)
             parts.append(f"{reader}({index})")
         else:
             raise UrpRefused(f"<{what}>: expression part <{part.tag}> is not simulated by the fake")
@@ -261,10 +295,10 @@ def _number(text: str | None, what: str) -> str:
     return text.strip()
 
 
-def _pin(node: ElementTree.Element, table: dict[str, str], what: str) -> tuple[str, str]:
+def _pin(tree: _Tree, node: ElementTree.Element, table: dict[str, str], what: str) -> tuple[str, str]:
     """The builtin and index of a node's ``<pin referencedName="digital_in[2]"/>``."""
     pin = node.find("pin")
-    name = "" if pin is None else _resolve(pin).get("referencedName", "")
+    name = "" if pin is None else tree.resolve(pin).get("referencedName", "")
     match = _PIN.match(name)
     if match is None or match.group(1) not in table:
         raise UrpRefused(f"<{what}> on pin {name!r} is not simulated by the fake")
@@ -281,7 +315,9 @@ def _digital(node: ElementTree.Element, what: str) -> str:
 class _Writer:
     """URScript lines with their indentation and PolyScope's step numbers."""
 
-    def __init__(self) -> None:
+    def __init__(self, tree: _Tree) -> None:
+        self.tree = tree
+        """The program's elements, by which references are resolved."""
         self._lines: list[str] = []
         self._steps = 0
         self._open_if = False
@@ -319,10 +355,10 @@ class _Writer:
             self.line(depth, f"sleep({seconds})")
             return
         if kind == "DigitalInput":
-            getter, index = _pin(node, _PINS_IN, "Wait")
+            getter, index = _pin(self.tree, node, _PINS_IN, "Wait")
             condition = f"{getter}({index}) == {_digital(node, 'Wait')}"
         elif kind == "Condition":
-            condition = _expression(node, "Wait")
+            condition = _expression(self.tree, node, "Wait")
         else:
             raise UrpRefused(f'program node <Wait type="{kind}"> is not simulated by the fake')
         self.step(depth, f"Wait {condition}")
@@ -334,7 +370,7 @@ class _Writer:
         kind = node.get("type", "Line")
         if kind == "Line":
             self.step(depth, "Script")
-            self.line(depth, _expression(node, "Script"))
+            self.line(depth, _expression(self.tree, node, "Script"))
             return
         contents = node.findtext("cachedContents")
         if contents is None:
@@ -345,10 +381,10 @@ class _Writer:
 
     def assignment(self, depth: int, node: ElementTree.Element) -> None:
         source = node.get("valueSource", "Expression")
-        name = _variable_name(node.find("variable"), "Assignment")
+        name = _variable_name(self.tree, node.find("variable"), "Assignment")
         if source != "Expression":
             raise UrpRefused(f'<Assignment valueSource="{source}"> to {name} is not simulated by the fake')
-        value = _expression(node, "Assignment")
+        value = _expression(self.tree, node, "Assignment")
         self.step(depth, f"{name} = {value}")
         self.line(depth, f"global {name} = {value}")
 
@@ -358,11 +394,11 @@ class _Writer:
             self.step(depth, "Set")
             return
         if kind == "DigitalOutput":
-            setter, index = _pin(node, _PINS_OUT, "Set")
+            setter, index = _pin(self.tree, node, _PINS_OUT, "Set")
             value = _digital(node, "Set")
         elif kind == "ExpressionOutput":
-            setter, index = _pin(node, _PINS_WRITE, "Set")
-            value = _expression(node, "Set")
+            setter, index = _pin(self.tree, node, _PINS_WRITE, "Set")
+            value = _expression(self.tree, node, "Set")
         else:
             raise UrpRefused(f'program node <Set type="{kind}"> is not simulated by the fake')
         self.step(depth, f"Set {setter}({index})={value}")
@@ -392,9 +428,9 @@ class _Writer:
         if node.get("checkContinuously", "false").lower() != "false":
             raise UrpRefused(f'<If type="{kind}" checkContinuously="true"> is not simulated by the fake')
         if kind == "If":
-            opens = f"if ({_expression(node, 'If')}):"
+            opens = f"if ({_expression(self.tree, node, 'If')}):"
         elif kind == "ElseIf":
-            opens = f"elif ({_expression(node, 'If')}):"
+            opens = f"elif ({_expression(self.tree, node, 'If')}):"
         elif kind == "Else":
             opens = "else:"
         else:
@@ -413,7 +449,7 @@ class _Writer:
         kind = node.get("type", "")
         if kind != "While" or node.get("checkContinuously", "false").lower() != "false":
             raise UrpRefused(f'program node <Loop type="{kind}"> is not simulated by the fake')
-        condition = _expression(node, "Loop")
+        condition = _expression(self.tree, node, "Loop")
         self.step(depth, f"Loop {condition}")
         self.line(depth, f"while ({condition}):")
         self.nodes(depth + 1, _children(node))
