@@ -478,3 +478,32 @@ async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPa
         assert ticks[0] >= 5
         assert fake.loaded_program == f"{tmp_path}/slow.urp"
         assert fake.programs.loaded_urp is not None
+
+
+async def test_a_dashboard_load_holds_no_clock(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Reproduction: the dashboard server translated a ``.urp`` at ``load`` on the event loop; here
+    the translation waits until the fake's clock has ticked on, which it would wait for in vain."""
+    (tmp_path / "slow.urp").write_bytes(urp(WAIT_PROGRAM))
+    release = threading.Event()
+    ticks: list[int] = []
+
+    def slow_translate(data: bytes, file_name: str) -> UrpProgram:
+        before = fake.cycles
+        release.wait(5.0)
+        ticks.append(fake.cycles - before)
+        return translate(data, file_name)
+
+    monkeypatch.setattr(dashboard_answers, "translate", slow_translate)
+    async with FakeController("ur10e", address=fake_address(), programs=tmp_path) as fake:
+        reader, writer = await asyncio.open_connection(fake.address, fake.ports.dashboard)
+        try:
+            await asyncio.wait_for(reader.readline(), 10.0)  # the banner
+            writer.write(b"load slow.urp\n")
+            await fake.cycles_pass(5, timeout=10.0)
+            release.set()
+            reply = await asyncio.wait_for(reader.readline(), 10.0)
+        finally:
+            writer.close()
+        assert reply == f"Loading program: {tmp_path}/slow.urp\n".encode()
+        assert len(ticks) == 1
+        assert ticks[0] >= 5

@@ -41,7 +41,7 @@ from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.connections import READ_CHUNK, Connections, paced
-from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_reply
+from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer, dashboard_reply
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.fakeur.programs import Programs, RunningScript
 from urdaemon.fakeur.reports import realtime_state, robot_state
@@ -468,7 +468,7 @@ class FakeController:
         while data := await reader.read(READ_CHUNK):
             for event in conn.receive_data(data):
                 if isinstance(event, dash.CommandReceived):
-                    reply = self._dashboard_reply(event.command)
+                    reply = await dashboard_answer(self, event.command)
                 elif isinstance(event, dash.UnknownCommand):
                     reply = dash.unknown_command_text(event.line)
                 else:  # the robot side receives nothing else
