@@ -324,3 +324,34 @@ def swing_trajectory(
     if passthrough:
         goal["passthrough"] = True
     return goal
+
+
+async def rtde_sample(address: str, names: Sequence[str]) -> dict[str, Any]:
+    """One RTDE output sample of ``names`` read with our own codec: a second, independent reader of a
+    fake controller at ``address`` (bounded: 5 s per read, 100 events)."""
+    from urdaemon.protocols import rtde
+    from urdaemon.protocols._buffer import Side
+
+    reader, writer = await asyncio.open_connection(address, 30004)
+    conn = rtde.RtdeConnection(Side.DAEMON)
+    pending: list[object] = []
+
+    async def next_event() -> object:
+        while not pending:
+            data = await asyncio.wait_for(reader.read(65536), 5.0)
+            assert data, "the fake closed the RTDE connection"
+            pending.extend(conn.receive_data(data))
+        return pending.pop(0)
+
+    try:
+        for request in (rtde.RequestProtocolVersion(2), rtde.SetupOutputs(125.0, tuple(names)), rtde.Start()):
+            conn.send(request)
+            writer.write(conn.data_to_send())
+            await next_event()
+        for _ in range(100):
+            event = await next_event()
+            if isinstance(event, rtde.DataPackage):
+                return dict(zip(names, event.values, strict=True))
+        raise AssertionError("no data package")
+    finally:
+        writer.close()

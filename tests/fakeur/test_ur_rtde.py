@@ -15,9 +15,10 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from tests.fakeur.judges import start_fake
+from tests.helpers import rtde_sample
 from urdaemon.model import RobotMode
 from urdaemon.protocols import primary as prim
-from urdaemon.protocols import reverse, rtde
+from urdaemon.protocols import reverse
 from urdaemon.protocols._buffer import Side
 from urdaemon.urscript import ScriptParameters, render_control_script
 
@@ -44,30 +45,8 @@ def unpowered_fake() -> Iterator[str]:
 
 async def _rtde_sample(address: str) -> dict[str, object]:
     """One output sample read with our own codec (a second, independent reader of the fake)."""
-    reader, writer = await asyncio.open_connection(address, 30004)
-    conn = rtde.RtdeConnection(Side.DAEMON)
     names = ("timestamp", "actual_q", "actual_digital_output_bits", "target_speed_fraction", "robot_mode")
-    pending: list[object] = []
-
-    async def next_event() -> object:
-        while not pending:
-            data = await asyncio.wait_for(reader.read(65536), 5.0)
-            assert data, "the fake closed the RTDE connection"
-            pending.extend(conn.receive_data(data))
-        return pending.pop(0)
-
-    try:
-        for request in (rtde.RequestProtocolVersion(2), rtde.SetupOutputs(125.0, names), rtde.Start()):
-            conn.send(request)
-            writer.write(conn.data_to_send())
-            await next_event()
-        for _ in range(100):
-            event = await next_event()
-            if isinstance(event, rtde.DataPackage):
-                return dict(zip(names, event.values, strict=True))
-        raise AssertionError("no data package")
-    finally:
-        writer.close()
+    return await rtde_sample(address, names)
 
 
 def _poll(condition: Callable[[], bool], seconds: float) -> None:

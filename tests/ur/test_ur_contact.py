@@ -9,19 +9,17 @@ each of these tests failed there (seen on f5f0e26: no contact event, a TCP force
 
 from __future__ import annotations
 
-import asyncio
 import math
 from typing import Any
 
 import pytest
 
+from tests.helpers import rtde_sample
 from tests.ur.test_ur_backend import HOME, _until
 from tests.ur.test_ur_handguiding import _ready_alice
 from urdaemon.fakeur.contact import Wall, surroundings_of
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.model import SafetyMode
-from urdaemon.protocols import rtde
-from urdaemon.protocols._buffer import Side
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -39,35 +37,9 @@ def _position(fake: FakeController) -> tuple[float, float, float]:
 
 async def _tcp_force(address: str) -> tuple[float, ...]:
     """RTDE ``actual_TCP_force`` read with our own codec, as a second client of the fake."""
-    reader, writer = await asyncio.open_connection(address, 30004)
-    conn = rtde.RtdeConnection(Side.DAEMON)
-    pending: list[object] = []
-
-    async def next_event() -> object:
-        while not pending:
-            data = await asyncio.wait_for(reader.read(65536), 5.0)
-            assert data, "the fake closed the RTDE connection"
-            pending.extend(conn.receive_data(data))
-        return pending.pop(0)
-
-    try:
-        for request in (
-            rtde.RequestProtocolVersion(2),
-            rtde.SetupOutputs(125.0, ("actual_TCP_force",)),
-            rtde.Start(),
-        ):
-            conn.send(request)
-            writer.write(conn.data_to_send())
-            await next_event()
-        for _ in range(100):
-            event = await next_event()
-            if isinstance(event, rtde.DataPackage):
-                value = event.values[0]
-                assert isinstance(value, tuple), value
-                return tuple(float(v) for v in value)
-        raise AssertionError("no data package")
-    finally:
-        writer.close()
+    value = (await rtde_sample(address, ("actual_TCP_force",)))["actual_TCP_force"]
+    assert isinstance(value, tuple), value
+    return tuple(float(v) for v in value)
 
 
 async def _cycles(fake: FakeController, count: int) -> None:
