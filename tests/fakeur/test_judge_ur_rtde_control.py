@@ -284,7 +284,10 @@ def test_the_watchdog_stops_the_robot_when_it_is_not_kicked(judge: Judge) -> Non
     assert judge.control.isProgramRunning(), "a kicked watchdog keeps the program running\n" + judge.explain(
         "kickWatchdog"
     )
-    assert abs(judge.receiver.getActualQd()[0] - 0.1) < JOINT_TOL, "still moving while kicked"
+    assert abs(judge.receiver.getActualQd()[0] - 0.1) < JOINT_TOL, (
+        f"not moving at 0.1 rad/s while kicked: speeds {judge.receiver.getActualQd()}\n"
+        + judge.explain("speedJ while kicking the watchdog")
+    )
     # no more kicks: within 2 s the controller stops the program, and the robot
     assert wait_until(lambda: judge.at_rest() and not judge.control.isProgramRunning(), 20.0), (
         f"not stopped: speeds {judge.receiver.getActualQd()}, program running "
