@@ -31,6 +31,15 @@ PURE = {
     "errors.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/codec.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/keys.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    # the codecs: bytes in, events out (protocols/__init__.py)
+    "protocols": {"asyncio", "socket", "selectors", "threading", "time", "zenoh", "logging", "pydantic"},
+    # the fake's pure parts: the arm, its motions and surroundings, what it reports, program translation
+    "fakeur/arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/contact.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/faults.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/urp.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
 }
 
 
