@@ -292,9 +292,8 @@ class StateMapper:
     def apply(self, values: Sequence[Any], state: RobotState) -> None:
         """Write one package's values into ``state`` (in place; also the host receive times).
 
-        The 500 Hz path: the joint vectors are copied every time; the modes, IO bits and the lifecycle
-        are decoded again only when their raw values changed (they rarely do), so a package costs a
-        handful of comparisons beyond the copies.
+        The 500 Hz path, kept in one function (a helper call costs ~10 %): the joint vectors are copied
+        every time; modes, IO bits and the lifecycle are decoded again only when their raw values change.
         """
         state.controller_time = values[self._timestamp]
         state.positions[:] = values[self._q]
@@ -333,14 +332,12 @@ class StateMapper:
             if bits != self._last_din:
                 self._last_din = bits
                 _split_io_bits(bits, state.digital_in, state.configurable_in, state.tool_in)
-        analog = state.analog_out
         if self._aout[0] >= 0:
-            analog[0] = values[self._aout[0]]
-            analog[1] = values[self._aout[1]]
-        analog = state.analog_in
+            state.analog_out[0] = values[self._aout[0]]
+            state.analog_out[1] = values[self._aout[1]]
         if self._ain[0] >= 0:
-            analog[0] = values[self._ain[0]]
-            analog[1] = values[self._ain[1]]
+            state.analog_in[0] = values[self._ain[0]]
+            state.analog_in[1] = values[self._ain[1]]
         if self._tool_voltage >= 0:
             state.tool_voltage = int(values[self._tool_voltage])
         if self._payload >= 0:
