@@ -31,8 +31,8 @@ import struct
 from dataclasses import dataclass, fields
 from typing import Final, TypeAlias
 
-from urdaemon.errors import LocalProtocolError, RemoteProtocolError
-from urdaemon.protocols._buffer import ReceiveBuffer, Side
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols._codec import Codec
 from urdaemon.protocols.primary import CommandReceived, PrimaryConnection, ProgramReceived, Script
 
 __all__ = [
@@ -134,71 +134,49 @@ def message_size(version: tuple[int, ...]) -> int:
 RealtimeEvent: TypeAlias = RealtimeState | ProgramReceived | CommandReceived
 
 
-class RealtimeConnection:
+class RealtimeConnection(Codec["RealtimeState | Script", "RealtimeEvent"]):
     """One real-time-interface TCP connection, for either party; see the module docstring."""
 
+    __slots__ = ("_daemon_script", "_encoded", "_packer", "_script", "version")
+
+    PROTOCOL = PROTOCOL
+
     def __init__(self, side: Side, version: tuple[int, ...] = (5, 15)) -> None:
-        self.side = side
+        super().__init__(side, MAX_MESSAGE_BYTES)
         self.version = tuple(version)
         count = field_count(self.version)
         self._encoded = _NAMES[:count]
         self._packer = struct.Struct(f">i{(_OFFSETS[count] - 4) // _DOUBLE_BYTES}d")
         self._script = PrimaryConnection(Side.ROBOT) if side is Side.ROBOT else None
         self._daemon_script = PrimaryConnection(Side.DAEMON) if side is Side.DAEMON else None
-        self._buffer = ReceiveBuffer(PROTOCOL, MAX_MESSAGE_BYTES)
-        self._outgoing = bytearray()
-        self._failed = False
-        self._consumed = 0
 
-    def receive_data(self, data: bytes | bytearray | memoryview) -> list[RealtimeEvent]:
-        """Feed received bytes; the events completed so far. RemoteProtocolError on bad bytes (then final)."""
-        if self._failed:
-            raise RemoteProtocolError("realtime: connection already failed", protocol=PROTOCOL)
-        try:
-            if self._script is not None:
-                return list(self._script.receive_data(data))  # type: ignore[arg-type]
-            return self._receive_states(data)
-        except RemoteProtocolError:
-            self._failed = True
-            raise
+    def _parse(self, events: list[RealtimeEvent]) -> None:
+        if self._script is not None:  # robot side: the primary codec's script text
+            if len(self._buffer):
+                # the robot-side primary codec yields only ProgramReceived and CommandReceived
+                events += self._script.receive_data(self._buffer.take_all())  # type: ignore[arg-type]
+            return
+        buffer = self._buffer
+        while (head := buffer.peek(_SIZE.size)) is not None:
+            size = _SIZE.unpack(head)[0]
+            if not _OFFSETS[1] <= size <= MAX_MESSAGE_BYTES:
+                message = f"message size {size} outside [{_OFFSETS[1]}, {MAX_MESSAGE_BYTES}]"
+                raise self._remote(message, self._consumed)
+            message_bytes = buffer.take(size)
+            if message_bytes is None:
+                return
+            events.append(_decode(message_bytes))
+            self._consumed += size
 
-    def _receive_states(self, data: bytes | bytearray | memoryview) -> list[RealtimeEvent]:
-        events: list[RealtimeEvent] = []
-        view = memoryview(data).cast("B")
-        while True:
-            while (head := self._buffer.peek(_SIZE.size)) is not None:
-                size = _SIZE.unpack(head)[0]
-                if not _OFFSETS[1] <= size <= MAX_MESSAGE_BYTES:
-                    raise RemoteProtocolError(
-                        f"realtime: message size {size} outside [{_OFFSETS[1]}, {MAX_MESSAGE_BYTES}]",
-                        protocol=PROTOCOL,
-                        offset=self._consumed,
-                    )
-                message = self._buffer.take(size)
-                if message is None:
-                    break
-                events.append(_decode(message))
-                self._consumed += size
-            if not view:
-                return events
-            room = self._buffer.limit - len(self._buffer)
-            self._buffer.feed(view[:room])
-            view = view[room:]
-
-    def send(self, message: RealtimeState | Script) -> None:
-        """Queue RealtimeState (robot side) or Script (daemon side); else LocalProtocolError."""
+    def _encode(self, message: RealtimeState | Script) -> None:
         if self._daemon_script is not None:
             if not isinstance(message, Script):
-                raise LocalProtocolError(
-                    f"realtime: the daemon sends only Script, not {message!r}", protocol=PROTOCOL
-                )
+                raise self._local(f"the daemon sends only Script, not {message!r}")
             self._daemon_script.send(message)
-            self._outgoing += self._daemon_script.data_to_send()
+            self._queue(self._daemon_script.data_to_send())
             return
         if not isinstance(message, RealtimeState):
-            raise LocalProtocolError(
-                f"realtime: the robot sends only RealtimeState, not {message!r}", protocol=PROTOCOL
-            )
+            raise self._local(f"the robot sends only RealtimeState, not {message!r}")
         values: list[float] = []
         vectors = _VECTORS
         for name in self._encoded:
@@ -208,17 +186,9 @@ class RealtimeConnection:
             else:
                 values.append(value)
         try:
-            self._outgoing += self._packer.pack(self._packer.size, *values)
+            self._queue(self._packer.pack(self._packer.size, *values))
         except struct.error as err:
-            raise LocalProtocolError(
-                f"realtime: cannot encode {message!r}: {err}", protocol=PROTOCOL
-            ) from err
-
-    def data_to_send(self) -> bytes:
-        """The bytes queued by ``send`` since the last call."""
-        out = bytes(self._outgoing)
-        self._outgoing.clear()
-        return out
+            raise self._local(f"cannot encode {message!r}: {err}") from err
 
 
 def _decode(message: bytes) -> RealtimeState:
