@@ -681,40 +681,13 @@ def _local(message: str) -> LocalProtocolError:
     return LocalProtocolError(f"{PROTOCOL}: {message}", protocol=PROTOCOL)
 
 
-class RtdeConnection:
-    """One RTDE connection for either party: ``receive_data`` → events, ``send`` → ``data_to_send``.
+class _RtdeCore:
+    """The job both parties share: state, framing, the feed loop, text messages; see RtdeConnection."""
 
-    State: ``_TRANSITIONS`` maps (state, step) to the next state; both parties walk the same table::
-
-        IDLE, CONFIGURED, PAUSED  --setup outputs, all found-->  CONFIGURED
-        IDLE, CONFIGURED, PAUSED  --setup outputs, NOT_FOUND-->  IDLE
-        CONFIGURED, PAUSED        --START-->                     STARTING
-        STARTING                  --accepted / refused-->        RUNNING / CONFIGURED
-        RUNNING                   --PAUSE-->                     PAUSING
-        PAUSING                   --accepted / refused-->        PAUSED / RUNNING
-        (version changes only in IDLE; input setups in IDLE, CONFIGURED, PAUSED change nothing;
-         output data in STARTING, RUNNING, PAUSING, PAUSED; input data in RUNNING)
-
-    The daemon side passes through STARTING and PAUSING while its request is out; the robot side
-    handles request and answer in one go and never rests there.
-
-    Requests (§1.6): urcl and UR's client send one request and wait for its reply, so the DAEMON side
-    allows one outstanding request. Sending a second first, or a request the table does not allow
-    now (START before outputs are set up, input data before START, a version change after setup),
-    raises LocalProtocolError and changes nothing. A reply nobody asked for is a RemoteProtocolError.
-
-    The ROBOT side reports every well-formed request as an event, in order or not, and keeps the
-    unanswered ones oldest first; the fake answers each exactly once, in that order. Order is judged
-    when the answer is sent (a controller handles requests one by one). The answer to an
-    out-of-order request leaves the state alone. Where the reply has an "accepted" byte, a
-    controller answers 0 (START or PAUSE before setup); the codec lets the fake answer as it likes
-    except where the answer would make no sense to the codec itself: accepting a version after
-    setup or one it cannot speak, accepting START without an output recipe.
-
-    Errors: bad bytes raise RemoteProtocolError (``offset`` = stream offset of the offending package)
-    and leave the connection in ERROR, where every later call raises. A refused ``send`` raises
-    LocalProtocolError and queues nothing.
-    """
+    _handlers: dict[int, Callable[[_Buf, int, int], Event]]
+    """Package type -> decoder of a received package, for this side."""
+    _senders: dict[type, Callable[[Any], None]]
+    """Message type -> encoder of a message this side sends."""
 
     def __init__(self, side: Side, *, protocol_version: int = 2) -> None:
         """``protocol_version`` is the framing in force until the robot accepts a REQUEST_PROTOCOL_VERSION."""
@@ -738,51 +711,6 @@ class RtdeConnection:
         self._input_recipes: dict[int, Recipe] = {}
         self._input_recipe_id: int | None = None
         self._controller_version: ControllerVersion | None = None
-        P = PackageType
-        self._handlers: dict[int, Callable[[_Buf, int, int], Event]]
-        self._senders: dict[type, Callable[[Any], None]]
-        if side is Side.DAEMON:
-            self._handlers = {
-                P.REQUEST_PROTOCOL_VERSION: self._on_version_reply,
-                P.GET_URCONTROL_VERSION: self._on_controller_version,
-                P.CONTROL_PACKAGE_SETUP_OUTPUTS: self._on_outputs_reply,
-                P.CONTROL_PACKAGE_SETUP_INPUTS: self._on_inputs_reply,
-                P.CONTROL_PACKAGE_START: self._on_start_reply,
-                P.CONTROL_PACKAGE_PAUSE: self._on_pause_reply,
-                P.DATA_PACKAGE: self._on_output_data,
-                P.TEXT_MESSAGE: self._on_text_from_robot,
-            }
-            self._senders = {
-                RequestProtocolVersion: self._send_version_request,
-                GetControllerVersion: self._send_controller_version_request,
-                SetupOutputs: self._send_setup_outputs,
-                SetupInputs: self._send_setup_inputs,
-                Start: self._send_start,
-                Pause: self._send_pause,
-                InputData: self._send_input_data,
-                SendText: self._send_text,
-            }
-        else:
-            self._handlers = {
-                P.REQUEST_PROTOCOL_VERSION: self._on_version_request,
-                P.GET_URCONTROL_VERSION: self._on_controller_version_request,
-                P.CONTROL_PACKAGE_SETUP_OUTPUTS: self._on_outputs_request,
-                P.CONTROL_PACKAGE_SETUP_INPUTS: self._on_inputs_request,
-                P.CONTROL_PACKAGE_START: self._on_start_request,
-                P.CONTROL_PACKAGE_PAUSE: self._on_pause_request,
-                P.DATA_PACKAGE: self._on_input_data,
-                P.TEXT_MESSAGE: self._on_text_from_client,
-            }
-            self._senders = {
-                ProtocolVersionAccept: self._send_version_answer,
-                ControllerVersionReply: self._send_controller_version,
-                OutputsSetup: self._send_outputs_answer,
-                InputsSetup: self._send_inputs_answer,
-                StartAccept: self._send_start_answer,
-                PauseAccept: self._send_pause_answer,
-                OutputData: self._send_output_data,
-                Text: self._send_text,
-            }
 
     # -- public API ------------------------------------------------------------------------------
 
@@ -1042,6 +970,33 @@ class RtdeConnection:
                 raise self._bad(f"setup reply has an unknown type {rtde_type[:40]!r}")
         return types
 
+
+class _DaemonSide(_RtdeCore):
+    """The daemon's job: send requests and input data, decode the replies and the output data."""
+
+    def _daemon_tables(self) -> None:
+        P = PackageType
+        self._handlers = {
+            P.REQUEST_PROTOCOL_VERSION: self._on_version_reply,
+            P.GET_URCONTROL_VERSION: self._on_controller_version,
+            P.CONTROL_PACKAGE_SETUP_OUTPUTS: self._on_outputs_reply,
+            P.CONTROL_PACKAGE_SETUP_INPUTS: self._on_inputs_reply,
+            P.CONTROL_PACKAGE_START: self._on_start_reply,
+            P.CONTROL_PACKAGE_PAUSE: self._on_pause_reply,
+            P.DATA_PACKAGE: self._on_output_data,
+            P.TEXT_MESSAGE: self._on_text_from_robot,
+        }
+        self._senders = {
+            RequestProtocolVersion: self._send_version_request,
+            GetControllerVersion: self._send_controller_version_request,
+            SetupOutputs: self._send_setup_outputs,
+            SetupInputs: self._send_setup_inputs,
+            Start: self._send_start,
+            Pause: self._send_pause,
+            InputData: self._send_input_data,
+            SendText: self._send_text,
+        }
+
     # -- DAEMON: requests ------------------------------------------------------------------------
 
     def _request(self, kind: PackageType, payload: bytes, request: _Request | None = None) -> None:
@@ -1200,6 +1155,33 @@ class RtdeConnection:
                 f"DATA_PACKAGE for output recipe {recipe_id}, configured is {self._output_recipe_id}"
             )
         return DataPackage(recipe_id, recipe.decode(buf, start + 1))
+
+
+class _RobotSide(_RtdeCore):
+    """The robot's job (the fake's side): decode requests and input data, send answers and outputs."""
+
+    def _robot_tables(self) -> None:
+        P = PackageType
+        self._handlers = {
+            P.REQUEST_PROTOCOL_VERSION: self._on_version_request,
+            P.GET_URCONTROL_VERSION: self._on_controller_version_request,
+            P.CONTROL_PACKAGE_SETUP_OUTPUTS: self._on_outputs_request,
+            P.CONTROL_PACKAGE_SETUP_INPUTS: self._on_inputs_request,
+            P.CONTROL_PACKAGE_START: self._on_start_request,
+            P.CONTROL_PACKAGE_PAUSE: self._on_pause_request,
+            P.DATA_PACKAGE: self._on_input_data,
+            P.TEXT_MESSAGE: self._on_text_from_client,
+        }
+        self._senders = {
+            ProtocolVersionAccept: self._send_version_answer,
+            ControllerVersionReply: self._send_controller_version,
+            OutputsSetup: self._send_outputs_answer,
+            InputsSetup: self._send_inputs_answer,
+            StartAccept: self._send_start_answer,
+            PauseAccept: self._send_pause_answer,
+            OutputData: self._send_output_data,
+            Text: self._send_text,
+        }
 
     # -- ROBOT: requests and data ----------------------------------------------------------------
 
@@ -1407,6 +1389,50 @@ class RtdeConnection:
             body = _U8.pack(self._output_recipe_id) + body
         self._emit(PackageType.DATA_PACKAGE, body)
         self._state = state
+
+
+class RtdeConnection(_DaemonSide, _RobotSide):
+    """One RTDE connection for either party: ``receive_data`` → events, ``send`` → ``data_to_send``.
+
+    State: ``_TRANSITIONS`` maps (state, step) to the next state; both parties walk the same table::
+
+        IDLE, CONFIGURED, PAUSED  --setup outputs, all found-->  CONFIGURED
+        IDLE, CONFIGURED, PAUSED  --setup outputs, NOT_FOUND-->  IDLE
+        CONFIGURED, PAUSED        --START-->                     STARTING
+        STARTING                  --accepted / refused-->        RUNNING / CONFIGURED
+        RUNNING                   --PAUSE-->                     PAUSING
+        PAUSING                   --accepted / refused-->        PAUSED / RUNNING
+        (version changes only in IDLE; input setups in IDLE, CONFIGURED, PAUSED change nothing;
+         output data in STARTING, RUNNING, PAUSING, PAUSED; input data in RUNNING)
+
+    The daemon side passes through STARTING and PAUSING while its request is out; the robot side
+    handles request and answer in one go and never rests there.
+
+    Requests (§1.6): urcl and UR's client send one request and wait for its reply, so the DAEMON side
+    allows one outstanding request. Sending a second first, or a request the table does not allow
+    now (START before outputs are set up, input data before START, a version change after setup),
+    raises LocalProtocolError and changes nothing. A reply nobody asked for is a RemoteProtocolError.
+
+    The ROBOT side reports every well-formed request as an event, in order or not, and keeps the
+    unanswered ones oldest first; the fake answers each exactly once, in that order. Order is judged
+    when the answer is sent (a controller handles requests one by one). The answer to an
+    out-of-order request leaves the state alone. Where the reply has an "accepted" byte, a
+    controller answers 0 (START or PAUSE before setup); the codec lets the fake answer as it likes
+    except where the answer would make no sense to the codec itself: accepting a version after
+    setup or one it cannot speak, accepting START without an output recipe.
+
+    Errors: bad bytes raise RemoteProtocolError (``offset`` = stream offset of the offending package)
+    and leave the connection in ERROR, where every later call raises. A refused ``send`` raises
+    LocalProtocolError and queues nothing.
+    """
+
+    def __init__(self, side: Side, *, protocol_version: int = 2) -> None:
+        """``protocol_version`` is the framing in force until the robot accepts a REQUEST_PROTOCOL_VERSION."""
+        super().__init__(side, protocol_version=protocol_version)
+        if side is Side.DAEMON:
+            self._daemon_tables()
+        else:
+            self._robot_tables()
 
 
 def _names_payload(names: Sequence[str]) -> bytes:
