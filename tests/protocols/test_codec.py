@@ -44,7 +44,7 @@ def test_an_over_long_unit_fails_and_every_later_call_raises() -> None:
     conn = Lines()
     with pytest.raises(RemoteProtocolError, match="lines: line longer than 7 bytes"):
         conn.receive_data(b"abcdefghijk\n")
-    assert conn._state is CodecState.ERROR
+    assert conn._stream is CodecState.ERROR
     with pytest.raises(RemoteProtocolError, match="already failed"):
         conn.receive_data(b"ok\n")
     with pytest.raises(LocalProtocolError, match="already failed"):

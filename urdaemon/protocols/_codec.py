@@ -4,8 +4,9 @@ A codec subclasses ``Codec``, sets ``PROTOCOL`` and implements ``_parse(events)`
 unit (package, line, frame) out of ``self._buffer``, append one event per unit, leave a partial unit
 buffered. ``receive_data`` is then the one feed loop of all codecs: it feeds at most what the buffer's
 limit allows, parses, and repeats, so a large chunk of complete units is fine and one over-long
-partial unit fails as soon as the limit fills. The first ``RemoteProtocolError`` moves the codec to
-``CodecState.ERROR``, in which every later ``receive_data``, ``receive_eof`` and ``send`` raises.
+partial unit fails as soon as the limit fills. The first ``RemoteProtocolError`` moves the codec's
+``_stream`` to ``CodecState.ERROR``, in which every later ``receive_data``, ``receive_eof`` and
+``send`` raises.
 
 ``send`` checks the state and calls the codec's ``_encode(message)``, which appends to the one
 outgoing buffer through ``_queue``; ``data_to_send`` returns and clears it. ``_remote`` and
@@ -37,7 +38,7 @@ class CodecState(enum.Enum):
 class Codec(Generic[MessageT, EventT]):
     """Side, state, receive buffer (capped at ``limit`` bytes), outgoing buffer and the feed loop."""
 
-    __slots__ = ("_buffer", "_consumed", "_out", "_state", "side")
+    __slots__ = ("_buffer", "_consumed", "_out", "_stream", "side")
 
     PROTOCOL: ClassVar[str] = "codec"
 
@@ -45,7 +46,7 @@ class Codec(Generic[MessageT, EventT]):
         self.side = side
         self._buffer = ReceiveBuffer(self.PROTOCOL, limit)
         self._out = bytearray()
-        self._state = CodecState.OPEN
+        self._stream = CodecState.OPEN
         self._consumed = 0  # stream bytes of complete units decoded so far, for error offsets
 
     # -- public API -----------------------------------------------------------------------------------
@@ -68,12 +69,12 @@ class Codec(Generic[MessageT, EventT]):
                 buffer.feed(view[:room])
                 view = view[room:]
         except RemoteProtocolError:
-            self._state = CodecState.ERROR
+            self._fail()
             raise
 
     def send(self, message: MessageT) -> None:
         """Queue one message; LocalProtocolError if it is illegal, not ours to send, or the codec failed."""
-        if self._state is CodecState.ERROR:
+        if self._stream is CodecState.ERROR:
             raise self._local("connection already failed")
         self._encode(message)
 
@@ -93,13 +94,17 @@ class Codec(Generic[MessageT, EventT]):
         """Append one message's bytes with ``_queue``; LocalProtocolError if it cannot be sent."""
         raise NotImplementedError
 
+    def _fail(self) -> None:
+        """Enter the final error state (a codec with its own state table marks it there too)."""
+        self._stream = CodecState.ERROR
+
     def _queue(self, data: bytes | bytearray) -> None:
         self._out += data
 
     def _check_receiving(self) -> None:
-        if self._state is CodecState.ERROR:
+        if self._stream is CodecState.ERROR:
             raise self._remote("connection already failed")
-        if self._state is CodecState.EOF:
+        if self._stream is CodecState.EOF:
             self._fail_local("data fed after receive_eof()")
 
     def _remote(self, message: str, offset: int | None = None) -> RemoteProtocolError:
