@@ -77,6 +77,34 @@ class FakePorts:
     rtde: int = 30004
 
 
+def _serving_parts(
+    fake: FakeController, address: str, rtde_versions: tuple[int, ...]
+) -> tuple[Connections, Programs, RtdeService]:
+    """The parts of ``fake`` that serve its clients: the connections (with their faults), the programs
+    it runs (and the scripts waiting to be compiled), and the RTDE interface (recipes, the output
+    stream, the inputs)."""
+    connections = Connections(address, fake.faults)
+    programs = Programs(
+        fake.arm,
+        controller_version=fake.controller_version,
+        step_time=fake.step_time,
+        address=address,
+        input_registers=fake.input_registers,
+        broadcast=fake._broadcast,
+    )
+    rtde = RtdeService(
+        fake.arm,
+        address=address,
+        rate_hz=fake.rate_hz,
+        controller_version=fake.controller_version,
+        versions=rtde_versions,
+        input_registers=fake.input_registers,
+        input_times=programs.input_times,
+        write=connections.write,
+    )
+    return connections, programs, rtde
+
+
 class FakeController:
     """One fake UR controller serving ``model`` on ``address``."""
 
@@ -118,28 +146,9 @@ class FakeController:
         self.loaded_program: str | None = self.default_program if urcap else None
         self.input_registers = InputRegisters()
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
-        self.connections = Connections(address, self.faults)
+        self.connections, self.programs, self.rtde = _serving_parts(self, address, rtde_versions)
+        """Its clients' connections, the programs it runs and the RTDE interface."""
         self._write = self.connections.write
-        self.programs = Programs(
-            self.arm,
-            controller_version=controller_version,
-            step_time=self.step_time,
-            address=address,
-            input_registers=self.input_registers,
-            broadcast=self._broadcast,
-        )
-        """The programs it runs (and the scripts waiting to be compiled)."""
-        self.rtde = RtdeService(
-            self.arm,
-            address=address,
-            rate_hz=self.rate_hz,
-            controller_version=controller_version,
-            versions=rtde_versions,
-            input_registers=self.input_registers,
-            input_times=self.programs.input_times,
-            write=self._write,
-        )
-        """The RTDE interface: recipes, the output stream, the inputs."""
         self._release_when_idle = False
         """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
         self._realtime_clients: list[tuple[rt.RealtimeConnection, asyncio.StreamWriter]] = []

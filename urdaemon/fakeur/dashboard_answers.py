@@ -57,8 +57,18 @@ _PROGRAM_STATES = {
 
 def dashboard_reply(fake: FakeController, command: Any) -> str:
     """The dashboard's answer to ``command`` (and what it does to ``fake``)."""
+    reply = _action_reply(fake, command)
+    if reply is None:
+        reply = _query_reply(fake, command)
+    if reply is not None:
+        return reply
+    success = getattr(command, "success_text", None)
+    return success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
+
+
+def _action_reply(fake: FakeController, command: Any) -> str | None:
+    """The answer to a command that changes the arm or the program; None for any other command."""
     arm = fake.arm
-    program = fake.loaded_program
     if isinstance(command, dash.PowerOn):
         return "Powering on" if arm.power_on() is None else "Failed to execute: power on"
     if isinstance(command, dash.PowerOff):
@@ -87,12 +97,6 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
         if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
             arm.safety_mode = SafetyMode.NORMAL
         return "Restarting safety"
-    if isinstance(command, dash.IsProgramSaved):
-        return dash.program_saved_text(program is not None, _basename(program))
-    if isinstance(command, dash.GetOperationalMode) and fake.controller_version[0] >= 5:
-        return dash.operational_mode_text(dash.OperationalMode.NONE)  # no mode password set
-    if isinstance(command, dash.GetUserRole) and fake.controller_version[0] < 5:
-        return dash.user_role_text(dash.UserRole.PROGRAMMER)  # no user password set
     if isinstance(command, dash.Pause):
         if arm.runtime_state is not RuntimeState.PLAYING:
             return "Failed to execute: pause"
@@ -103,6 +107,24 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
             return "Failed to execute: stop"
         fake._stop_program()
         return "Stopped"
+    if isinstance(command, dash.Quit):
+        return "Disconnected"
+    if isinstance(command, dash.Shutdown):
+        arm.power_off()
+        return "Shutting down"
+    return None
+
+
+def _query_reply(fake: FakeController, command: Any) -> str | None:
+    """The answer to a command that only reads the fake's state; None for any other command."""
+    arm = fake.arm
+    program = fake.loaded_program
+    if isinstance(command, dash.IsProgramSaved):
+        return dash.program_saved_text(program is not None, _basename(program))
+    if isinstance(command, dash.GetOperationalMode) and fake.controller_version[0] >= 5:
+        return dash.operational_mode_text(dash.OperationalMode.NONE)  # no mode password set
+    if isinstance(command, dash.GetUserRole) and fake.controller_version[0] < 5:
+        return dash.user_role_text(dash.UserRole.PROGRAMMER)  # no user password set
     if isinstance(command, dash.GetRobotMode):
         return dash.robot_mode_text(arm.robot_mode)
     if isinstance(command, dash.GetSafetyMode):
@@ -128,13 +150,7 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
         return fake.model.model.upper().removesuffix("E")
     if isinstance(command, dash.GetOperationalMode | dash.GetUserRole):  # not on this series
         return dash.unknown_command_text(command.KEYWORD)
-    if isinstance(command, dash.Quit):
-        return "Disconnected"
-    if isinstance(command, dash.Shutdown):
-        arm.power_off()
-        return "Shutting down"
-    success = getattr(command, "success_text", None)
-    return success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
+    return None
 
 
 async def dashboard_answer(fake: FakeController, command: Any) -> str:

@@ -83,39 +83,13 @@ def robot_state(
     arm: FakeArm, model: UrModel, controller_version: tuple[int, int, int, int]
 ) -> prim.RobotState:
     """The robot state of ``arm`` on the primary and secondary interfaces (10 Hz)."""
-    dh = arm.dh
-    q = tuple(arm.q)
     powered = arm.robot_mode in (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON)
     running_modes = 253 if arm.robot_mode is RobotMode.RUNNING else 255 if powered else 239
+    dh = arm.dh
     return prim.RobotState(
         (
-            prim.RobotModeData(
-                timestamp=int(arm.timestamp * 1000),
-                is_real_robot_connected=True,
-                is_real_robot_enabled=True,
-                is_robot_power_on=powered,
-                is_emergency_stopped=arm.safety_mode
-                in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP),
-                is_protective_stopped=arm.safety_mode is SafetyMode.PROTECTIVE_STOP,
-                is_program_running=arm.program_running,
-                is_program_paused=arm.runtime_state is RuntimeState.PAUSED,
-                robot_mode=int(arm.robot_mode),
-                control_mode=0,
-                target_speed_fraction=arm.speed_slider,
-                speed_scaling=arm.speed_scaling,
-                target_speed_fraction_limit=1.0,
-                reserved=0 if controller_version[0] >= 5 else None,  # CB3: 46 bytes
-            ),
-            prim.JointData(
-                q_actual=q,
-                q_target=tuple(arm.target_q),
-                qd_actual=tuple(arm.qd),
-                i_actual=tuple(arm.current),
-                v_actual=(48.0,) * 6,
-                t_motor=(JOINT_TEMPERATURE,) * 6,
-                t_micro=(JOINT_TEMPERATURE,) * 6,
-                joint_mode=(running_modes,) * 6,
-            ),
+            _robot_mode_data(arm, powered, controller_version),
+            _joint_data(arm, running_modes),
             prim.CartesianInfo(tcp_pose=arm.actual_tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
             prim.KinematicsInfo(
                 checksum=(0xFFFFFFFF,) * 6,
@@ -125,37 +99,87 @@ def robot_state(
                 dh_alpha=dh.alpha,
                 calibration_status=KINEMATICS_CALIBRATED,
             ),
-            prim.MasterboardData(
-                digital_input_bits=arm.io.digital_in & 0xFFFF,
-                digital_output_bits=arm.io.digital_out & 0xFFFF,
-                analog_output0=arm.io.analog_out[0],
-                analog_output1=arm.io.analog_out[1],
-                robot_voltage_48v=48.0 if powered else 0.0,
-                safety_mode=int(arm.safety_mode),
-            ),
+            _masterboard_data(arm, powered),
             prim.ToolData(tool_output_voltage=arm.io.tool_voltage, tool_mode=running_modes),
-            prim.ConfigurationData(
-                joint_min_limit=tuple(max(v, -6.335) for v in arm.min_position),
-                joint_max_limit=tuple(min(v, 6.335) for v in arm.max_position),
-                joint_max_speed=tuple(arm.max_velocity),
-                joint_max_acceleration=(40.0,) * 6,
-                v_joint_default=1.0472,
-                a_joint_default=1.3963,
-                v_tool_default=0.25,
-                a_tool_default=1.2,
-                eq_radius=0.25,
-                dh_a=dh.a,
-                dh_d=dh.d,
-                dh_alpha=dh.alpha,
-                dh_theta=dh.theta,
-                masterboard_version=6,
-                controller_box_type=4 if controller_version[0] >= 5 else 2,
-                robot_type=model.robot_type,
-                robot_sub_type=3 if controller_version[0] >= 5 else 2,
-            ),
+            _configuration_data(arm, model, controller_version),
             prim.ForceModeData(wrench=_six(arm.tcp_force)),
             prim.AdditionalInfo(),
         )
+    )
+
+
+def _robot_mode_data(
+    arm: FakeArm, powered: bool, controller_version: tuple[int, int, int, int]
+) -> prim.RobotModeData:
+    """The robot mode package: power, stops, program run state and speed."""
+    return prim.RobotModeData(
+        timestamp=int(arm.timestamp * 1000),
+        is_real_robot_connected=True,
+        is_real_robot_enabled=True,
+        is_robot_power_on=powered,
+        is_emergency_stopped=arm.safety_mode
+        in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP),
+        is_protective_stopped=arm.safety_mode is SafetyMode.PROTECTIVE_STOP,
+        is_program_running=arm.program_running,
+        is_program_paused=arm.runtime_state is RuntimeState.PAUSED,
+        robot_mode=int(arm.robot_mode),
+        control_mode=0,
+        target_speed_fraction=arm.speed_slider,
+        speed_scaling=arm.speed_scaling,
+        target_speed_fraction_limit=1.0,
+        reserved=0 if controller_version[0] >= 5 else None,  # CB3: 46 bytes
+    )
+
+
+def _joint_data(arm: FakeArm, running_modes: int) -> prim.JointData:
+    """The joint data package: positions, speeds, currents and joint modes."""
+    return prim.JointData(
+        q_actual=tuple(arm.q),
+        q_target=tuple(arm.target_q),
+        qd_actual=tuple(arm.qd),
+        i_actual=tuple(arm.current),
+        v_actual=(48.0,) * 6,
+        t_motor=(JOINT_TEMPERATURE,) * 6,
+        t_micro=(JOINT_TEMPERATURE,) * 6,
+        joint_mode=(running_modes,) * 6,
+    )
+
+
+def _masterboard_data(arm: FakeArm, powered: bool) -> prim.MasterboardData:
+    """The masterboard package: the controller's digital and analog IO and the 48 V supply."""
+    return prim.MasterboardData(
+        digital_input_bits=arm.io.digital_in & 0xFFFF,
+        digital_output_bits=arm.io.digital_out & 0xFFFF,
+        analog_output0=arm.io.analog_out[0],
+        analog_output1=arm.io.analog_out[1],
+        robot_voltage_48v=48.0 if powered else 0.0,
+        safety_mode=int(arm.safety_mode),
+    )
+
+
+def _configuration_data(
+    arm: FakeArm, model: UrModel, controller_version: tuple[int, int, int, int]
+) -> prim.ConfigurationData:
+    """The configuration package: joint limits, defaults, DH parameters and hardware types."""
+    dh = arm.dh
+    return prim.ConfigurationData(
+        joint_min_limit=tuple(max(v, -6.335) for v in arm.min_position),
+        joint_max_limit=tuple(min(v, 6.335) for v in arm.max_position),
+        joint_max_speed=tuple(arm.max_velocity),
+        joint_max_acceleration=(40.0,) * 6,
+        v_joint_default=1.0472,
+        a_joint_default=1.3963,
+        v_tool_default=0.25,
+        a_tool_default=1.2,
+        eq_radius=0.25,
+        dh_a=dh.a,
+        dh_d=dh.d,
+        dh_alpha=dh.alpha,
+        dh_theta=dh.theta,
+        masterboard_version=6,
+        controller_box_type=4 if controller_version[0] >= 5 else 2,
+        robot_type=model.robot_type,
+        robot_sub_type=3 if controller_version[0] >= 5 else 2,
     )
 
 

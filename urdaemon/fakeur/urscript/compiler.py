@@ -721,40 +721,11 @@ class _Generator:
         elif isinstance(node, ast.ExprStatement):
             self._emit(indent, self._expr(node.value), node)
         elif isinstance(node, ast.If):
-            for number, (condition, block) in enumerate(node.branches):
-                keyword = "if" if number == 0 else "elif"
-                self._emit(indent, f"{keyword} {self._expr(condition)}:", condition)
-                self._block(indent + 1, block)
-            if node.orelse is not None:
-                self._emit(indent, "else:", None)
-                self._block(indent + 1, node.orelse)
+            self._if(indent, node)
         elif isinstance(node, ast.While):
-            self._emit(indent, f"while {self._expr(node.condition)}:", node)
-            if self.checker.body_blocks((node,)):
-                # a loop that waits on something (a socket read that keeps finding data, say) has used
-                # its time slice: the thread sleeps until the next cycle, as the controller's does
-                self._emit(
-                    indent + 1,
-                    f"if {_SPENT}: yield",
-                    node,
-                )
-            else:
-                # a loop that can never wait would hold the controller: the controller's error
-                self._emit(
-                    indent + 1,
-                    f"if {_SPENT}: _too_long()",
-                    node,
-                )
-            self._block(indent + 1, node.body)
+            self._while(indent, node)
         elif isinstance(node, ast.Return):
-            value = node.value
-            if value is None:
-                self._emit(indent, "return", node)
-            else:
-                text = self._expr(value)
-                if _is_read(value) and self.checker.mutated:
-                    text = f"_cp({text})"
-                self._emit(indent, f"return {text}", node)
+            self._return(indent, node)
         elif isinstance(node, ast.Break):
             self._emit(indent, "break", node)
         elif isinstance(node, ast.Continue):
@@ -771,6 +742,39 @@ class _Generator:
             self._emit(indent, f"yield from _join({self._expr(node.handle)})", node)
         else:  # pragma: no cover - the parser makes no other statement
             raise TypeError(f"unknown statement {node!r}")
+
+    def _if(self, indent: int, node: Any) -> None:
+        """An ``if``/``elif``/``else`` chain."""
+        for number, (condition, block) in enumerate(node.branches):
+            keyword = "if" if number == 0 else "elif"
+            self._emit(indent, f"{keyword} {self._expr(condition)}:", condition)
+            self._block(indent + 1, block)
+        if node.orelse is not None:
+            self._emit(indent, "else:", None)
+            self._block(indent + 1, node.orelse)
+
+    def _while(self, indent: int, node: Any) -> None:
+        """A ``while`` loop that gives up its time slice once the cycle's time is spent."""
+        self._emit(indent, f"while {self._expr(node.condition)}:", node)
+        if self.checker.body_blocks((node,)):
+            # a loop that waits on something (a socket read that keeps finding data, say) has used
+            # its time slice: the thread sleeps until the next cycle, as the controller's does
+            self._emit(indent + 1, f"if {_SPENT}: yield", node)
+        else:
+            # a loop that can never wait would hold the controller: the controller's error
+            self._emit(indent + 1, f"if {_SPENT}: _too_long()", node)
+        self._block(indent + 1, node.body)
+
+    def _return(self, indent: int, node: Any) -> None:
+        """A ``return``; a copy of a list another variable holds when either side mutates it."""
+        value = node.value
+        if value is None:
+            self._emit(indent, "return", node)
+            return
+        text = self._expr(value)
+        if _is_read(value) and self.checker.mutated:
+            text = f"_cp({text})"
+        self._emit(indent, f"return {text}", node)
 
     def _assigned(self, target: Any, value: Any) -> str:
         """The value to store: a copy when it is another variable's list that either side mutates.
