@@ -183,6 +183,12 @@ class FakeArm:
         """Walls and a push on the tool (fakeur/contact.py), stepped after the motion; None: free air."""
         self.remote_control = True
         self._transition_at: float | None = None
+        self._init_motion()
+        if powered:
+            self.robot_mode = RobotMode.RUNNING
+
+    def _init_motion(self) -> None:
+        """The motion state at boot: holding still at ``q``, no motion played, a full history."""
         self._mode = MotionMode.HOLD
         self._servo_target: list[float] | None = None
         self._speed_target = [0.0] * 6
@@ -202,8 +208,6 @@ class FakeArm:
         """s: the last cycle's time (a pause or resume ramp shorter than one cycle happens at once)."""
         self._carry = 0.0
         """s of program time: how far the last cycle went on past the end of the motion it ended."""
-        if powered:
-            self.robot_mode = RobotMode.RUNNING
 
     # ---- power, brakes, safety -----------------------------------------------------------------
 
