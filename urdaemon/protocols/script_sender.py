@@ -26,12 +26,11 @@ the sender's trailing ``\\n``) when what arrived ends with a newline, else ``Pro
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
-from typing import Final, NoReturn, TypeAlias
+from typing import Final, TypeAlias
 
-from urdaemon.errors import LocalProtocolError, RemoteProtocolError
-from urdaemon.protocols._buffer import ReceiveBuffer, Side
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols._codec import Codec, CodecState
 
 __all__ = [
     "MAX_PROGRAM_BYTES",
@@ -106,43 +105,20 @@ ScriptSenderEvent: TypeAlias = ProgramRequested | UnknownRequest | ProgramReceiv
 """An event of either side."""
 
 
-class _State(enum.Enum):
-    OPEN = "open"
-    CLOSED = "closed"
-    ERROR = "error"
-
-
-class ScriptSenderConnection:
+class ScriptSenderConnection(Codec[ScriptSenderMessage, ScriptSenderEvent]):
     """One script-sender connection (§4.3), for either party (DAEMON = urcl's server, ROBOT = the URCap)."""
 
-    __slots__ = ("_buffer", "_out", "_pending", "_requested", "_state", "side")
+    __slots__ = ("_pending", "_requested")
+
+    PROTOCOL = PROTOCOL
 
     def __init__(self, side: Side) -> None:
-        self.side = side
         limit = MAX_REQUEST_LINE_BYTES + 1 if side is Side.DAEMON else MAX_PROGRAM_BYTES
-        self._buffer = ReceiveBuffer(PROTOCOL, limit)
-        self._out = bytearray()
+        super().__init__(side, limit)
         self._pending = 0  # DAEMON: requests not answered yet
         self._requested = False  # ROBOT: request sent
-        self._state = _State.OPEN
 
     # -- public API -----------------------------------------------------------------------------------
-
-    def receive_data(self, data: bytes | bytearray | memoryview) -> list[ScriptSenderEvent]:
-        """Feed received bytes. DAEMON: one event per complete line. ROBOT: accumulates, returns []."""
-        self._check_open()
-        try:
-            if self.side is Side.DAEMON:
-                return self._request_lines(bytes(data))
-            if data and not self._requested:
-                raise RemoteProtocolError(
-                    f"{PROTOCOL}: the daemon sent data before request_program", protocol=PROTOCOL, offset=0
-                )
-            self._buffer.feed(data)
-            return []
-        except RemoteProtocolError:
-            self._state = _State.ERROR
-            raise
 
     def receive_eof(self) -> list[ScriptSenderEvent]:
         """The peer closed: the final events (see ``close``)."""
@@ -151,8 +127,8 @@ class ScriptSenderConnection:
     def close(self) -> list[ScriptSenderEvent]:
         """We stop reading. ROBOT: ``ProgramReceived`` or ``ProgramIncomplete``. DAEMON: a final
         unterminated line as ``UnknownRequest`` (urcl only answers a complete ``request_program\\n``)."""
-        self._check_open()
-        self._state = _State.CLOSED
+        self._check_receiving()
+        self._stream = CodecState.EOF
         data = self._buffer.take_all()
         if self.side is Side.DAEMON:
             return [UnknownRequest(data)] if data else []
@@ -161,68 +137,45 @@ class ScriptSenderConnection:
         try:
             return [ProgramReceived(data[:-1].decode("utf-8"))]
         except UnicodeDecodeError as err:
-            self._state = _State.ERROR
-            raise RemoteProtocolError(
-                f"{PROTOCOL}: the program is not UTF-8 text", protocol=PROTOCOL, offset=err.start
-            ) from None
+            self._fail()
+            raise self._remote("the program is not UTF-8 text", err.start) from None
 
-    def send(self, message: ScriptSenderMessage) -> None:
-        """Queue a message; LocalProtocolError if it is not ours to send now."""
-        if self._state is not _State.OPEN:
-            self._refuse(f"connection is {self._state.value}")
+    # -- internals ------------------------------------------------------------------------------------
+
+    def _parse(self, events: list[ScriptSenderEvent]) -> None:
+        # DAEMON: one event per complete line. ROBOT: the program accumulates until close().
+        if self.side is Side.ROBOT:
+            if len(self._buffer) and not self._requested:
+                raise self._remote("the daemon sent data before request_program", 0)
+            return
+        while (line := self._buffer.take_line(MAX_REQUEST_LINE_BYTES)) is not None:
+            if line == REQUEST_LINE:
+                self._pending += 1
+                events.append(ProgramRequested())
+            else:
+                events.append(UnknownRequest(line[:-1]))
+
+    def _encode(self, message: ScriptSenderMessage) -> None:
+        if self._stream is CodecState.EOF:
+            self._fail_local("connection is closed")
         if self.side is Side.DAEMON and type(message) is Program:
             self._send_program(message)
         elif self.side is Side.ROBOT and type(message) is RequestProgram:
             if self._requested:
-                self._refuse("the URCap requests the program once per connection")
+                self._fail_local("the URCap requests the program once per connection")
             self._requested = True
-            self._out += REQUEST_LINE
+            self._queue(REQUEST_LINE)
         else:
-            self._refuse(f"the {self.side.value} side does not send {type(message).__name__}")
-
-    def data_to_send(self) -> bytes:
-        """Return and clear the queued bytes."""
-        out = bytes(self._out)
-        self._out.clear()
-        return out
-
-    # -- internals ------------------------------------------------------------------------------------
-
-    def _request_lines(self, data: bytes) -> list[ScriptSenderEvent]:
-        # Feed at most what the cap allows, split lines, repeat: many short lines in one chunk are
-        # fine, one overlong line fails as soon as the cap fills without a newline.
-        events: list[ScriptSenderEvent] = []
-        pos = 0
-        while True:
-            room = self._buffer.limit - len(self._buffer)
-            self._buffer.feed(data[pos : pos + room])
-            pos += room
-            while (line := self._buffer.take_line(MAX_REQUEST_LINE_BYTES)) is not None:
-                if line == REQUEST_LINE:
-                    self._pending += 1
-                    events.append(ProgramRequested())
-                else:
-                    events.append(UnknownRequest(line[:-1]))
-            if pos >= len(data):
-                return events
+            self._fail_local(f"the {self.side.value} side does not send {type(message).__name__}")
 
     def _send_program(self, message: Program) -> None:
         if not isinstance(message.text, str) or not message.text:
-            self._refuse("the program must be a non-empty str")
+            self._fail_local("the program must be a non-empty str")
         if self._pending == 0:
-            self._refuse("no request_program to answer (urcl only answers requests)")
+            self._fail_local("no request_program to answer (urcl only answers requests)")
         try:
             payload = message.text.encode("utf-8")
         except UnicodeEncodeError:
-            self._refuse("the program is not encodable as UTF-8")
+            self._fail_local("the program is not encodable as UTF-8")
         self._pending -= 1
-        self._out += payload + b"\n"
-
-    def _check_open(self) -> None:
-        if self._state is _State.ERROR:
-            raise RemoteProtocolError(f"{PROTOCOL}: connection is in an error state", protocol=PROTOCOL)
-        if self._state is _State.CLOSED:
-            raise LocalProtocolError(f"{PROTOCOL}: connection already closed", protocol=PROTOCOL)
-
-    def _refuse(self, reason: str) -> NoReturn:
-        raise LocalProtocolError(f"{PROTOCOL}: {reason}", protocol=PROTOCOL)
+        self._queue(payload + b"\n")
