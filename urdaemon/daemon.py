@@ -19,10 +19,10 @@ from urdaemon.description import (
     KinematicTree,
     build_cell_urdf,
     joint_limits_for,
-    load_urdf,
     robot_dh,
 )
 from urdaemon.description.calibration import load_calibration
+from urdaemon.description.urdf_facts import read_urdf_facts
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.model import JointLimits
@@ -50,7 +50,7 @@ class CellDescription:
 def describe_cell(cell: Cell) -> CellDescription:
     """Build the cell URDF and every robot's joint limits."""
     urdf_text = build_cell_urdf(cell)
-    urdf = load_urdf(urdf_text)
+    urdf = read_urdf_facts(urdf_text)
     limits = {robot.name: joint_limits_for(robot, urdf) for robot in cell.robots}
     return CellDescription(urdf=urdf_text, tree=KinematicTree.from_urdf(urdf), limits=limits)
 

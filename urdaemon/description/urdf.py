@@ -1,11 +1,15 @@
-"""Read a cell URDF (yourdfpy, no meshes) and derive a robot's joint limits from it."""
+"""Read a cell URDF (yourdfpy, no meshes) and derive a robot's joint limits from it.
+
+yourdfpy (and the trimesh, scipy and networkx it imports) is loaded only when ``load_urdf`` is
+called: serving reads the URDF with ``urdf_facts.read_urdf_facts`` instead, which
+``joint_limits_for`` accepts as well.
+"""
 
 from __future__ import annotations
 
 import io
 import math
-
-import yourdfpy
+from typing import TYPE_CHECKING, Any
 
 from urdaemon.cell.config import Robot
 from urdaemon.description.build import robot_joint_names
@@ -13,11 +17,16 @@ from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import DescriptionError
 from urdaemon.model import JointLimits
 
+if TYPE_CHECKING:
+    import yourdfpy
+
 __all__ = ["joint_limits_for", "load_urdf"]
 
 
 def load_urdf(text: str) -> yourdfpy.URDF:
     """Parse URDF text into a yourdfpy model with its scene graph, loading no meshes."""
+    import yourdfpy  # heavy (trimesh, scipy, networkx): only for readers of geometry
+
     try:
         return yourdfpy.URDF.load(
             io.StringIO(text),
@@ -30,8 +39,11 @@ def load_urdf(text: str) -> yourdfpy.URDF:
         raise DescriptionError(f"cannot read the URDF: {type(err).__name__}: {err}") from err
 
 
-def joint_limits_for(robot: Robot, urdf: yourdfpy.URDF) -> JointLimits:
-    """The robot's limits: position, velocity, effort from the URDF; rates from the model; then overrides."""
+def joint_limits_for(robot: Robot, urdf: Any) -> JointLimits:
+    """The robot's limits: position, velocity, effort from the URDF; rates from the model; overrides.
+
+    ``urdf`` is a yourdfpy ``URDF`` or a ``UrdfFacts``.
+    """
     names = robot_joint_names(robot, urdf)
     lower: list[float] = []
     upper: list[float] = []
