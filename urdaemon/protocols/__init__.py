@@ -12,6 +12,11 @@ Every protocol module follows one shape (h11/aioquic style):
   is queued, so the pump has a single write path. Sending what the protocol forbids raises
   ``LocalProtocolError``;
 * events and messages are frozen, slotted dataclasses named for what happened;
+* the stream codecs share one base, ``_codec.Codec``: side, the error state (``_stream``), the
+  receive buffer with its limit, the feed loop calling the codec's ``_parse`` step, the one outgoing
+  buffer behind ``send``/``data_to_send``, and the two error helpers. A codec brings only its parse
+  step, its ``_encode`` and its own conversation state (RTDE's table, for example); the fixed-frame
+  callback codecs share ``_fixed.FixedFrameConnection``;
 * wire layouts are drawn in each codec's docstring; every limit is a named constant with its unit.
 
 The reference for every format is ``shared/docs/ur-protocols.md`` (section numbers are cited).
