@@ -658,31 +658,7 @@ class MotionController:
         if now >= goal.next_feedback:
             self._emit_feedback(goal, pos, meas, now)
         if goal.t >= goal.duration:
-            if goal.end_now is None:
-                goal.end_now = now
-            final = goal.final
-            goal_tol = goal.goal_tol
-            worst = -1
-            for i in range(n):
-                if abs(final[i] - meas[i]) > goal_tol[i]:
-                    worst = i
-                    break
-            if worst < 0:
-                self._finish_goal(GoalStatus.SUCCEEDED, "reached the goal within tolerance", meas)
-                self._enter_stopping()
-                self._hold = True
-                self._tick_stopping(state, command)
-                return
-            if now - goal.end_now > goal.goal_time:
-                err = final[worst] - meas[worst]
-                self._finish_goal(
-                    GoalStatus.ABORTED,
-                    f"goal tolerance not reached {goal.goal_time:.4g} s after the planned end: "
-                    f"{self.joint_names[worst]} is {err:.4g} from its goal, tolerance {goal_tol[worst]:.4g}",
-                    meas,
-                )
-                self._enter_stopping()
-                self._tick_stopping(state, command)
+            if self._tick_goal_end(goal, state, command, now):
                 return
             # Holding the final point: the setpoint stays as it is.
         else:
@@ -708,6 +684,41 @@ class MotionController:
         command.mode = CommandMode.POSITION
         command.positions[:] = pos
         command.velocities[:] = self._vel
+
+    def _tick_goal_end(self, goal: _Goal, state: RobotState, command: JointCommand, now: float) -> bool:
+        """Past the planned end: succeed within the goal tolerance, abort after the goal time.
+
+        True when the goal ended and this tick's command is written; False while holding the final point.
+        """
+        if goal.end_now is None:
+            goal.end_now = now
+        meas = state.positions
+        n = self._n
+        final = goal.final
+        goal_tol = goal.goal_tol
+        worst = -1
+        for i in range(n):
+            if abs(final[i] - meas[i]) > goal_tol[i]:
+                worst = i
+                break
+        if worst < 0:
+            self._finish_goal(GoalStatus.SUCCEEDED, "reached the goal within tolerance", meas)
+            self._enter_stopping()
+            self._hold = True
+            self._tick_stopping(state, command)
+            return True
+        if now - goal.end_now > goal.goal_time:
+            err = final[worst] - meas[worst]
+            self._finish_goal(
+                GoalStatus.ABORTED,
+                f"goal tolerance not reached {goal.goal_time:.4g} s after the planned end: "
+                f"{self.joint_names[worst]} is {err:.4g} from its goal, tolerance {goal_tol[worst]:.4g}",
+                meas,
+            )
+            self._enter_stopping()
+            self._tick_stopping(state, command)
+            return True
+        return False
 
     def _check_point_accelerations(self, k: int, pt: TrajectoryPoint) -> None:
         """Refuse client accelerations within a limit but inside the reserve kept for the speed scaling."""
