@@ -162,6 +162,31 @@ class _Goal:
         self.next_feedback = -math.inf
 
 
+def _check_settings(
+    period: float,
+    path_tolerance: float,
+    goal_tolerance: float,
+    goal_time_tolerance: float,
+    stream_timeout: float,
+    feedback_period: float,
+) -> None:
+    """Refuse a controller setting out of range, naming it."""
+    for label, value in (
+        ("period", period),
+        ("path_tolerance", path_tolerance),
+        ("goal_tolerance", goal_tolerance),
+        ("stream_timeout", stream_timeout),
+    ):
+        if not (value > 0.0):
+            raise ValueError(f"MotionController: {label} must be > 0, got {value}")
+    for label, value in (
+        ("goal_time_tolerance", goal_time_tolerance),
+        ("feedback_period", feedback_period),
+    ):
+        if not (value >= 0.0):
+            raise ValueError(f"MotionController: {label} must be >= 0, got {value}")
+
+
 class MotionController:
     """Executes trajectory goals, point-to-point moves and joint streams for one robot."""
 
@@ -176,20 +201,9 @@ class MotionController:
         stream_timeout: float = 0.2,
         feedback_period: float = 0.1,
     ) -> None:
-        for label, value in (
-            ("period", period),
-            ("path_tolerance", path_tolerance),
-            ("goal_tolerance", goal_tolerance),
-            ("stream_timeout", stream_timeout),
-        ):
-            if not (value > 0.0):
-                raise ValueError(f"MotionController: {label} must be > 0, got {value}")
-        for label, value in (
-            ("goal_time_tolerance", goal_time_tolerance),
-            ("feedback_period", feedback_period),
-        ):
-            if not (value >= 0.0):
-                raise ValueError(f"MotionController: {label} must be >= 0, got {value}")
+        _check_settings(
+            period, path_tolerance, goal_tolerance, goal_time_tolerance, stream_timeout, feedback_period
+        )
         n = limits.dof
         self.limits = limits
         self.plan_limits = planning_limits(limits)
@@ -202,17 +216,7 @@ class MotionController:
         self._goal_time_tolerance = goal_time_tolerance
         self._stream_timeout = stream_timeout
         self._feedback_period = feedback_period
-        self._lo = list(limits.min_position)
-        self._hi = list(limits.max_position)
-        self._vmax = list(limits.max_velocity)
-        self._amax = list(limits.max_acceleration)
-        self._jmax = list(limits.max_jerk)
-        # Beyond this distance from both limits no stop from any admissible state can reach a limit,
-        # so the per-cycle braking check is skipped (the common case, far from the limits).
-        self._safe_distance = [
-            stopping_distance(v + a * period, a, a, j) + 2.0 * v * period + 1e-6
-            for v, a, j in zip(self._vmax, self._amax, self._jmax, strict=True)
-        ]
+        self._init_limits(limits, period)
 
         self._mode = _Mode.IDLE
         self._goal: _Goal | None = None
@@ -228,6 +232,37 @@ class MotionController:
         self._meas = [0.0] * n
         self._zeros = [0.0] * n
 
+        self._init_online(limits, period)
+        self._hold = False
+        """The stop that runs holds a succeeded goal's final point until the robot settles on it."""
+        self._ramp_done = False
+        """The stop's ramp has ended (only a hold keeps the controller out of IDLE)."""
+        self._settle_ticks = 0
+        self._settle_limit = max(1, round(SETTLE_TIME / period))
+
+        self._events: list[GoalFeedback | GoalResult] = []
+        # Plans of ended goals, freed RELEASE_SEGMENTS a tick.
+        self._released: list[PlannedTrajectory] = []
+        self._perm_cache: dict[tuple[str, ...], tuple[int, ...]] = {}
+        self._init_counters()
+
+    def _init_limits(self, limits: JointLimits, period: float) -> None:
+        """The joint limits as lists for the per-cycle checks, and the distance that needs no braking."""
+        self._lo = list(limits.min_position)
+        self._hi = list(limits.max_position)
+        self._vmax = list(limits.max_velocity)
+        self._amax = list(limits.max_acceleration)
+        self._jmax = list(limits.max_jerk)
+        # Beyond this distance from both limits no stop from any admissible state can reach a limit,
+        # so the per-cycle braking check is skipped (the common case, far from the limits).
+        self._safe_distance = [
+            stopping_distance(v + a * period, a, a, j) + 2.0 * v * period + 1e-6
+            for v, a, j in zip(self._vmax, self._amax, self._jmax, strict=True)
+        ]
+
+    def _init_online(self, limits: JointLimits, period: float) -> None:
+        """The online (ruckig) follower of streams and stops, and the stream's per-joint state."""
+        n = limits.dof
         self._otg: Any = Ruckig(n, period)
         self._inp: Any = InputParameter(n)
         self._out: Any = OutputParameter(n)
@@ -245,17 +280,9 @@ class MotionController:
         self._effective_velocity = [0.0] * n
         self._latch = [0] * n
         self._last_stream_now = -math.inf
-        self._hold = False
-        """The stop that runs holds a succeeded goal's final point until the robot settles on it."""
-        self._ramp_done = False
-        """The stop's ramp has ended (only a hold keeps the controller out of IDLE)."""
-        self._settle_ticks = 0
-        self._settle_limit = max(1, round(SETTLE_TIME / period))
 
-        self._events: list[GoalFeedback | GoalResult] = []
-        # Plans of ended goals, freed RELEASE_SEGMENTS a tick.
-        self._released: list[PlannedTrajectory] = []
-        self._perm_cache: dict[tuple[str, ...], tuple[int, ...]] = {}
+    def _init_counters(self) -> None:
+        """The statistics' counters, all zero."""
         self._ticks = 0
         self._goals_accepted = 0
         self._goals_succeeded = 0
