@@ -32,7 +32,8 @@ from dataclasses import KW_ONLY, dataclass, fields
 from typing import Any, Final, Literal, TypeAlias, TypeVar
 
 from urdaemon.errors import LocalProtocolError, RemoteProtocolError
-from urdaemon.protocols._buffer import ReceiveBuffer, Side
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols._codec import Codec, CodecState
 from urdaemon.protocols.kinematics_hash import kinematics_hash
 
 __all__ = [
@@ -944,47 +945,21 @@ _ROBOT_MESSAGE_CLASSES: Final = (
 # --- the connection -------------------------------------------------------------------------------
 
 
-class PrimaryConnection:
+class PrimaryConnection(Codec["PrimaryMessage", "PrimaryEvent"]):
     """One primary/secondary-interface TCP connection, for either party; see the module docstring."""
 
+    __slots__ = ("_block_bytes", "_block_kind", "_block_lines", "_block_name", "_parse_step")
+
+    PROTOCOL = PROTOCOL
+
     def __init__(self, side: Side) -> None:
-        self.side = side
-        limit = MAX_PACKAGE_BYTES if side is Side.DAEMON else MAX_SCRIPT_BYTES
-        self._buffer = ReceiveBuffer(PROTOCOL, limit)
-        self._outgoing = bytearray()
-        self._failed = False
-        self._eof = False
-        self._consumed = 0  # bytes decoded so far: error offsets are positions in the stream
+        super().__init__(side, MAX_PACKAGE_BYTES if side is Side.DAEMON else MAX_SCRIPT_BYTES)
         # robot side: the open top-level block, if any
         self._block_kind: Literal["def", "sec"] | None = None
         self._block_name = ""
         self._block_lines: list[str] = []
         self._block_bytes = 0
-
-    def receive_data(self, data: bytes | bytearray | memoryview) -> list[PrimaryEvent]:
-        """Feed received bytes; the events completed so far. RemoteProtocolError on bad bytes (then final)."""
-        if self._failed:
-            raise RemoteProtocolError("primary: connection already failed", protocol=PROTOCOL)
-        if self._eof:
-            raise _local("data fed after receive_eof()")
-        events: list[PrimaryEvent] = []
-        view = memoryview(data).cast("B")
-        parse = self._parse_packages if self.side is Side.DAEMON else self._parse_lines
-        try:
-            while True:
-                parse(events)
-                if not view:
-                    return events
-                # feed no more than the cap allows, decode, repeat: a large chunk of complete
-                # packages is fine, an over-long partial one is not
-                room = self._buffer.limit - len(self._buffer)
-                if room <= 0:
-                    raise self._error(f"more than {self._buffer.limit} bytes without a complete unit", 0)
-                self._buffer.feed(view[:room])
-                view = view[room:]
-        except RemoteProtocolError:
-            self._failed = True
-            raise
+        self._parse_step = self._parse_packages if side is Side.DAEMON else self._parse_lines
 
     def receive_eof(self) -> list[PrimaryEvent]:
         """The peer closed; RemoteProtocolError if it closed inside a package (daemon side).
@@ -992,35 +967,30 @@ class PrimaryConnection:
         On the robot side an unterminated line or unclosed block is dropped: the controller runs only
         newline-terminated text (§2.4 step 1).
         """
-        if self._failed:
-            raise RemoteProtocolError("primary: connection already failed", protocol=PROTOCOL)
-        self._eof = True
+        if self._stream is CodecState.ERROR:
+            raise self._remote("connection already failed")
+        self._stream = CodecState.EOF
         if self.side is Side.DAEMON and len(self._buffer):
-            self._failed = True
+            self._fail()
             raise self._error(f"connection closed {len(self._buffer)} bytes into a package", 0)
         return []
 
-    def send(self, message: PrimaryMessage) -> None:
-        """Queue one message: Script from the daemon, packages from the robot; else LocalProtocolError."""
-        if self._failed:
-            raise _local("connection already failed")
+    def _parse(self, events: list[PrimaryEvent]) -> None:
+        self._parse_step(events)
+
+    def _encode(self, message: PrimaryMessage) -> None:
+        """Script from the daemon, packages from the robot; else LocalProtocolError."""
         if self.side is Side.DAEMON:
             if not isinstance(message, Script):
                 raise _local(f"the daemon sends only Script, not {message!r}")
-            self._outgoing += _encode_script(message.text)
+            self._queue(_encode_script(message.text))
             return
         if isinstance(message, Script):
             raise _local("the robot side does not send Script")
         try:
-            self._outgoing += _encode_package(message)
+            self._queue(_encode_package(message))
         except (struct.error, OverflowError, TypeError) as err:
             raise _local(f"cannot encode {message!r}: {err}") from err
-
-    def data_to_send(self) -> bytes:
-        """The bytes queued by ``send`` since the last call."""
-        out = bytes(self._outgoing)
-        self._outgoing.clear()
-        return out
 
     # --- daemon side: packages ---
 
