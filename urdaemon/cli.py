@@ -77,13 +77,26 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"urdaemon {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_serve(sub)
+    _add_fake_robot(sub)
+    _add_cell_tools(sub)
+    _add_client_tools(sub)
+    _add_goal_tools(sub)
+    _add_calibration(sub)
+    return parser
 
+
+def _add_serve(sub: Any) -> None:
+    """``serve``: run the daemon for a cell file."""
     serve = sub.add_parser("serve", help="run the daemon for a cell file")
     serve.add_argument("--config", required=True, help="cell file (YAML)")
     serve.add_argument(
         "--listen", action="append", help="Zenoh listen endpoint, overrides the cell file (repeatable)"
     )
 
+
+def _add_fake_robot(sub: Any) -> None:
+    """``fake-robot``: the fake controllers and their fault options."""
     fake = sub.add_parser(
         "fake-robot", help="serve fake UR controllers (RTDE, primary, dashboard) on loopback"
     )
@@ -132,12 +145,18 @@ def _parser() -> argparse.ArgumentParser:
         "(m), optionally its stiffness K in N/m (default 20000); try tool contact and force mode on it",
     )
 
+
+def _add_cell_tools(sub: Any) -> None:
+    """``check`` and ``urdf``: read a cell file offline."""
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)
 
     urdf = sub.add_parser("urdf", help="print the cell URDF")
     urdf.add_argument("--config", required=True)
 
+
+def _add_client_tools(sub: Any) -> None:
+    """``echo``, ``service``, ``dashboard``: Zenoh clients of a serving daemon."""
     echo = sub.add_parser("echo", help="print samples of a key expression as JSON lines")
     echo.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
     echo.add_argument("--count", type=_count_arg, default=0, help="stop after N samples (0: until Ctrl-C)")
@@ -175,6 +194,9 @@ def _parser() -> argparse.ArgumentParser:
     board.add_argument("--cell", default=None)
     _connect_arg(board)
 
+
+def _add_goal_tools(sub: Any) -> None:
+    """``move`` and ``cancel``: a robot's goals."""
     move = sub.add_parser("move", help="move a robot to joint positions and wait for the result")
     move.add_argument("robot")
     move.add_argument(
@@ -197,6 +219,9 @@ def _parser() -> argparse.ArgumentParser:
     cancel.add_argument("--cell", default=None)
     _connect_arg(cancel)
 
+
+def _add_calibration(sub: Any) -> None:
+    """``calibration``: read a controller's calibration into a file."""
     calibration = sub.add_parser(
         "calibration", help="read a UR controller's kinematics calibration into a calibration file"
     )
@@ -208,7 +233,6 @@ def _parser() -> argparse.ArgumentParser:
     calibration.add_argument(
         "--timeout", type=_seconds_arg(False), default=10.0, help="give up after S seconds (default 10)"
     )
-    return parser
 
 
 def _connect_arg(parser: argparse.ArgumentParser) -> None:
