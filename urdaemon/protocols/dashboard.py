@@ -59,7 +59,8 @@ from typing import ClassVar, Final, Self, TypeAlias, cast
 
 from urdaemon.errors import LocalProtocolError, RemoteProtocolError
 from urdaemon.model import RobotMode, SafetyMode
-from urdaemon.protocols._buffer import ReceiveBuffer, Side
+from urdaemon.protocols._buffer import Side
+from urdaemon.protocols._codec import Codec
 
 __all__ = [
     "DASHBOARD_BANNER", "DASHBOARD_PORT", "MAX_LINE_BYTES", "ActionCommand", "AddToLog", "Banner",
@@ -943,7 +944,7 @@ def _encode_line(text: str, *, allow_empty: bool) -> bytes:
     return data + b"\n"
 
 
-class DashboardConnection:
+class DashboardConnection(Codec["Command | Banner | ReplyLine", "Event"]):
     """One dashboard connection (§3), for either party: lines in, typed events out.
 
     Daemon side: ``send(Command)``; events ``Banner`` (first line) then one ``Reply`` per command, in
@@ -951,17 +952,15 @@ class DashboardConnection:
     command; events ``CommandReceived`` or ``UnknownCommand``.
     """
 
+    PROTOCOL = PROTOCOL
+
     def __init__(self, side: Side) -> None:
-        self.side = side
         # One line plus its newline is the most that may wait undecoded.
-        self._buffer = ReceiveBuffer(PROTOCOL, MAX_LINE_BYTES + 1)
-        self._outgoing = bytearray()
+        super().__init__(side, MAX_LINE_BYTES + 1)
         self._pending: deque[Command] = deque()  # daemon: sent, not yet answered
         self._owed = 0  # robot: received, not yet answered
         self._banner_done = False  # daemon: banner received; robot: banner sent
         self._quit_sent = False
-        self._consumed = 0  # bytes of complete lines received, for error offsets
-        self._failed = False
 
     @property
     def pending(self) -> tuple[Command, ...]:
@@ -973,20 +972,8 @@ class DashboardConnection:
         """Robot side: how many received lines still wait for a reply."""
         return self._owed
 
-    def receive_data(self, data: bytes | bytearray | memoryview) -> list[Event]:
-        """Feed received bytes; the events of every line completed. RemoteProtocolError on bad input."""
-        if self._failed:
-            raise RemoteProtocolError(f"{PROTOCOL}: connection already failed", protocol=PROTOCOL)
-        try:
-            return self._receive(memoryview(data))
-        except RemoteProtocolError:
-            self._failed = True
-            raise
-
-    def send(self, message: Command | Banner | ReplyLine) -> None:
+    def _encode(self, message: Command | Banner | ReplyLine) -> None:
         """Queue a command (daemon side) or a banner/reply (robot side); LocalProtocolError if not allowed."""
-        if self._failed:
-            raise LocalProtocolError(f"{PROTOCOL}: connection already failed", protocol=PROTOCOL)
         if self.side is Side.DAEMON:
             if isinstance(message, Banner | ReplyLine):
                 raise LocalProtocolError(
@@ -1000,12 +987,6 @@ class DashboardConnection:
         else:
             raise LocalProtocolError(f"{PROTOCOL}: the robot side sends replies only", protocol=PROTOCOL)
 
-    def data_to_send(self) -> bytes:
-        """Everything queued by ``send`` since the last call."""
-        out = bytes(self._outgoing)
-        self._outgoing.clear()
-        return out
-
     def _send_command(self, command: Command) -> None:
         if self._quit_sent:
             raise LocalProtocolError(f"{PROTOCOL}: quit was sent; the server closes", protocol=PROTOCOL)
@@ -1014,14 +995,14 @@ class DashboardConnection:
             raise LocalProtocolError(
                 f"{PROTOCOL}: the server would not read {command.line!r} as {command!r}", protocol=PROTOCOL
             )
-        self._outgoing += data
+        self._out += data
         self._pending.append(command)
         self._quit_sent = isinstance(command, Quit)
 
     def _send_banner(self, banner: Banner) -> None:
         if self._banner_done:
             raise LocalProtocolError(f"{PROTOCOL}: the banner was already sent", protocol=PROTOCOL)
-        self._outgoing += _encode_line(banner.text, allow_empty=True)
+        self._out += _encode_line(banner.text, allow_empty=True)
         self._banner_done = True
 
     def _send_reply(self, reply: ReplyLine) -> None:
@@ -1029,23 +1010,14 @@ class DashboardConnection:
             raise LocalProtocolError(f"{PROTOCOL}: send the Banner before any reply", protocol=PROTOCOL)
         if not self._owed:
             raise LocalProtocolError(f"{PROTOCOL}: no command is waiting for a reply", protocol=PROTOCOL)
-        self._outgoing += _encode_line(reply.text, allow_empty=True)
+        self._out += _encode_line(reply.text, allow_empty=True)
         self._owed -= 1
 
-    def _receive(self, data: memoryview) -> list[Event]:
-        events: list[Event] = []
-        offset = 0
-        while True:
-            # Feed only what fits: a chunk holding many short lines must not trip the one-line cap.
-            chunk = data[offset : offset + self._buffer.limit - len(self._buffer)]
-            offset += len(chunk)
-            self._buffer.feed(chunk)
-            while (raw := self._buffer.take_line(MAX_LINE_BYTES)) is not None:
-                text = raw.rstrip(_TRAILING_WHITESPACE_BYTES).decode("utf-8", errors="replace")
-                events.append(self._on_line(text))
-                self._consumed += len(raw)
-            if offset >= len(data):
-                return events
+    def _parse(self, events: list[Event]) -> None:
+        while (raw := self._buffer.take_line(MAX_LINE_BYTES)) is not None:
+            text = raw.rstrip(_TRAILING_WHITESPACE_BYTES).decode("utf-8", errors="replace")
+            events.append(self._on_line(text))
+            self._consumed += len(raw)
 
     def _on_line(self, text: str) -> Event:
         if self.side is Side.ROBOT:
