@@ -191,7 +191,7 @@ class KinematicTree:
 
     @classmethod
     def from_urdf(cls, urdf: Any) -> KinematicTree:
-        """The tree of a yourdfpy ``URDF`` (joints ordered parent before child from the root)."""
+        """The tree of a ``UrdfFacts`` or yourdfpy ``URDF`` (joints parent before child from the root)."""
         root = urdf.base_link
         if root is None:
             raise DescriptionError("the URDF has no root link (every link has a parent)")
