@@ -747,7 +747,9 @@ QUERY_CASES: st.SearchStrategy[tuple[Command, str, Event]] = st.one_of(
             IsProgramSaved(), program_saved_text(*a), ProgramSavedReply(a[0], a[1], program_saved_text(*a))
         )
     ),
-    st.tuples(st.integers(1, 5).flatmap(_versions), st.text(st.characters(exclude_characters="\r\n"))).map(
+    st.tuples(
+        st.integers(1, 5).flatmap(_versions), st.text(st.characters(codec="utf-8", exclude_characters="\r\n"))
+    ).map(
         lambda a: _case(
             GetPolyscopeVersion(),
             polyscope_version_text(*a),
