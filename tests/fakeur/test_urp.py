@@ -485,10 +485,12 @@ async def test_a_dashboard_load_holds_no_clock(monkeypatch: pytest.MonkeyPatch, 
     the translation waits until the fake's clock has ticked on, which it would wait for in vain."""
     (tmp_path / "slow.urp").write_bytes(urp(WAIT_PROGRAM))
     release = threading.Event()
+    started = threading.Event()
     ticks: list[int] = []
 
     def slow_translate(data: bytes, file_name: str) -> UrpProgram:
         before = fake.cycles
+        started.set()
         release.wait(5.0)
         ticks.append(fake.cycles - before)
         return translate(data, file_name)
@@ -499,6 +501,9 @@ async def test_a_dashboard_load_holds_no_clock(monkeypatch: pytest.MonkeyPatch, 
         try:
             await asyncio.wait_for(reader.readline(), 10.0)  # the banner
             writer.write(b"load slow.urp\n")
+            # count from the translation's start, not from the write: on a busy machine the fake
+            # reads the line a cycle or two later (stress_suite.sh saw 4 cycles)
+            await fake.until(started.is_set, cycles=2500, timeout=10.0)
             await fake.cycles_pass(5, timeout=10.0)
             release.set()
             reply = await asyncio.wait_for(reader.readline(), 10.0)
