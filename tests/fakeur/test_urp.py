@@ -460,8 +460,8 @@ async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPa
     ticks: list[int] = []
 
     def slow_translate(data: bytes, file_name: str) -> UrpProgram:
-        started.set()
         before = fake.cycles
+        started.set()
         release.wait(5.0)
         ticks.append(fake.cycles - before)
         return translate(data, file_name)
@@ -469,6 +469,8 @@ async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(dashboard_answers, "translate", slow_translate)
     async with FakeController("ur10e", address=fake_address(), programs=tmp_path) as fake:
         answer = asyncio.ensure_future(dashboard_answers.dashboard_answer(fake, dash.Load("slow.urp")))
+        # count from the translation's start (the compiler thread may start it a cycle or two later)
+        await fake.until(started.is_set, cycles=2500, timeout=10.0)
         await fake.cycles_pass(5, timeout=10.0)
         release.set()
         reply = await asyncio.wait_for(answer, 10.0)
