@@ -307,6 +307,8 @@ class FakeController:
     def _cycle(self) -> None:
         arm, dt = self.arm, self.step_time
         programs = self.programs
+        if self.rtde.waiting:
+            self.rtde.apply_due()
         if programs.main is not None or programs.secondary:
             programs.step()
         if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:

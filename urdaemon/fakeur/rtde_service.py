@@ -6,6 +6,12 @@ controller's own time grid, drift-free. Input packages write the arm's IO, the s
 RTDE input registers (``input_*_register_X`` and the words ``input_bit_registers0_to_31`` /
 ``32_to_63``), and note when each variable last arrived (what a program's RTDE watchdogs check). An
 input variable belongs to the first client that sets it up (IN_USE for the others).
+
+Inputs are taken the way a controller takes them, once per cycle: each client's input packages wait
+in arrival order and ``apply_due`` (called at the start of every controller cycle, before the
+programs step) applies at most one per client. So a fake that was held up and finds two packages of
+one client waiting (ur_rtde's speedj and its first watchdog kick) lets its program see each in its
+own cycle, as the cycles a controller would have run in that time would have.
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,13 +32,19 @@ from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
 
-__all__ = ["RtdeService"]
+__all__ = ["MAX_PENDING_INPUTS", "RtdeService"]
 
 log = logging.getLogger("urdaemon.fakeur")
 
 Write = Callable[[str, asyncio.StreamWriter, bytes], None]
 """The controller's guarded write: (service, writer, data)."""
 Paced = Callable[[asyncio.StreamWriter, bytes], Any]
+
+MAX_PENDING_INPUTS = 8
+"""Input packages of one client waiting for their cycle (a model parameter: 16 ms at 500 Hz). When a
+client is further ahead than this (the fake was held up longer, or the client sends faster than the
+controller cycles), its oldest waiting package is applied at once to make room: no package is lost
+and the lag stays bounded, at the cost of the program missing that package's own cycle."""
 
 
 @dataclass
@@ -43,6 +56,8 @@ class _RtdeClient:
     streaming: bool = False
     getters: list[Callable[[FakeArm], Any]] = field(default_factory=list)
     inputs: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    pending: deque[dict[str, Any]] = field(default_factory=deque)
+    """Input packages received and not yet applied, oldest first (one is applied per cycle)."""
 
 
 class RtdeService:
@@ -70,6 +85,8 @@ class RtdeService:
         self.write = write
         self.clients: list[_RtdeClient] = []
         """The clients that stream (or streamed and are still connected)."""
+        self.waiting: list[_RtdeClient] = []
+        """The clients with input packages waiting for a cycle."""
         self.input_owner: dict[str, _RtdeClient] = {}
 
     async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, paced: Paced) -> None:
@@ -83,8 +100,11 @@ class RtdeService:
                 await paced(writer, data)
         finally:
             client.streaming = False
+            client.pending.clear()
             with contextlib.suppress(ValueError):
                 self.clients.remove(client)
+            with contextlib.suppress(ValueError):
+                self.waiting.remove(client)
             for name in [n for n, owner in self.input_owner.items() if owner is client]:
                 del self.input_owner[name]
 
@@ -97,6 +117,20 @@ class RtdeService:
                 if client.next_due < now:  # fell behind (a stall): resume on the grid, no burst
                     client.next_due = now + client.period
                 self._send(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
+
+    def apply_due(self) -> None:
+        """One controller cycle's inputs: the oldest waiting package of each client, applied."""
+        for client in self.waiting:
+            self.apply_inputs(client.pending.popleft())
+        self.waiting = [client for client in self.waiting if client.pending]
+
+    def _receive_inputs(self, client: _RtdeClient, values: dict[str, Any]) -> None:
+        """Queue one input package for its cycle (the oldest applied at once when the queue is full)."""
+        if len(client.pending) >= MAX_PENDING_INPUTS:
+            self.apply_inputs(client.pending.popleft())
+        if not client.pending:
+            self.waiting.append(client)
+        client.pending.append(values)
 
     def _send(self, client: _RtdeClient, message: Any) -> None:
         try:
@@ -130,7 +164,7 @@ class RtdeService:
         elif isinstance(event, rtde.InputDataReceived):
             input_names = client.inputs.get(event.recipe_id)
             if input_names is not None:
-                self.apply_inputs(dict(zip(input_names, event.values, strict=True)))
+                self._receive_inputs(client, dict(zip(input_names, event.values, strict=True)))
         elif isinstance(event, rtde.TextReceived):
             log.info("%s rtde text from client: %s", self.address, event.message)
 

@@ -1,0 +1,88 @@
+"""The fake takes RTDE input packages as a controller does, one per client per cycle, in arrival order
+(the fake's clock turned by hand: the packages arrive between two cycles, as after a stall)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.fakeur.test_controller import Link
+from tests.fakeur.test_controller_life import ManualClock, manual_fake
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.rtde_service import MAX_PENDING_INPUTS
+from urdaemon.protocols import primary as prim
+from urdaemon.protocols import rtde
+from urdaemon.protocols._buffer import Side
+
+pytestmark = pytest.mark.timeout(60)
+
+MIRROR = (
+    "def mirror():\n  while True:\n"
+    "    write_output_integer_register(0, read_input_integer_register(0))\n    sync()\n  end\nend\n"
+)
+"""A program that shows, every cycle, what it reads of input_int_register_0."""
+
+
+async def _mirroring(controller: FakeController, clock: ManualClock) -> Link:
+    """The mirror program running, and an RTDE client owning input_int_register_0."""
+    primary = await Link.open(prim.PrimaryConnection(Side.DAEMON), controller.address, 30001)
+    await primary.next(prim.VersionMessage)
+    await primary.send(prim.Script(MIRROR))
+    started = await primary.next(prim.KeyMessage)
+    assert (started.title, started.text) == ("PROGRAM_XXX_STARTED", "mirror")
+    primary.close()
+    link = await Link.open(rtde.RtdeConnection(Side.DAEMON), controller.address, 30004)
+    await link.send(rtde.RequestProtocolVersion(2))
+    assert (await link.next(rtde.ProtocolVersionReply)).accepted
+    await link.send(rtde.SetupInputs(("input_int_register_0",)))
+    configured = await link.next(rtde.InputsConfigured)
+    assert configured.recipe_id == 1
+    assert not configured.in_use
+    await link.send(rtde.SetupOutputs(10.0, ("timestamp",)))
+    await link.next(rtde.OutputsConfigured)
+    await link.send(rtde.Start())
+    assert (await link.next(rtde.StartReply)).accepted
+    clock.turn(2)
+    assert controller.arm.io.registers_int.get(0, 0) == 0
+    return link
+
+
+async def _arrive_together(link: Link, values: list[int]) -> None:
+    """``values`` as input packages in one write, then wait until the fake has read them all (its
+    reply to the pause request that follows them); no cycle runs meanwhile."""
+    for value in values:
+        link.conn.send(rtde.InputData((value,), recipe_id=1))
+    link.conn.send(rtde.Pause())
+    link.writer.write(link.conn.data_to_send())
+    await link.writer.drain()
+    assert (await link.next(rtde.PauseReply)).accepted
+
+
+async def test_two_input_packages_in_one_cycle_reach_the_program_in_turn() -> None:
+    """Reproduction: ur_rtde's speedj package and its first watchdog kick arrived while the fake was
+    held up; the fake applied both at once, so its program never read the speedj command (the arm
+    stood still while the program ran). The program must see the first, then the second."""
+    async with manual_fake(powered=True) as (controller, clock):
+        link = await _mirroring(controller, clock)
+        await _arrive_together(link, [7, 8])
+        clock.turn(1)
+        assert controller.arm.io.registers_int[0] == 7
+        clock.turn(1)
+        assert controller.arm.io.registers_int[0] == 8
+        clock.turn(3)
+        assert controller.arm.io.registers_int[0] == 8
+        link.close()
+
+
+async def test_a_client_far_ahead_loses_no_package_and_catches_up_within_the_bound() -> None:
+    """More packages than the queue holds: the oldest are applied at once to make room, the rest one
+    per cycle, so the program reaches the latest value within MAX_PENDING_INPUTS cycles, in order."""
+    async with manual_fake(powered=True) as (controller, clock):
+        link = await _mirroring(controller, clock)
+        values = list(range(1, MAX_PENDING_INPUTS + 6))
+        await _arrive_together(link, values)
+        seen = []
+        for _ in range(MAX_PENDING_INPUTS + 2):
+            clock.turn(1)
+            seen.append(controller.arm.io.registers_int[0])
+        assert seen == values[-MAX_PENDING_INPUTS:] + [values[-1]] * 2
+        link.close()
