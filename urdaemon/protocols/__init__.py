@@ -19,7 +19,7 @@ Every protocol module follows one shape (h11/aioquic style):
   callback codecs share ``_fixed.FixedFrameConnection``;
 * wire layouts are drawn in each codec's docstring; every limit is a named constant with its unit.
 
-The reference for every format is ``shared/docs/ur-protocols.md`` (section numbers are cited).
+The reference for every format is ``docs/protocols.md``; a ``§N.M`` in these modules names its section.
 """
 
 from __future__ import annotations
