@@ -1,4 +1,5 @@
-"""Shared value types: robot/safety modes, lifecycle, joint limits, the per-robot state and command.
+"""Shared value types: robot/safety modes, lifecycle, joint limits, the per-robot state and command,
+and the requests of the robot services (publish/services.py declares which service takes which).
 
 ``RobotState`` and ``JointCommand`` are deliberately mutable and reused every cycle: the backend
 fills one ``RobotState`` in place at the robot's rate and the controller writes one ``JointCommand``
@@ -12,14 +13,24 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = [
+    "FORCE_MODE_DAMPING",
+    "FORCE_MODE_GAIN_SCALING",
+    "FORCE_MODE_TYPE",
     "UR_JOINTS",
     "CommandMode",
+    "CycleStatsRequest",
+    "DashboardRequest",
+    "ForceModeRequest",
     "JointCommand",
     "JointLimits",
     "Lifecycle",
     "RobotMode",
     "RobotState",
     "SafetyMode",
+    "SetIoRequest",
+    "SetPayloadRequest",
+    "SpeedSliderRequest",
+    "ToolVoltageRequest",
 ]
 
 UR_JOINTS: tuple[str, ...] = (
@@ -266,3 +277,74 @@ class JointCommand:
     def idle(cls, dof: int) -> JointCommand:
         """An IDLE command for ``dof`` joints."""
         return cls(mode=CommandMode.IDLE, positions=[0.0] * dof, velocities=[0.0] * dof)
+
+
+# ---- the requests of the robot services ------------------------------------------------------------
+# Each is what a service's JSON request decodes to (publish/codec.py checks shape and ranges with the
+# reasons clients see) and what the client sends; the field names are the message's, but for
+# ``ForceModeRequest.force_type`` (``type`` on the wire).
+
+FORCE_MODE_TYPE = 2
+"""Force mode's default type: the force frame is the task frame (URScript ``force_mode``)."""
+FORCE_MODE_DAMPING = 0.025
+"""Force mode's default damping (0..1), as URScript's ``force_mode_set_damping`` default."""
+FORCE_MODE_GAIN_SCALING = 0.5
+"""Force mode's default gain scaling (0..2), as URScript's ``force_mode_set_gain_scaling`` default."""
+
+
+@dataclass(frozen=True, slots=True)
+class SetIoRequest:
+    """``set_io``: one output of a kind (``digital``, ``configurable``, ``tool``: bool; ``analog``: 0..1)."""
+
+    kind: str
+    pin: int
+    value: float | bool
+
+
+@dataclass(frozen=True, slots=True)
+class SetPayloadRequest:
+    """``set_payload``: mass (kg) and centre of gravity (m, tool flange frame)."""
+
+    mass: float
+    cog: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedSliderRequest:
+    """``set_speed_slider``: the slider's fraction (0..1)."""
+
+    fraction: float
+
+
+@dataclass(frozen=True, slots=True)
+class DashboardRequest:
+    """``dashboard``: one dashboard command line (``power on``)."""
+
+    command: str
+
+
+@dataclass(frozen=True, slots=True)
+class ToolVoltageRequest:
+    """``set_tool_voltage``: 0, 12 or 24 V."""
+
+    volts: int
+
+
+@dataclass(frozen=True, slots=True)
+class ForceModeRequest:
+    """``start_force_mode``: URScript ``force_mode``'s arguments, damping and gain scaling."""
+
+    task_frame: tuple[float, ...]
+    selection: tuple[int, ...]
+    wrench: tuple[float, ...]
+    limits: tuple[float, ...]
+    force_type: int = FORCE_MODE_TYPE
+    damping: float = FORCE_MODE_DAMPING
+    gain_scaling: float = FORCE_MODE_GAIN_SCALING
+
+
+@dataclass(frozen=True, slots=True)
+class CycleStatsRequest:
+    """``cycle_stats``: whether to start a new measuring window after the reply."""
+
+    reset: bool = False

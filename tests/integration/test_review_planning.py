@@ -24,6 +24,7 @@ from urdaemon.control import MotionController
 from urdaemon.daemon import describe_cell
 from urdaemon.errors import BackendError
 from urdaemon.protocols import trajectory_point
+from urdaemon.publish.services import spec
 from urdaemon.robot import RobotRuntime
 
 pytestmark = pytest.mark.timeout(60)
@@ -215,7 +216,7 @@ def trajectory(points: int, *, passthrough: bool = False, last_segment: float = 
 
 def planning(cell: Cell) -> bool:
     """True once the goal is past decoding (its points are being checked or planned)."""
-    return (cell.runtime._planning or "").startswith("of ")
+    return (cell.runtime.gate.planning or "").startswith("of ")
 
 
 async def test_stop_while_a_trajectory_is_planned_refuses_it() -> None:
@@ -223,10 +224,10 @@ async def test_stop_while_a_trajectory_is_planned_refuses_it() -> None:
     trajectory was accepted and the robot moved."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await cell.turns_until(lambda: planning(cell))
         stop = Query(cell.key("service/stop"))
-        cell.runtime._on_stop(stop)
+        cell.runtime.services.on_stop(stop)
         assert (await stop.answer())["ok"] is True
         answer = await goal.answer()
         assert answer["accepted"] is False, answer
@@ -240,10 +241,10 @@ async def test_cancel_while_a_trajectory_is_planned_cancels_it() -> None:
     trajectory was accepted and the robot moved."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await cell.turns_until(lambda: planning(cell))
         cancel = Query(cell.key("goal/cancel"), {})
-        cell.runtime._on_cancel(cancel)
+        cell.runtime.goals.on_cancel(cancel)
         canceled = await cancel.answer()
         assert canceled["canceled"] is True, canceled
         assert "being planned" in canceled["planned"]
@@ -253,7 +254,7 @@ async def test_cancel_while_a_trajectory_is_planned_cancels_it() -> None:
         assert cell.runtime.controller.active_goal_id is None
         # nothing planned: cancel still says there is nothing to cancel
         again = Query(cell.key("goal/cancel"), {})
-        cell.runtime._on_cancel(again)
+        cell.runtime.goals.on_cancel(again)
         nothing = await again.answer()
         assert (nothing["canceled"], nothing["reason"]) == (False, "no active goal"), nothing
 
@@ -262,10 +263,10 @@ async def test_stop_while_a_trajectory_is_decoded_refuses_it() -> None:
     """Reproduction: ``stop`` while a big goal was still being decoded did not stop it either."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await asyncio.sleep(0)  # its first decoding slice ran; thousands of points are left
-        assert cell.runtime._planning == "being decoded"
-        cell.runtime._on_stop(Query(cell.key("service/stop")))
+        assert cell.runtime.gate.planning == "being decoded"
+        cell.runtime.services.on_stop(Query(cell.key("service/stop")))
         answer = await goal.answer()
         assert answer["accepted"] is False
         assert "stopped while it was being planned" in answer["reason"]
@@ -275,9 +276,9 @@ async def test_a_goal_planned_after_a_stop_is_accepted_and_ends_once() -> None:
     """The counter refuses only what was planned across a stop: the next goal starts and succeeds,
     with exactly one result."""
     async with alice() as cell:
-        cell.runtime._on_stop(Query(cell.key("service/stop")))
+        cell.runtime.services.on_stop(Query(cell.key("service/stop")))
         goal = Query(cell.key("goal/trajectory"), trajectory(20))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         answer = await goal.answer()
         assert answer["accepted"] is True, answer
         await cell.cycles(lambda: cell.runtime.controller.mode == "idle")
@@ -290,11 +291,11 @@ async def test_freedrive_is_refused_while_a_trajectory_is_planned() -> None:
     controller stays idle while a goal is planned); then the trajectory started too."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await cell.turns_until(lambda: planning(cell))
-        rejected = cell.runtime._stream_rejections
-        cell.runtime._on_freedrive(cell.key("command/freedrive"), b'{"active": true}')
-        assert cell.runtime._stream_rejections == rejected + 1
+        rejected = cell.runtime.status.rejected_commands
+        cell.runtime.commands.on_freedrive(cell.key("command/freedrive"), b'{"active": true}')
+        assert cell.runtime.status.rejected_commands == rejected + 1
         assert not cell.backend.freedrive_on
         answer = await goal.answer()
         assert answer["accepted"] is True, answer  # freedrive never started: the goal may run
@@ -305,7 +306,7 @@ async def test_freedrive_on_before_accepting_refuses_the_trajectory() -> None:
     was planned (here switched on at the backend) still let the trajectory start."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await cell.turns_until(lambda: planning(cell))
         cell.backend.freedrive(True, 1.0)
         answer = await goal.answer()
@@ -323,10 +324,10 @@ async def test_hand_back_control_while_a_trajectory_is_planned_refuses_it() -> N
 
         cell.backend.hand_back_control = handed_back  # type: ignore[method-assign]
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         await cell.turns_until(lambda: planning(cell))
         service = Query(cell.key("service/hand_back_control"))
-        cell.runtime._service(service, "hand_back_control", cell.runtime._services()["hand_back_control"])
+        cell.runtime.services.run(service, spec("hand_back_control"))
         assert (await service.answer())["ok"] is True
         answer = await goal.answer()
         assert answer["accepted"] is False
@@ -338,7 +339,7 @@ async def test_a_passthrough_goal_is_encoded_in_slices_before_it_is_accepted() -
     event loop, after it was accepted (~50 ms held every robot's cycle)."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(5000, passthrough=True))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         answer = await goal.answer()
         assert answer["accepted"] is True, answer
         turns = cell.backend.encoded_turns
@@ -354,7 +355,7 @@ async def test_a_passthrough_segment_too_long_for_the_robot_is_refused_before_ac
     false, internal error" while the controller kept the goal, so every later goal was "busy"."""
     async with alice() as cell:
         goal = Query(cell.key("goal/trajectory"), trajectory(5, passthrough=True, last_segment=2200.0))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         answer = await goal.answer()
         assert answer["accepted"] is False
         assert answer["reason"].startswith("passthrough: point 4: "), answer
@@ -363,7 +364,7 @@ async def test_a_passthrough_segment_too_long_for_the_robot_is_refused_before_ac
         assert cell.runtime.controller.mode == "idle"
         assert cell.node.results() == []  # no result for a goal the client was told was refused
         after = Query(cell.key("goal/trajectory"), trajectory(5, passthrough=True))
-        cell.runtime._on_trajectory_goal(after)
+        cell.runtime.goals.on_trajectory_goal(after)
         assert (await after.answer())["accepted"] is True
 
 
@@ -378,7 +379,7 @@ async def test_a_passthrough_goal_the_backend_fails_to_send_ends_with_one_result
 
         cell.backend.start_encoded_passthrough = broken  # type: ignore[method-assign]
         goal = Query(cell.key("goal/trajectory"), trajectory(5, passthrough=True))
-        cell.runtime._on_trajectory_goal(goal)
+        cell.runtime.goals.on_trajectory_goal(goal)
         answer = await goal.answer()
         assert answer["accepted"] is True, answer
         results = [r for r in cell.node.results() if r.get("goal_id") == answer["goal_id"]]
@@ -386,5 +387,5 @@ async def test_a_passthrough_goal_the_backend_fails_to_send_ends_with_one_result
         assert "internal error: RuntimeError: socket gone" in results[0]["reason"]
         assert cell.runtime.controller.mode == "idle"
         after = Query(cell.key("goal/trajectory"), trajectory(5))
-        cell.runtime._on_trajectory_goal(after)
+        cell.runtime.goals.on_trajectory_goal(after)
         assert (await after.answer())["accepted"] is True

@@ -16,9 +16,10 @@ from collections.abc import Callable
 import pytest
 
 from tests.integration.test_review_planning import Query, alice, trajectory
-from urdaemon import robot as robot_module
 from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
+from urdaemon.publish.services import spec
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
+from urdaemon.runtime import slicing
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -58,8 +59,8 @@ async def test_two_goals_decoded_at_once_run_one_slice_per_turn(monkeypatch: pyt
     payload = json.dumps(trajectory(3000)).encode()
     try:
         goals = await asyncio.gather(
-            robot_module._decode_sliced(TrajectoryGoalDecoder(payload)),
-            robot_module._decode_sliced(TrajectoryGoalDecoder(payload)),
+            slicing.decode_sliced(TrajectoryGoalDecoder(payload)),
+            slicing.decode_sliced(TrajectoryGoalDecoder(payload)),
         )
     finally:
         stop()
@@ -93,8 +94,8 @@ async def test_two_robots_planning_at_once_never_slice_in_the_same_turn(
     try:
         async with alice() as first, alice() as second:
             goals = [Query(c.key("goal/trajectory"), trajectory(3000)) for c in (first, second)]
-            first.runtime._on_trajectory_goal(goals[0])
-            second.runtime._on_trajectory_goal(goals[1])
+            first.runtime.goals.on_trajectory_goal(goals[0])
+            second.runtime.goals.on_trajectory_goal(goals[1])
             answers = [await goal.answer() for goal in goals]
     finally:
         stop()
@@ -112,10 +113,10 @@ async def test_a_request_cancelled_before_it_started_is_answered() -> None:
     async with alice() as cell:
         runtime = cell.runtime
         service = Query(cell.key("service/set_speed_slider"), {"fraction": 0.5})
-        runtime._service(service, "set_speed_slider", runtime._services()["set_speed_slider"])
+        runtime.services.run(service, spec("set_speed_slider"))
         goal = Query(cell.key("goal/trajectory"), trajectory(10))
-        runtime._on_trajectory_goal(goal)
-        pending = list(runtime._tasks)
+        runtime.goals.on_trajectory_goal(goal)
+        pending = list(runtime.requests.tasks)
         assert len(pending) == 2
         for task in pending:
             task.cancel()  # before either ran a step
@@ -140,9 +141,9 @@ async def test_requests_after_shutdown_began_are_refused() -> None:
     service = Query(cell.key("service/set_speed_slider"), {"fraction": 0.5})
     cell.node.handlers[runtime.keys.service("set_speed_slider")](service)
     move = Query(cell.key("goal/move"), {"positions": [0.1, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]})
-    runtime._on_move_goal(move)
+    runtime.goals.on_move_goal(move)
     trajectory_goal = Query(cell.key("goal/trajectory"), trajectory(10))
-    runtime._on_trajectory_goal(trajectory_goal)
+    runtime.goals.on_trajectory_goal(trajectory_goal)
     for query in (service, move, trajectory_goal):
         answer = await query.answer()
         assert answer.get("reason") == "daemon shutting down", answer
@@ -160,7 +161,7 @@ async def test_a_handed_over_planner_is_freed_whatever_the_interpreter_counts(
     planner = TrajectoryPlanner.__new__(TrajectoryPlanner)
     shared = [float(i) for i in range(1000)]
     planner.__dict__.update(points=shared, velocities=[(0.0,) * 6 for _ in range(1000)])
-    await robot_module._release([planner])
+    await slicing.release([planner])
     assert vars(planner) == {}, "the planner handed over was not taken apart"
     assert len(shared) == 1000, "a list it reached was changed"
 

@@ -8,6 +8,7 @@ controller, which rejects with its own reasons; here only the shape and types ar
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import heapq
 import json
 import math
@@ -19,7 +20,12 @@ from urdaemon.control.controller import MAX_JOINT_TOLERANCE
 from urdaemon.control.goals import GoalFeedback, GoalResult, TrajectoryPoint
 from urdaemon.control.trajectory import MAX_GOAL_TIME_S
 from urdaemon.errors import MessageError
-from urdaemon.model import RobotState
+from urdaemon.model import (
+    FORCE_MODE_DAMPING,
+    FORCE_MODE_GAIN_SCALING,
+    FORCE_MODE_TYPE,
+    RobotState,
+)
 
 __all__ = [
     "MAX_MESSAGE_BYTES",
@@ -48,6 +54,7 @@ __all__ = [
     "encode",
     "encode_feedback",
     "encode_result",
+    "request_body",
 ]
 
 SCHEMA_VERSION = 1
@@ -498,11 +505,14 @@ def decode_force_mode(payload: bytes | None) -> dict[str, Any]:
     ):
         raise MessageError(f"{what}.selection: expected six 0/1 values")
     fields["selection"] = tuple(int(v) for v in selection)
-    force_type = data.get("type", 2)
+    force_type = data.get("type", FORCE_MODE_TYPE)
     if isinstance(force_type, bool) or force_type not in (1, 2, 3):
         raise MessageError(f"{what}.type: must be 1, 2 or 3")
     fields["force_type"] = int(force_type)
-    for key, low, high, default in (("damping", 0.0, 1.0, 0.025), ("gain_scaling", 0.0, 2.0, 0.5)):
+    for key, low, high, default in (
+        ("damping", 0.0, 1.0, FORCE_MODE_DAMPING),
+        ("gain_scaling", 0.0, 2.0, FORCE_MODE_GAIN_SCALING),
+    ):
         value = data.get(key, default)
         fields[key] = _within(_number(value, f"{what}.{key}"), f"{what}.{key}", low, high)
     return fields
@@ -524,6 +534,21 @@ def decode_cycle_stats(payload: bytes | None) -> bool:
     data = decode_message(payload, what)
     _allowed(data, what, {"reset"})
     return _bool(data, "reset", what)
+
+
+WIRE_NAMES = {"force_type": "type"}
+"""Request fields whose name in the message differs (``ForceModeRequest.force_type`` is ``type``)."""
+
+
+def request_body(request: object | None) -> dict[str, Any]:
+    """A service request (a dataclass of model.py, or None: no arguments) as the message's fields."""
+    if request is None:
+        return {}
+    body: dict[str, Any] = {}
+    for item in dataclasses.fields(request):  # type: ignore[arg-type]
+        value = getattr(request, item.name)
+        body[WIRE_NAMES.get(item.name, item.name)] = list(value) if isinstance(value, tuple) else value
+    return body
 
 
 def encode_feedback(robot: str, feedback: GoalFeedback) -> bytes:

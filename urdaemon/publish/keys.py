@@ -141,6 +141,16 @@ class RobotKeys:
         """Streaming joint velocity commands (deadman)."""
         return f"{self.base}/command/joint_velocity"
 
+    @property
+    def command_freedrive(self) -> str:
+        """Freedrive (hand guiding) commands (deadman)."""
+        return f"{self.base}/command/freedrive"
+
+    @property
+    def goal_messages(self) -> str:
+        """Every goal's feedback and result (wildcard: what a client follows)."""
+        return f"{self.base}/goal/*/*"
+
     def service(self, name: str) -> str:
-        """Queryable service ``name`` (set_io, set_payload, set_speed_slider, stop)."""
+        """Queryable service ``name`` (publish/services.py lists them)."""
         return f"{self.base}/service/{name}"

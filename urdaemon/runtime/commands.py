@@ -1,0 +1,134 @@
+"""One robot's streaming commands: joint position and velocity streams, and freedrive.
+
+Commands are puts, not queries: nothing answers them. A rejected one is counted in the status and
+reported as a ``command_rejected`` event (the first ten, then every hundredth also in the log).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+
+from urdaemon.backends.base import Backend
+from urdaemon.cell.config import Robot
+from urdaemon.control import MotionController
+from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
+from urdaemon.publish import codec
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import ZenohNode
+from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
+from urdaemon.runtime.queries import SHUTTING_DOWN, internal_error
+from urdaemon.runtime.status import StatusPublisher
+
+__all__ = ["Commands"]
+
+
+class Commands:
+    """Acts on one robot's streaming and freedrive commands."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        backend: Backend,
+        controller: MotionController,
+        parts: tuple[MotionGate, StatusPublisher],
+        joint_names: Callable[[Sequence[str] | None], tuple[str, ...]],
+        log: logging.LoggerAdapter[logging.Logger],
+    ) -> None:
+        self._robot = robot
+        self._backend = backend
+        self._controller = controller
+        self._gate, self._status = parts
+        self._joint_names = joint_names
+        self._log = log
+
+    def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
+        """Subscribe to the command keys (a put on a wildcard, or too large, is refused)."""
+        for key, handler in (
+            (keys.command_joint_position, self.on_stream_position),
+            (keys.command_joint_velocity, self.on_stream_velocity),
+            (keys.command_freedrive, self.on_freedrive),
+        ):
+            node.subscriber(key, handler, refused=self.on_refused)
+
+    def on_stream_position(self, key: str, payload: bytes) -> None:
+        """A joint position command: the controller follows it until the deadman times out."""
+        try:
+            message = codec.decode_stream_position(payload)
+            self._gate.check_accepting()
+            assert message.positions is not None
+            self._controller.stream_positions(
+                self._joint_names(message.joint_names),
+                message.positions,
+                message.velocities,
+                self._backend.state,
+                time.monotonic(),
+            )
+        except (MessageError, GoalRejected) as err:
+            self.reject(key, err)
+        except Exception as err:  # a bug must not kill the subscriber; the client hears of it
+            self._log.exception("streaming command failed")
+            self.reject(key, GoalRejected(internal_error(err)))
+
+    def on_stream_velocity(self, key: str, payload: bytes) -> None:
+        """A joint velocity command: the controller follows it until the deadman times out."""
+        try:
+            message = codec.decode_stream_velocity(payload)
+            self._gate.check_accepting()
+            assert message.velocities is not None
+            self._controller.stream_velocities(
+                self._joint_names(message.joint_names),
+                message.velocities,
+                self._backend.state,
+                time.monotonic(),
+            )
+        except (MessageError, GoalRejected) as err:
+            self.reject(key, err)
+        except Exception as err:  # a bug must not kill the subscriber; the client hears of it
+            self._log.exception("streaming command failed")
+            self.reject(key, GoalRejected(internal_error(err)))
+
+    def on_refused(self, key: str, reason: str) -> None:
+        """A command put on a wildcard key expression, or too large to read: it did nothing."""
+        self.reject(key, GoalRejected(reason))
+
+    def reject(self, key: str, err: UrDaemonError) -> None:
+        """Count, log (rate-limited) and report a rejected command."""
+        status = self._status
+        status.rejected_commands += 1
+        count = status.rejected_commands
+        reason = err.reason if isinstance(err, GoalRejected) else str(err)
+        if count <= 10 or count % 100 == 0:
+            self._log.warning("streaming command on %s rejected (%d so far): %s", key, count, reason)
+        status.event({"kind": "command_rejected", "key": key, "reason": reason})
+
+    def on_freedrive(self, key: str, payload: bytes) -> None:
+        """Keep freedrive on for one deadman period (it starts only at rest), or end it."""
+        try:
+            active = codec.decode_freedrive(payload)
+            if active:
+                self._check_freedrive_can_start()
+                self._gate.generation += 1  # a trajectory planned from now on was planned before freedrive
+            self._backend.freedrive(active, self._robot.motion.stream_timeout)
+        except (MessageError, GoalRejected) as err:
+            self.reject(key, err)
+        except BackendError as err:
+            self.reject(key, GoalRejected(str(err)))
+
+    def _check_freedrive_can_start(self) -> None:
+        gate, controller = self._gate, self._controller
+        if gate.closing:
+            raise GoalRejected(SHUTTING_DOWN)
+        if gate.in_contact:
+            raise GoalRejected(TOOL_CONTACT_BUSY)
+        controller.release_hold()
+        if controller.mode != "idle":
+            raise GoalRejected(
+                f"busy: the robot is {controller.mode.replace('_', ' ')}; freedrive starts at rest"
+            )
+        if gate.planning is not None:
+            raise GoalRejected(
+                f"busy: trajectory goal {gate.planning} is being planned; freedrive starts at rest"
+                " (cancel it first)"
+            )

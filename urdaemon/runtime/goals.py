@@ -1,0 +1,300 @@
+"""One robot's goals: trajectory and move goals, cancel, and their feedback and results.
+
+A trajectory goal is decoded, checked, planned (and for passthrough encoded) in slices between
+robot cycles, then started; it is accepted only if nothing ended motion meanwhile (gate.py). Every
+accepted goal ends with exactly one result, published and kept to answer late queries.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import secrets
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.cell.config import Robot
+from urdaemon.control import GoalFeedback, GoalResult, MotionController, Tolerances
+from urdaemon.control.trajectory import TrajectoryPlanner
+from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
+from urdaemon.publish import codec
+from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
+from urdaemon.runtime.gate import MotionGate
+from urdaemon.runtime.passthrough import Passthrough
+from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
+from urdaemon.runtime.slicing import check_sliced, decode_sliced, plan_tail, release
+from urdaemon.runtime.status import StatusPublisher
+
+__all__ = ["KEPT_RESULTS", "Goals"]
+
+KEPT_RESULTS = 256
+"""Finished goal results kept to answer late queries."""
+
+
+class Goals:
+    """Accepts, cancels and reports one robot's goals."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        backend: Backend,
+        controller: MotionController,
+        keys: RobotKeys,
+        parts: tuple[MotionGate, Requests, StatusPublisher],
+        log: logging.LoggerAdapter[logging.Logger],
+    ) -> None:
+        self._robot = robot
+        self._backend = backend
+        self._controller = controller
+        self._keys = keys
+        self._gate, self._requests, self._status = parts
+        self._log = log
+        self._node: Any = None
+        self.passthrough = Passthrough(backend, controller, log)
+        self._results: OrderedDict[str, bytes] = OrderedDict()
+        self._ids = itertools.count(1)
+        self._salt = secrets.token_hex(2)
+
+    def declare(self, node: ZenohNode) -> None:
+        """Declare the goal queryables (each acts on its exact key only: publish/node.py)."""
+        keys = self._keys
+        self._node = node
+        node.queryable(
+            keys.goal_trajectory, self.on_trajectory_goal, max_bytes=MAX_MESSAGE_BYTES, answer="accepted"
+        )
+        node.queryable(keys.goal_move, self.on_move_goal, answer="accepted")
+        node.queryable(keys.goal_cancel, self.on_cancel, answer="canceled")
+        node.queryable(keys.goal_results, self.on_result_query, any_id=True)
+
+    # ---- events and results ----------------------------------------------------------------------
+
+    def publish_events(self) -> None:
+        """Publish the controller's goal feedback and results."""
+        for event in self._controller.drain_events():
+            if isinstance(event, GoalResult):
+                self.passthrough.ended_here(event.goal_id)
+            if isinstance(event, GoalFeedback):
+                self._node.put(
+                    self._keys.goal_feedback(event.goal_id), codec.encode_feedback(self._robot.name, event)
+                )
+            else:
+                self._publish_result(event)
+
+    def _publish_result(self, result: GoalResult) -> None:
+        payload = codec.encode_result(self._robot.name, result)
+        self._results[result.goal_id] = payload
+        while len(self._results) > KEPT_RESULTS:
+            self._results.popitem(last=False)
+        self._node.put(self._keys.goal_result(result.goal_id), payload)
+        log = self._log.info if result.status.value == "succeeded" else self._log.warning
+        log(
+            "goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else ""
+        )
+
+    def on_result_query(self, query: Any) -> None:
+        """Answer a query for a finished goal's result (nothing while it runs or once forgotten)."""
+        parts = str(query.key_expr).split("/")
+        goal_id = parts[-2] if len(parts) >= 2 else ""
+        payload = self._results.get(goal_id)
+        if payload is not None:
+            query.reply(self._keys.goal_result(goal_id), payload)
+        query.drop()
+
+    # ---- shared by both kinds of goal ------------------------------------------------------------
+
+    def _new_goal_id(self) -> str:
+        return f"{self._robot.name}-{self._salt}-{next(self._ids)}"
+
+    def joint_names(self, names: Sequence[str] | None) -> tuple[str, ...]:
+        """Client joint names → controller names; names may leave out the robot prefix."""
+        own = self._controller.joint_names
+        if names is None:
+            return own
+        known = set(own)
+        prefix = self._robot.prefix
+        return tuple(n if n in known or f"{prefix}{n}" not in known else f"{prefix}{n}" for n in names)
+
+    def _tolerances(self, message: ToleranceMessage, names: tuple[str, ...]) -> Tolerances | None:
+        if message.path is None and message.goal is None and message.goal_time is None:
+            return None
+        own = self._controller.joint_names
+
+        def per_joint(value: float | tuple[float, ...] | None, label: str) -> tuple[float, ...] | None:
+            if value is None:
+                return None
+            if isinstance(value, float):
+                return (value,) * len(own)
+            if len(value) != len(names):
+                raise GoalRejected(f"tolerances.{label} has {len(value)} values for {len(names)} joints")
+            by_name = dict(zip(names, value, strict=True))
+            missing = [n for n in own if n not in by_name]
+            if missing:
+                raise GoalRejected(f"tolerances.{label}: no value for joint(s) {', '.join(missing)}")
+            return tuple(by_name[n] for n in own)
+
+        return Tolerances(
+            path=per_joint(message.path, "path"),
+            goal=per_joint(message.goal, "goal"),
+            goal_time=message.goal_time,
+        )
+
+    def _accept(self, query: Any, kind: str, goal_id: str, duration: float) -> None:
+        self._log.info("%s goal %s accepted (%.3f s)", kind, goal_id, duration)
+        reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration})
+        self.publish_events()  # a preempted goal's result goes out before the new goal's feedback
+        self._status.publish()
+
+    def _fail(self, query: Any, kind: str, err: Exception) -> None:
+        """Answer a goal that failed on a bug (call it from the except block: it logs the traceback)."""
+        self._log.exception("%s goal failed", kind)
+        reply(query, {"accepted": False, "reason": internal_error(err)})
+
+    def _reject(self, query: Any, kind: str, err: UrDaemonError) -> None:
+        reason = err.reason if isinstance(err, GoalRejected) else str(err)
+        self._log.warning("%s goal rejected: %s", kind, reason)
+        reply(query, {"accepted": False, "reason": reason})
+
+    # ---- trajectory goals ------------------------------------------------------------------------
+
+    def on_trajectory_goal(self, query: Any) -> None:
+        """A trajectory goal: refused at once while another is planned, else planned in a task."""
+        gate = self._gate
+        if gate.closing:
+            self._reject(query, "trajectory", GoalRejected(SHUTTING_DOWN))
+            return
+        if gate.planning is not None:  # refused before reading a byte of it
+            self._reject(
+                query, "trajectory", GoalRejected(f"busy: still planning trajectory {gate.planning}")
+            )
+            return
+        gate.planning = "being decoded"
+        # what ended motion before this query counts as before it: recorded now, not when it starts
+        work = self._trajectory_goal(query, gate.generation)
+        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+
+    async def _trajectory_goal(self, query: Any, generation: int) -> None:
+        """Decode, check, plan (and for passthrough encode) a trajectory goal, all in slices between
+        robot cycles, then start it; then free what it decoded and planned in slices too (a 5 000-point
+        goal's points take ~1 ms to free at once)."""
+        owned: list[object] = []
+        await self._handle_trajectory_goal(query, generation, owned)
+        with contextlib.suppress(asyncio.CancelledError):  # answered already: shutting down frees it
+            await release(owned)
+
+    async def _handle_trajectory_goal(self, query: Any, generation: int, owned: list[object]) -> None:
+        gate, controller = self._gate, self._controller
+        try:
+            goal = await decode_sliced(TrajectoryGoalDecoder(payload(query)))
+            owned.append(goal.points)  # decoded here: nobody else holds the list
+            names = self.joint_names(goal.joint_names)
+            tolerances = self._tolerances(goal.tolerances, names)
+            gate.check_still_wanted(generation)
+            if goal.passthrough:
+                self.passthrough.check_available()
+            controller.check_can_start(self._backend.state, time.monotonic(), goal.preempt)
+            gate.planning = f"of {len(goal.points)} points"
+            planner = await check_sliced(controller.check_trajectory(names, goal.points, self._backend.state))
+            owned.append(planner)  # the controller keeps the plan it finishes, never the planner
+            await plan_tail(planner)
+            frames = await self.passthrough.encode(planner) if goal.passthrough else None
+            gate.check_still_wanted(generation)  # nothing ended motion while it was planned
+            goal_id = self._new_goal_id()
+            duration = self._start_trajectory(goal_id, goal.preempt, tolerances, planner, frames)
+        except (MessageError, GoalRejected) as err:
+            self._reject(query, "trajectory", err)
+            return
+        except Exception as err:  # a bug must still answer the client, once
+            self._fail(query, "trajectory", err)
+            return
+        finally:  # cancelled (shutting down): the task's done-callback answers
+            gate.planning = None
+        self._accept(query, "passthrough trajectory" if goal.passthrough else "trajectory", goal_id, duration)
+
+    def _start_trajectory(
+        self,
+        goal_id: str,
+        preempt: bool,
+        tolerances: Tolerances | None,
+        planner: TrajectoryPlanner,
+        frames: tuple[bytes, int] | None,
+    ) -> float:
+        if frames is not None:
+            return self.passthrough.start(goal_id, planner, tolerances, frames, self._on_passthrough_result)
+        return self._controller.accept_trajectory(
+            goal_id,
+            self._controller.joint_names,  # the planner's points are in the controller's joint order
+            planner.points,
+            self._backend.state,
+            time.monotonic(),
+            tolerances=tolerances,
+            preempt=preempt,
+            planner=planner,
+        )
+
+    def _on_passthrough_result(self, goal_id: str, code: int) -> None:
+        if self.passthrough.finish(goal_id, code):
+            self.publish_events()
+            self._status.publish()
+
+    # ---- move goals and cancel -------------------------------------------------------------------
+
+    def on_move_goal(self, query: Any) -> None:
+        """A point-to-point move goal: decided at once."""
+        try:
+            if self._gate.closing:
+                raise GoalRejected(SHUTTING_DOWN)
+            goal = codec.decode_move_goal(payload(query))
+            self._gate.check_free_to_move()
+            names = self.joint_names(goal.joint_names)
+            goal_id = self._new_goal_id()
+            duration = self._controller.accept_move(
+                goal_id,
+                names,
+                goal.positions,
+                self._backend.state,
+                time.monotonic(),
+                duration=goal.duration,
+                velocity_scale=goal.velocity_scale,
+                acceleration_scale=goal.acceleration_scale,
+                tolerances=self._tolerances(goal.tolerances, names),
+                preempt=goal.preempt,
+            )
+        except (MessageError, GoalRejected) as err:
+            self._reject(query, "move", err)
+            return
+        except Exception as err:  # a bug must still answer the client, once
+            self._fail(query, "move", err)
+            return
+        self._accept(query, "move", goal_id, duration)
+
+    def on_cancel(self, query: Any) -> None:
+        """Cancel a goal (default: the active one, and a trajectory being planned)."""
+        try:
+            goal_id = codec.decode_cancel(payload(query))
+        except MessageError as err:
+            reply(query, {"canceled": False, "reason": str(err)})
+            return
+        controller = self._controller
+        target = goal_id if goal_id is not None else controller.active_goal_id
+        external = controller.external_goal_id
+        canceled = controller.cancel(goal_id)
+        if canceled and external is not None and external == target:
+            self._backend.cancel_passthrough()
+        body: dict[str, Any] = {"canceled": canceled, "goal_id": target}
+        # a goal being planned has no id yet: a cancel of no id, or of nothing active, cancels it
+        planned = self._gate.interrupt_planning() if goal_id is None or not canceled else None
+        if planned is not None:
+            body["canceled"] = True
+            body["planned"] = planned
+        elif not canceled:
+            body["reason"] = "no active goal" if target is None else f"goal {target} is not active"
+        reply(query, body)
+        self.publish_events()

@@ -1,0 +1,119 @@
+"""The runner of one robot's services (publish/services.py declares them, once).
+
+Every service but ``stop`` runs through ``run``: refused once the daemon shuts down, refused while
+the same service still runs (a burst never acts more than once at a time), its request decoded and
+checked before anything acts, answered exactly once. ``stop`` is answered at once, never refused.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.control import MotionController
+from urdaemon.errors import BackendError, MessageError
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.services import SERVICES, STOP, ServiceSpec
+from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
+from urdaemon.runtime.goals import Goals
+from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
+from urdaemon.runtime.status import StatusPublisher
+
+__all__ = ["ServiceRunner"]
+
+
+class ServiceRunner:
+    """Answers one robot's service queries; the ``ServiceHost`` the table's handlers use."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        controller: MotionController,
+        parts: tuple[MotionGate, Requests, StatusPublisher, Goals],
+        log: logging.LoggerAdapter[logging.Logger],
+    ) -> None:
+        self._backend = backend
+        self._controller = controller
+        self._gate, self._requests, self._status, self._goals = parts
+        self._log = log
+        self._running: set[str] = set()
+
+    @property
+    def backend(self) -> Backend:
+        """The robot's backend."""
+        return self._backend
+
+    def declare(self, node: ZenohNode, keys: RobotKeys) -> frozenset[str]:
+        """Declare a queryable for every service; the names of the services this robot answers."""
+        node.queryable(keys.service(STOP.name), self.on_stop, max_bytes=None)  # never refused for its payload
+        for spec in SERVICES:
+            node.queryable(keys.service(spec.name), self._handler(spec))
+        return frozenset({STOP.name, *(spec.name for spec in SERVICES)})
+
+    def _handler(self, spec: ServiceSpec) -> Callable[[Any], None]:
+        def handle(query: Any) -> None:
+            self.run(query, spec)
+
+        return handle
+
+    def on_stop(self, query: Any) -> None:
+        """Stop whatever moves the robot (a trajectory being planned is refused); answered at once."""
+        planned = self._gate.interrupt_planning()
+        self._goals.passthrough.cancel_if_running()
+        self._controller.stop("stop requested", time.monotonic())
+        self._goals.publish_events()
+        reply(query, {"ok": True} if planned is None else {"ok": True, "planned": planned})
+
+    def run(self, query: Any, spec: ServiceSpec) -> None:
+        """Run ``spec``'s service with the query's payload and answer once; a second call while it runs
+        is refused, so a burst of requests never acts more than once at a time."""
+        name = spec.name
+        if self._gate.closing:
+            reply(query, {"ok": False, "reason": SHUTTING_DOWN})
+            return
+        if name in self._running:
+            reply(
+                query, {"ok": False, "reason": f"busy: {name} is still running; ask again once it answered"}
+            )
+            return
+        self._running.add(name)
+        task = self._requests.spawn(
+            self._serve(query, spec, payload(query)), query, {"ok": False, "reason": SHUTTING_DOWN}
+        )
+        task.add_done_callback(lambda _: self._running.discard(name))
+
+    async def _serve(self, query: Any, spec: ServiceSpec, data: bytes | None) -> None:
+        assert spec.handle is not None, "stop is answered by on_stop"
+        try:
+            extra = await spec.handle(self, spec.decode(data))
+        except (MessageError, BackendError) as err:
+            self._log.warning("%s refused: %s", spec.name, err)
+            reply(query, {"ok": False, "reason": str(err)})
+        except Exception as err:  # a backend bug must still answer the client
+            self._log.exception("%s failed", spec.name)
+            reply(query, {"ok": False, "reason": internal_error(err)})
+        else:
+            reply(query, {"ok": True, **(extra or {})})
+
+    # ---- the runtime's part of the table's handlers (ServiceHost) ------------------------------------
+
+    def publish_io(self) -> None:
+        """Publish the IO message now."""
+        self._status.publish_io()
+
+    async def hand_back_control(self) -> None:
+        """The pendant program continues: nothing being planned may start."""
+        self._gate.interrupt_planning()
+        await self._backend.hand_back_control()
+
+    async def end_tool_contact(self) -> None:
+        """End tool-contact detection; motion starts anew from where the robot rests, never from a
+        setpoint of before the contact."""
+        await self._backend.tool_contact(False)
+        if self._gate.in_contact:
+            self._gate.in_contact = False
+            self._controller.abort(TOOL_CONTACT_REASON)

@@ -1,0 +1,156 @@
+"""One robot's status, IO and events messages: published on change and on slow timers.
+
+The status goes out at once when what users act on changes (lifecycle, modes, a percent of speed
+scaling, the program, the active goal) and every status period; the IO when it changes (looked at
+every IO period) and at least once a second. Events are notices and rejected commands.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.cell.config import PublishOptions, Robot
+from urdaemon.control import MotionController
+from urdaemon.publish import codec
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import ZenohNode
+
+__all__ = ["StatusPublisher"]
+
+
+class StatusPublisher:
+    """Publishes one robot's status, IO and events; counts what the status reports."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        backend: Backend,
+        controller: MotionController,
+        publish: PublishOptions,
+        log: logging.LoggerAdapter[logging.Logger],
+    ) -> None:
+        self._robot = robot
+        self._backend = backend
+        self._controller = controller
+        self._log = log
+        self._status_period = 1.0 / publish.status_rate_hz
+        self._io_period = 1.0 / publish.io_rate_hz
+        self._signature: tuple[Any, ...] = ()
+        self._io_signature: tuple[Any, ...] = ()
+        self._pub_status: Any = None
+        self._pub_io: Any = None
+        self._pub_events: Any = None
+        self.restarts = 0
+        """Backend restarts since start."""
+        self.rejected_commands = 0
+        """Streaming and freedrive commands rejected since start."""
+
+    def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
+        """Declare the status, IO and events publishers."""
+        self._pub_status = node.publisher(keys.status)
+        self._pub_io = node.publisher(keys.io)
+        self._pub_events = node.publisher(keys.events)
+
+    def message(self) -> dict[str, Any]:
+        """The status message body."""
+        backend = self._backend
+        state = backend.state
+        stats = backend.statistics()
+        return {
+            "robot": self._robot.name,
+            "backend": backend.kind,
+            "model": self._robot.model,
+            "lifecycle": state.lifecycle.value,
+            # never an empty reason while not ready, even before the backend worded its own
+            "reason": state.lifecycle_reason or state.not_ready_reason(),
+            "robot_mode": state.robot_mode.name,
+            "safety_mode": state.safety_mode.name,
+            "speed_slider": state.speed_slider,
+            "speed_scaling": state.speed_scaling,
+            "program_running": state.program_running,
+            "ready": state.ready_for_motion,
+            "active_goal": self._controller.active_goal_id,
+            "rate_hz": backend.rate_hz,
+            "cycles": stats.cycles,
+            "missed_cycles": stats.missed_cycles,
+            "late_cycles": stats.late_cycles,
+            "restarts": self.restarts,
+            "rejected_stream_commands": self.rejected_commands,
+            # UR robots: does the robot's kinematics hash match the configured calibration (None: not checked)
+            "calibration_ok": getattr(backend, "calibration_ok", None),
+        }
+
+    def io_message(self) -> dict[str, Any]:
+        """The IO message body."""
+        s = self._backend.state
+        return {
+            "robot": self._robot.name,
+            "digital_out": list(s.digital_out),
+            "configurable_out": list(s.configurable_out),
+            "tool_out": list(s.tool_out),
+            "analog_out": list(s.analog_out),
+            "digital_in": list(s.digital_in),
+            "configurable_in": list(s.configurable_in),
+            "tool_in": list(s.tool_in),
+            "analog_in": list(s.analog_in),
+            "tool_voltage": s.tool_voltage,
+            "payload": {"mass": s.payload_mass, "cog": list(s.payload_cog)},
+        }
+
+    def _key(self) -> tuple[Any, ...]:
+        """What, when it changes, makes the status go out at once."""
+        state = self._backend.state
+        return (
+            state.lifecycle,
+            state.lifecycle_reason,
+            state.robot_mode,
+            state.safety_mode,
+            # a real controller's scaling moves continuously: only a change of a percent is news
+            round(state.speed_scaling, 2),
+            state.program_running,
+            self._controller.active_goal_id,
+        )
+
+    def publish_if_changed(self) -> None:
+        """Publish the status if what users act on changed (once per cycle)."""
+        if self._key() != self._signature:
+            self.publish()
+
+    def publish(self) -> None:
+        """Publish the status now."""
+        self._signature = self._key()
+        if self._pub_status is not None:
+            self._pub_status.put(codec.encode(self.message()))
+
+    def publish_io(self) -> None:
+        """Publish the IO message now."""
+        message = self.io_message()
+        self._io_signature = tuple(str(v) for v in message.values())
+        if self._pub_io is not None:
+            self._pub_io.put(codec.encode(message))
+
+    def event(self, body: dict[str, Any]) -> None:
+        """Publish an event (``kind`` and what it says) of this robot."""
+        if self._pub_events is not None:
+            self._pub_events.put(codec.encode({"robot": self._robot.name, **body}))
+
+    async def run(self) -> None:
+        """Publish the status every status period and the IO when it changed (or each second)."""
+        last_status = last_io = 0.0
+        while True:
+            await asyncio.sleep(min(self._status_period, self._io_period))
+            now = time.monotonic()
+            try:
+                if now - last_status >= self._status_period:
+                    self.publish()
+                    last_status = now
+                io_signature = tuple(str(v) for v in self.io_message().values())
+                if io_signature != self._io_signature or now - last_io >= 1.0:
+                    self.publish_io()
+                    last_io = now
+            except Exception:  # a publishing error must not end this robot's (or the cell's) tasks
+                self._log.exception("publishing status/IO failed")
