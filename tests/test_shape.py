@@ -21,7 +21,6 @@ STILL_OVER: dict[str, int] = {
     "urdaemon/control/controller.py:MotionController": 997,
     "urdaemon/description/urdf.py:joint_limits_for": 64,
     "urdaemon/fakeur/arm.py:FakeArm": 521,
-    "urdaemon/robot.py:RobotRuntime": 797,
 }
 """``path:qualified.name`` → its length in lines today, for each place still over its limit."""
 
