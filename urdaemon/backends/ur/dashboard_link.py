@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
+from collections import deque
 from typing import Any
 
-from urdaemon.errors import ConnectionLostError, RemoteProtocolError, UrTimeoutError
+from urdaemon.errors import RemoteProtocolError, UrTimeoutError
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Shell, connect
 
 __all__ = ["DASHBOARD_PORT", "DashboardLink"]
 
@@ -18,29 +19,22 @@ BANNER_TIMEOUT_S = 10.0
 REPLY_TIMEOUT_S = 5.0
 
 
-class DashboardLink:
-    """One dashboard connection; ``command`` sends a command and returns its typed reply."""
+class DashboardLink(Shell):
+    """One dashboard connection (the shell around ``DashboardConnection``); ``command`` sends a command
+    and returns its typed reply."""
 
-    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self.reader = reader
-        self.writer = writer
-        self.conn = dash.DashboardConnection(Side.DAEMON)
+    def __init__(self) -> None:
+        super().__init__(dash.DashboardConnection(Side.DAEMON), "dashboard", self._arrived)
+        self.conn: dash.DashboardConnection = self.codec
         self._lock = asyncio.Lock()
-        self._pending: list[Any] = []
+        self._pending: deque[Any] = deque()
+        self._waiter: asyncio.Future[None] | None = None
         self.banner: dash.Banner | None = None
 
     @classmethod
     async def connect(cls, host: str, *, port: int = DASHBOARD_PORT, timeout: float = 5.0) -> DashboardLink:
         """Connect and read the banner."""
-        try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-        except TimeoutError as err:
-            raise UrTimeoutError(f"dashboard: no connection to {host}:{port} within {timeout} s") from err
-        except OSError as err:
-            raise ConnectionLostError(
-                f"dashboard: cannot connect to {host}:{port}: {err.strerror or err}"
-            ) from err
-        link = cls(reader, writer)
+        link = await connect(cls, host, port, timeout=timeout, name="dashboard")
         try:
             banner = await link._next(BANNER_TIMEOUT_S)
             if not isinstance(banner, dash.Banner):
@@ -55,23 +49,31 @@ class DashboardLink:
         """Send ``command`` and return its typed reply (refusals are replies with success False)."""
         async with self._lock:
             self.conn.send(command)
-            self.writer.write(self.conn.data_to_send())
+            self.flush()
             return await self._next(timeout)
 
+    def end(self, reason: Exception) -> None:
+        super().end(reason)
+        self._wake()
+
+    def _arrived(self, event: Any) -> None:
+        self._pending.append(event)
+        self._wake()
+
+    def _wake(self) -> None:
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
     async def _next(self, timeout: float) -> Any:
+        """The next reply; UrTimeoutError after ``timeout``, the reason once the connection ended."""
         while not self._pending:
+            if self.closed.done():
+                raise self.closed.result()
+            self._waiter = asyncio.get_running_loop().create_future()
             try:
-                data = await asyncio.wait_for(self.reader.read(4096), timeout)
+                await asyncio.wait_for(self._waiter, timeout)
             except TimeoutError as err:
                 raise UrTimeoutError(f"dashboard: no reply within {timeout} s") from err
-            except (ConnectionError, OSError) as err:
-                raise ConnectionLostError(f"dashboard: connection lost: {err}") from err
-            if not data:
-                raise ConnectionLostError("dashboard: connection closed by the robot")
-            self._pending.extend(self.conn.receive_data(data))
-        return self._pending.pop(0)
-
-    def close(self) -> None:
-        """Close the connection."""
-        with contextlib.suppress(Exception):
-            self.writer.close()
+            finally:
+                self._waiter = None
+        return self._pending.popleft()

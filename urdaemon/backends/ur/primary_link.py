@@ -3,35 +3,32 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from urdaemon.errors import ConnectionLostError, ProtocolError, UrTimeoutError
+from urdaemon.errors import UrTimeoutError
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Shell, connect
 
 __all__ = ["PRIMARY_PORT", "PrimaryLink"]
 
 PRIMARY_PORT = 30001
-READ_CHUNK = 65536
 KEPT_MESSAGES = 50
 """Robot messages kept for the status and for diagnosing a failed program."""
 
 log = logging.getLogger("urdaemon.ur")
 
 
-class PrimaryLink:
-    """One primary-interface connection; ``run()`` reads until the connection ends."""
+class PrimaryLink(Shell):
+    """One primary-interface connection (the shell around ``PrimaryConnection``); it reads from the
+    moment it connects, and ``run()`` waits until the connection ends."""
 
-    def __init__(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, on_message: Callable[[Any], None]
-    ) -> None:
-        self.reader = reader
-        self.writer = writer
-        self.conn = prim.PrimaryConnection(Side.DAEMON)
+    def __init__(self, on_message: Callable[[Any], None]) -> None:
+        super().__init__(prim.PrimaryConnection(Side.DAEMON), "primary", self._on_event)
+        self.conn: prim.PrimaryConnection = self.codec
         self.on_message = on_message
         self.version: prim.VersionMessage | None = None
         self.kinematics: prim.KinematicsInfo | None = None
@@ -45,32 +42,16 @@ class PrimaryLink:
         cls, host: str, on_message: Callable[[Any], None], *, port: int = PRIMARY_PORT, timeout: float = 5.0
     ) -> PrimaryLink:
         """Open the connection."""
-        try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-        except TimeoutError as err:
-            raise UrTimeoutError(f"primary: no connection to {host}:{port} within {timeout} s") from err
-        except OSError as err:
-            raise ConnectionLostError(
-                f"primary: cannot connect to {host}:{port}: {err.strerror or err}"
-            ) from err
-        return cls(reader, writer, on_message)
+        return await connect(lambda: cls(on_message), host, port, timeout=timeout, name="primary")
 
     async def run(self) -> None:
-        """Read until the connection ends: ConnectionLostError, or RemoteProtocolError on bad bytes."""
-        try:
-            while data := await self.reader.read(READ_CHUNK):
-                for event in self.conn.receive_data(data):
-                    self._on_event(event)
-        except (ConnectionError, OSError) as err:
-            raise ConnectionLostError(f"primary: connection lost: {err}") from err
-        except ProtocolError:
-            raise
-        raise ConnectionLostError("primary: connection closed by the robot")
+        """Wait until the connection ends: ConnectionLostError, or RemoteProtocolError on bad bytes."""
+        raise await asyncio.shield(self.closed)
 
     def send_script(self, text: str) -> None:
         """Send URScript text (a program, a ``sec`` program or a controller command line)."""
         self.conn.send(prim.Script(text))
-        self.writer.write(self.conn.data_to_send())
+        self.flush()
 
     async def wait_kinematics(self, timeout: float) -> prim.KinematicsInfo:
         """The robot's KINEMATICS_INFO (UrTimeoutError if none arrives within ``timeout``)."""
@@ -80,11 +61,6 @@ class PrimaryLink:
             raise UrTimeoutError(f"primary: no KINEMATICS_INFO within {timeout} s") from err
         assert self.kinematics is not None
         return self.kinematics
-
-    def close(self) -> None:
-        """Close the connection."""
-        with contextlib.suppress(Exception):
-            self.writer.close()
 
     def _on_event(self, event: Any) -> None:
         if isinstance(event, prim.RobotState):

@@ -1,6 +1,6 @@
 """The daemon's RTDE link: handshake, then every output package clocks one robot cycle.
 
-An ``asyncio.Protocol`` around the sans-IO ``RtdeConnection``: during the handshake each request
+The shell (``urdaemon.shell``) around the sans-IO ``RtdeConnection``: during the handshake each request
 waits on a future for its reply; once streaming, ``data_received`` decodes each DATA_PACKAGE and
 calls ``on_package(values)`` synchronously, in the same turn of the loop (the robot is the clock).
 When one read brings several packages (the loop was held up and they queued in the socket), the
@@ -15,17 +15,16 @@ loop up further (ur-protocols.md §4.2: the program's read waits only the frame'
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import socket
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, TypeVar, cast
+from typing import Any, TypeVar
 
-from urdaemon.errors import ConnectionLostError, ProtocolError, RemoteProtocolError, UrTimeoutError
+from urdaemon.errors import ConnectionLostError, RemoteProtocolError, UrTimeoutError
 from urdaemon.model import Lifecycle, RobotMode, RobotState, SafetyMode
 from urdaemon.paths import resource_path
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Shell, connect
 
 __all__ = [
     "RTDE_PORT",
@@ -55,16 +54,15 @@ def input_recipe() -> tuple[str, ...]:
     return tuple(resource_path("rtde", "input_recipe.txt").read_text().split())
 
 
-class RtdeLink(asyncio.Protocol):
-    """One RTDE connection of the daemon to a controller."""
+class RtdeLink(Shell):
+    """One RTDE connection of the daemon to a controller (the shell around ``RtdeConnection``)."""
 
     def __init__(self, on_package: Callable[[tuple[Any, ...]], None]) -> None:
-        self.conn = rtde.RtdeConnection(Side.DAEMON)
+        super().__init__(rtde.RtdeConnection(Side.DAEMON), "rtde")
+        self.conn: rtde.RtdeConnection = self.codec
         self.on_package = on_package
-        self.transport: asyncio.Transport | None = None
         self.controller_version: rtde.ControllerVersion | None = None
         self.frequency = 0.0
-        self.closed: asyncio.Future[Exception | None] = asyncio.get_running_loop().create_future()
         self._waiter: asyncio.Future[Any] | None = None
         self._waiting_for: tuple[type[Any], ...] = ()
         self._streaming = False
@@ -89,37 +87,12 @@ class RtdeLink(asyncio.Protocol):
         timeout: float = 5.0,
     ) -> RtdeLink:
         """Open the TCP connection (TCP_NODELAY)."""
-        loop = asyncio.get_running_loop()
-        try:
-            _, link = await asyncio.wait_for(
-                loop.create_connection(lambda: cls(on_package), host, port), timeout
-            )
-        except TimeoutError as err:
-            raise UrTimeoutError(f"rtde: no connection to {host}:{port} within {timeout} s") from err
-        except OSError as err:
-            raise ConnectionLostError(
-                f"rtde: cannot connect to {host}:{port}: {err.strerror or err}"
-            ) from err
-        return link
+        return await connect(lambda: cls(on_package), host, port, timeout=timeout, name="rtde")
 
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        # uvloop's transports are not asyncio.Transport subclasses but offer the same methods
-        self.transport = cast(asyncio.Transport, transport)
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        error = ConnectionLostError(
-            f"rtde: connection lost: {exc}" if exc else "rtde: connection closed by the robot"
-        )
-        self._fail(error)
-
-    def close(self) -> None:
-        """Close the connection."""
-        if self.transport is not None:
-            self.transport.close()
+    def end(self, reason: Exception) -> None:
+        super().end(reason)
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_exception(reason)
 
     # ---- handshake ----------------------------------------------------------------------------------
 
@@ -175,7 +148,7 @@ class RtdeLink(asyncio.Protocol):
     def send_inputs(self, values: Sequence[Any]) -> None:
         """Send one input package (every field of the input recipe, in order)."""
         self.conn.send(rtde.InputData(tuple(values)))
-        self._flush()
+        self.flush()
 
     async def _request(self, message: Any, reply: type[_R]) -> _R:
         loop = asyncio.get_running_loop()
@@ -184,7 +157,7 @@ class RtdeLink(asyncio.Protocol):
         self._waiter = loop.create_future()
         self._waiting_for = (reply,)
         self.conn.send(message)
-        self._flush()
+        self.flush()
         try:
             answer = await asyncio.wait_for(asyncio.shield(self._waiter), RTDE_REPLY_TIMEOUT_S)
         except TimeoutError as err:
@@ -206,12 +179,10 @@ class RtdeLink(asyncio.Protocol):
                 self.packages += 1
                 self.on_package(values)
                 return
-        try:
-            events = self.conn.receive_data(data)
-        except ProtocolError as err:
-            self._fail(err)
-            self.close()
-            return
+        super().data_received(data)
+
+    def handle(self, events: list[Any]) -> None:
+        """One read's events: replies to the waiting request, and the packages (older ones catching up)."""
         packages: list[tuple[Any, ...]] = []
         for event in events:
             if isinstance(event, rtde.DataPackage):
@@ -242,17 +213,6 @@ class RtdeLink(asyncio.Protocol):
                 finally:
                     self.catching_up = False
             self.on_package(newest)
-
-    def _flush(self) -> None:
-        data = self.conn.data_to_send()
-        if data and self.transport is not None and not self.transport.is_closing():
-            self.transport.write(data)
-
-    def _fail(self, error: Exception) -> None:
-        if not self.closed.done():
-            self.closed.set_result(error)
-        if self._waiter is not None and not self._waiter.done():
-            self._waiter.set_exception(error)
 
 
 class StateMapper:

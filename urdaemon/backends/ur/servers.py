@@ -1,9 +1,9 @@
 """The servers the robot's control program dials: reverse, script sender, trajectory, script command.
 
 Each listens on one of the robot's configured host ports, accepts only the robot's own address,
-keeps one connection, and wraps the daemon side of its sans-IO codec. ``send`` writes at once (one
-write per frame: the script reads fixed-size frames); events and connect/disconnect reach the owner
-through callbacks on the loop.
+keeps one connection, and wraps the daemon side of its sans-IO codec in the shell
+(``urdaemon.shell``). ``send`` writes at once (one write per frame: the script reads fixed-size
+frames); events and connect/disconnect reach the owner through callbacks on the loop.
 
 Who may connect (the callback-link rules, docs/ursim.md):
 
@@ -31,14 +31,14 @@ import contextlib
 import errno
 import ipaddress
 import logging
-import socket
 import time
 from collections.abc import Callable
-from typing import Any, Protocol, cast
+from typing import Any, Protocol
 
-from urdaemon.errors import BackendError, ProtocolError
+from urdaemon.errors import BackendError, ConnectionLostError
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Codec, Shell, serve
 
 __all__ = [
     "PROGRAM_CONNECT_WINDOW_S",
@@ -61,12 +61,6 @@ REFUSAL_LOG_EVERY = 100
 """Refused connections are logged the first time and then every this many times (with the count)."""
 
 
-class _Codec(Protocol):
-    def receive_data(self, data: bytes) -> list[Any]: ...
-    def send(self, message: Any) -> None: ...
-    def data_to_send(self) -> bytes: ...
-
-
 class ServerHooks(Protocol):
     """What a server tells its owner (all called on the loop)."""
 
@@ -74,67 +68,39 @@ class ServerHooks(Protocol):
     def on_event(self, name: str, event: Any) -> None: ...
 
 
-class CallbackLink(asyncio.Protocol):
-    """One accepted connection from the robot."""
+class CallbackLink(Shell):
+    """One accepted connection from the robot (the shell around the server's codec)."""
 
     def __init__(self, server: CallbackServer) -> None:
+        codec = server.make_codec()
+        super().__init__(codec, server.name, self._on_event, on_close=self._lost, keepalive=True)
         self.server = server
-        self.codec: _Codec = server.make_codec()
-        self.transport: asyncio.Transport | None = None
         self.peer = ""
 
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        # uvloop's transports are not asyncio.Transport subclasses but offer the same methods
-        self.transport = cast(asyncio.Transport, transport)
-        peer = transport.get_extra_info("peername")
+    def opened(self) -> bool:
+        assert self.transport is not None
+        peer = self.transport.get_extra_info("peername")
         self.peer = str(peer[0]) if peer else ""
-        if not self.server.admit(self):
-            transport.close()
-            return
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        return self.server.admit(self)
 
     def data_received(self, data: bytes) -> None:
         if self.server.link is not self:  # replaced or refused: its bytes are nobody's messages
             return
-        try:
-            events = self.codec.receive_data(data)
-        except ProtocolError as err:
-            self.server.lost(self, f"{self.server.name}: {err}")
-            self.close()
-            return
-        for event in events:
-            self.server.hooks.on_event(self.server.name, event)
+        super().data_received(data)
 
-    def connection_lost(self, exc: Exception | None) -> None:
-        self.server.lost(
-            self, f"{self.server.name}: connection {'lost: ' + str(exc) if exc else 'closed by the robot'}"
-        )
+    def _on_event(self, event: Any) -> None:
+        self.server.hooks.on_event(self.server.name, event)
 
-    def send(self, message: Any) -> None:
-        """Encode and write ``message`` now; LocalProtocolError if it cannot be encoded."""
-        self.codec.send(message)
-        self.write(self.codec.data_to_send())
-
-    def write(self, data: bytes) -> None:
-        """Write bytes already encoded for this protocol (the 500 Hz servoj frame)."""
-        if self.transport is not None and not self.transport.is_closing():
-            self.transport.write(data)
-
-    def close(self) -> None:
-        """Close this connection."""
-        if self.transport is not None:
-            self.transport.close()
+    def _lost(self, reason: Exception) -> None:
+        text = str(reason) if isinstance(reason, ConnectionLostError) else f"{self.server.name}: {reason}"
+        self.server.lost(self, text)
 
 
 class CallbackServer:
     """A listening port for one kind of connection from the robot."""
 
     def __init__(
-        self, name: str, port: int, robot_address: str, make_codec: Callable[[], _Codec], hooks: ServerHooks
+        self, name: str, port: int, robot_address: str, make_codec: Callable[[], Codec], hooks: ServerHooks
     ) -> None:
         self.name = name
         self.port = port
@@ -152,11 +118,8 @@ class CallbackServer:
 
     async def start(self, host: str) -> None:
         """Listen on ``host``:port; BackendError (one line, naming the port) if it cannot."""
-        loop = asyncio.get_running_loop()
         try:
-            self._server = await loop.create_server(
-                lambda: CallbackLink(self), host, self.port, reuse_address=True
-            )
+            self._server = await serve(lambda: CallbackLink(self), host, self.port)
         except OSError as err:
             if err.errno == errno.EADDRINUSE:
                 why = (
