@@ -1,0 +1,91 @@
+"""The bytes the UR backend writes to its control program: the reverse channel's frames and actions
+on the reverse socket, passthrough points on the trajectory socket.
+
+``ReverseChannel`` decides what goes out; ``ReverseWriter`` writes it. The frames that never change
+(keepalives, trajectory and freedrive control) are encoded once; servoj is packed without building a
+message (the 500 Hz path).
+"""
+
+from __future__ import annotations
+
+from urdaemon.backends.ur.reverse_channel import Action, Frame, Step
+from urdaemon.backends.ur.servers import CallbackServers
+from urdaemon.errors import BackendError, LocalProtocolError
+from urdaemon.model import JointCommand
+from urdaemon.protocols import reverse, trajectory_point
+
+__all__ = ["IDLE_TIMEOUT_S", "PASSTHROUGH_TIMEOUT_S", "ReverseWriter", "encode_passthrough_point"]
+
+IDLE_TIMEOUT_S = 1.0
+"""Read timeout sent with a keepalive (urcl's default, ur-protocols.md §4.2)."""
+PASSTHROUGH_TIMEOUT_S = 0.2
+"""Read timeout sent with trajectory control frames (urcl's default for non-realtime control, §4.2)."""
+
+_T = reverse.TrajectoryAction
+_F = reverse.FreedriveAction
+_CONSTANT: dict[Frame, reverse.ReverseCommand] = {
+    Frame.IDLE: reverse.Idle(IDLE_TIMEOUT_S),
+    Frame.TRAJECTORY_NOOP: reverse.TrajectoryControl(_T.NOOP, 0, PASSTHROUGH_TIMEOUT_S),
+    Frame.FREEDRIVE_NOOP: reverse.FreedriveControl(_F.NOOP, PASSTHROUGH_TIMEOUT_S),
+    Frame.FREEDRIVE_STOP: reverse.FreedriveControl(_F.STOP, PASSTHROUGH_TIMEOUT_S),
+}
+_ACTIONS: dict[Action, reverse.ReverseCommand] = {
+    Action.SEND_CANCEL: reverse.TrajectoryControl(_T.CANCEL, 0, PASSTHROUGH_TIMEOUT_S),
+    Action.SEND_FREEDRIVE_START: reverse.FreedriveControl(_F.START, PASSTHROUGH_TIMEOUT_S),
+    Action.SEND_FREEDRIVE_STOP: reverse.FreedriveControl(_F.STOP, PASSTHROUGH_TIMEOUT_S),
+    Action.SEND_STOPPED: reverse.Stopped(),
+}
+
+
+class ReverseWriter:
+    """Writes the channel's frames and actions to the reverse (and trajectory) server."""
+
+    def __init__(self, servers: CallbackServers) -> None:
+        self.servers = servers
+        self.servo_timeout = reverse.DEFAULT_COMMAND_TIMEOUT_S
+        """The read timeout of servoj and speedj frames (the backend clamps the configured one)."""
+        self._frames = {frame: reverse.encode_reverse_command(m) for frame, m in _CONSTANT.items()}
+
+    def write(self, frame: Frame, command: JointCommand) -> None:
+        """This cycle's frame (``Frame.NONE``: nothing)."""
+        server = self.servers.reverse
+        if frame is Frame.SERVOJ:
+            server.write(reverse.encode_servoj(command.positions, self.servo_timeout))
+        elif frame is Frame.SPEEDJ:
+            server.send(reverse.SpeedJ(tuple(command.velocities), self.servo_timeout))
+        elif frame is not Frame.NONE:
+            server.write(self._frames[frame])
+
+    def act(self, step: Step) -> None:
+        """Send what an event's step asks for on the reverse socket (START has its own method)."""
+        message = _ACTIONS.get(step.action)
+        if message is not None:
+            self.servers.reverse.send(message)
+
+    def start(self, frames: bytes, count: int) -> None:
+        """START(count) on the reverse socket, then the pre-encoded points on the trajectory socket."""
+        self.servers.reverse.send(
+            reverse.TrajectoryControl(reverse.TrajectoryAction.START, count, PASSTHROUGH_TIMEOUT_S)
+        )
+        self.servers.trajectory.write(frames)
+
+
+def encode_passthrough_point(
+    positions: tuple[float, ...],
+    velocities: tuple[float, ...],
+    accelerations: tuple[float, ...] | None,
+    segment_time: float,
+) -> bytes:
+    """One spline point's 84-byte frame; BackendError for a value the wire cannot carry (a segment
+    longer than trajectory_point.MAX_DURATION_S, a non-finite or too large value)."""
+    if segment_time > trajectory_point.MAX_DURATION_S:
+        raise BackendError(
+            f"a segment of {segment_time:.6g} s is longer than the robot can take"
+            f" (at most {trajectory_point.MAX_DURATION_S:g} s between two points)"
+        )
+    try:
+        return trajectory_point.encode_point(
+            trajectory_point.SplinePoint(positions, velocities, accelerations, segment_time)
+        )
+    except LocalProtocolError as err:
+        raise BackendError(f"cannot send the trajectory to the robot: {err}") from None

@@ -1,0 +1,82 @@
+"""What the UR robot tells its users on the primary interface: messages, runtime errors, and the
+calibration check of its kinematics against the configured one.
+
+Each message becomes a notice (``robot_message``) and is kept among the last ``KEPT_MESSAGES``; a
+runtime exception or error code is also what the controller said when the program ended.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from urdaemon.backends.ur.primary_link import PrimaryLink
+from urdaemon.backends.ur.program import ControlProgram
+from urdaemon.errors import RobotFaultError
+from urdaemon.protocols import primary as prim
+
+__all__ = ["KEPT_MESSAGES", "KINEMATICS_TIMEOUT_S", "RobotMessages"]
+
+log = logging.getLogger("urdaemon.ur")
+
+KINEMATICS_TIMEOUT_S = 10.0
+"""urcl waits up to 10 s for the first state package after connecting (ur-protocols.md §6.7)."""
+KEPT_MESSAGES = 20
+
+
+class RobotMessages:
+    """The robot's messages of one backend, told through ``notice(kind, text)``."""
+
+    __slots__ = ("calibration_ok", "name", "notice", "program", "recent")
+
+    def __init__(self, name: str, notice: Callable[[str, str], None], program: ControlProgram) -> None:
+        self.name = name
+        self.notice = notice
+        self.program = program
+        """Whose ``ended`` a runtime exception or error code sets."""
+        self.recent: list[str] = []
+        """The last ``KEPT_MESSAGES`` texts."""
+        self.calibration_ok: bool | None = None
+        """Whether the robot's kinematics hash is the configured one (None: not checked yet)."""
+
+    def on_message(self, message: Any) -> None:
+        """One message from the primary interface."""
+        text = ""
+        if isinstance(message, prim.RuntimeExceptionMessage):
+            text = f"runtime exception at {message.line}:{message.column}: {message.text}"
+            log.warning("[%s] %s", self.name, text)
+            self.program.ended = text
+        elif isinstance(message, prim.ErrorCodeMessage):
+            text = f"error C{message.code}A{message.argument}: {message.text}"
+            log.warning("[%s] %s", self.name, text)
+            self.program.ended = text
+        elif isinstance(message, prim.TextMessage | prim.KeyMessage):
+            text = (
+                message.text if isinstance(message, prim.TextMessage) else f"{message.title}: {message.text}"
+            )
+            log.info("[%s] robot: %s", self.name, text)
+        if text:
+            self.report("robot_message", text)
+
+    def report(self, kind: str, text: str) -> None:
+        """Keep the text among the last robot messages and publish it as a notice of this kind."""
+        self.recent = [*self.recent[-(KEPT_MESSAGES - 1) :], text]
+        self.notice(kind, text)
+
+    async def check_calibration(self, primary: PrimaryLink, expected_hash: str | None, check: str) -> None:
+        """Compare the robot's kinematics hash with ``expected_hash``: a mismatch is a warning and a
+        ``calibration_mismatch`` notice, or RobotFaultError when ``check`` is ``"error"``."""
+        kinematics = await primary.wait_kinematics(KINEMATICS_TIMEOUT_S)
+        actual = kinematics.kinematics_hash()
+        self.calibration_ok = expected_hash is None or actual == expected_hash
+        if not self.calibration_ok:
+            text = (
+                f"the robot's kinematics hash is {actual}, the configured calibration's is "
+                f"{expected_hash}: the URDF does not match this robot "
+                "(write its calibration with `urdaemon calibration`)"
+            )
+            if check == "error":
+                raise RobotFaultError(text)
+            log.warning("[%s] %s", self.name, text)
+            self.report("calibration_mismatch", text)
