@@ -157,6 +157,8 @@ def _add_cell_tools(sub: Any) -> None:
 
 def _add_client_tools(sub: Any) -> None:
     """``echo``, ``service``, ``dashboard``: Zenoh clients of a serving daemon."""
+    from urdaemon.publish import services
+
     echo = sub.add_parser("echo", help="print samples of a key expression as JSON lines")
     echo.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
     echo.add_argument("--count", type=_count_arg, default=0, help="stop after N samples (0: until Ctrl-C)")
@@ -170,9 +172,9 @@ def _add_client_tools(sub: Any) -> None:
 
     call = sub.add_parser(
         "service",
-        help="call a robot service (set_io, set_speed_slider, set_payload, zero_ft_sensor, set_tool_voltage, "
-        "startup, resend_program, hand_back_control, start_force_mode, end_force_mode, start_tool_contact, "
-        "end_tool_contact, stop) and print the reply",
+        help=f"call a robot service ({', '.join(services.names())}) and print the reply",
+        description=_services_listed(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     call.add_argument("robot")
     call.add_argument("name", help="service name, e.g. set_io")
@@ -193,6 +195,32 @@ def _add_client_tools(sub: Any) -> None:
     )
     board.add_argument("--cell", default=None)
     _connect_arg(board)
+
+
+def _services_listed() -> str:
+    """``service``'s description: every service, its request and what it does (publish/services.py)."""
+    from urdaemon.publish import services
+
+    lines = ["Call a robot service and print its reply. The services:", ""]
+    for entry in (*services.SERVICES, services.STOP):
+        request = "no request" if entry.request is None else f"request: {_fields(entry.request)}"
+        lines.append(f"  {entry.name}: {entry.summary} ({request})")
+    return "\n".join(lines)
+
+
+def _fields(request: type) -> str:
+    """A request type's fields as the message names them, optional ones with their default."""
+    import dataclasses
+
+    from urdaemon.publish.codec import WIRE_NAMES
+
+    shown = []
+    for item in dataclasses.fields(request):
+        name = WIRE_NAMES.get(item.name, item.name)
+        shown.append(
+            name if item.default is dataclasses.MISSING else f"{name}? (default {json.dumps(item.default)})"
+        )
+    return ", ".join(shown)
 
 
 def _add_goal_tools(sub: Any) -> None:

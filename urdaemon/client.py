@@ -22,6 +22,19 @@ from typing import Any
 import zenoh
 
 from urdaemon.errors import ConnectionLostError, GoalRejected, UrDaemonError, UrTimeoutError
+from urdaemon.model import (
+    FORCE_MODE_DAMPING,
+    FORCE_MODE_GAIN_SCALING,
+    FORCE_MODE_TYPE,
+    CycleStatsRequest,
+    DashboardRequest,
+    ForceModeRequest,
+    SetIoRequest,
+    SetPayloadRequest,
+    SpeedSliderRequest,
+    ToolVoltageRequest,
+)
+from urdaemon.publish import codec, services
 from urdaemon.publish.codec import SCHEMA_VERSION
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
@@ -38,7 +51,8 @@ __all__ = [
 ]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
-QUERY_TIMEOUT_S = 5.0
+QUERY_TIMEOUT_S = services.CLIENT_TIMEOUT_S
+"""How long a query waits for its answer unless told (a service's own wait is in its table entry)."""
 RESULT_POLL_S = 0.5
 """While waiting for a result, ask the daemon for it this often (covers a missed publication)."""
 LOST_GRACE_S = 1.0
@@ -381,6 +395,11 @@ class GoalHandle:
                 return
 
 
+def _three(values: Sequence[float]) -> tuple[float, float, float]:
+    """A centre of gravity as sent: the daemon refuses one that is not three numbers, naming it."""
+    return tuple(values)  # type: ignore[return-value]
+
+
 def _result_message(payload: bytes, goal_id: str) -> dict[str, Any] | None:
     """``payload`` decoded if it is a message of goal ``goal_id``, else None (garbage is ignored)."""
     try:
@@ -477,6 +496,15 @@ class RobotClient:
         """
         return await self.client.request(self.keys.service(service), body or {}, timeout=timeout)
 
+    async def service(
+        self, name: str, request: object | None = None, *, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """Call service ``name`` of the table (publish/services.py) with its request (a request type of
+        model.py; None for a service without arguments), waiting the table's time unless ``timeout``."""
+        entry = services.spec(name)
+        wait = entry.timeout if timeout is None else timeout
+        return await self.client.request(self.keys.service(name), codec.request_body(request), timeout=wait)
+
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
         """Cancel a goal (default: the active one)."""
         return await self.client.request(
@@ -485,52 +513,48 @@ class RobotClient:
 
     async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
         """Set an output; the reply says ok or the reason."""
-        return await self.client.request(
-            self.keys.service("set_io"), {"kind": kind, "pin": pin, "value": value}
-        )
+        return await self.service("set_io", SetIoRequest(kind, pin, value))
 
     async def set_payload(self, mass: float, cog: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
         """Set the payload."""
-        return await self.client.request(self.keys.service("set_payload"), {"mass": mass, "cog": list(cog)})
+        return await self.service("set_payload", SetPayloadRequest(mass, _three(cog)))
 
     async def set_speed_slider(self, fraction: float) -> dict[str, Any]:
         """Set the speed slider (0..1)."""
-        return await self.client.request(self.keys.service("set_speed_slider"), {"fraction": fraction})
+        return await self.service("set_speed_slider", SpeedSliderRequest(fraction))
 
-    async def dashboard(self, command: str, *, timeout: float = 30.0) -> dict[str, Any]:
+    async def dashboard(self, command: str, *, timeout: float | None = None) -> dict[str, Any]:
         """Send a dashboard command line (``power on``, ``robotmode`` …); the reply or the reason."""
-        return await self.client.request(
-            self.keys.service("dashboard"), {"command": command}, timeout=timeout
-        )
+        return await self.service("dashboard", DashboardRequest(command), timeout=timeout)
 
-    async def startup(self, *, timeout: float = 60.0) -> dict[str, Any]:
+    async def startup(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Power on, release the brakes and start the control program."""
-        return await self.client.request(self.keys.service("startup"), {}, timeout=timeout)
+        return await self.service("startup", timeout=timeout)
 
     async def resend_program(self) -> dict[str, Any]:
         """Send the control program again (headless) or play it (URCap)."""
-        return await self.client.request(self.keys.service("resend_program"), {})
+        return await self.service("resend_program")
 
     async def hand_back_control(self) -> dict[str, Any]:
         """End the control program so the pendant program continues."""
-        return await self.client.request(self.keys.service("hand_back_control"), {})
+        return await self.service("hand_back_control")
 
     async def cycle_stats(self, *, reset: bool = False) -> dict[str, Any]:
         """Cycle counters and the turnaround (state in → command out, µs: count, p50, p99, p99.9,
         max) since the last reset; ``reset`` starts a new measuring window after this reply."""
-        return await self.client.request(self.keys.service("cycle_stats"), {"reset": reset})
+        return await self.service("cycle_stats", CycleStatsRequest(reset))
 
     async def zero_ft_sensor(self) -> dict[str, Any]:
         """Zero the force/torque sensor."""
-        return await self.client.request(self.keys.service("zero_ft_sensor"), {})
+        return await self.service("zero_ft_sensor")
 
     async def set_tool_voltage(self, volts: int) -> dict[str, Any]:
         """Set the tool voltage (0, 12 or 24 V)."""
-        return await self.client.request(self.keys.service("set_tool_voltage"), {"volts": volts})
+        return await self.service("set_tool_voltage", ToolVoltageRequest(volts))
 
     async def stop(self) -> dict[str, Any]:
         """Stop whatever moves the robot."""
-        return await self.client.request(self.keys.service("stop"), {})
+        return await self.service("stop")
 
     def stream_positions(self, positions: Sequence[float], velocities: Sequence[float] | None = None) -> None:
         """Publish one streaming position command (repeat faster than the deadman timeout)."""
@@ -541,7 +565,7 @@ class RobotClient:
 
     def freedrive(self, active: bool = True) -> None:
         """Keep freedrive (hand guiding) on for one deadman period, or end it; repeat while it should last."""
-        self.client.session.put(f"{self.keys.base}/command/freedrive", _encode({"active": active}))
+        self.client.session.put(self.keys.command_freedrive, _encode({"active": active}))
 
     async def start_force_mode(
         self,
@@ -550,33 +574,33 @@ class RobotClient:
         wrench: Sequence[float],
         limits: Sequence[float],
         *,
-        force_type: int = 2,
-        damping: float = 0.025,
-        gain_scaling: float = 0.5,
+        force_type: int = FORCE_MODE_TYPE,
+        damping: float = FORCE_MODE_DAMPING,
+        gain_scaling: float = FORCE_MODE_GAIN_SCALING,
     ) -> dict[str, Any]:
         """Start force mode (URScript ``force_mode`` semantics)."""
-        body = {
-            "task_frame": list(task_frame),
-            "selection": list(selection),
-            "wrench": list(wrench),
-            "type": force_type,
-            "limits": list(limits),
-            "damping": damping,
-            "gain_scaling": gain_scaling,
-        }
-        return await self.client.request(self.keys.service("start_force_mode"), body)
+        request = ForceModeRequest(
+            tuple(task_frame),
+            tuple(selection),
+            tuple(wrench),
+            tuple(limits),
+            force_type,
+            damping,
+            gain_scaling,
+        )
+        return await self.service("start_force_mode", request)
 
     async def end_force_mode(self) -> dict[str, Any]:
         """End force mode."""
-        return await self.client.request(self.keys.service("end_force_mode"), {})
+        return await self.service("end_force_mode")
 
     async def start_tool_contact(self) -> dict[str, Any]:
         """Arm tool-contact detection; the outcome comes as a ``tool_contact`` event."""
-        return await self.client.request(self.keys.service("start_tool_contact"), {})
+        return await self.service("start_tool_contact")
 
     async def end_tool_contact(self) -> dict[str, Any]:
         """End tool-contact detection."""
-        return await self.client.request(self.keys.service("end_tool_contact"), {})
+        return await self.service("end_tool_contact")
 
     def stream_velocities(self, velocities: Sequence[float]) -> None:
         """Publish one streaming velocity command (repeat faster than the deadman timeout)."""
@@ -595,7 +619,7 @@ class RobotClient:
 
     def _ensure_goal_subscription(self) -> None:
         if self._goal_sub is None:
-            self._goal_sub = self.client.subscribe(f"{self.keys.base}/goal/*/*", maxsize=10000)
+            self._goal_sub = self.client.subscribe(self.keys.goal_messages, maxsize=10000)
             self._pump = asyncio.get_running_loop().create_task(self._pump_goals(self._goal_sub))
             self.client._tasks.append(self._pump)
             self._watch_liveliness()

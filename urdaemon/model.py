@@ -16,6 +16,8 @@ __all__ = [
     "FORCE_MODE_DAMPING",
     "FORCE_MODE_GAIN_SCALING",
     "FORCE_MODE_TYPE",
+    "IO_SIZES",
+    "TOOL_VOLTAGES",
     "UR_JOINTS",
     "CommandMode",
     "CycleStatsRequest",
@@ -42,6 +44,13 @@ UR_JOINTS: tuple[str, ...] = (
     "wrist_3_joint",
 )
 """The six joint names of every UR arm, without the robot prefix."""
+
+
+IO_SIZES: dict[str, int] = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}
+"""Outputs (and inputs) of each kind a UR controller has: the state's IO lists have these lengths, and
+a ``set_io`` request names one of these kinds (analog outputs take 0..1, the others true or false)."""
+TOOL_VOLTAGES = (0, 12, 24)
+"""The tool voltages a ``set_tool_voltage`` request may ask for (V)."""
 
 
 class RobotMode(enum.IntEnum):
@@ -167,14 +176,14 @@ class RobotState:
     speed_scaling: float = 1.0
     """The effective scaling of trajectory time (slider × runtime scaling, 0..1)."""
     program_running: bool = False
-    digital_out: list[bool] = field(default_factory=lambda: [False] * 8)
-    configurable_out: list[bool] = field(default_factory=lambda: [False] * 8)
-    tool_out: list[bool] = field(default_factory=lambda: [False] * 2)
-    analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])
-    digital_in: list[bool] = field(default_factory=lambda: [False] * 8)
-    configurable_in: list[bool] = field(default_factory=lambda: [False] * 8)
-    tool_in: list[bool] = field(default_factory=lambda: [False] * 2)
-    analog_in: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    digital_out: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["digital"])
+    configurable_out: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["configurable"])
+    tool_out: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["tool"])
+    analog_out: list[float] = field(default_factory=lambda: [0.0] * IO_SIZES["analog"])
+    digital_in: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["digital"])
+    configurable_in: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["configurable"])
+    tool_in: list[bool] = field(default_factory=lambda: [False] * IO_SIZES["tool"])
+    analog_in: list[float] = field(default_factory=lambda: [0.0] * IO_SIZES["analog"])
     tool_voltage: int = 0
     payload_mass: float = 0.0
     payload_cog: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 
 from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
-from urdaemon.model import JointCommand, RobotState
+from urdaemon.model import IO_SIZES, JointCommand, RobotState
 
 __all__ = ["IO_KINDS", "Backend", "BackendStatistics"]
 
 log = logging.getLogger("urdaemon.backends")
 
-IO_KINDS = ("digital", "configurable", "tool", "analog")
+IO_KINDS = tuple(IO_SIZES)
 """Output kinds a ``set_io`` request may name."""
 
 

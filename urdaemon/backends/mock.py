@@ -14,11 +14,12 @@ from collections.abc import Callable, Sequence
 from urdaemon.backends.base import Backend
 from urdaemon.backends.clock import PeriodicClock
 from urdaemon.errors import BackendError, ConfigError
-from urdaemon.model import CommandMode, Lifecycle, RobotMode, SafetyMode
+from urdaemon.model import IO_SIZES, TOOL_VOLTAGES, CommandMode, Lifecycle, RobotMode, SafetyMode
 
 __all__ = ["MOCK_IO_SIZES", "MockBackend"]
 
-MOCK_IO_SIZES = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}
+MOCK_IO_SIZES = IO_SIZES
+"""The mock has a UR controller's outputs."""
 
 
 class MockBackend(Backend):
@@ -113,7 +114,7 @@ class MockBackend(Backend):
 
     async def set_tool_voltage(self, volts: int) -> None:
         """Store the tool voltage."""
-        if volts not in (0, 12, 24):
+        if volts not in TOOL_VOLTAGES:
             raise BackendError(f"tool voltage must be 0, 12 or 24 V, got {volts!r}")
         self.state.tool_voltage = volts
 

@@ -24,6 +24,8 @@ from urdaemon.model import (
     FORCE_MODE_DAMPING,
     FORCE_MODE_GAIN_SCALING,
     FORCE_MODE_TYPE,
+    IO_SIZES,
+    TOOL_VOLTAGES,
     RobotState,
 )
 
@@ -425,7 +427,7 @@ def decode_set_io(payload: bytes | None) -> tuple[str, int, float | bool]:
     _allowed(data, what, {"kind", "pin", "value"})
     kind, pin, value = data.get("kind"), data.get("pin"), data.get("value")
     if not isinstance(kind, str):
-        raise MessageError(f"{what}.kind: expected one of digital, configurable, tool, analog")
+        raise MessageError(f"{what}.kind: expected one of {', '.join(IO_SIZES)}")
     if isinstance(pin, bool) or not isinstance(pin, int):
         raise MessageError(f"{what}.pin: expected an integer")
     if isinstance(value, bool):
@@ -469,8 +471,10 @@ def decode_tool_voltage(payload: bytes | None) -> int:
     data = decode_message(payload, what)
     _allowed(data, what, {"volts"})
     volts = data.get("volts")
-    if isinstance(volts, bool) or volts not in (0, 12, 24):
-        raise MessageError(f"{what}.volts: must be 0, 12 or 24")
+    if isinstance(volts, bool) or volts not in TOOL_VOLTAGES:
+        raise MessageError(
+            f"{what}.volts: must be {', '.join(map(str, TOOL_VOLTAGES[:-1]))} or {TOOL_VOLTAGES[-1]}"
+        )
     return int(volts)
 
 

@@ -1,0 +1,213 @@
+"""The robot services are declared once (publish/services.py): the runtime's queryables and
+``service_names``, the client's calls and waits, the CLI's help and docs/keys.md's rows all follow
+from the one table (issue 15: adding a service touched six files).
+
+No Zenoh: the runtime is declared on a recording node, the client sends through a recording session.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.integration.conftest import TWO_MOCKS
+from urdaemon.backends.base import Backend
+from urdaemon.backends.mock import MockBackend
+from urdaemon.cell import parse_cell
+from urdaemon.cli import main
+from urdaemon.client import RobotClient
+from urdaemon.control import MotionController
+from urdaemon.daemon import describe_cell
+from urdaemon.errors import MessageError
+from urdaemon.model import (
+    CycleStatsRequest,
+    DashboardRequest,
+    ForceModeRequest,
+    SetIoRequest,
+    SetPayloadRequest,
+    SpeedSliderRequest,
+    ToolVoltageRequest,
+)
+from urdaemon.publish import codec, services
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import Matching
+from urdaemon.robot import RobotRuntime
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class RecordingNode:
+    """The node's declaring API, recording the keys of queryables and subscribers."""
+
+    def __init__(self) -> None:
+        self.queryables: dict[str, Any] = {}
+        self.subscribers: dict[str, Any] = {}
+
+    def publisher(self, key: str, **_: Any) -> Any:
+        return None
+
+    def matching(self, publisher: Any) -> Matching:
+        return Matching(False)
+
+    def queryable(self, key: str, handler: Any, **_: Any) -> None:
+        assert key not in self.queryables, f"{key} declared twice"
+        self.queryables[key] = handler
+
+    def subscriber(self, key: str, handler: Any, **_: Any) -> None:
+        self.subscribers[key] = handler
+
+    def liveliness_token(self, key: str) -> None:
+        pass
+
+
+class RecordingSession:
+    def __init__(self) -> None:
+        self.puts: list[tuple[str, bytes]] = []
+
+    def put(self, key: str, payload: bytes) -> None:
+        self.puts.append((key, payload))
+
+
+class RecordingClient:
+    """What ``RobotClient`` uses of ``Client``: records each request and answers ``ok``."""
+
+    def __init__(self) -> None:
+        self.session = RecordingSession()
+        self.requests: list[tuple[str, dict[str, Any], float]] = []
+
+    async def request(
+        self, key: str, body: dict[str, Any] | None = None, *, timeout: float
+    ) -> dict[str, Any]:
+        self.requests.append((key, dict(body or {}), timeout))
+        return {"ok": True}
+
+
+def declared_runtime() -> tuple[RobotRuntime, RecordingNode]:
+    cell = parse_cell(TWO_MOCKS, base_dir=ROOT / "configs")
+    limits = describe_cell(cell).limits["alice"]
+    backend = MockBackend("alice", limits.names, 500.0)
+    node = RecordingNode()
+    runtime = RobotRuntime(
+        cell.cell,
+        cell.robot("alice"),
+        backend,
+        MotionController(limits, period=backend.period),
+        node,  # type: ignore[arg-type]
+        cell.publish,
+    )
+    runtime.declare()
+    return runtime, node
+
+
+def test_the_runtime_answers_every_service_of_the_table_on_its_key() -> None:
+    runtime, node = declared_runtime()
+    assert runtime.service_names == frozenset(services.names())
+    declared = {key for key in node.queryables if "/service/" in key}
+    assert declared == {runtime.keys.service(name) for name in services.names()}
+
+
+def test_the_freedrive_command_goes_where_the_runtime_listens() -> None:
+    """The key was built by hand in client.py and robot.py; it is one RobotKeys property now."""
+    runtime, node = declared_runtime()
+    client = RecordingClient()
+    RobotClient(client, runtime.keys).freedrive(True)  # type: ignore[arg-type]
+    [(key, payload)] = client.session.puts
+    assert key == runtime.keys.command_freedrive == "testcell/alice/command/freedrive"
+    assert key in node.subscribers
+    assert codec.decode_freedrive(payload) is True
+
+
+FORCE = ((0.0,) * 6, (0, 0, 1, 0, 0, 0), (0.0, 0.0, -5.0, 0.0, 0.0, 0.0), (0.1,) * 6)
+CALLS: list[tuple[str, str, tuple[Any, ...], object]] = [
+    ("set_io", "set_io", ("digital", 3, True), SetIoRequest("digital", 3, True)),
+    ("set_io", "set_io", ("analog", 1, 0.25), SetIoRequest("analog", 1, 0.25)),
+    ("set_payload", "set_payload", (2.0, (0.1, 0.0, -0.2)), SetPayloadRequest(2.0, (0.1, 0.0, -0.2))),
+    ("set_payload", "set_payload", (1.5,), SetPayloadRequest(1.5)),
+    ("set_speed_slider", "set_speed_slider", (0.5,), SpeedSliderRequest(0.5)),
+    ("dashboard", "dashboard", ("power on",), DashboardRequest("power on")),
+    ("set_tool_voltage", "set_tool_voltage", (24,), ToolVoltageRequest(24)),
+    ("start_force_mode", "start_force_mode", FORCE, ForceModeRequest(*FORCE)),
+    ("cycle_stats", "cycle_stats", (), CycleStatsRequest(False)),
+    ("startup", "startup", (), None),
+    ("resend_program", "resend_program", (), None),
+    ("hand_back_control", "hand_back_control", (), None),
+    ("zero_ft_sensor", "zero_ft_sensor", (), None),
+    ("end_force_mode", "end_force_mode", (), None),
+    ("start_tool_contact", "start_tool_contact", (), None),
+    ("end_tool_contact", "end_tool_contact", (), None),
+    ("stop", "stop", (), None),
+]
+
+
+@pytest.mark.parametrize(("method", "name", "args", "expected"), CALLS)
+async def test_each_named_client_call_sends_what_its_service_decodes(
+    method: str, name: str, args: tuple[Any, ...], expected: object
+) -> None:
+    keys = RobotKeys("testcell", "alice")
+    client = RecordingClient()
+    await getattr(RobotClient(client, keys), method)(*args)  # type: ignore[arg-type]
+    [(key, body, timeout)] = client.requests
+    entry = services.spec(name)
+    assert key == keys.service(name)
+    assert timeout == entry.timeout
+    assert entry.decode(codec.encode(body)) == expected
+
+
+def test_every_named_service_has_a_client_call() -> None:
+    assert {name for _, name, _, _ in CALLS} == set(services.names())
+
+
+def test_the_client_waits_as_it_did_for_each_service() -> None:
+    waits = {name: services.spec(name).timeout for name in services.names()}
+    assert waits.pop("startup") == 60.0
+    assert waits.pop("dashboard") == 30.0
+    assert set(waits.values()) == {5.0}
+
+
+@pytest.mark.parametrize("name", [entry.name for entry in services.SERVICES if entry.payloadless])
+def test_a_service_without_arguments_refuses_garbage_naming_it(name: str) -> None:
+    decode = services.spec(name).decode
+    for nothing in (None, b"", b"{}", b'{"v": 1}'):
+        assert decode(nothing) is None
+    with pytest.raises(MessageError, match=rf"^{name} takes no arguments, but got: unknown field\(s\) now$"):
+        decode(b'{"now": 1}')
+
+
+def test_stop_is_never_refused_for_its_payload() -> None:
+    for anything in (None, b"", b"garbage", b'{"now": 1}'):
+        assert services.STOP.decode(anything) is None
+
+
+def test_every_service_names_a_backend_method_it_needs() -> None:
+    needs = {entry.name: entry.needs for entry in (*services.SERVICES, services.STOP)}
+    for name, method in needs.items():
+        assert method is None or callable(getattr(Backend, method, None)), name
+
+
+def test_a_request_is_sent_with_the_message_field_names() -> None:
+    body = codec.request_body(ForceModeRequest(*FORCE))
+    assert body["type"] == 2
+    assert "force_type" not in body
+    assert body["selection"] == [0, 0, 1, 0, 0, 0]
+    assert codec.request_body(None) == {}
+
+
+def test_docs_list_the_services_as_the_table_declares_them() -> None:
+    doc = (ROOT / "docs" / "keys.md").read_text(encoding="utf-8")
+    rows = [line for line in doc.splitlines() if line.startswith("| `<cell>/<robot>/service/")]
+    assert rows == services.markdown_rows()
+
+
+def test_the_cli_lists_every_service_with_its_request(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["service", "-h"])
+    assert exit_info.value.code == 0
+    shown = capsys.readouterr().out
+    for entry in (*services.SERVICES, services.STOP):
+        assert f"  {entry.name}: {entry.summary} (" in shown
+    assert (
+        "start_force_mode: start force mode (URScript force_mode semantics) (request: task_frame, " in shown
+    )
+    assert "type? (default 2)" in shown
