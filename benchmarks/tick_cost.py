@@ -37,7 +37,7 @@ Command = Callable[[MotionController, RobotState, int, float], None]
 def _goal(controller: MotionController, state: RobotState, k: int, now: float) -> None:
     if k == 0:
         points = [
-            TrajectoryPoint(positions=tuple(p + 0.5 for p in HOME), time_from_start=10.0),
+            TrajectoryPoint(positions=tuple(p + 0.5 for p in HOME), time_from_start=CYCLES * PERIOD),
             TrajectoryPoint(positions=HOME, time_from_start=2.0 * CYCLES * PERIOD),
         ]
         controller.accept_trajectory("bench", UR_JOINTS, points, state, now)
