@@ -17,6 +17,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from urdaemon.model import (
+    FORCE_MODE_DAMPING,
+    FORCE_MODE_GAIN_SCALING,
+    FORCE_MODE_TYPE,
+    IO_SIZES,
+    TOOL_VOLTAGES,
     CycleStatsRequest,
     DashboardRequest,
     ForceModeRequest,
@@ -26,6 +31,7 @@ from urdaemon.model import (
     ToolVoltageRequest,
 )
 from urdaemon.publish import codec
+from urdaemon.publish.codec import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
 
 if TYPE_CHECKING:
     from urdaemon.backends.base import Backend
@@ -198,7 +204,8 @@ SERVICES: tuple[ServiceSpec, ...] = (
         _set_io,
         needs="set_io",
         request_doc=(
-            "`kind` (`digital`, `configurable`, `tool`, `analog`), `pin`, `value` (bool, or 0..1 for analog)"
+            f"`kind` ({', '.join(f'`{kind}`' for kind in IO_SIZES)}), `pin`, "
+            "`value` (bool, or 0..1 for analog)"
         ),
         reply_doc='`{"ok": true}` or `{"ok": false, "reason": …}`',
     ),
@@ -209,7 +216,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         lambda payload: SetPayloadRequest(*codec.decode_set_payload(payload)),
         _set_payload,
         needs="set_payload",
-        request_doc="`mass` (kg, 0..35), `cog` [x, y, z] (m, each within ±1)",
+        request_doc=f"`mass` (kg, 0..{MAX_PAYLOAD_KG:g}), `cog` [x, y, z] (m, each within ±{MAX_COG_M:g})",
         reply_doc=_AS_ABOVE,
     ),
     ServiceSpec(
@@ -280,7 +287,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         lambda payload: ToolVoltageRequest(codec.decode_tool_voltage(payload)),
         _set_tool_voltage,
         needs="set_tool_voltage",
-        request_doc="`volts` (0, 12, 24)",
+        request_doc=f"`volts` ({', '.join(map(str, TOOL_VOLTAGES))})",
         reply_doc="",
     ),
     ServiceSpec(
@@ -291,9 +298,11 @@ SERVICES: tuple[ServiceSpec, ...] = (
         _start_force_mode,
         needs="force_mode",
         request_doc=(
-            "`task_frame` [6] (m, rad; each within ±10), `selection` [6 × 0/1], `wrench` [6] (N, Nm; "
-            "each within ±1000), `limits` [6] (each 0..10), `type`? (1–3, default 2), `damping`? "
-            "(0..1, 0.025), `gain_scaling`? (0..2, 0.5)"
+            f"`task_frame` [6] (m, rad; each within ±{MAX_FORCE_MODE['task_frame']:g}), "
+            f"`selection` [6 × 0/1], `wrench` [6] (N, Nm; each within ±{MAX_FORCE_MODE['wrench']:g}), "
+            "`limits` [6] (each "
+            f"0..{MAX_FORCE_MODE['limits']:g}), `type`? (1–3, default {FORCE_MODE_TYPE}), `damping`? "
+            f"(0..1, {FORCE_MODE_DAMPING:g}), `gain_scaling`? (0..2, {FORCE_MODE_GAIN_SCALING:g})"
         ),
         reply_doc="URScript `force_mode` semantics (UR)",
     ),
