@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import inspect
 import socket
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol, TypeVar, cast
@@ -183,14 +184,14 @@ class Shell(asyncio.Protocol):
                     return
                 pending = self.on_event(event)
                 if pending is not None:
-                    self._hold(self._finish(pending, events[index + 1 :]))
+                    self._hold(pending, events[index + 1 :])
                     return
         except (ProtocolError, ConnectionError) as err:
             self.fail(err)
             return
         self.flush()
         if self._backlog or (self.paced and self._writable is not None and not self._writable.done()):
-            self._hold(self._finish(None, []))
+            self._hold(None, [])
 
     def receive(self, data: bytes) -> list[Any]:
         """The codec's events for ``data`` (a subclass may take a faster path)."""
@@ -210,12 +211,12 @@ class Shell(asyncio.Protocol):
             self.fail(err)
             return None
 
-    def _hold(self, work: Awaitable[None]) -> None:
-        """Stop reading while ``work`` runs (the events after it, then the backlog, wait for it)."""
+    def _hold(self, pending: Awaitable[Any] | None, events: list[Any]) -> None:
+        """Stop reading until ``pending`` is done, then ``events``, then the backlog (in a task)."""
         if self.transport is not None:
             self.transport.pause_reading()
-        self._work = asyncio.ensure_future(work)
-        self._work.add_done_callback(self._released)
+        self._work = asyncio.ensure_future(self._finish(pending, events))
+        self._work.add_done_callback(lambda work: self._released(pending))
 
     async def _finish(self, pending: Awaitable[Any] | None, events: list[Any]) -> None:
         try:
@@ -250,8 +251,10 @@ class Shell(asyncio.Protocol):
                 await pending
             self.flush()
 
-    def _released(self, work: asyncio.Task[None]) -> None:
+    def _released(self, pending: Awaitable[Any] | None) -> None:
         self._work = None
+        if inspect.iscoroutine(pending):
+            pending.close()  # never started if the connection ended first: not an error
         if self.transport is not None and not self.closed.done():
             self.transport.resume_reading()
 

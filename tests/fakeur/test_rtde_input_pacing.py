@@ -64,6 +64,7 @@ async def test_two_input_packages_in_one_cycle_reach_the_program_in_turn() -> No
     async with manual_fake(powered=True) as (controller, clock):
         link = await _mirroring(controller, clock)
         await _arrive_together(link, [7, 8])
+        assert controller.input_registers.ints[0] == 7  # the first applies at once, as before
         clock.turn(1)
         assert controller.arm.io.registers_int[0] == 7
         clock.turn(1)
@@ -74,15 +75,16 @@ async def test_two_input_packages_in_one_cycle_reach_the_program_in_turn() -> No
 
 
 async def test_a_client_far_ahead_loses_no_package_and_catches_up_within_the_bound() -> None:
-    """More packages than the queue holds: the oldest are applied at once to make room, the rest one
-    per cycle, so the program reaches the latest value within MAX_PENDING_INPUTS cycles, in order."""
+    """More packages than the queue holds: the first is applied at once, the oldest waiting ones too
+    as room is needed, the rest one per cycle, so the program sees the last MAX_PENDING_INPUTS + 1 in
+    order and reaches the latest within that many cycles."""
     async with manual_fake(powered=True) as (controller, clock):
         link = await _mirroring(controller, clock)
         values = list(range(1, MAX_PENDING_INPUTS + 6))
         await _arrive_together(link, values)
         seen = []
-        for _ in range(MAX_PENDING_INPUTS + 2):
+        for _ in range(MAX_PENDING_INPUTS + 3):
             clock.turn(1)
             seen.append(controller.arm.io.registers_int[0])
-        assert seen == values[-MAX_PENDING_INPUTS:] + [values[-1]] * 2
+        assert seen == values[-MAX_PENDING_INPUTS - 1 :] + [values[-1]] * 2
         link.close()

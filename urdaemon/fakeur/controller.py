@@ -23,7 +23,7 @@ and scripts are compiled off the event loop (``fakeur.programs``).
 
 The controller composes one job per module: ``programs`` (the programs it runs), ``rtde_service``
 (30004), ``reports`` (what it reports of the arm), ``dashboard_answers`` (29999's replies and
-``play``), ``connections`` (guarded connections and writes), ``clock`` (the shared clock). This
+``play``), ``connections`` (each client's shell and the writes), ``clock`` (the shared clock). This
 module keeps the robot's life: the ports, the cycle, the script ports and the controller commands.
 """
 
@@ -32,7 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,7 @@ from typing import Any
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.clock import SharedClock
-from urdaemon.fakeur.connections import READ_CHUNK, Connections, paced
+from urdaemon.fakeur.connections import Connections, ServiceShell
 from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer, dashboard_reply
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.fakeur.programs import Programs, RunningScript
@@ -52,6 +52,7 @@ from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import realtime as rt
 from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Shell, serve
 
 __all__ = ["FakeController", "FakePorts", "SharedClock"]
 
@@ -100,7 +101,6 @@ def _serving_parts(
         versions=rtde_versions,
         input_registers=fake.input_registers,
         input_times=programs.input_times,
-        write=connections.write,
     )
     return connections, programs, rtde
 
@@ -148,12 +148,11 @@ class FakeController:
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
         self.connections, self.programs, self.rtde = _serving_parts(self, address, rtde_versions)
         """Its clients' connections, the programs it runs and the RTDE interface."""
-        self._write = self.connections.write
         self._release_when_idle = False
         """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
-        self._realtime_clients: list[tuple[rt.RealtimeConnection, asyncio.StreamWriter]] = []
+        self._realtime_clients: list[ServiceShell] = []
         self._servers: list[asyncio.Server] = []
-        self._state_clients: list[tuple[prim.PrimaryConnection, asyncio.StreamWriter, str]] = []
+        self._state_clients: list[ServiceShell] = []
         self._writers = self.connections.writers
         self._next_state = 0.0
         self._clock: asyncio.Task[None] | None = None
@@ -175,18 +174,15 @@ class FakeController:
 
     async def start(self) -> None:
         """Listen on every port and start the controller clock."""
-        handlers = (
-            ("dashboard", self.ports.dashboard, self._serve_dashboard),
-            ("primary", self.ports.primary, self._serve_primary),
-            ("secondary", self.ports.secondary, self._serve_secondary),
-            ("realtime", self.ports.realtime, self._serve_realtime),
-            ("rtde", self.ports.rtde, self._serve_rtde),
+        shells: tuple[tuple[int, Callable[[], Shell]], ...] = (
+            (self.ports.dashboard, self._dashboard_shell),
+            (self.ports.primary, lambda: self._state_shell("primary")),
+            (self.ports.secondary, lambda: self._state_shell("secondary")),
+            (self.ports.realtime, self._realtime_shell),
+            (self.ports.rtde, lambda: self.rtde.shell(self.connections, self._wake)),
         )
-        for service, port, handler in handlers:
-            server = await asyncio.start_server(
-                self.connections.guard(service, handler), self.address, port, reuse_address=True
-            )
-            self._servers.append(server)
+        for port, shell in shells:
+            self._servers.append(await serve(shell, self.address, port))
         self._clock = asyncio.get_running_loop().create_task(self._run_clock())
         log.info(
             "fake %s (controller %s) on %s",
@@ -307,8 +303,6 @@ class FakeController:
     def _cycle(self) -> None:
         arm, dt = self.arm, self.step_time
         programs = self.programs
-        if self.rtde.waiting:
-            self.rtde.apply_due()
         if programs.main is not None or programs.secondary:
             programs.step()
         if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:
@@ -316,6 +310,7 @@ class FakeController:
             arm.brake_release()
         arm.step(dt)
         self.cycles += 1
+        self.rtde.after_cycle()
         now = arm.timestamp
         if now < self.faults.stalled_until:
             return
@@ -327,84 +322,70 @@ class FakeController:
             self._next_state = now + STATE_PERIOD_S
             if self._state_clients:
                 state = robot_state(arm, self.model, self.controller_version)
-                for conn, writer, service in self._state_clients:
-                    self._send_primary(conn, writer, service, state)
+                for shell in self._state_clients:
+                    self._send_primary(shell, state)
 
-    # ---- primary (30001) and secondary (30002) ------------------------------------------------------
+    # ---- primary (30001), secondary (30002) and real-time (30003): the script ports ------------------
 
-    async def _serve_primary(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await self._serve_state(reader, writer, "primary")
+    def _state_shell(self, service: str) -> ServiceShell:
+        """A primary or secondary client: VERSION first, then the state on the controller's 10 Hz grid."""
 
-    async def _serve_secondary(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await self._serve_state(reader, writer, "secondary")
+        def opened(shell: ServiceShell) -> None:
+            major, minor, bugfix, build = self.controller_version
+            version = prim.VersionMessage("URControl", major, minor, bugfix, build, "01-01-2026, 00:00:00")
+            self._send_primary(shell, version)
+            self._state_clients.append(shell)
+            self._wake()  # the client is connected (and listed)
 
-    async def _serve_state(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, service: str
-    ) -> None:
-        conn = prim.PrimaryConnection(Side.ROBOT)
-        major, minor, bugfix, build = self.controller_version
-        self._send_primary(
-            conn,
-            writer,
+        return self.connections.shell(
             service,
-            prim.VersionMessage("URControl", major, minor, bugfix, build, "01-01-2026, 00:00:00"),
+            prim.PrimaryConnection(Side.ROBOT),
+            self._on_script_port,
+            on_open=opened,
+            on_end=self._state_clients.remove,
         )
-        entry = (conn, writer, service)
-        self._state_clients.append(entry)  # the state follows on the controller's 10 Hz grid
-        try:
-            await self._read_scripts(reader, writer, conn)
-        finally:
-            self._state_clients.remove(entry)
 
-    async def _read_scripts(
-        self,
-        reader: asyncio.StreamReader,
-        writer: asyncio.StreamWriter,
-        conn: prim.PrimaryConnection | rt.RealtimeConnection,
-    ) -> None:
+    def _realtime_shell(self) -> ServiceShell:
+        """A real-time client: the state every controller cycle."""
+
+        def opened(shell: ServiceShell) -> None:
+            self._realtime_clients.append(shell)
+            self._wake()
+
+        conn = rt.RealtimeConnection(Side.ROBOT, self.controller_version)
+        return self.connections.shell(
+            "realtime", conn, self._on_script_port, on_open=opened, on_end=self._realtime_clients.remove
+        )
+
+    def _on_script_port(self, shell: ServiceShell, event: Any) -> Awaitable[None] | None:
         """Hand the scripts a client sends to the programs, in their order: each is compiled off the
         event loop, then started. Scripts get no replies, so reading never waits on the client reading
         (ur_rtde reads nothing of 30003, where it sends its scripts); it waits while too many scripts
         wait to be compiled (TCP flow control holds the client back meanwhile)."""
-        self._wake()  # the client is connected (and listed)
-        while data := await reader.read(READ_CHUNK):
-            for event in conn.receive_data(data):
-                if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
-                    self._on_script(event)
-                    await self.programs.room()
-            self._wake()
-
-    # ---- real-time interface (30003) ---------------------------------------------------------------
-
-    async def _serve_realtime(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        conn = rt.RealtimeConnection(Side.ROBOT, self.controller_version)
-        entry = (conn, writer)
-        self._realtime_clients.append(entry)  # the state follows every controller cycle
-        try:
-            await self._read_scripts(reader, writer, conn)
-        finally:
-            self._realtime_clients.remove(entry)
+        self._wake()
+        if isinstance(event, prim.CommandReceived | prim.ProgramReceived):
+            self._on_script(event)
+            return self.programs.room()
+        return None
 
     def _send_realtime(self) -> None:
         state = self._realtime_state()
-        for conn, writer in self._realtime_clients:
-            conn.send(state)
-            self._write("realtime", writer, conn.data_to_send())
+        for shell in self._realtime_clients:
+            shell.codec.send(state)
+            shell.flush()
 
     def _realtime_state(self) -> rt.RealtimeState:
         return realtime_state(self.arm)
 
-    def _send_primary(
-        self, conn: prim.PrimaryConnection, writer: asyncio.StreamWriter, service: str, message: Any
-    ) -> None:
-        conn.send(message)
-        self._write(service, writer, conn.data_to_send())
+    def _send_primary(self, shell: Shell, message: Any) -> None:
+        shell.codec.send(message)
+        shell.flush()
 
     def _broadcast(self, message: Any) -> None:
         """Send a robot message to every primary client (the secondary interface gets only state)."""
-        for conn, writer, service in self._state_clients:
-            if service == "primary":
-                self._send_primary(conn, writer, service, message)
+        for shell in self._state_clients:
+            if shell.name == "primary":
+                self._send_primary(shell, message)
 
     def _on_script(self, event: prim.CommandReceived | prim.ProgramReceived) -> None:
         if isinstance(event, prim.CommandReceived):
@@ -471,36 +452,30 @@ class FakeController:
 
     # ---- dashboard (29999) ------------------------------------------------------------------------------
 
-    async def _serve_dashboard(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        conn = dash.DashboardConnection(Side.ROBOT)
-        conn.send(dash.Banner())
-        self._write("dashboard", writer, conn.data_to_send())
-        self._wake()
-        while data := await reader.read(READ_CHUNK):
-            for event in conn.receive_data(data):
-                if isinstance(event, dash.CommandReceived):
-                    reply = await dashboard_answer(self, event.command)
-                elif isinstance(event, dash.UnknownCommand):
-                    reply = dash.unknown_command_text(event.line)
-                else:  # the robot side receives nothing else
-                    continue
-                conn.send(dash.ReplyLine(reply))
-                self._write("dashboard", writer, conn.data_to_send())
-                await asyncio.sleep(0)  # one command per turn: a flood of them delays no cycle
-                if isinstance(event, dash.CommandReceived) and isinstance(
-                    event.command, dash.Quit | dash.Shutdown
-                ):
-                    await writer.drain()
-                    return
-            await self._paced(writer, data)
+    def _dashboard_shell(self) -> ServiceShell:
+        """A dashboard client: the banner, then one reply per command line, one command per loop turn."""
 
-    # ---- RTDE (30004) ------------------------------------------------------------------------------------
+        def opened(shell: ServiceShell) -> None:
+            shell.send(dash.Banner())
+            self._wake()
 
-    async def _serve_rtde(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self._wake()
-        await self.rtde.serve(reader, writer, self._paced)
+        return self.connections.shell(
+            "dashboard", dash.DashboardConnection(Side.ROBOT), self._on_dashboard, on_open=opened, paced=True
+        )
 
-    async def _paced(self, writer: asyncio.StreamWriter, data: bytes) -> None:
-        """``paced``, once what was read is handled: a waiting ``until`` looks again."""
+    def _on_dashboard(self, shell: ServiceShell, event: Any) -> Awaitable[None] | None:
+        if isinstance(event, dash.CommandReceived | dash.UnknownCommand):
+            return self._answer(shell, event)
+        return None  # the robot side receives nothing else
+
+    async def _answer(self, shell: ServiceShell, event: dash.CommandReceived | dash.UnknownCommand) -> None:
+        if isinstance(event, dash.CommandReceived):
+            reply = await dashboard_answer(self, event.command)
+        else:
+            reply = dash.unknown_command_text(event.line)
+        shell.send(dash.ReplyLine(reply))
         self._wake()
-        await paced(writer, data)
+        await asyncio.sleep(0)  # one command per turn: a flood of them delays no cycle
+        if isinstance(event, dash.CommandReceived) and isinstance(event.command, dash.Quit | dash.Shutdown):
+            await shell.drain()
+            shell.close()

@@ -7,16 +7,16 @@ RTDE input registers (``input_*_register_X`` and the words ``input_bit_registers
 ``32_to_63``), and note when each variable last arrived (what a program's RTDE watchdogs check). An
 input variable belongs to the first client that sets it up (IN_USE for the others).
 
-Inputs are taken the way a controller takes them, once per cycle: each client's input packages wait
-in arrival order and ``apply_due`` (called at the start of every controller cycle, before the
-programs step) applies at most one per client. So a fake that was held up and finds two packages of
-one client waiting (ur_rtde's speedj and its first watchdog kick) lets its program see each in its
-own cycle, as the cycles a controller would have run in that time would have.
+Inputs are taken the way a controller takes them, once per cycle: between two steps of the programs
+at most one input package of each client is applied. The first to arrive applies at once; the
+ones after it wait in arrival order, and ``after_cycle`` (called at the end of every controller
+cycle) applies the oldest waiting one of each client. So a fake that was held up and finds two
+packages of one client (ur_rtde's speedj and its first watchdog kick) lets its program see each in
+a cycle of its own, as the cycles a controller would have run in that time would have.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 from collections import deque
@@ -26,6 +26,7 @@ from typing import Any
 
 from urdaemon.errors import ProtocolError
 from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.connections import Connections, ServiceShell
 from urdaemon.fakeur.reports import output_getter
 from urdaemon.fakeur.urscript.host import InputRegisters
 from urdaemon.protocols import rtde
@@ -36,9 +37,6 @@ __all__ = ["MAX_PENDING_INPUTS", "RtdeService"]
 
 log = logging.getLogger("urdaemon.fakeur")
 
-Write = Callable[[str, asyncio.StreamWriter, bytes], None]
-"""The controller's guarded write: (service, writer, data)."""
-Paced = Callable[[asyncio.StreamWriter, bytes], Any]
 
 MAX_PENDING_INPUTS = 8
 """Input packages of one client waiting for their cycle (a model parameter: 16 ms at 500 Hz). When a
@@ -49,8 +47,8 @@ and the lag stays bounded, at the cost of the program missing that package's own
 
 @dataclass
 class _RtdeClient:
+    shell: ServiceShell
     conn: rtde.RtdeConnection
-    writer: asyncio.StreamWriter
     period: float = 0.0
     next_due: float = 0.0
     streaming: bool = False
@@ -58,6 +56,8 @@ class _RtdeClient:
     inputs: dict[int, tuple[str, ...]] = field(default_factory=dict)
     pending: deque[dict[str, Any]] = field(default_factory=deque)
     """Input packages received and not yet applied, oldest first (one is applied per cycle)."""
+    applied_in: int = -1
+    """The cycle in which its latest input package was applied (``RtdeService.cycle``)."""
 
 
 class RtdeService:
@@ -73,7 +73,6 @@ class RtdeService:
         versions: tuple[int, ...],
         input_registers: InputRegisters,
         input_times: dict[str, float],
-        write: Write,
     ) -> None:
         self.arm = arm
         self.address = address
@@ -82,31 +81,42 @@ class RtdeService:
         self.versions = versions
         self.input_registers = input_registers
         self.input_times = input_times
-        self.write = write
         self.clients: list[_RtdeClient] = []
         """The clients that stream (or streamed and are still connected)."""
         self.waiting: list[_RtdeClient] = []
         """The clients with input packages waiting for a cycle."""
+        self.cycle = 0
+        """Controller cycles ended (``after_cycle``): inputs applied in one are seen by the next step."""
         self.input_owner: dict[str, _RtdeClient] = {}
 
-    async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, paced: Paced) -> None:
-        conn = rtde.RtdeConnection(Side.ROBOT)
-        client = _RtdeClient(conn, writer)
-        try:
-            while data := await reader.read(4096):
-                for event in conn.receive_data(data):
-                    self._on_event(client, event)
-                self.write("rtde", writer, conn.data_to_send())
-                await paced(writer, data)
-        finally:
-            client.streaming = False
-            client.pending.clear()
-            with contextlib.suppress(ValueError):
-                self.clients.remove(client)
-            with contextlib.suppress(ValueError):
-                self.waiting.remove(client)
-            for name in [n for n, owner in self.input_owner.items() if owner is client]:
-                del self.input_owner[name]
+    def shell(self, connections: Connections, on_read: Callable[[], None]) -> ServiceShell:
+        """The shell of one new client connection (``on_read`` after each request handled)."""
+        clients: dict[ServiceShell, _RtdeClient] = {}
+
+        def opened(shell: ServiceShell) -> None:
+            clients[shell] = _RtdeClient(shell, shell.codec)
+            on_read()
+
+        def on_event(shell: ServiceShell, event: Any) -> None:
+            self._on_event(clients[shell], event)
+            on_read()
+
+        def ended(shell: ServiceShell) -> None:
+            self._forget(clients.pop(shell))
+
+        return connections.shell(
+            "rtde", rtde.RtdeConnection(Side.ROBOT), on_event, on_open=opened, on_end=ended, paced=True
+        )
+
+    def _forget(self, client: _RtdeClient) -> None:
+        client.streaming = False
+        client.pending.clear()
+        with contextlib.suppress(ValueError):
+            self.clients.remove(client)
+        with contextlib.suppress(ValueError):
+            self.waiting.remove(client)
+        for name in [n for n, owner in self.input_owner.items() if owner is client]:
+            del self.input_owner[name]
 
     def send_due(self, now: float) -> None:
         """Send every streaming client whose next output package is due at controller time ``now``."""
@@ -118,14 +128,23 @@ class RtdeService:
                     client.next_due = now + client.period
                 self._send(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
 
-    def apply_due(self) -> None:
-        """One controller cycle's inputs: the oldest waiting package of each client, applied."""
-        for client in self.waiting:
-            self.apply_inputs(client.pending.popleft())
-        self.waiting = [client for client in self.waiting if client.pending]
+    def after_cycle(self) -> None:
+        """A controller cycle ended (its programs stepped): the oldest waiting input package of each
+        client is applied, for the next step to see."""
+        self.cycle += 1
+        if self.waiting:
+            for client in self.waiting:
+                client.applied_in = self.cycle
+                self.apply_inputs(client.pending.popleft())
+            self.waiting = [client for client in self.waiting if client.pending]
 
     def _receive_inputs(self, client: _RtdeClient, values: dict[str, Any]) -> None:
-        """Queue one input package for its cycle (the oldest applied at once when the queue is full)."""
+        """Apply one input package now if none of this client's was applied since the last step, else
+        queue it for a later cycle (the oldest waiting one applied at once when the queue is full)."""
+        if not client.pending and client.applied_in != self.cycle:
+            client.applied_in = self.cycle
+            self.apply_inputs(values)
+            return
         if len(client.pending) >= MAX_PENDING_INPUTS:
             self.apply_inputs(client.pending.popleft())
         if not client.pending:
@@ -138,7 +157,7 @@ class RtdeService:
         except ProtocolError as err:
             log.info("%s rtde: not sent: %s", self.address, err)
             return
-        self.write("rtde", client.writer, client.conn.data_to_send())
+        client.shell.flush()
 
     def _on_event(self, client: _RtdeClient, event: Any) -> None:
         conn = client.conn
