@@ -156,7 +156,7 @@ class MotionController:
 
     @property
     def mode(self) -> str:
-        """What the controller is doing: idle, goal, stream_position, stream_velocity or stopping."""
+        """What runs: idle, goal, stream_position, stream_velocity, stopping or external (passthrough)."""
         return self._mode.value
 
     def statistics(self) -> ControllerStatistics:

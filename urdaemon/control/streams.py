@@ -4,7 +4,7 @@ Owns the newest stream target, the braking near the position limits and the dead
 stream brakes a joint whose freshly planned path would leave its limits, or that passed its target and
 coasts on toward a limit it could no longer stop before; a velocity stream latches a joint's target to
 zero once it must brake, until the client stops asking to go that way. Far from the limits (beyond
-``safe_distance``, the longest stop from any admissible state) none of this is checked. The deadman:
+the safe distance, the longest stop from any admissible state) none of this is checked. The deadman:
 a stream whose last command is older than the timeout has ended; the controller then stops it.
 Streams run in real time: the speed scaling does not slow them (the client owns their timing).
 """
@@ -53,22 +53,22 @@ class StreamFollower:
         "_inp",
         "_jmax",
         "_latch",
+        "_limits",
         "_lo",
         "_names",
         "_online",
         "_out",
         "_period",
         "_pos",
+        "_safe_distance",
+        "_target",
+        "_target_velocity",
         "_update",
         "_vel",
         "_velocity",
         "_vmax",
         "_zeros",
         "last_command",
-        "limits",
-        "safe_distance",
-        "target",
-        "target_velocity",
         "timeout",
     )
 
@@ -76,7 +76,7 @@ class StreamFollower:
         self, limits: JointLimits, period: float, timeout: float, online: OnlineGenerator, setpoint: Setpoint
     ) -> None:
         n = limits.dof
-        self.limits = limits
+        self._limits = limits
         self.timeout = timeout
         """s: a stream without a command for longer has ended (the deadman)."""
         self._names = limits.names
@@ -86,7 +86,7 @@ class StreamFollower:
         self._vmax = list(limits.max_velocity)
         self._amax = list(limits.max_acceleration)
         self._jmax = list(limits.max_jerk)
-        self.safe_distance = [
+        self._safe_distance = [
             stopping_distance(v + a * period, a, a, j) + 2.0 * v * period + 1e-6
             for v, a, j in zip(self._vmax, self._amax, self._jmax, strict=True)
         ]
@@ -101,9 +101,9 @@ class StreamFollower:
         self._vel = setpoint.vel
         self._acc = setpoint.acc
         self._zeros = setpoint.zeros
-        self.target = [0.0] * n
+        self._target = [0.0] * n
         """The position stream's target."""
-        self.target_velocity = [0.0] * n
+        self._target_velocity = [0.0] * n
         """The position stream's velocity at the target (zero where coasting on could not stop)."""
         self._velocity = [0.0] * n
         self._effective = [0.0] * n
@@ -135,22 +135,22 @@ class StreamFollower:
         """
         target = apply_permutation(perm, positions, "positions")
         check_finite("positions", target, self._names)
-        check_positions_within(self.limits, target, "stream target")
+        check_positions_within(self._limits, target, "stream target")
         tvel = self._zeros
         if velocities is not None:
             given = apply_permutation(perm, velocities, "velocities")
             check_finite("velocities", given, self._names)
-            check_velocities_within(self.limits, given, "stream target")
+            check_velocities_within(self._limits, given, "stream target")
             tvel = self._stoppable(target, list(given))
         self._start(start)
-        self.target[:] = target
-        self.target_velocity[:] = tvel
-        self._online.toward_position(self.target, tvel)
+        self._target[:] = target
+        self._target_velocity[:] = tvel
+        self._online.toward_position(self._target, tvel)
         self.last_command = now
 
     def _stoppable(self, target: Sequence[float], tvel: list[float]) -> list[float]:
         """``tvel`` with zero where coasting on from the target could not stop inside the limits."""
-        safe = self.safe_distance
+        safe = self._safe_distance
         for i, v in enumerate(tvel):
             q = target[i]
             if v == 0.0 or (q + safe[i] < self._hi[i] and q - safe[i] > self._lo[i]):
@@ -176,7 +176,7 @@ class StreamFollower:
         """
         target = apply_permutation(perm, velocities, "velocities")
         check_finite("velocities", target, self._names)
-        check_velocities_within(self.limits, target, "stream target")
+        check_velocities_within(self._limits, target, "stream target")
         self._start(start)
         if first:
             self._online.toward_velocity(None)
@@ -238,9 +238,9 @@ class StreamFollower:
         pos = self._pos
         vel = self._vel
         acc = self._acc
-        target = self.target
-        target_vel = self.target_velocity
-        safe = self.safe_distance
+        target = self._target
+        target_vel = self._target_velocity
+        safe = self._safe_distance
         for i in range(len(pos)):
             p = pos[i]
             q = target[i]
@@ -271,8 +271,8 @@ class StreamFollower:
         """Brake joints that passed their stream target and coast on toward a limit they must not pass."""
         pos = self._pos
         vel = self._vel
-        target = self.target
-        safe = self.safe_distance
+        target = self._target
+        safe = self._safe_distance
         braking = self._braking
         bad: list[int] | None = None
         for i in range(len(pos)):
@@ -307,7 +307,7 @@ class StreamFollower:
         latch = self._latch
         pos = self._pos
         vel = self._vel
-        safe = self.safe_distance
+        safe = self._safe_distance
         lo = self._lo
         hi = self._hi
         vmax = self._vmax
