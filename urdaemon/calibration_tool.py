@@ -2,9 +2,10 @@
 
 The controller's primary interface (port 30001) sends a VERSION message right after connecting, then
 ROBOT_STATE packages whose KINEMATICS_INFO sub-package carries the calibrated DH parameters and whose
-CONFIGURATION_DATA says the robot type. :func:`read_calibration` collects those three (sans-IO codec
-over an asyncio stream); :func:`calibration_yaml` turns them into the file that a robot's
-``calibration`` key in the cell file accepts (see ``urdaemon.description.calibration``).
+CONFIGURATION_DATA says the robot type. :func:`read_calibration` collects those three with the
+daemon's own primary link (``PrimaryLink``, on the shell); :func:`calibration_yaml` turns them into
+the file that a robot's ``calibration`` key in the cell file accepts (see
+``urdaemon.description.calibration``).
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ from typing import Any
 
 import yaml
 
+from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.errors import ProtocolError, UrDaemonError, UrTimeoutError
 from urdaemon.protocols import primary as prim
-from urdaemon.protocols._buffer import Side
 
 __all__ = [
     "ControllerCalibration",
@@ -33,7 +34,6 @@ DEFAULT_PORT = 30001
 DEFAULT_TIMEOUT_S = 10.0
 CONFIGURATION_GRACE_S = 1.0
 """How long to keep reading for CONFIGURATION_DATA once KINEMATICS_INFO has arrived without it."""
-_READ_CHUNK = 65536
 
 # robot_type (CONFIGURATION_DATA) → model, for controllers of major version ≥ 5 and < 5.
 _E_SERIES_MODELS = {1: "ur5e", 2: "ur10e", 3: "ur3e", 4: "ur16e", 7: "ur20", 8: "ur30"}
@@ -129,6 +129,41 @@ def _printable(text: str) -> str:
     return "".join(c if c.isprintable() else "?" for c in text)
 
 
+class _CalibrationReader(PrimaryLink):
+    """The daemon's primary link, woken on every message, that also checks the stream at its end."""
+
+    def __init__(self) -> None:
+        super().__init__(lambda message: None)
+        self.changed = asyncio.Event()
+        self.lost: Exception | None = None
+        """The socket error that ended the connection, if one did."""
+
+    def _on_event(self, event: Any) -> None:
+        super()._on_event(event)
+        self.changed.set()
+
+    def eof_received(self) -> bool | None:
+        try:
+            self.conn.receive_eof()  # a package cut off by the close is bad data
+        except ProtocolError as err:
+            self.fail(err)
+        return None
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.lost = exc
+        super().connection_lost(exc)
+
+    def end(self, reason: Exception) -> None:
+        super().end(reason)
+        self.changed.set()
+
+    def reading(self) -> ControllerCalibration | None:
+        """What it has read, once KINEMATICS_INFO is among it."""
+        if self.kinematics is None:
+            return None
+        return ControllerCalibration(self.kinematics, self.version, self.configuration)
+
+
 async def read_calibration(
     address: str, port: int = DEFAULT_PORT, timeout: float = DEFAULT_TIMEOUT_S
 ) -> ControllerCalibration:
@@ -139,61 +174,51 @@ async def read_calibration(
     deadline = loop.time() + timeout
     where = f"{address}:{port}"
     try:
-        reader, writer = await asyncio.wait_for(asyncio.open_connection(address, port), timeout)
+        _, link = await asyncio.wait_for(loop.create_connection(_CalibrationReader, address, port), timeout)
     except TimeoutError:
         raise UrTimeoutError(f"cannot connect to {where}: no answer within {timeout:g} s") from None
     except (OSError, UnicodeError) as err:  # UnicodeError: a host name IDNA cannot encode
         raise UrDaemonError(f"cannot connect to {where}: {getattr(err, 'strerror', None) or err}") from err
     try:
-        return await _read(reader, where, deadline, timeout)
+        return await _read(link, where, deadline, timeout)
     finally:
-        writer.close()
-        with contextlib.suppress(OSError, TimeoutError):
-            await asyncio.wait_for(writer.wait_closed(), 1.0)
+        link.close()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(asyncio.shield(link.closed), 1.0)
 
 
 async def _read(
-    reader: asyncio.StreamReader, where: str, deadline: float, timeout: float
+    link: _CalibrationReader, where: str, deadline: float, timeout: float
 ) -> ControllerCalibration:
     loop = asyncio.get_running_loop()
-    conn = prim.PrimaryConnection(Side.DAEMON)
-    version: prim.VersionMessage | None = None
-    configuration: prim.ConfigurationData | None = None
-    kinematics: prim.KinematicsInfo | None = None
+    graced = False
     while True:
-        if kinematics is not None and configuration is not None:
-            return ControllerCalibration(kinematics, version, configuration)
+        reading = link.reading()
+        if reading is not None and (reading.configuration is not None or link.closed.done()):
+            return reading  # once the connection ended, what matters has arrived: do without the rest
+        if link.closed.done():
+            raise _ended(link, where)
         remaining = deadline - loop.time()
         if remaining <= 0:
-            if kinematics is not None:  # the grace for CONFIGURATION_DATA ran out: do without it
-                return ControllerCalibration(kinematics, version, configuration)
+            if reading is not None:  # the grace for CONFIGURATION_DATA ran out: do without it
+                return reading
             raise UrTimeoutError(
                 f"{where}: no KINEMATICS_INFO within {timeout:g} s; is this a UR controller?"
             )
-        try:
-            data = await asyncio.wait_for(reader.read(_READ_CHUNK), remaining)
-        except TimeoutError:
-            continue  # the deadline check above decides
-        except OSError as err:
-            raise UrDaemonError(f"{where}: connection lost: {err.strerror or err}") from err
-        try:
-            events = conn.receive_data(data) if data else conn.receive_eof()
-        except ProtocolError as err:
-            if kinematics is not None:  # what matters has arrived; the rest is not needed
-                return ControllerCalibration(kinematics, version, configuration)
-            raise UrDaemonError(f"{where}: bad data on the primary interface: {err}") from err
-        for event in events:
-            if isinstance(event, prim.VersionMessage):
-                version = event
-            elif isinstance(event, prim.RobotState):
-                configuration = event.get(prim.ConfigurationData) or configuration
-                found = event.get(prim.KinematicsInfo)
-                if found is not None and kinematics is None:
-                    kinematics = found
-                    deadline = min(deadline, loop.time() + CONFIGURATION_GRACE_S)
-        if not data:
-            if kinematics is not None:
-                return ControllerCalibration(kinematics, version, configuration)
-            raise UrDaemonError(
-                f"{where}: the controller closed the connection before sending KINEMATICS_INFO"
-            )
+        link.changed.clear()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(link.changed.wait(), remaining)
+        if link.kinematics is not None and not graced:
+            graced = True
+            deadline = min(deadline, loop.time() + CONFIGURATION_GRACE_S)
+
+
+def _ended(link: _CalibrationReader, where: str) -> UrDaemonError:
+    """Why the connection ended before KINEMATICS_INFO arrived."""
+    reason = link.closed.result()
+    if isinstance(reason, ProtocolError):
+        return UrDaemonError(f"{where}: bad data on the primary interface: {reason}")
+    if link.lost is not None:
+        err = link.lost
+        return UrDaemonError(f"{where}: connection lost: {getattr(err, 'strerror', None) or err}")
+    return UrDaemonError(f"{where}: the controller closed the connection before sending KINEMATICS_INFO")
