@@ -71,7 +71,7 @@ class RobotRuntime:
         self.requests = Requests()
         self.status = StatusPublisher(robot, backend, controller, publish, self.log)
         self.goals = Goals(
-            robot, backend, controller, self.keys, (self.gate, self.requests, self.status), self.log
+            robot, backend, controller, node, self.keys, (self.gate, self.requests, self.status), self.log
         )
         self.commands = Commands(
             robot, backend, controller, (self.gate, self.status), self.goals.joint_names, self.log
@@ -103,7 +103,7 @@ class RobotRuntime:
         self.status.declare(node, keys)
         # every queryable and subscriber acts on its exact key only and refuses oversized messages
         # before reading them (publish/node.py)
-        self.goals.declare(node)
+        self.goals.declare()
         self.service_names = self.services.declare(node, keys)
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self.status.publish

@@ -47,6 +47,7 @@ class Goals:
         robot: Robot,
         backend: Backend,
         controller: MotionController,
+        node: ZenohNode,
         keys: RobotKeys,
         parts: tuple[MotionGate, Requests, StatusPublisher],
         log: logging.LoggerAdapter[logging.Logger],
@@ -57,16 +58,15 @@ class Goals:
         self._keys = keys
         self._gate, self._requests, self._status = parts
         self._log = log
-        self._node: Any = None
+        self._node = node
         self.passthrough = Passthrough(backend, controller, log)
         self._results: OrderedDict[str, bytes] = OrderedDict()
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
 
-    def declare(self, node: ZenohNode) -> None:
+    def declare(self) -> None:
         """Declare the goal queryables (each acts on its exact key only: publish/node.py)."""
-        keys = self._keys
-        self._node = node
+        node, keys = self._node, self._keys
         node.queryable(
             keys.goal_trajectory, self.on_trajectory_goal, max_bytes=MAX_MESSAGE_BYTES, answer="accepted"
         )
