@@ -13,13 +13,13 @@ from typing import Any
 import pytest
 
 from tests.integration.conftest import TWO_MOCKS
+from tests.integration.test_review_planning import Query
 from urdaemon.backends.base import Backend
-from urdaemon.backends.mock import MockBackend
 from urdaemon.cell import parse_cell
 from urdaemon.cli import main
 from urdaemon.client import RobotClient
 from urdaemon.control import MotionController
-from urdaemon.daemon import describe_cell
+from urdaemon.daemon import describe_cell, make_backend
 from urdaemon.errors import MessageError
 from urdaemon.model import (
     CycleStatsRequest,
@@ -84,14 +84,15 @@ class RecordingClient:
         return {"ok": True}
 
 
-def declared_runtime() -> tuple[RobotRuntime, RecordingNode]:
-    cell = parse_cell(TWO_MOCKS, base_dir=ROOT / "configs")
-    limits = describe_cell(cell).limits["alice"]
-    backend = MockBackend("alice", limits.names, 500.0)
+def declared_runtime(text: str = TWO_MOCKS, name: str = "alice") -> tuple[RobotRuntime, RecordingNode]:
+    """A robot's runtime declared on a recording node (its backend made as ``serve`` makes it)."""
+    cell = parse_cell(text, base_dir=ROOT / "configs")
+    limits = describe_cell(cell).limits[name]
+    backend = make_backend(cell.robot(name), limits, None, cell.cell)
     node = RecordingNode()
     runtime = RobotRuntime(
         cell.cell,
-        cell.robot("alice"),
+        cell.robot(name),
         backend,
         MotionController(limits, period=backend.period),
         node,  # type: ignore[arg-type]
@@ -211,3 +212,54 @@ def test_the_cli_lists_every_service_with_its_request(capsys: pytest.CaptureFixt
         "start_force_mode: start force mode (URScript force_mode semantics) (request: task_frame, " in shown
     )
     assert "type? (default 2)" in shown
+
+
+REQUESTS: dict[str, dict[str, Any] | None] = {
+    "set_io": {"kind": "digital", "pin": 1, "value": True},
+    "set_payload": {"mass": 1.0},
+    "set_speed_slider": {"fraction": 0.5},
+    "dashboard": {"command": "robotmode"},
+    "set_tool_voltage": {"volts": 12},
+    "start_force_mode": {
+        "task_frame": [0.0] * 6,
+        "selection": [0, 0, 1, 0, 0, 0],
+        "wrench": [0.0, 0.0, -5.0, 0.0, 0.0, 0.0],
+        "limits": [0.1] * 6,
+    },
+    "cycle_stats": {"reset": False},
+}
+"""A valid request of every service with arguments (the others get none)."""
+MOCK_REFUSALS = {
+    "dashboard": "mock backend has no dashboard server",
+    "resend_program": "mock backend runs no control program",
+    "hand_back_control": "mock backend runs no control program",
+    "start_force_mode": "the mock backend has no force mode",
+    "end_force_mode": "the mock backend has no force mode",
+    "start_tool_contact": "the mock backend has no tool contact detection",
+    "end_tool_contact": "the mock backend has no tool contact detection",
+}
+SERVO_REFUSALS = {
+    **{name: reason.replace("mock", "servo") for name, reason in MOCK_REFUSALS.items()},
+    "set_io": "servo backend has no IO outputs",
+    "set_payload": "servo backend has no payload setting",
+}
+SERVO_ARM = (ROOT / "configs" / "servo_arm.yaml").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize(
+    ("text", "robot", "refusals"), [(TWO_MOCKS, "alice", MOCK_REFUSALS), (SERVO_ARM, "arm", SERVO_REFUSALS)]
+)
+async def test_each_backend_answers_every_service_its_own_way(
+    text: str, robot: str, refusals: dict[str, str]
+) -> None:
+    """Every robot answers every service of the table; a backend without what a service needs refuses
+    it with its own reason (backends/base.py, servo.py), and nothing else changes that answer."""
+    runtime, node = declared_runtime(text, robot)
+    answers = {}
+    for name in services.names():
+        query = Query(runtime.keys.service(name), REQUESTS.get(name))
+        node.queryables[runtime.keys.service(name)](query)
+        answers[name] = await query.answer(timeout=10.0)
+    refused = {name: answer["reason"] for name, answer in answers.items() if not answer["ok"]}
+    assert refused == refusals
+    assert answers["cycle_stats"]["turnaround"]["count"] == 0
