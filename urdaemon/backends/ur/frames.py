@@ -21,6 +21,8 @@ IDLE_TIMEOUT_S = 1.0
 PASSTHROUGH_TIMEOUT_S = 0.2
 """Read timeout sent with trajectory control frames (urcl's default for non-realtime control, §4.2)."""
 
+_SERVOJ, _SPEEDJ, _NONE = Frame.SERVOJ, Frame.SPEEDJ, Frame.NONE
+"""(the 500 Hz path: an enum's attribute lookup costs ~0.1 µs, a module alias a fifth of that)"""
 _T = reverse.TrajectoryAction
 _F = reverse.FreedriveAction
 _CONSTANT: dict[Frame, reverse.ReverseCommand] = {
@@ -49,11 +51,11 @@ class ReverseWriter:
     def write(self, frame: Frame, command: JointCommand) -> None:
         """This cycle's frame (``Frame.NONE``: nothing)."""
         server = self.servers.reverse
-        if frame is Frame.SERVOJ:
+        if frame is _SERVOJ:
             server.write(reverse.encode_servoj(command.positions, self.servo_timeout))
-        elif frame is Frame.SPEEDJ:
+        elif frame is _SPEEDJ:
             server.send(reverse.SpeedJ(tuple(command.velocities), self.servo_timeout))
-        elif frame is not Frame.NONE:
+        elif frame is not _NONE:
             server.write(self._frames[frame])
 
     def act(self, step: Step) -> None:

@@ -147,13 +147,13 @@ class ControlProgram:
             )
         return None
 
-    def wanted(self, state: RobotState, links_up: bool, playing: bool, handed_back: bool) -> bool:
-        """Headless, whether the cycle should send the program: the robot runs but no program holds
-        its links (none runs, or the running one lost a link: a new program brings every link back)."""
+    def wanted(self, state: RobotState, playing: bool, handed_back: bool) -> bool:
+        """Headless, whether the cycle should send the program while it does not hold all its links:
+        the robot runs but no program does, or the running one lost a link (a new program brings every
+        link back)."""
         servers = self.servers
         return (
-            not links_up
-            and self.robot.headless
+            self.robot.headless
             and not self.options.read_only
             and not handed_back
             and state.robot_mode is RobotMode.RUNNING

@@ -93,6 +93,19 @@ class Step:
 
 
 _NOTHING = Step(Action.NOTHING)
+_NO_PROGRAM, _STREAMING, _PASSTHROUGH, _HANDED_BACK = (
+    Channel.NO_PROGRAM,
+    Channel.STREAMING,
+    Channel.PASSTHROUGH,
+    Channel.HANDED_BACK,
+)
+_POSITION, _VELOCITY = CommandMode.POSITION, CommandMode.VELOCITY
+_NONE, _SERVOJ, _SPEEDJ, _IDLE = Frame.NONE, Frame.SERVOJ, Frame.SPEEDJ, Frame.IDLE
+_TRAJECTORY_NOOP, _FREEDRIVE_NOOP, _FREEDRIVE_STOP = (
+    Frame.TRAJECTORY_NOOP,
+    Frame.FREEDRIVE_NOOP,
+    Frame.FREEDRIVE_STOP,
+)
 _CONNECTED = (Channel.STREAMING, Channel.PASSTHROUGH, Channel.FREEDRIVE)
 
 
@@ -251,21 +264,22 @@ class ReverseChannel:
         queued meanwhile would be replayed on play, ur-protocols.md §6.2.5); ``mode``: the motion
         controller's command this cycle, which goes out as servoj or speedj while the program streams
         (the controller commands nothing while the robot runs a trajectory or is in freedrive)."""
+        # (the 500 Hz path: members through module aliases, an enum's attribute lookup costs ~0.1 µs)
         state = self.state
-        if not playing or state is Channel.NO_PROGRAM or state is Channel.HANDED_BACK:
-            return Frame.NONE
-        if mode is CommandMode.POSITION:
-            return Frame.SERVOJ
-        if mode is CommandMode.VELOCITY:
-            return Frame.SPEEDJ
-        if state is Channel.STREAMING:
-            return Frame.IDLE
-        if state is Channel.PASSTHROUGH:
-            return Frame.TRAJECTORY_NOOP
+        if not playing or state is _NO_PROGRAM or state is _HANDED_BACK:
+            return _NONE
+        if mode is _POSITION:
+            return _SERVOJ
+        if mode is _VELOCITY:
+            return _SPEEDJ
+        if state is _STREAMING:
+            return _IDLE
+        if state is _PASSTHROUGH:
+            return _TRAJECTORY_NOOP
         if now > self._freedrive_until:  # the deadman: nobody asked for freedrive in time
-            self.state = Channel.STREAMING
-            return Frame.FREEDRIVE_STOP
-        return Frame.FREEDRIVE_NOOP
+            self.state = _STREAMING
+            return _FREEDRIVE_STOP
+        return _FREEDRIVE_NOOP
 
     def _end_goal(self, code: int = FAILURE) -> Step:
         goal = self._goal
