@@ -1,4 +1,4 @@
-"""Zenoh: key layout, message encoding, the daemon's session."""
+"""Zenoh: key layout, message encoding, the robot services declared once (services.py), the session."""
 
 from __future__ import annotations
 
