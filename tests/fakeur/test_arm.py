@@ -50,10 +50,10 @@ def test_power_on_boots_to_idle_and_brake_release_to_running() -> None:
     assert arm.brake_release() is None
     _run(arm, BRAKE_RELEASE_TIME_S + 0.01)
     assert _mode(arm) is RobotMode.RUNNING
-    assert arm.robot_status_bits & 1 == 1
+    assert arm.life.robot_status_bits & 1 == 1
     arm.power_off()
     assert arm.robot_mode is RobotMode.POWER_OFF
-    assert arm.robot_status_bits == 0
+    assert arm.life.robot_status_bits == 0
 
 
 def test_program_cannot_start_unless_running() -> None:
@@ -63,7 +63,7 @@ def test_program_cannot_start_unless_running() -> None:
     assert arm.start_program() is None
     assert arm.runtime_state is RuntimeState.PLAYING
     assert arm.program_running
-    assert arm.robot_status_bits == 0b11
+    assert arm.life.robot_status_bits == 0b11
 
 
 def test_servoj_tracks_the_target_within_the_velocity_limits() -> None:
@@ -119,7 +119,7 @@ def test_protective_stop_stops_motion_pauses_the_program_and_needs_an_unlock() -
     arm.speedj([1.0] * 6)
     _run(arm, 0.1)
     assert arm.qd == [0.0] * 6, "no motion during a protective stop"
-    assert arm.safety_status_bits == 1 << 2
+    assert arm.life.safety_status_bits == 1 << 2
     assert arm.unlock_protective_stop() is None
     assert _safety(arm) is SafetyMode.NORMAL
     assert arm.unlock_protective_stop() == "safety mode is NORMAL, not PROTECTIVE_STOP"

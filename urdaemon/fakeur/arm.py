@@ -1,4 +1,4 @@
-"""The fake controller's robot: power and brakes, safety stops, speed slider, joint motion, IO.
+"""The fake controller's robot: joint motion, speed slider, IO, and its life (power, brakes, safety stops).
 
 Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller cycle; every
 command is a method that returns a refusal reason (or None) the way the real controller would
@@ -21,10 +21,12 @@ the motion: it makes ``tcp_force``, moves the compliant axes in force mode and t
 freedrive, and protective-stops the arm when a wall pushes back harder than the force limit. Without
 surroundings (None) the arm moves in free air and the step costs one attribute check.
 
-State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
-POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
-Power off from anywhere → POWER_OFF. A protective stop keeps the mode but stops motion until
-unlocked; an emergency stop powers the arm off until released.
+The arm's life (power, brakes, safety stops, the program's run state and the status bits) is its
+``life`` (``ArmLife``, fakeur/life.py). Its modes and commands are on the arm too, as every user of
+the arm calls them (``arm.robot_mode``, ``arm.power_on()``); the arm halts or stops its motion when
+the life says it cannot move, and offers the life the motion side of each change (``halt``,
+``set_time_scaling``, ``slow_to_rest``, ``speed_up``). Its flange and TCP poses come from
+fakeur/pose.py (``TcpPoses``).
 """
 
 from __future__ import annotations
@@ -33,11 +35,19 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from urdaemon.description.frames import compose, frame_of_pose, pose_of_frame
+from urdaemon.description.frames import Pose
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.fakeur.life import (
+    BOOT_TIME_S,
+    BRAKE_RELEASE_TIME_S,
+    EMERGENCY_STOP_DECELERATION,
+    PROTECTIVE_STOP_DECELERATION,
+    ArmLife,
+    RuntimeState,
+)
 from urdaemon.fakeur.motion import (
     TIME_EPSILON_S,
     LinearStop,
@@ -45,6 +55,7 @@ from urdaemon.fakeur.motion import (
     ScalingRamp,
     leading_stop_time,
 )
+from urdaemon.fakeur.pose import TcpPoses
 from urdaemon.model import RobotMode, SafetyMode
 
 if TYPE_CHECKING:
@@ -54,43 +65,28 @@ if TYPE_CHECKING:
 __all__ = [
     "BOOT_TIME_S",
     "BRAKE_RELEASE_TIME_S",
+    "EMERGENCY_STOP_DECELERATION",
     "HISTORY_STEPS",
     "PAUSE_ACCELERATION_SHARE",
     "PROTECTIVE_STOP_DECELERATION",
+    "ArmLife",
     "FakeArm",
     "IoState",
     "MotionMode",
     "RuntimeState",
 ]
 
-BOOT_TIME_S = 0.5
-"""Simulated time from 'power on' until the arm is IDLE (a real arm takes several seconds)."""
-BRAKE_RELEASE_TIME_S = 0.3
-"""Simulated time from 'brake release' until RUNNING (brakes audibly release over ~1 s on a real arm)."""
-PROTECTIVE_STOP_DECELERATION = 10.0
-"""Joint deceleration (rad/s²) of the category-2 stop that a protective stop performs."""
-EMERGENCY_STOP_DECELERATION = 20.0
-"""Joint deceleration (rad/s²) of an emergency stop before power is cut."""
 SPEEDJ_DEFAULT_ACCELERATION = 40.0
 """rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
 ACCELERATION_STEP_S = 1e-5
 """s of program time: the backward difference over which a motion's acceleration at its end is taken."""
+_HOME = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0)
+"""rad: the joints of an arm made without initial positions."""
 PAUSE_ACCELERATION_SHARE = 0.5
 """The share of each joint's acceleration limit that the speed scaling's ramp may use when the
 controller pauses or resumes a program (the motion's own acceleration comes on top, scaled down)."""
-
-
-class RuntimeState(enum.IntEnum):
-    """RTDE ``runtime_state`` (ur-protocols.md §1.9)."""
-
-    STOPPING = 0
-    STOPPED = 1
-    PLAYING = 2
-    PAUSING = 3
-    PAUSED = 4
-    RESUMING = 5
 
 
 class MotionMode(enum.Enum):
@@ -137,11 +133,7 @@ class FakeArm:
         self.model = model
         self.dh = dh
         self.kinematics = DhKinematics(dh)
-        self.q = (
-            list(initial_positions)
-            if initial_positions is not None
-            else [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
-        )
+        self.q = list(initial_positions if initial_positions is not None else _HOME)
         self.qd = [0.0] * 6
         self.qdd = [0.0] * 6
         self.current = [0.0] * 6
@@ -153,22 +145,13 @@ class FakeArm:
         self.max_position = [j.max_position if j.max_position is not None else math.inf for j in model.joints]
         self.timestamp = 0.0
         """Controller time since boot (s), RTDE ``timestamp``."""
-        self._pose_cache: tuple[tuple[float, ...], tuple[float, float, float, float, float, float]] | None = (
-            None
-        )
-        """The last ``tcp_pose()`` and the joint values it is for."""
-        self._tcp_cache: tuple[Any, tuple[float, float, float, float, float, float]] | None = None
-        """The last ``actual_tcp_pose()`` and the flange pose and offset it is for."""
-        self.robot_mode = RobotMode.POWER_OFF
-        self.safety_mode = SafetyMode.NORMAL
-        self.runtime_state = RuntimeState.STOPPED
+        self._poses = TcpPoses(self.kinematics)
+        """The flange and TCP poses, each kept for the joint values it is for (fakeur/pose.py)."""
         self.speed_slider = 1.0
         """RTDE ``target_speed_fraction``."""
         self.speed_scaling = 1.0
         """RTDE ``speed_scaling``: the controller's own scaling (1 unless stopping or paused; ramped
         while the program pauses and resumes)."""
-        self._scaling = ScalingRamp()
-        """The time scaling of played motions that pausing and resuming ramp."""
         self.io = IoState()
         self.payload_mass = 0.0
         self.payload_cog = [0.0, 0.0, 0.0]
@@ -182,14 +165,47 @@ class FakeArm:
         self.surroundings: Surroundings | None = None
         """Walls and a push on the tool (fakeur/contact.py), stepped after the motion; None: free air."""
         self.remote_control = True
-        self._transition_at: float | None = None
         self._init_motion()
-        if powered:
-            self.robot_mode = RobotMode.RUNNING
+        life = self.life = ArmLife(self, powered=powered)
+        """Power, brakes, safety stops and the program's run state (fakeur/life.py)."""
+        # the life's commands, called on the arm as its users always have
+        self.power_on = life.power_on
+        self.power_off = life.power_off
+        self.brake_release = life.brake_release
+        self.protective_stop = life.protective_stop
+        self.unlock_protective_stop = life.unlock_protective_stop
+        self.emergency_stop = life.emergency_stop
+        self.release_emergency_stop = life.release_emergency_stop
+        self.start_program = life.start_program
+        self.pause_program = life.pause_program
+        self.resume_program = life.resume_program
+        self.stop_program = life.stop_program
+
+    @property
+    def robot_mode(self) -> RobotMode:
+        """The life's robot mode (``life.robot_mode``)."""
+        return self.life.robot_mode
+
+    @property
+    def safety_mode(self) -> SafetyMode:
+        """The life's safety mode (``life.safety_mode``)."""
+        return self.life.safety_mode
+
+    @property
+    def runtime_state(self) -> RuntimeState:
+        """The life's program run state, RTDE ``runtime_state`` (``life.runtime_state``)."""
+        return self.life.runtime_state
+
+    @property
+    def program_running(self) -> bool:
+        """RTDE robot_status_bits bit 1 (``life.program_running``)."""
+        return self.life.program_running
 
     def _init_motion(self) -> None:
         """The motion state at boot: holding still at ``q``, no motion played, a full history."""
         self._mode = MotionMode.HOLD
+        self._scaling = ScalingRamp()
+        """The time scaling of played motions that pausing and resuming ramp."""
         self._servo_target: list[float] | None = None
         self._speed_target = [0.0] * 6
         self._acceleration = SPEEDJ_DEFAULT_ACCELERATION
@@ -209,145 +225,18 @@ class FakeArm:
         self._carry = 0.0
         """s of program time: how far the last cycle went on past the end of the motion it ended."""
 
-    # ---- power, brakes, safety -----------------------------------------------------------------
-
-    def power_on(self) -> str | None:
-        """Start powering on; a reason if refused."""
-        if self.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
-            return "emergency stop active"
-        if self.robot_mode is RobotMode.POWER_OFF:
-            self.robot_mode = RobotMode.BOOTING
-            self._transition_at = self.timestamp + BOOT_TIME_S
-        return None
-
-    def power_off(self) -> None:
-        """Cut arm power (brakes engage, program stops)."""
-        self._halt_motion()
-        self.robot_mode = RobotMode.POWER_OFF
-        self._transition_at = None
-        self.stop_program()
-
-    def brake_release(self) -> str | None:
-        """Release the brakes; refused unless powered (IDLE)."""
-        if self.robot_mode is RobotMode.RUNNING:
-            return None
-        if self.robot_mode is not RobotMode.IDLE:
-            return f"robot is {self.robot_mode.name}, not IDLE"
-        if self.safety_mode is not SafetyMode.NORMAL:
-            return f"safety mode is {self.safety_mode.name}"
-        self.robot_mode = RobotMode.POWER_ON  # releasing
-        self._transition_at = self.timestamp + BRAKE_RELEASE_TIME_S
-        return None
-
-    def protective_stop(self) -> None:
-        """Trigger a protective stop: motion decelerates to rest, the program pauses."""
-        if self.safety_mode is SafetyMode.NORMAL or self.safety_mode is SafetyMode.REDUCED:
-            self.safety_mode = SafetyMode.PROTECTIVE_STOP
-            self.stop(PROTECTIVE_STOP_DECELERATION)
-            if self.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING):
-                self.runtime_state = RuntimeState.PAUSED
-                self._scaling.set(0.0)
-
-    def unlock_protective_stop(self) -> str | None:
-        """Clear a protective stop; a reason if there is none to clear or it is too early."""
-        if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
-            return f"safety mode is {self.safety_mode.name}, not PROTECTIVE_STOP"
-        if any(abs(v) > 1e-9 for v in self.qd):
-            return "robot still moving"
-        self.safety_mode = SafetyMode.NORMAL
-        return None
-
-    def emergency_stop(self) -> None:
-        """Press the emergency stop: stop, power off, program stopped."""
-        self.safety_mode = SafetyMode.ROBOT_EMERGENCY_STOP
-        self.stop(EMERGENCY_STOP_DECELERATION)
-        self.stop_program()
-        self.robot_mode = RobotMode.POWER_OFF
-        self._transition_at = None
-
-    def release_emergency_stop(self) -> None:
-        """Release the emergency stop button; the arm stays powered off."""
-        if self.safety_mode in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
-            self.safety_mode = SafetyMode.NORMAL
-
-    @property
-    def can_move(self) -> bool:
-        """True when motion commands are executed (brakes released, no safety stop)."""
-        return self.robot_mode is RobotMode.RUNNING and self.safety_mode in (
-            SafetyMode.NORMAL,
-            SafetyMode.REDUCED,
-        )
-
-    # ---- program state (driven by the program executor and the dashboard) ------------------------
-
-    def start_program(self) -> str | None:
-        """The program starts playing; a reason if it cannot."""
-        if self.robot_mode is not RobotMode.RUNNING:
-            return f"robot is {self.robot_mode.name}, not RUNNING"
-        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
-            return f"safety mode is {self.safety_mode.name}"
-        self.runtime_state = RuntimeState.PLAYING
-        self._scaling.set(1.0)
-        return None
-
-    def pause_program(self) -> None:
-        """Pause the program: a played motion slows down along its path (PAUSING) to rest (PAUSED).
-
-        Any other motion (a stop, a legacy servo or speed target) stops at once as a protective stop
-        does, and the program is PAUSED."""
-        if self.runtime_state is not RuntimeState.PLAYING:
-            return
-        if self._mode is MotionMode.PLAY:
-            self.runtime_state = RuntimeState.PAUSING
-            self._scaling.ramp_to(
-                0.0, self.qd, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt
-            )
-            if self._scaling.scale == 0.0:  # at rest: paused at once
-                self.runtime_state = RuntimeState.PAUSED
-            return
-        if self._mode is not MotionMode.HOLD:
-            self.stop(PROTECTIVE_STOP_DECELERATION)
-        self._scaling.set(0.0)
-        self.runtime_state = RuntimeState.PAUSED
-
-    def resume_program(self) -> str | None:
-        """Resume a paused program: PLAYING, the paused motion speeding up along its path."""
-        if self.runtime_state is not RuntimeState.PAUSED:
-            return "no paused program"
-        if self.robot_mode is not RobotMode.RUNNING:
-            return f"robot is {self.robot_mode.name}, not RUNNING"
-        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
-            return f"safety mode is {self.safety_mode.name}"
-        self.runtime_state = RuntimeState.PLAYING
-        slider = self.speed_slider
-        velocity = [v * slider for v in self._program_qd] if self._mode is MotionMode.PLAY else [0.0] * 6
-        self._scaling.ramp_to(1.0, velocity, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt)
-        return None
-
-    def stop_program(self) -> None:
-        """Stop the program (motion stops)."""
-        if self.runtime_state is not RuntimeState.STOPPED:
-            self.stop(PROTECTIVE_STOP_DECELERATION)
-            self.runtime_state = RuntimeState.STOPPED
-        self._scaling.set(1.0)
-
-    @property
-    def program_running(self) -> bool:
-        """RTDE robot_status_bits bit 1."""
-        return self.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING)
-
     # ---- motion commands -------------------------------------------------------------------------
 
     def servoj(self, target: Sequence[float]) -> None:
         """Track joint position ``target`` (reached as fast as the velocity limits allow)."""
-        if not self.can_move:
+        if not self.life.can_move:
             return
         self._mode = MotionMode.SERVO
         self._servo_target = [float(v) for v in target]
 
     def speedj(self, velocities: Sequence[float], acceleration: float = SPEEDJ_DEFAULT_ACCELERATION) -> None:
         """Accelerate toward joint ``velocities`` (rad/s) at ``acceleration`` (rad/s²)."""
-        if not self.can_move:
+        if not self.life.can_move:
             return
         self._mode = MotionMode.SPEED
         self._speed_target = [float(v) for v in velocities]
@@ -368,7 +257,7 @@ class FakeArm:
 
         Once it is over, unless another motion replaced it, the arm stops from the motion's end velocity
         at ``stop_deceleration`` (leading joint, rad/s²), along the path it was on."""
-        if not self.can_move:
+        if not self.life.can_move:
             return False
         self._mode = MotionMode.PLAY
         self._motion = self._played = motion
@@ -426,12 +315,40 @@ class FakeArm:
         """Stand still (no motion thread)."""
         self.stop(PROTECTIVE_STOP_DECELERATION)
 
-    def _halt_motion(self) -> None:
+    # ---- the motion side of the life's changes (fakeur/life.py) -----------------------------------
+
+    def halt(self) -> None:
+        """Stand still at once, nothing played (power is cut: the brakes hold the joints)."""
         self._mode = MotionMode.HOLD
         self._servo_target = None
         self._motion = self._played = None
         self.qd = [0.0] * 6
         self.qdd = [0.0] * 6
+
+    def set_time_scaling(self, scale: float) -> None:
+        """Set the played motions' time scaling to ``scale`` at once (a program starts or stops)."""
+        self._scaling.set(scale)
+
+    def slow_to_rest(self) -> bool:
+        """Slow down for a pause; True while a played motion still slows down along its path.
+
+        A played motion's time scaling ramps to 0 within ``PAUSE_ACCELERATION_SHARE`` of the joints'
+        acceleration limits; any other motion stops at once as a protective stop does."""
+        if self._mode is MotionMode.PLAY:
+            self._scaling.ramp_to(
+                0.0, self.qd, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt
+            )
+            return self._scaling.scale != 0.0
+        if self._mode is not MotionMode.HOLD:
+            self.stop(PROTECTIVE_STOP_DECELERATION)
+        self._scaling.set(0.0)
+        return False
+
+    def speed_up(self) -> None:
+        """Resume: a paused motion's time scaling ramps back to 1 the way it came down."""
+        slider = self.speed_slider
+        velocity = [v * slider for v in self._program_qd] if self._mode is MotionMode.PLAY else [0.0] * 6
+        self._scaling.ramp_to(1.0, velocity, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt)
 
     # ---- simulation ------------------------------------------------------------------------------
 
@@ -440,15 +357,17 @@ class FakeArm:
         self.timestamp += dt
         self._last_dt = dt
         self._carry = 0.0
-        self._advance_transitions()
-        if self.robot_mode is not RobotMode.RUNNING and self._mode is not MotionMode.STOP:
-            self._halt_motion()
+        life = self.life
+        life.advance(self.timestamp)
+        if life.robot_mode is not RobotMode.RUNNING and self._mode is not MotionMode.STOP:
+            self.halt()
         if (
-            self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED)
+            life.safety_mode is not SafetyMode.NORMAL
+            and life.safety_mode is not SafetyMode.REDUCED
             and self._mode is not MotionMode.STOP
         ):
             self.stop(PROTECTIVE_STOP_DECELERATION)
-        runtime = self.runtime_state
+        runtime = life.runtime_state
         scaling = self._scaling
         scale = scaling.scale if scaling.settled else scaling.step(dt)
         playing = runtime is RuntimeState.PLAYING or runtime is RuntimeState.PAUSING
@@ -465,8 +384,8 @@ class FakeArm:
         else:
             self.qd = [0.0] * 6
             self.qdd = [0.0] * 6
-        if runtime is RuntimeState.PAUSING and scale == 0.0 and self.runtime_state is RuntimeState.PAUSING:
-            self.runtime_state = RuntimeState.PAUSED  # the scaling has come to 0: at rest on the path
+        if runtime is RuntimeState.PAUSING and scale == 0.0:
+            life.came_to_rest()  # the scaling has come to 0: at rest on the path
         surroundings = self.surroundings
         if surroundings is not None:
             surroundings.step(self, dt)
@@ -474,15 +393,6 @@ class FakeArm:
         at = (self._history_at + 1) % HISTORY_STEPS
         self._history[at][:] = self.q
         self._history_at = at
-
-    def _advance_transitions(self) -> None:
-        if self._transition_at is None or self.timestamp < self._transition_at:
-            return
-        self._transition_at = None
-        if self.robot_mode is RobotMode.BOOTING:
-            self.robot_mode = RobotMode.IDLE
-        elif self.robot_mode is RobotMode.POWER_ON:
-            self.robot_mode = RobotMode.RUNNING
 
     def _step_play(self, dt: float, scale: float) -> None:
         motion = self._motion
@@ -589,61 +499,13 @@ class FakeArm:
             solver = self._ik = UrKinematics(self.model, self.dh)
         return solver
 
-    def tcp_pose(self) -> tuple[float, float, float, float, float, float]:
-        """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector.
+    def tcp_pose(self) -> Pose:
+        """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector."""
+        return self._poses.flange(self.q)
 
-        Kept for the joint values it was computed for: one RTDE package asks for it twice (actual and
-        target TCP pose) and several clients may each ask once per cycle."""
-        q = tuple(self.q)
-        cached = self._pose_cache
-        if cached is not None and cached[0] == q:
-            return cached[1]
-        x, y, z, qx, qy, qz, qw = self.kinematics.tool_pose(q)
-        pose = (x, y, z, *_rotation_vector(qx, qy, qz, qw))
-        self._pose_cache = (q, pose)
-        return pose
-
-    def actual_tcp_pose(self) -> tuple[float, float, float, float, float, float]:
+    def actual_tcp_pose(self) -> Pose:
         """The TCP pose (the flange pose with ``tcp_offset`` applied), as RTDE ``actual_TCP_pose``."""
-        flange = self.tcp_pose()
-        offset = self.tcp_offset
-        if not any(offset):
-            return flange
-        cached = self._tcp_cache
-        key = (flange, tuple(offset))
-        if cached is not None and cached[0] == key:
-            return cached[1]
-        pose = pose_of_frame(compose(frame_of_pose(flange), frame_of_pose(offset)))
-        self._tcp_cache = (key, pose)
-        return pose
-
-    @property
-    def robot_status_bits(self) -> int:
-        """RTDE ``robot_status_bits``: bit 0 power on, bit 1 program running."""
-        powered = self.robot_mode in (
-            RobotMode.IDLE,
-            RobotMode.RUNNING,
-            RobotMode.POWER_ON,
-            RobotMode.BACKDRIVE,
-        )
-        return int(powered) | (int(self.program_running) << 1)
-
-    @property
-    def safety_status_bits(self) -> int:
-        """RTDE ``safety_status_bits`` (ur-protocols.md §1.9)."""
-        mode = self.safety_mode
-        bits = 0
-        if mode is SafetyMode.NORMAL:
-            bits |= 1
-        if mode is SafetyMode.REDUCED:
-            bits |= 1 << 1
-        if mode is SafetyMode.PROTECTIVE_STOP:
-            bits |= 1 << 2
-        if mode is SafetyMode.SYSTEM_EMERGENCY_STOP:
-            bits |= (1 << 5) | (1 << 7)
-        if mode is SafetyMode.ROBOT_EMERGENCY_STOP:
-            bits |= (1 << 6) | (1 << 7)
-        return bits
+        return self._poses.tcp(self.q, self.tcp_offset)
 
 
 def _went_on(motion: Motion, end: list[float], velocity: list[float], carry: float) -> list[float]:
@@ -663,13 +525,3 @@ def _went_on(motion: Motion, end: list[float], velocity: list[float], carry: flo
         else:
             goal.append(q + v * carry + 0.5 * a * carry * carry)
     return goal
-
-
-def _rotation_vector(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
-    """Axis-angle (rotation vector) of a unit quaternion."""
-    norm = math.sqrt(qx * qx + qy * qy + qz * qz)
-    if norm < 1e-12:
-        return (0.0, 0.0, 0.0)
-    angle = 2.0 * math.atan2(norm, qw)
-    scale = angle / norm
-    return (qx * scale, qy * scale, qz * scale)

@@ -201,11 +201,11 @@ class Surroundings:
         felt = arm.tcp_force = [wrench[i] - offset[i] for i in range(6)]
         self._track_contact(felt, walled)
         self._quiet = not walls and not arm.force_mode and not arm.freedrive and not any(push)
-        if pressing > FORCE_LIMIT_N and arm.can_move:
+        if pressing > FORCE_LIMIT_N and arm.life.can_move:
             arm.protective_stop()
-        if arm.can_move and arm.force_mode and self.force is not None:
+        if arm.life.can_move and arm.force_mode and self.force is not None:
             self._move(arm, self._force_twist(felt, depths, dt), dt)
-        elif arm.can_move and arm.freedrive:
+        elif arm.life.can_move and arm.freedrive:
             self._move(arm, self._free_twist(felt, depths, dt), dt)
         elif any(self._twist):
             self._twist[:] = _ZERO6

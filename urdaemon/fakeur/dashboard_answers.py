@@ -95,7 +95,7 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
         fake._stop_program()
         arm.power_off()
         if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
-            arm.safety_mode = SafetyMode.NORMAL
+            arm.life.safety_mode = SafetyMode.NORMAL
         return "Restarting safety"
     if isinstance(command, dash.Pause):
         if arm.runtime_state is not RuntimeState.PLAYING:
@@ -223,7 +223,7 @@ def play(fake: FakeController) -> str | None:
         except (OSError, UnicodeDecodeError) as err:
             arm.stop_program()
             return str(err)
-    arm.runtime_state = RuntimeState.STOPPED
+    arm.life.runtime_state = RuntimeState.STOPPED
     fake._start_program(_basename(program) or program, text)
     return None
 

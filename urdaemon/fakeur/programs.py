@@ -365,7 +365,7 @@ class Programs:
                 chunks.append(line)
         finally:
             writer.close()
-        self.arm.runtime_state = RuntimeState.STOPPED
+        self.arm.life.runtime_state = RuntimeState.STOPPED
         start("externalControl", b"".join(chunks).decode("utf-8", "replace"))
 
 
