@@ -16,7 +16,6 @@ MAX_FUNCTION_LINES = 60
 
 STILL_OVER: dict[str, int] = {
     "urdaemon/description/urdf.py:joint_limits_for": 64,
-    "urdaemon/fakeur/arm.py:FakeArm": 521,
 }
 """``path:qualified.name`` → its length in lines today, for each place still over its limit."""
 
