@@ -317,9 +317,9 @@ class UrBackend(Backend):
             raise BackendError(problem)
         if count <= 0 or len(frames) != count * trajectory_point.FRAME_BYTES:
             raise BackendError(f"{len(frames)} bytes are not {count} encoded trajectory points")
+        self._writer.start(frames, count)  # sent first: a goal that could not be sent never runs
         self._channel.start_passthrough(goal_id, self.servers.trajectory.connected)
         self._on_result = on_result
-        self._writer.start(frames, count)
 
     def cancel_passthrough(self) -> None:
         """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
