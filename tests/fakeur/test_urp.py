@@ -11,6 +11,8 @@ import asyncio
 import gzip
 import re
 import threading
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -451,10 +453,31 @@ def test_a_chain_of_references_is_followed_once_and_a_cycle_is_refused() -> None
     assert "references in a row" in refused.value.reason
 
 
-async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    """Reproduction: ``load`` translated a ``.urp`` on the event loop, so a slow translation (0.17 s
-    for the reviewer's file) held every fake's clock. Here the translation waits until the clock
-    has ticked on: it would wait in vain (5 s, then fail) if it ran on the loop."""
+@dataclass
+class SlowLoad:
+    """A fake whose ``.urp`` translation (of ``slow.urp`` in its programs directory) starts, then waits
+    for ``release`` (5 s at most) and records in ``ticks`` how many cycles the fake ran meanwhile."""
+
+    fake: FakeController
+    programs: Path
+    started: threading.Event
+    release: threading.Event
+    ticks: list[int]
+
+    async def let_the_clock_tick(self, cycles: int = 5) -> None:
+        """Wait for the translation to start, let the fake run ``cycles`` cycles, then release it.
+
+        Counted from the translation's start, not from the request: on a busy machine the fake reads
+        the request a cycle or two later (stress_suite.sh saw 4 cycles)."""
+        await self.fake.until(self.started.is_set, cycles=2500, timeout=10.0)
+        await self.fake.cycles_pass(cycles, timeout=10.0)
+        self.release.set()
+
+
+@pytest.fixture
+async def slow_load(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> AsyncIterator[SlowLoad]:
+    """A running fake whose ``load`` of ``slow.urp`` translates only once its clock has ticked on: a
+    translation on the event loop would wait for that in vain (5 s, then fail)."""
     (tmp_path / "slow.urp").write_bytes(urp(WAIT_PROGRAM))
     started, release = threading.Event(), threading.Event()
     ticks: list[int] = []
@@ -468,49 +491,40 @@ async def test_a_load_translates_off_the_event_loop(monkeypatch: pytest.MonkeyPa
 
     monkeypatch.setattr(dashboard_answers, "translate", slow_translate)
     async with FakeController("ur10e", address=fake_address(), programs=tmp_path) as fake:
-        answer = asyncio.ensure_future(dashboard_answers.dashboard_answer(fake, dash.Load("slow.urp")))
-        # count from the translation's start (the compiler thread may start it a cycle or two later)
-        await fake.until(started.is_set, cycles=2500, timeout=10.0)
-        await fake.cycles_pass(5, timeout=10.0)
-        release.set()
-        reply = await asyncio.wait_for(answer, 10.0)
-        assert started.is_set()
-        assert reply == f"Loading program: {tmp_path}/slow.urp"
-        assert len(ticks) == 1
-        assert ticks[0] >= 5
-        assert fake.loaded_program == f"{tmp_path}/slow.urp"
-        assert fake.programs.loaded_urp is not None
+        try:
+            yield SlowLoad(fake, tmp_path, started, release, ticks)
+        finally:
+            release.set()
 
 
-async def test_a_dashboard_load_holds_no_clock(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+async def test_a_load_translates_off_the_event_loop(slow_load: SlowLoad) -> None:
+    """Reproduction: ``load`` translated a ``.urp`` on the event loop, so a slow translation (0.17 s
+    for the reviewer's file) held every fake's clock. Here the translation waits until the clock
+    has ticked on: it would wait in vain (5 s, then fail) if it ran on the loop."""
+    fake, programs = slow_load.fake, slow_load.programs
+    answer = asyncio.ensure_future(dashboard_answers.dashboard_answer(fake, dash.Load("slow.urp")))
+    await slow_load.let_the_clock_tick()
+    reply = await asyncio.wait_for(answer, 10.0)
+    assert slow_load.started.is_set()
+    assert reply == f"Loading program: {programs}/slow.urp"
+    assert len(slow_load.ticks) == 1
+    assert slow_load.ticks[0] >= 5
+    assert fake.loaded_program == f"{programs}/slow.urp"
+    assert fake.programs.loaded_urp is not None
+
+
+async def test_a_dashboard_load_holds_no_clock(slow_load: SlowLoad) -> None:
     """Reproduction: the dashboard server translated a ``.urp`` at ``load`` on the event loop; here
     the translation waits until the fake's clock has ticked on, which it would wait for in vain."""
-    (tmp_path / "slow.urp").write_bytes(urp(WAIT_PROGRAM))
-    release = threading.Event()
-    started = threading.Event()
-    ticks: list[int] = []
-
-    def slow_translate(data: bytes, file_name: str) -> UrpProgram:
-        before = fake.cycles
-        started.set()
-        release.wait(5.0)
-        ticks.append(fake.cycles - before)
-        return translate(data, file_name)
-
-    monkeypatch.setattr(dashboard_answers, "translate", slow_translate)
-    async with FakeController("ur10e", address=fake_address(), programs=tmp_path) as fake:
-        reader, writer = await asyncio.open_connection(fake.address, fake.ports.dashboard)
-        try:
-            await asyncio.wait_for(reader.readline(), 10.0)  # the banner
-            writer.write(b"load slow.urp\n")
-            # count from the translation's start, not from the write: on a busy machine the fake
-            # reads the line a cycle or two later (stress_suite.sh saw 4 cycles)
-            await fake.until(started.is_set, cycles=2500, timeout=10.0)
-            await fake.cycles_pass(5, timeout=10.0)
-            release.set()
-            reply = await asyncio.wait_for(reader.readline(), 10.0)
-        finally:
-            writer.close()
-        assert reply == f"Loading program: {tmp_path}/slow.urp\n".encode()
-        assert len(ticks) == 1
-        assert ticks[0] >= 5
+    fake = slow_load.fake
+    reader, writer = await asyncio.open_connection(fake.address, fake.ports.dashboard)
+    try:
+        await asyncio.wait_for(reader.readline(), 10.0)  # the banner
+        writer.write(b"load slow.urp\n")
+        await slow_load.let_the_clock_tick()
+        reply = await asyncio.wait_for(reader.readline(), 10.0)
+    finally:
+        writer.close()
+    assert reply == f"Loading program: {slow_load.programs}/slow.urp\n".encode()
+    assert len(slow_load.ticks) == 1
+    assert slow_load.ticks[0] >= 5
