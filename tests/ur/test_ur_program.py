@@ -10,6 +10,8 @@ import pytest
 from tests.helpers import fake_address
 from tests.ur.test_links_harness import JOINTS, robot_config
 from urdaemon.backends.ur.program import PROGRAM_RESEND_S, ControlProgram
+from urdaemon.backends.ur.reverse_channel import RUNTIME_PLAYING, ReverseChannel
+from urdaemon.backends.ur.rtde_link import RUNTIME_PAUSED
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.cell.config import UrOptions
 from urdaemon.model import Lifecycle, RobotMode, RobotState
@@ -57,8 +59,6 @@ def running() -> RobotState:
     return state
 
 
-LINKS = ("reverse", "trajectory", "script_command")
-
 WANTED: list[tuple[str, dict[str, Any], bool]] = [
     # (case, what differs from a headless robot that runs with no program, wanted)
     ("no program", {}, True),
@@ -83,4 +83,11 @@ def test_when_the_cycle_sends_a_program(case: str, given: dict[str, Any], wanted
     for name in given.get("links", ()):
         getattr(p.servers, name).link = object()
     p.lost_link = given.get("lost_link", "")
-    assert p.wanted(state, given.get("playing", True), given.get("handed_back", False)) is wanted, case
+    runtime_state = RUNTIME_PLAYING if given.get("playing", True) else RUNTIME_PAUSED
+    channel = ReverseChannel()
+    if given.get("links", ()) and "reverse" in given["links"]:
+        channel.program_connected()
+    if given.get("handed_back", False):
+        channel.program_connected()
+        channel.hand_back()
+    assert p.wanted(state, runtime_state, channel) is wanted, case

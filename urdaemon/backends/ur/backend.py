@@ -33,7 +33,7 @@ from urdaemon.backends.ur.frames import (
 )
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import PROGRAM_RESEND_S, ControlProgram, ProgramBuilder
-from urdaemon.backends.ur.reverse_channel import Action, Frame, ReverseChannel, Step
+from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
 from urdaemon.backends.ur.robot_messages import KINEMATICS_TIMEOUT_S, RobotMessages
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.backends.ur.servers import CallbackServers
@@ -58,10 +58,6 @@ __all__ = [
 
 log = logging.getLogger("urdaemon.ur")
 
-RUNTIME_PLAYING = 2
-RUNTIME_PAUSING = 3
-_PLAYING = frozenset((RUNTIME_PLAYING, RUNTIME_PAUSING))
-"""RTDE runtime states in which the program reads frames (pausing: until it has paused)."""
 _NO_FRAME, _RUNNING = Frame.NONE, Lifecycle.RUNNING
 """(the 500 Hz path: an enum's attribute lookup costs ~0.1 µs, a module alias a fifth of that)"""
 RTDE_WATCHDOG_S = 0.5
@@ -386,7 +382,7 @@ class UrBackend(Backend):
             return
         if not self._command_sent:
             self.send_command()
-        if not links_up and self._program.wanted(state, self._playing(), self._channel.handed_back):
+        if not links_up and self._program.wanted(state, self._mapper.runtime_state, self._channel):
             self._send_program(now, force=False)
 
     @property
@@ -401,7 +397,7 @@ class UrBackend(Backend):
         if self._command_sent:
             return
         self._command_sent = True
-        playing = self._mapper.runtime_state in _PLAYING
+        playing = self._mapper.runtime_state in READING_FRAMES
         frame = self._channel.frame(self.command.mode, playing, self._package_at)
         if frame is _NO_FRAME:
             return
@@ -409,10 +405,6 @@ class UrBackend(Backend):
         rtde = self._rtde
         if rtde is not None:  # package in → command out (issue 5's turnaround)
             self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
-
-    def _playing(self) -> bool:
-        """The controller runs a program (a paused one reads no frames, ur-protocols.md §6.2.5)."""
-        return self._mapper.runtime_state in _PLAYING
 
     def _send_program(self, now: float, *, force: bool) -> None:
         self._program.send_headless(self._primary, now, force=force)

@@ -18,6 +18,7 @@ from typing import Any
 
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.readiness import ProgramFacts, not_ready_reason
+from urdaemon.backends.ur.reverse_channel import READING_FRAMES, ReverseChannel
 from urdaemon.backends.ur.servers import REPLACED, CallbackServers
 from urdaemon.cell.config import Robot, UrOptions
 from urdaemon.model import Lifecycle, RobotMode, RobotState
@@ -147,7 +148,7 @@ class ControlProgram:
             )
         return None
 
-    def wanted(self, state: RobotState, playing: bool, handed_back: bool) -> bool:
+    def wanted(self, state: RobotState, runtime_state: int, channel: ReverseChannel) -> bool:
         """Headless, whether the cycle should send the program while it does not hold all its links:
         the robot runs but no program does, or the running one lost a link (a new program brings every
         link back)."""
@@ -155,13 +156,13 @@ class ControlProgram:
         return (
             self.robot.headless
             and not self.options.read_only
-            and not handed_back
+            and not channel.handed_back
             and state.robot_mode is RobotMode.RUNNING
             and state.lifecycle is Lifecycle.RUNNING
             and (
                 # no program: send one
                 (
-                    not (servers.reverse.connected and playing)
+                    not (servers.reverse.connected and runtime_state in READING_FRAMES)
                     and not servers.trajectory.connected
                     and not servers.script_command.connected
                 )

@@ -33,6 +33,7 @@ __all__ = [
     "FAILURE",
     "HANDED_BACK_REFUSAL",
     "NOT_CONNECTED",
+    "READING_FRAMES",
     "Action",
     "Channel",
     "Frame",
@@ -40,6 +41,11 @@ __all__ = [
     "Step",
 ]
 
+RUNTIME_PLAYING = 2
+RUNTIME_PAUSING = 3
+READING_FRAMES = frozenset((RUNTIME_PLAYING, RUNTIME_PAUSING))
+"""RTDE ``runtime_state`` values in which the program reads its frames (pausing: until it has paused);
+the backend passes ``runtime_state in READING_FRAMES`` to ``frame`` as ``playing``."""
 FAILURE = int(TrajectoryResultCode.FAILURE)
 """The trajectory result code of a goal whose program or trajectory link was lost (``FAILURE``)."""
 NOT_CONNECTED = "the control program is not connected"
