@@ -17,7 +17,7 @@ from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, MessageError
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
-from urdaemon.publish.services import SERVICES, STOP, ServiceSpec
+from urdaemon.publish.services import SERVICES, STOP, ServiceSpec, names
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
@@ -52,7 +52,7 @@ class ServiceRunner:
         node.queryable(keys.service(STOP.name), self.on_stop, max_bytes=None)  # never refused for its payload
         for spec in SERVICES:
             node.queryable(keys.service(spec.name), self._handler(spec))
-        return frozenset({STOP.name, *(spec.name for spec in SERVICES)})
+        return frozenset(names())
 
     def _handler(self, spec: ServiceSpec) -> Callable[[Any], None]:
         def handle(query: Any) -> None:
