@@ -176,7 +176,7 @@ class MotionController:
         the planner that can plan the tail (``plan_next()``) before accepting. The same refusals, in
         the same order, as ``prepare_trajectory``; nothing changes in the controller."""
         return TrajectoryCheck(
-            self._intake.check_steps(joint_names, points, lambda: self._goal_seed(state)[0])
+            self._intake.check_steps(tuple(joint_names), points, lambda: self._goal_seed(state)[0])
         )
 
     def prepare_trajectory(
