@@ -16,6 +16,7 @@ sets. The *input* registers are written by RTDE clients and read by ``read_input
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Final
 
 from urdaemon.fakeur.arm import FakeArm
@@ -77,6 +78,12 @@ def _number(function: str, value: Any) -> float:
     return float(value)
 
 
+def _register(name: str, function: Callable[..., Any]) -> None:
+    """Register ``function`` (made for a row of one of the tables below) as builtin ``name``."""
+    function.__name__ = function.__qualname__ = name
+    builtin(name)(function)
+
+
 # ---- digital ------------------------------------------------------------------------------------------
 
 
@@ -106,64 +113,35 @@ def get_flag(host: ScriptHost, n: Any) -> bool:
     return bool(host.arm.io.flags >> _index("get_flag", n, FLAGS) & 1)
 
 
-@builtin("set_standard_digital_out")
-def set_standard_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
-    _set_bit(host, "set_standard_digital_out", _STANDARD, n, b)
+_DIGITAL_GROUPS: Final = {"standard_": _STANDARD, "configurable_": _CONFIGURABLE, "tool_": _TOOL, "": _ALL}
+"""The digital IO groups by the infix of their builtins' names: ``set_<infix>digital_out(n, b)``,
+``get_<infix>digital_out(n)`` and ``get_<infix>digital_in(n)``; "" is the deprecated numbering."""
 
 
-@builtin("set_configurable_digital_out")
-def set_configurable_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
-    _set_bit(host, "set_configurable_digital_out", _CONFIGURABLE, n, b)
+def _digital_builtins(infix: str, group: tuple[int, int]) -> None:
+    """Register the three digital IO builtins of one group (``_DIGITAL_GROUPS``)."""
+    set_name, get_out_name, get_in_name = (
+        f"set_{infix}digital_out",
+        f"get_{infix}digital_out",
+        f"get_{infix}digital_in",
+    )
+
+    def set_out(host: ScriptHost, n: Any, b: Any) -> None:
+        _set_bit(host, set_name, group, n, b)
+
+    def get_out(host: ScriptHost, n: Any) -> bool:
+        return _get_bit(host.arm.io.digital_out, get_out_name, group, n)
+
+    def get_in(host: ScriptHost, n: Any) -> bool:
+        return _get_bit(host.arm.io.digital_in, get_in_name, group, n)
+
+    _register(set_name, set_out)
+    _register(get_out_name, get_out)
+    _register(get_in_name, get_in)
 
 
-@builtin("set_tool_digital_out")
-def set_tool_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
-    _set_bit(host, "set_tool_digital_out", _TOOL, n, b)
-
-
-@builtin("set_digital_out")
-def set_digital_out(host: ScriptHost, n: Any, b: Any) -> None:
-    _set_bit(host, "set_digital_out", _ALL, n, b)
-
-
-@builtin("get_standard_digital_out")
-def get_standard_digital_out(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_out, "get_standard_digital_out", _STANDARD, n)
-
-
-@builtin("get_configurable_digital_out")
-def get_configurable_digital_out(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_out, "get_configurable_digital_out", _CONFIGURABLE, n)
-
-
-@builtin("get_tool_digital_out")
-def get_tool_digital_out(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_out, "get_tool_digital_out", _TOOL, n)
-
-
-@builtin("get_digital_out")
-def get_digital_out(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_out, "get_digital_out", _ALL, n)
-
-
-@builtin("get_standard_digital_in")
-def get_standard_digital_in(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_in, "get_standard_digital_in", _STANDARD, n)
-
-
-@builtin("get_configurable_digital_in")
-def get_configurable_digital_in(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_in, "get_configurable_digital_in", _CONFIGURABLE, n)
-
-
-@builtin("get_tool_digital_in")
-def get_tool_digital_in(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_in, "get_tool_digital_in", _TOOL, n)
-
-
-@builtin("get_digital_in")
-def get_digital_in(host: ScriptHost, n: Any) -> bool:
-    return _get_bit(host.arm.io.digital_in, "get_digital_in", _ALL, n)
+for _infix, _group in _DIGITAL_GROUPS.items():
+    _digital_builtins(_infix, _group)
 
 
 # ---- the controller's IO variables (``digital_out[n]``) -----------------------------------------------
@@ -207,43 +185,47 @@ def digital_in_get(host: ScriptHost, n: Any) -> bool:
 # ---- analog and tool voltage -----------------------------------------------------------------------------
 
 
-def _set_analog_out(host: ScriptHost, function: str, n: Any, f: Any) -> None:
-    pin = _index(function, n, 2)
-    level = _number(function, f)
-    if not 0.0 <= level <= 1.0:
-        raise ScriptRuntimeError(f"{function}: level {level:g} is not in 0..1")
-    host.arm.io.analog_out[pin] = level
+_ANALOG_OUTS: Final = ("standard_analog_out", "analog_out")
+"""``set_<name>(n, f)`` sets analog output ``n`` (0..1) to the relative level ``f`` (0..1) of its domain,
+``get_<name>(n)`` reads it back; ``analog_out`` is the deprecated name of the same outputs."""
+_ANALOG_INS: Final = {"get_standard_analog_in": "analog_in", "get_tool_analog_in": "tool_analog_in"}
+"""The analog input readers (inputs 0..1) by the ``IoState`` field they read."""
+_DOMAINS: Final = {"set_analog_outputdomain": 2, "set_standard_analog_input_domain": 0}
+"""``name(port, domain)``: port 0..1 in current (``domain`` 0, 4-20 mA) or voltage (1, 0-10 V) mode, the
+analog outputs' (bits 2-3 of ``analog_out_types``) and the standard analog inputs' (bits 0-1), by the
+first bit of the pair."""
 
 
-@builtin("set_standard_analog_out")
-def set_standard_analog_out(host: ScriptHost, n: Any, f: Any) -> None:
-    """Set analog output ``n`` (0..1) to the relative level ``f`` (0..1) of its domain."""
-    _set_analog_out(host, "set_standard_analog_out", n, f)
+def _analog_out_builtins(name: str) -> None:
+    set_name, get_name = f"set_{name}", f"get_{name}"
+
+    def set_out(host: ScriptHost, n: Any, f: Any) -> None:
+        pin = _index(set_name, n, 2)
+        level = _number(set_name, f)
+        if not 0.0 <= level <= 1.0:
+            raise ScriptRuntimeError(f"{set_name}: level {level:g} is not in 0..1")
+        host.arm.io.analog_out[pin] = level
+
+    def get_out(host: ScriptHost, n: Any) -> float:
+        return host.arm.io.analog_out[_index(get_name, n, 2)]
+
+    _register(set_name, set_out)
+    _register(get_name, get_out)
 
 
-@builtin("set_analog_out")
-def set_analog_out(host: ScriptHost, n: Any, f: Any) -> None:
-    _set_analog_out(host, "set_analog_out", n, f)
+def _analog_in_builtin(name: str, field: str) -> None:
+    def get_in(host: ScriptHost, n: Any) -> float:
+        levels: list[float] = getattr(host.arm.io, field)
+        return levels[_index(name, n, 2)]
+
+    _register(name, get_in)
 
 
-@builtin("get_standard_analog_out")
-def get_standard_analog_out(host: ScriptHost, n: Any) -> float:
-    return host.arm.io.analog_out[_index("get_standard_analog_out", n, 2)]
+def _domain_builtin(name: str, first_bit: int) -> None:
+    def set_domain(host: ScriptHost, port: Any, domain: Any) -> None:
+        _set_domain(host, name, first_bit, port, domain)
 
-
-@builtin("get_analog_out")
-def get_analog_out(host: ScriptHost, n: Any) -> float:
-    return host.arm.io.analog_out[_index("get_analog_out", n, 2)]
-
-
-@builtin("get_standard_analog_in")
-def get_standard_analog_in(host: ScriptHost, n: Any) -> float:
-    return host.arm.io.analog_in[_index("get_standard_analog_in", n, 2)]
-
-
-@builtin("get_tool_analog_in")
-def get_tool_analog_in(host: ScriptHost, n: Any) -> float:
-    return host.arm.io.tool_analog_in[_index("get_tool_analog_in", n, 2)]
+    _register(name, set_domain)
 
 
 @builtin("get_analog_in")
@@ -261,16 +243,12 @@ def _set_domain(host: ScriptHost, function: str, first_bit: int, port: Any, doma
     io.analog_out_types = io.analog_out_types | bit if voltage else io.analog_out_types & ~bit
 
 
-@builtin("set_analog_outputdomain")
-def set_analog_outputdomain(host: ScriptHost, port: Any, domain: Any) -> None:
-    """Analog output ``port`` (0..1) in current (``domain`` 0, 4-20 mA) or voltage (1, 0-10 V) mode."""
-    _set_domain(host, "set_analog_outputdomain", 2, port, domain)
-
-
-@builtin("set_standard_analog_input_domain")
-def set_standard_analog_input_domain(host: ScriptHost, port: Any, domain: Any) -> None:
-    """Analog input ``port`` (0..1) in current (``domain`` 0) or voltage (1) mode."""
-    _set_domain(host, "set_standard_analog_input_domain", 0, port, domain)
+for _name in _ANALOG_OUTS:
+    _analog_out_builtins(_name)
+for _name, _field in _ANALOG_INS.items():
+    _analog_in_builtin(_name, _field)
+for _name, _first_bit in _DOMAINS.items():
+    _domain_builtin(_name, _first_bit)
 
 
 @builtin("set_tool_voltage")
@@ -286,38 +264,30 @@ def set_tool_voltage(host: ScriptHost, voltage: Any) -> None:
 # ---- RTDE registers --------------------------------------------------------------------------------------
 
 
-@builtin("read_input_integer_register")
-def read_input_integer_register(host: ScriptHost, address: Any) -> int:
-    return host.input_registers.ints.get(_index("read_input_integer_register", address, NUMBER_REGISTERS), 0)
+_Registers = Callable[[ScriptHost], dict[int, Any]]
+"""The register set a reader reads, of the host."""
+_REGISTER_READS: Final[dict[str, tuple[_Registers, int, Any]]] = {
+    "read_input_integer_register": (lambda host: host.input_registers.ints, NUMBER_REGISTERS, 0),
+    "read_input_float_register": (lambda host: host.input_registers.doubles, NUMBER_REGISTERS, 0.0),
+    "read_input_boolean_register": (lambda host: host.input_registers.bits, BIT_REGISTERS, False),
+    "read_output_integer_register": (lambda host: host.arm.io.registers_int, NUMBER_REGISTERS, 0),
+    "read_output_float_register": (lambda host: host.arm.io.registers_double, NUMBER_REGISTERS, 0.0),
+    "read_output_boolean_register": (lambda host: host.arm.io.registers_bit, BIT_REGISTERS, False),
+}
+"""``name(address)`` → (the registers it reads, how many there are, what one never written reads)."""
 
 
-@builtin("read_input_float_register")
-def read_input_float_register(host: ScriptHost, address: Any) -> float:
-    return host.input_registers.doubles.get(
-        _index("read_input_float_register", address, NUMBER_REGISTERS), 0.0
-    )
+def _register_read(
+    name: str, registers: Callable[[ScriptHost], dict[int, Any]], count: int, unset: Any
+) -> None:
+    def read(host: ScriptHost, address: Any) -> Any:
+        return registers(host).get(_index(name, address, count), unset)
+
+    _register(name, read)
 
 
-@builtin("read_input_boolean_register")
-def read_input_boolean_register(host: ScriptHost, address: Any) -> bool:
-    return host.input_registers.bits.get(_index("read_input_boolean_register", address, BIT_REGISTERS), False)
-
-
-@builtin("read_output_integer_register")
-def read_output_integer_register(host: ScriptHost, address: Any) -> int:
-    return host.arm.io.registers_int.get(_index("read_output_integer_register", address, NUMBER_REGISTERS), 0)
-
-
-@builtin("read_output_float_register")
-def read_output_float_register(host: ScriptHost, address: Any) -> float:
-    index = _index("read_output_float_register", address, NUMBER_REGISTERS)
-    return host.arm.io.registers_double.get(index, 0.0)
-
-
-@builtin("read_output_boolean_register")
-def read_output_boolean_register(host: ScriptHost, address: Any) -> bool:
-    index = _index("read_output_boolean_register", address, BIT_REGISTERS)
-    return host.arm.io.registers_bit.get(index, False)
+for _name, (_registers, _count, _unset) in _REGISTER_READS.items():
+    _register_read(_name, _registers, _count, _unset)
 
 
 @builtin("write_output_integer_register")
@@ -389,27 +359,23 @@ def _input_action(host: ScriptHost, function: str, group: str, port: Any, action
         actions[(group, pin)] = action
 
 
-@builtin("set_standard_digital_input_action")
-def set_standard_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
-    """What standard input ``port`` (0..7) does when high: ``"default"`` (nothing); ``"freedrive"`` stops
-    the program with "not simulated" (nothing watches the fake's inputs to start freedrive)."""
-    _input_action(host, "set_standard_digital_input_action", "standard", port, action)
+_INPUT_ACTION_GROUPS: Final = ("standard", "configurable", "tool", "gp_boolean")
+"""``set_<group>_(digital_)input_action(port, action)``: what input ``port`` of the group does when high:
+``"default"`` (nothing); ``"freedrive"`` stops the program with "not simulated" (nothing watches the
+fake's inputs to start freedrive). ``gp_boolean``: the general purpose boolean input registers."""
 
 
-@builtin("set_configurable_digital_input_action")
-def set_configurable_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
-    _input_action(host, "set_configurable_digital_input_action", "configurable", port, action)
+def _input_action_builtin(group: str) -> None:
+    name = f"set_{group}_input_action" if group == "gp_boolean" else f"set_{group}_digital_input_action"
+
+    def set_action(host: ScriptHost, port: Any, action: Any) -> None:
+        _input_action(host, name, group, port, action)
+
+    _register(name, set_action)
 
 
-@builtin("set_tool_digital_input_action")
-def set_tool_digital_input_action(host: ScriptHost, port: Any, action: Any) -> None:
-    _input_action(host, "set_tool_digital_input_action", "tool", port, action)
-
-
-@builtin("set_gp_boolean_input_action")
-def set_gp_boolean_input_action(host: ScriptHost, port: Any, action: Any) -> None:
-    """The same for the general purpose boolean input registers (0..127)."""
-    _input_action(host, "set_gp_boolean_input_action", "gp_boolean", port, action)
+for _group_name in _INPUT_ACTION_GROUPS:
+    _input_action_builtin(_group_name)
 
 
 @builtin("set_input_actions_to_default")
@@ -465,29 +431,23 @@ def apply_runstate_outputs(arm: FakeArm, running: bool) -> None:
             io.digital_out = io.digital_out | bit if high else io.digital_out & ~bit
 
 
-@builtin("set_runstate_standard_digital_output_to_value")
-def set_runstate_standard_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
-    """What standard output ``outputId`` (0..7) does as programs start and stop (:data:`RUNSTATE_DIGITAL`)."""
-    _runstate(host, "set_runstate_standard_digital_output_to_value", "standard", outputId, state)
+_RUNSTATE_BUILTINS: Final = {
+    "set_runstate_standard_digital_output_to_value": "standard",
+    "set_runstate_configurable_digital_output_to_value": "configurable",
+    "set_runstate_tool_digital_output_to_value": "tool",
+    "set_runstate_gp_boolean_output_to_value": "gp_boolean",
+    "set_runstate_standard_analog_output_to_value": "analog",
+}
+"""``name(outputId, state)`` → the output group whose output ``outputId`` does as programs start and
+stop what ``state`` says (:data:`RUNSTATE_DIGITAL`, :data:`RUNSTATE_ANALOG` for the analog outputs)."""
 
 
-@builtin("set_runstate_configurable_digital_output_to_value")
-def set_runstate_configurable_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
-    _runstate(host, "set_runstate_configurable_digital_output_to_value", "configurable", outputId, state)
+def _runstate_builtin(name: str, group: str) -> None:
+    def set_runstate(host: ScriptHost, outputId: Any, state: Any) -> None:
+        _runstate(host, name, group, outputId, state)
+
+    _register(name, set_runstate)
 
 
-@builtin("set_runstate_tool_digital_output_to_value")
-def set_runstate_tool_digital_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
-    _runstate(host, "set_runstate_tool_digital_output_to_value", "tool", outputId, state)
-
-
-@builtin("set_runstate_gp_boolean_output_to_value")
-def set_runstate_gp_boolean_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
-    """The same for the general purpose boolean output registers (0..127)."""
-    _runstate(host, "set_runstate_gp_boolean_output_to_value", "gp_boolean", outputId, state)
-
-
-@builtin("set_runstate_standard_analog_output_to_value")
-def set_runstate_standard_analog_output_to_value(host: ScriptHost, outputId: Any, state: Any) -> None:
-    """What analog output ``outputId`` (0..1) does when programs stop (:data:`RUNSTATE_ANALOG`)."""
-    _runstate(host, "set_runstate_standard_analog_output_to_value", "analog", outputId, state)
+for _name, _group_name in _RUNSTATE_BUILTINS.items():
+    _runstate_builtin(_name, _group_name)
