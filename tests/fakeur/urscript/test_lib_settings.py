@@ -6,38 +6,23 @@ import re
 
 import pytest
 
+from tests.fakeur.urscript.library_host import DT, make_host, run_script
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
-from urdaemon.fakeur.urscript import ScriptRun, compile_program
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_settings import pause_on_error_of, settings_of
 from urdaemon.model import RobotMode
 
-DT = 0.002
-
 
 def _host() -> ScriptHost:
-    model = load_ur_model("ur5e")
-    arm = FakeArm(model, model.dh, powered=True)
-    arm.start_program()
-    return ScriptHost(arm, step_time=DT, version=(5, 17))
-
-
-def _run(host: ScriptHost, text: str, cycles: int = 20) -> ScriptRun:
-    run = compile_program(text, series="e", version=host.version).start(host)
-    for _ in range(cycles):
-        if run.done:
-            break
-        run.step()
-        host.arm.step(DT)
-    assert run.done
-    return run
+    """A UR5e on a 5.17 controller, its program playing."""
+    return make_host("ur5e", playing=True, version=(5, 17))
 
 
 def test_settings_are_recorded_for_later_programs() -> None:
     """On f5f0e26 each of these stopped the program with "not simulated"."""
     host = _host()
-    run = _run(
+    run = run_script(
         host,
         "set_base_acceleration([0.1, 0, -0.2])\n"
         "set_safety_mode_transition_hardness(1)\n"
@@ -45,6 +30,7 @@ def test_settings_are_recorded_for_later_programs() -> None:
         "position_deviation_warning(True, 0.5)\n"
         "high_holding_torque_disable()\n"
         "set_baselight_solid(255, 128, 0)\n",
+        cycles=20,
     )
     assert run.error is None
     settings = settings_of(host.arm)
@@ -54,11 +40,11 @@ def test_settings_are_recorded_for_later_programs() -> None:
     assert settings.deviation_warning == (True, 0.5)
     assert settings.high_holding_torque is False
     assert settings.baselight == ("solid", (255.0, 128.0, 0.0))
-    later = _run(host, "global a = get_base_acceleration()\nset_baselight_iec()\n")
+    later = run_script(host, "global a = get_base_acceleration()\nset_baselight_iec()\n", cycles=20)
     assert later.variable("a") == [0.1, 0.0, -0.2]
     assert settings.baselight[0] == "iec"
     assert pause_on_error_of(host) == {(173, 2)}, "the same program's host"
-    hard = _run(host, "set_safety_mode_transition_hardness(0)\n")
+    hard = run_script(host, "set_safety_mode_transition_hardness(0)\n", cycles=20)
     assert hard.error is not None
     assert "not simulated" in hard.error.message, "the fake's stops are soft: a hard one is not faked"
     fresh = ScriptHost(host.arm, step_time=DT)
@@ -78,7 +64,7 @@ def test_settings_are_recorded_for_later_programs() -> None:
     ],
 )
 def test_bad_settings_are_runtime_errors(line: str, words: str) -> None:
-    run = _run(_host(), line + "\n")
+    run = run_script(_host(), line + "\n", cycles=20)
     error = run.error
     assert error is not None
     assert error.line == 1
@@ -88,7 +74,7 @@ def test_bad_settings_are_runtime_errors(line: str, words: str) -> None:
 def test_powerdown_powers_the_arm_off_and_ends_the_program() -> None:
     """As URSim: the arm is POWER_OFF, the program stops at once (the line after it never runs)."""
     host = _host()
-    run = _run(host, "global before = 1\npowerdown()\nglobal after = 2\n", cycles=3)
+    run = run_script(host, "global before = 1\npowerdown()\nglobal after = 2\n", cycles=3)
     assert run.error is None
     assert host.arm.robot_mode is RobotMode.POWER_OFF
     assert host.arm.runtime_state is RuntimeState.STOPPED
