@@ -6,35 +6,15 @@ from typing import Any
 
 import pytest
 
-from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript import compile_program
+from tests.fakeur.urscript.library_host import DT, make_host, run_script
 from urdaemon.fakeur.urscript import lib_config as cfg
-from urdaemon.fakeur.urscript.host import ScriptHost, Watchdog
+from urdaemon.fakeur.urscript.host import Watchdog
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose
 from urdaemon.fakeur.urscript.signatures import ACTIVE_TCP
 
-DT = 0.002
-
-
-def _host() -> ScriptHost:
-    model = load_ur_model("ur10e")
-    return ScriptHost(FakeArm(model, model.dh, powered=True), step_time=DT)
-
-
-def _run(host: ScriptHost, text: str, version: tuple[int, int] = (5, 12)) -> Any:
-    run = compile_program(text, series="e", version=version).start(host)
-    for _ in range(50):
-        if run.done:
-            break
-        run.step()
-        host.arm.step(DT)
-    assert run.done
-    return run.error
-
 
 def test_payload_setters_and_getters() -> None:
-    host = _host()
+    host = make_host()
     cfg.set_target_payload(host, 2.5, [0.0, 0.01, 0.05], [0.1, 0.2, 0.3, 0, 0, 0], 0)
     arm = host.arm
     assert (arm.payload_mass, arm.payload_cog, arm.payload_inertia) == (
@@ -51,7 +31,7 @@ def test_payload_setters_and_getters() -> None:
 
 
 def test_set_payload_without_cog_uses_the_tcp_position() -> None:
-    host = _host()
+    host = make_host()
     cfg.set_tcp(host, [0, 0, 0.2, 0, 0, 0])
     cfg.set_payload(host, 3.0, ACTIVE_TCP)
     assert host.arm.payload_mass == 3.0
@@ -59,7 +39,7 @@ def test_set_payload_without_cog_uses_the_tcp_position() -> None:
 
 
 def test_tcp_and_gravity() -> None:
-    host = _host()
+    host = make_host()
     cfg.set_tcp(host, UrPose([0.0, 0.0, 0.1, 0.0, 0.0, 1.0]))
     offset = cfg.get_tcp_offset(host)
     assert isinstance(offset, UrPose)
@@ -93,11 +73,11 @@ def test_tcp_and_gravity() -> None:
 )
 def test_bad_arguments_are_runtime_errors(call: Any, args: tuple[Any, ...]) -> None:
     with pytest.raises(ScriptRuntimeError, match=call.__name__):
-        call(_host(), *args)
+        call(make_host(), *args)
 
 
 def test_force_mode_on_and_off_with_its_parameters() -> None:
-    host = _host()
+    host = make_host()
     cfg.force_mode_set_damping(host, 0.025)
     cfg.force_mode_set_gain_scaling(host, 0.5)
     cfg.force_mode(host, UrPose([0.0] * 6), [0, 0, 1, 0, 0, 0], [0, 0, -5, 0, 0, 0], 2, [0.1] * 6)
@@ -111,7 +91,7 @@ def test_force_mode_on_and_off_with_its_parameters() -> None:
 
 
 def test_freedrive_teach_mode_and_tool_contact() -> None:
-    host = _host()
+    host = make_host()
     seen = []
     cfg.freedrive_mode(host, [1, 1, 1, 0, 0, 0], UrPose([0.0] * 6))
     seen.append(host.arm.freedrive)
@@ -128,7 +108,7 @@ def test_freedrive_teach_mode_and_tool_contact() -> None:
 
 
 def test_tool_io_configuration_is_recorded() -> None:
-    host = _host()
+    host = make_host()
     cfg.set_tool_communication(host, True, 115200, 0, 1, 1.5, 3.5)
     cfg.set_tool_digital_output_mode(host, 1, 3)
     cfg.set_tool_output_mode(host, 1)
@@ -138,7 +118,7 @@ def test_tool_io_configuration_is_recorded() -> None:
 
 
 def test_watchdog_is_recorded_for_the_controller_and_dropped_at_close() -> None:
-    host = _host()
+    host = make_host()
     host.arm.step(0.5)
     cfg.rtde_set_watchdog(host, "input_int_register_0", 10, "stop")
     cfg.rtde_set_watchdog(host, "input_double_register_1", 2.5, "pause")
@@ -153,8 +133,8 @@ def test_watchdog_is_recorded_for_the_controller_and_dropped_at_close() -> None:
 
 def test_a_script_configures_the_arm() -> None:
     """ur_rtde's and our control script's calls, in their keyword forms."""
-    host = _host()
-    error = _run(
+    host = make_host()
+    error = run_script(
         host,
         "set_tcp(p[0, 0, 0.15, 0, 0, 0])\n"
         "set_target_payload(1.2, [0, 0, 0.05])\n"
@@ -168,7 +148,7 @@ def test_a_script_configures_the_arm() -> None:
         'rtde_set_watchdog("input_int_register_24", 10, "stop")\n'
         "if tool_contact(direction=[0, 0, -0.1, 0, 0, 0]) != 0:\n  halt\nend\n"
         "write_output_integer_register(0, get_freedrive_status())\n",
-    )
+    ).error
     assert error is None
     arm = host.arm
     assert arm.tcp_offset == [0.0, 0.0, 0.15, 0.0, 0.0, 0.0]
@@ -181,7 +161,7 @@ def test_a_script_configures_the_arm() -> None:
 
 def test_an_external_ft_sensor_is_recorded_while_enabled_and_bad_arguments_are_errors() -> None:
     """urcl's external F/T example calls ft_rtde_input_enable first: it runs, and a disable forgets it."""
-    host = _host()
+    host = make_host()
     cfg.ft_rtde_input_enable(host, True, 0.5, [0.0, 0.0, 0.02], [0.0, 0.0, 0.01])
     assert cfg._config(host).external_ft_sensor == (0.5, [0.0, 0.0, 0.02], [0.0, 0.0, 0.01])
     cfg.enable_external_ft_sensor(host, False, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
@@ -199,7 +179,7 @@ def test_freedrive_free_axes_are_in_the_feature_frame_and_force_mode_settings_re
 
     from urdaemon.fakeur.contact import surroundings_of
 
-    host = _host()
+    host = make_host()
     arm = host.arm
     surroundings = surroundings_of(arm)
     turned = UrPose([0.0, 0.0, 0.0, 0.0, 0.0, math.pi / 2])  # its x is the base's y
