@@ -136,6 +136,11 @@ class Backend(abc.ABC):
         backends that apply the command in their own step (mock, servo) do nothing here."""
         return
 
+    @property
+    def passthrough_goal(self) -> str | None:
+        """The id of the passthrough goal the robot runs itself (None: none runs)."""
+        return None
+
     def cancel_passthrough(self) -> None:
         """Cancel the passthrough trajectory the robot runs (no-op when none runs)."""
         return  # backends without passthrough never have one running

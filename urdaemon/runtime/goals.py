@@ -284,9 +284,9 @@ class Goals:
             return
         controller = self._controller
         target = goal_id if goal_id is not None else controller.active_goal_id
-        external = controller.external_goal_id
+        running = self._backend.passthrough_goal
         canceled = controller.cancel(goal_id)
-        if canceled and external is not None and external == target:
+        if canceled and running is not None and running == target:
             self._backend.cancel_passthrough()
         body: dict[str, Any] = {"canceled": canceled, "goal_id": target}
         # a goal being planned has no id yet: a cancel of no id, or of nothing active, cancels it

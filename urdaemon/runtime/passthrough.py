@@ -39,8 +39,6 @@ class Passthrough:
         self._backend = backend
         self._controller = controller
         self._log = log
-        self.goal_id: str | None = None
-        """The goal the robot runs itself now (None: none)."""
 
     def check_available(self) -> None:
         """Refuse a passthrough goal the backend cannot run now."""
@@ -91,13 +89,10 @@ class Passthrough:
             self._log.exception("passthrough goal %s could not be sent", goal_id)
             self._controller.finish_external(goal_id, GoalStatus.ABORTED, internal_error(err), state)
             return duration
-        self.goal_id = goal_id
         return duration
 
     def finish(self, goal_id: str, code: int) -> bool:
         """The robot's result of ``goal_id``; True when it ended the goal (its result is an event)."""
-        if self.goal_id == goal_id:
-            self.goal_id = None
         status, reason = ROBOT_RESULTS.get(
             code, (GoalStatus.ABORTED, "the robot reported that the trajectory failed")
         )
@@ -106,11 +101,9 @@ class Passthrough:
     def ended_here(self, goal_id: str) -> None:
         """A goal ended by the daemon (not ready, stopped, aborted), not by the robot's result: the
         robot must stop its trajectory too, or it would carry on after play."""
-        if goal_id == self.goal_id:
-            self.goal_id = None
+        if goal_id == self._backend.passthrough_goal:
             self._backend.cancel_passthrough()
 
     def cancel_if_running(self) -> None:
         """Stop the trajectory the robot runs, if the controller follows one (stop)."""
-        if self._controller.external_goal_id is not None:
-            self._backend.cancel_passthrough()
+        self._backend.cancel_passthrough()  # (nothing when the robot runs none)
