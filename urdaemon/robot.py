@@ -15,22 +15,17 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.cell.config import PublishOptions, Robot
 from urdaemon.control import MotionController
-from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.errors import UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
-from urdaemon.publish.codec import TrajectoryGoalMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching, ZenohNode
-from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
-from urdaemon.runtime import slicing
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.services import ServiceRunner
-from urdaemon.runtime.slicing import CHECK_STEPS, PLANNING_SLICE_S, RELEASE_ITEMS
 from urdaemon.runtime.status import StatusPublisher
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
@@ -197,26 +192,3 @@ class RobotRuntime:
     def state(self) -> RobotState:
         """The robot's latest state."""
         return self.backend.state
-
-    def _on_trajectory_goal(self, query: Any) -> None:
-        """Kept for tests/ur/test_review_passthrough.py (not this file's owner's): use
-        ``goals.on_trajectory_goal``."""
-        self.goals.on_trajectory_goal(query)
-
-
-# ---- kept for tests/control/test_stepped_check.py, which sets this module's PLANNING_SLICE_S ----------
-# (the slicing lives in runtime/slicing.py; these read the budget from here at each call)
-
-__all__ += ["CHECK_STEPS", "PLANNING_SLICE_S", "RELEASE_ITEMS"]
-
-
-async def _check_sliced(check: TrajectoryCheck) -> TrajectoryPlanner:
-    return await slicing.check_sliced(check, PLANNING_SLICE_S)
-
-
-async def _release(owned: list[object]) -> None:
-    await slicing.release(owned, PLANNING_SLICE_S)
-
-
-async def _decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:
-    return await slicing.decode_sliced(decoder, PLANNING_SLICE_S)

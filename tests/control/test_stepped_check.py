@@ -17,12 +17,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from urdaemon import robot as runtime
 from urdaemon.control import GoalStatus, MotionController, PlannedTrajectory, TrajectoryPoint
 from urdaemon.control.controller import RELEASE_SEGMENTS
 from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS
+from urdaemon.runtime import slicing
 
 from .sim import PERIOD, THREE_LIMITS, UR10E_LIMITS, SimRobot, ready_state
 
@@ -259,7 +259,7 @@ async def test_the_runtime_checks_a_long_trajectory_over_many_turns_of_the_loop(
 ) -> None:
     """With no time allowed per slice, the runtime turns the loop after every few points checked.
     Old code: the check ran in a worker thread, one call the loop could not step."""
-    monkeypatch.setattr(runtime, "PLANNING_SLICE_S", 0.0)
+    monkeypatch.setattr(slicing, "PLANNING_SLICE_S", 0.0)
     turns = 0
     stop = asyncio.Event()
 
@@ -273,11 +273,11 @@ async def test_the_runtime_checks_a_long_trajectory_over_many_turns_of_the_loop(
     state = ready_state(UR_JOINTS, START)
     task = asyncio.ensure_future(probe())
     await asyncio.sleep(0)
-    planner = await runtime._check_sliced(controller.check_trajectory(UR_JOINTS, _ur_points(400), state))
+    planner = await slicing.check_sliced(controller.check_trajectory(UR_JOINTS, _ur_points(400), state))
     stop.set()
     await task
     assert len(planner.points) == 400
-    assert turns >= 400 // runtime.CHECK_STEPS
+    assert turns >= 400 // slicing.CHECK_STEPS
 
 
 async def test_the_runtime_frees_a_goals_points_over_many_turns_of_the_loop(
@@ -285,7 +285,7 @@ async def test_the_runtime_frees_a_goals_points_over_many_turns_of_the_loop(
 ) -> None:
     """A goal's message points and planner are freed a few objects a turn, and what someone else
     still holds is only let go of. Old code: each was freed in one turn (~1 ms for 5 000 points)."""
-    monkeypatch.setattr(runtime, "PLANNING_SLICE_S", 0.0)
+    monkeypatch.setattr(slicing, "PLANNING_SLICE_S", 0.0)
     planner = _planned_tail(100)
     planner.finish(START, [0.0] * 6, [0.0] * 6)
     message_points = tuple(_ur_points(2000))
@@ -303,9 +303,9 @@ async def test_the_runtime_frees_a_goals_points_over_many_turns_of_the_loop(
 
     task = asyncio.ensure_future(probe())
     await asyncio.sleep(0)
-    await runtime._release(held)
+    await slicing.release(held)
     stop.set()
     await task
     assert held == []
     assert kept == list(range(1000))  # held elsewhere too: let go of, not taken apart
-    assert turns >= 2000 // runtime.RELEASE_ITEMS
+    assert turns >= 2000 // slicing.RELEASE_ITEMS

@@ -84,7 +84,7 @@ async def test_a_segment_longer_than_the_protocol_carries_is_refused_and_leaves_
     was refused "busy" and a result came later for the goal the client was told was refused."""
     async with served() as (runtime, run):
         too_long = Query("review/alice/goal/trajectory", trajectory(5, passthrough=True, last_segment=2200.0))
-        runtime._on_trajectory_goal(too_long)
+        runtime.goals.on_trajectory_goal(too_long)
         answer = await too_long.answer()
         assert answer["accepted"] is False
         assert answer["reason"] == (
@@ -94,7 +94,7 @@ async def test_a_segment_longer_than_the_protocol_carries_is_refused_and_leaves_
         assert runtime.controller.external_goal_id is None
         assert run.backend.passthrough_problem() is None, "no START went out"
         good = Query("review/alice/goal/trajectory", trajectory(5, passthrough=True))
-        runtime._on_trajectory_goal(good)
+        runtime.goals.on_trajectory_goal(good)
         accepted = await good.answer()
         assert accepted["accepted"] is True, accepted
         assert runtime.controller.external_goal_id == accepted["goal_id"]
