@@ -20,8 +20,9 @@ import xacro
 import yaml
 
 from urdaemon.cell.config import Cell, Robot
-from urdaemon.description._transforms import rot_z, rpy_of, xyz_rpy_matrix
+from urdaemon.description._transforms import matrix_of, rot_z, rpy_of, xyz_rpy
 from urdaemon.description.calibration import joint_origins, load_calibration
+from urdaemon.description.frames import compose
 from urdaemon.description.urmodels import INERTIA_KEYS, LinkInertial, load_ur_model
 from urdaemon.errors import ConfigError, DescriptionError
 from urdaemon.model import UR_JOINTS
@@ -184,9 +185,9 @@ def _merge_override(
 def _inertial(data: LinkInertial, *, turn_pi: bool) -> dict[str, Any]:
     xyz, rpy = data.center_of_mass, data.center_of_mass_rpy
     if turn_pi:
-        m = rot_z(-math.pi) @ xyz_rpy_matrix(xyz, rpy)
-        xyz = (float(m[0, 3]) + 0.0, float(m[1, 3]) + 0.0, float(m[2, 3]) + 0.0)
-        rpy = rpy_of(m)
+        f = compose(rot_z(-math.pi), xyz_rpy(xyz, rpy))
+        xyz = (f[9] + 0.0, f[10] + 0.0, f[11] + 0.0)
+        rpy = rpy_of(matrix_of(f))
     # No tensor in the data: a point mass (zero tensor), since URDF needs an <inertia> element.
     values = dict(zip(INERTIA_KEYS, data.inertia or (0.0,) * 6, strict=True))
     return {"mass": data.mass, "xyz": list(xyz), "rpy": list(rpy), **values}

@@ -34,20 +34,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from urdaemon.cell.config import Robot
 from urdaemon.description._checks import BadKey, mapping, only_keys
 from urdaemon.description._transforms import (
     Matrix,
+    matrix_of,
     rot_x,
     rot_z,
     rpy_of,
     trans_x,
     trans_z,
-    xyz_rpy_matrix,
+    xyz_rpy,
 )
+from urdaemon.description.frames import IDENTITY, Frame, compose
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model, parse_dh
 from urdaemon.errors import ConfigError, DescriptionError
 
@@ -84,19 +85,18 @@ class Calibration:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Origin:
-    """One fixed transform: the 4×4 matrix (read-only) and its URDF ``xyz``/``rpy``."""
+    """One fixed transform: the 4×4 matrix (rows) and its URDF ``xyz``/``rpy``."""
 
     matrix: Matrix
     xyz: tuple[float, float, float]
     rpy: tuple[float, float, float]
 
     @classmethod
-    def of(cls, matrix: Matrix) -> Origin:
-        """The origin of ``matrix`` (copied)."""
-        m = np.array(matrix, dtype=np.float64)
-        m.flags.writeable = False
+    def of(cls, frame: Frame) -> Origin:
+        """The origin of ``frame``."""
+        m = matrix_of(frame)
         # adding 0.0 turns -0.0 into 0.0, which keeps the URDF text free of "-0.0" noise
-        xyz = (float(m[0, 3]) + 0.0, float(m[1, 3]) + 0.0, float(m[2, 3]) + 0.0)
+        xyz = (frame[9] + 0.0, frame[10] + 0.0, frame[11] + 0.0)
         return cls(matrix=m, xyz=xyz, rpy=rpy_of(m))
 
 
@@ -170,31 +170,32 @@ def robot_dh(robot: Robot) -> DhParameters:
 def joint_origins(dh: DhParameters, *, correct: bool = True) -> UrChain:
     """The URDF origins of the six joints and the flange for ``dh``, with the calibration correction."""
     theta, a, d, alpha = list(dh.theta), list(dh.a), list(dh.d), list(dh.alpha)
-    passive: list[Matrix] = [trans_x(a[i]) @ rot_x(alpha[i]) for i in range(6)]
+    passive: list[Frame] = [compose(trans_x(a[i]), rot_x(alpha[i])) for i in range(6)]
     if correct:
         for k in (1, 2):
             # Joint k+1's axis seen from joint k's frame (before A_k, at q_k = 0).
-            step = trans_z(d[k]) @ rot_z(theta[k]) @ passive[k]
-            o, z = step[:3, 3], step[:3, 2]
-            if abs(z[2]) < _MIN_AXIS_Z:
+            step = compose(compose(trans_z(d[k]), rot_z(theta[k])), passive[k])
+            ox, oy, oz = step[9], step[10], step[11]
+            zx, zy, zz = step[2], step[5], step[8]
+            if abs(zz) < _MIN_AXIS_Z:
                 raise DescriptionError(
                     f"DH joint {k + 1}: the next joint's axis is (nearly) perpendicular to this one's; "
                     "these are not UR kinematics"
                 )
-            t = float(-o[2] / z[2])
-            p = o + t * z
+            t = -oz / zz
+            px, py = ox + t * zx, oy + t * zy
             # atan2(-y, -x) is atan2(y, x) - π wrapped into (-π, π]: a nominal arm (p on the
             # negative x axis) keeps θ = 0 rather than turning into -2π.
-            new_theta = math.atan2(-float(p[1]), -float(p[0]))
-            new_a = -math.hypot(float(p[0]), float(p[1]))
-            passive[k] = trans_x(new_a) @ rot_z(theta[k] - new_theta) @ rot_x(alpha[k])
+            new_theta = math.atan2(-py, -px)
+            new_a = -math.hypot(px, py)
+            passive[k] = compose(compose(trans_x(new_a), rot_z(theta[k] - new_theta)), rot_x(alpha[k]))
             # Joint k+1's own frame stays put: it moved by t along its axis, so d shrinks by t.
             d[k + 1] -= t
             theta[k], a[k], d[k] = new_theta, new_a, 0.0
     joints: list[Origin] = []
-    previous: Matrix = np.eye(4)
+    previous: Frame = IDENTITY
     for i in range(6):
-        joints.append(Origin.of(previous @ trans_z(d[i]) @ rot_z(theta[i])))
+        joints.append(Origin.of(compose(compose(previous, trans_z(d[i])), rot_z(theta[i]))))
         previous = passive[i]
-    flange = Origin.of(passive[5] @ xyz_rpy_matrix((0.0, 0.0, 0.0), FLANGE_RPY))
+    flange = Origin.of(compose(passive[5], xyz_rpy((0.0, 0.0, 0.0), FLANGE_RPY)))
     return UrChain(joints=tuple(joints), flange=flange)

@@ -8,15 +8,13 @@ the trimesh, scipy and networkx it pulls in. The shape mirrors the parts of your
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
+from urdaemon.description._transforms import Matrix, xyz_rpy_matrix
 from urdaemon.errors import DescriptionError
 
 __all__ = ["FactJoint", "FactLimit", "FactMimic", "UrdfFacts", "read_urdf_facts"]
-
-Matrix = tuple[tuple[float, float, float, float], ...]
 
 
 @dataclass(frozen=True)
@@ -80,16 +78,8 @@ def _origin(element: ET.Element | None) -> Matrix | None:
     """xyz and rpy as the matrix ``T(xyz) Rz(yaw) Ry(pitch) Rx(roll)``."""
     if element is None:
         return None
-    x, y, z = _floats(element.get("xyz", "0 0 0"), "xyz")
-    roll, pitch, yaw = _floats(element.get("rpy", "0 0 0"), "rpy")
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return (
-        (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr, x),
-        (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr, y),
-        (-sp, cp * sr, cp * cr, z),
-        (0.0, 0.0, 0.0, 1.0),
+    return xyz_rpy_matrix(
+        _floats(element.get("xyz", "0 0 0"), "xyz"), _floats(element.get("rpy", "0 0 0"), "rpy")
     )
 
 
