@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from urdaemon.cell.config import Robot
 from urdaemon.description.build import robot_joint_names
-from urdaemon.description.urmodels import load_ur_model
+from urdaemon.description.urmodels import UrModel, load_ur_model
 from urdaemon.errors import DescriptionError
 from urdaemon.model import JointLimits
 
@@ -21,6 +21,8 @@ if TYPE_CHECKING:
     import yourdfpy
 
 __all__ = ["joint_limits_for", "load_urdf"]
+
+_Row = tuple[float, float, float, float, float, float]
 
 
 def load_urdf(text: str) -> yourdfpy.URDF:
@@ -45,61 +47,52 @@ def joint_limits_for(robot: Robot, urdf: Any) -> JointLimits:
     ``urdf`` is a yourdfpy ``URDF`` or a ``UrdfFacts``.
     """
     names = robot_joint_names(robot, urdf)
-    lower: list[float] = []
-    upper: list[float] = []
-    velocity: list[float] = []
-    acceleration: list[float] = []
-    jerk: list[float] = []
-    effort: list[float] = []
     model = load_ur_model(robot.model) if robot.is_ur else None
-    for name in names:
-        short = name[len(robot.prefix) :]
-        joint = urdf.joint_map[name]
-        limit = joint.limit
-        lo: float | None
-        hi: float | None
-        if joint.type == "continuous":
-            lo, hi = -math.inf, math.inf
-        else:
-            lo = None if limit is None else limit.lower
-            hi = None if limit is None else limit.upper
-        vel = None if limit is None else limit.velocity
-        if model is not None:
-            acc, jrk = model.joint(short).max_acceleration, model.joint(short).max_jerk
-        else:
-            assert robot.description is not None  # the cell schema guarantees it for model 'custom'
-            acc, jrk = robot.description.default_max_acceleration, robot.description.default_max_jerk
-        override = robot.joint_limits.get(short)
-        if override is not None:
-            lo = lo if override.min_position is None else override.min_position
-            hi = hi if override.max_position is None else override.max_position
-            vel = vel if override.max_velocity is None else override.max_velocity
-            acc = acc if override.max_acceleration is None else override.max_acceleration
-            jrk = jrk if override.max_jerk is None else override.max_jerk
-        if lo is None or hi is None:
-            raise DescriptionError(
-                f"robot {robot.name!r}: joint {name!r} has no <limit lower upper> in the URDF"
-            )
-        if vel is None or not 0.0 < vel < math.inf:
-            raise DescriptionError(
-                f"robot {robot.name!r}: joint {name!r} has no positive <limit velocity>; "
-                f"set it in the description or as joint_limits.{short}.max_velocity"
-            )
-        lower.append(float(lo))
-        upper.append(float(hi))
-        velocity.append(float(vel))
-        acceleration.append(acc)
-        jerk.append(jrk)
-        effort.append(0.0 if limit is None or limit.effort is None else float(limit.effort))
+    rows = [_joint_row(robot, model, name, urdf.joint_map[name]) for name in names]
     try:
         return JointLimits(
             names=names,
-            min_position=tuple(lower),
-            max_position=tuple(upper),
-            max_velocity=tuple(velocity),
-            max_acceleration=tuple(acceleration),
-            max_jerk=tuple(jerk),
-            max_effort=tuple(effort),
+            min_position=tuple(row[0] for row in rows),
+            max_position=tuple(row[1] for row in rows),
+            max_velocity=tuple(row[2] for row in rows),
+            max_acceleration=tuple(row[3] for row in rows),
+            max_jerk=tuple(row[4] for row in rows),
+            max_effort=tuple(row[5] for row in rows),
         )
     except ValueError as err:
         raise DescriptionError(f"robot {robot.name!r}: {err}") from err
+
+
+def _joint_row(robot: Robot, model: UrModel | None, name: str, joint: Any) -> _Row:
+    """One joint's (lower, upper, velocity, acceleration, jerk, effort) after the cell's override."""
+    short = name[len(robot.prefix) :]
+    limit = joint.limit
+    lo: float | None
+    hi: float | None
+    if joint.type == "continuous":
+        lo, hi = -math.inf, math.inf
+    else:
+        lo = None if limit is None else limit.lower
+        hi = None if limit is None else limit.upper
+    vel = None if limit is None else limit.velocity
+    if model is not None:
+        acc, jrk = model.joint(short).max_acceleration, model.joint(short).max_jerk
+    else:
+        assert robot.description is not None  # the cell schema guarantees it for model 'custom'
+        acc, jrk = robot.description.default_max_acceleration, robot.description.default_max_jerk
+    override = robot.joint_limits.get(short)
+    if override is not None:
+        lo = lo if override.min_position is None else override.min_position
+        hi = hi if override.max_position is None else override.max_position
+        vel = vel if override.max_velocity is None else override.max_velocity
+        acc = acc if override.max_acceleration is None else override.max_acceleration
+        jrk = jrk if override.max_jerk is None else override.max_jerk
+    if lo is None or hi is None:
+        raise DescriptionError(f"robot {robot.name!r}: joint {name!r} has no <limit lower upper> in the URDF")
+    if vel is None or not 0.0 < vel < math.inf:
+        raise DescriptionError(
+            f"robot {robot.name!r}: joint {name!r} has no positive <limit velocity>; "
+            f"set it in the description or as joint_limits.{short}.max_velocity"
+        )
+    effort = 0.0 if limit is None or limit.effort is None else float(limit.effort)
+    return (float(lo), float(hi), float(vel), acc, jrk, effort)
