@@ -48,3 +48,56 @@ def test_building_the_cell_loads_no_geometry_libraries_nor_numpy() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+
+
+SHM_PROBE = """
+import asyncio, json, socket, sys
+import zenoh
+from urdaemon.cell.config import ZenohOptions
+from urdaemon.publish.node import ZenohNode, zenoh_config
+
+def shm_resident_kib():  # KiB resident in Zenoh's shared-memory mappings (/dev/shm/*.zenoh)
+    found, name = {}, None
+    with open("/proc/self/smaps") as smaps:
+        for line in smaps:
+            fields = line.split()
+            if fields[0].endswith(":"):
+                if name is not None and fields[0] == "Rss:":
+                    found[name] = found.get(name, 0) + int(fields[1])
+            else:
+                name = fields[-1] if fields[-1].endswith(".zenoh") else None
+    return found
+
+async def main():
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    loop = asyncio.get_running_loop()
+    node = ZenohNode(ZenohOptions(listen=(endpoint,)), loop)
+    node.queryable("probe/big", lambda query: query.reply("probe/big", bytes(64 * 1024)), max_bytes=None)
+    client = zenoh.open(zenoh_config("peer", [], [endpoint]))  # a client as any: shared memory on
+    try:
+        replies = await loop.run_in_executor(None, lambda: list(client.get("probe/big", timeout=10.0)))
+        sizes = [len(reply.ok.payload.to_bytes()) for reply in replies if reply.ok is not None]
+    finally:
+        client.close()
+        node.close()
+    print(json.dumps({"sizes": sizes, "shm": shm_resident_kib()}))
+
+asyncio.run(main())
+"""
+
+
+def test_serving_a_large_reply_maps_no_shared_memory_pool() -> None:
+    """Reproduction: with Zenoh's default shared memory, the daemon's first reply of 3 KiB or more
+    to a peer on this host (a client asking for the URDF) mapped a 16 MiB pool, resident from
+    then on (86.6 -> 70 MiB VmRSS of serve without it). A fresh interpreter opens the daemon's
+    session, answers one 64 KiB query from a default client, and sums what is resident in its
+    ``*.zenoh`` mappings (the client's own probing segments are 12 KiB each)."""
+    done = subprocess.run(
+        [sys.executable, "-c", SHM_PROBE], cwd=ROOT, capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["sizes"] == [64 * 1024]  # the reply really went through
+    assert sum(result["shm"].values()) < 1024, result["shm"]

@@ -34,6 +34,7 @@ __all__ = [
     "ZenohNode",
     "busy_refusal",
     "declare_state_publisher",
+    "serve_config",
     "size_refusal",
     "wildcard_refusal",
     "zenoh_config",
@@ -146,6 +147,27 @@ def zenoh_config(
     return conf
 
 
+def serve_config(options: ZenohOptions, listen: tuple[str, ...]) -> Any:
+    """The daemon's session: the cell file's mode, endpoints, scouting and transport, without shared
+    memory.
+
+    Zenoh's shared memory moves a payload of 3 KiB or more to a peer on the same host through a
+    16 MiB pool, mapped (and resident) from the first such message on: for the daemon, the first
+    client asking for the URDF. Its messages are small JSON, so the pool bought nothing and cost a
+    fifth of the process's memory; peers that use shared memory still connect, over the network
+    transport (docs/performance.md, "The serve process").
+    """
+    conf = zenoh_config(
+        options.mode,
+        listen,
+        options.connect,
+        multicast=options.multicast_scouting,
+        low_latency=options.low_latency,
+    )
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    return conf
+
+
 class Matching:
     """Whether a publisher has subscribers anywhere, kept up to date by a Zenoh matching listener.
 
@@ -170,15 +192,7 @@ class ZenohNode:
         self._loop = loop
         endpoints = options.listen if listen is None else listen
         try:
-            self.session: Any = zenoh.open(
-                zenoh_config(
-                    options.mode,
-                    endpoints,
-                    options.connect,
-                    multicast=options.multicast_scouting,
-                    low_latency=options.low_latency,
-                )
-            )
+            self.session: Any = zenoh.open(serve_config(options, endpoints))
         except zenoh.ZError as err:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
         self._entities: list[Any] = []
