@@ -1,12 +1,17 @@
 """The serve process's footprint: time to serving and resident memory.
 
-    python benchmarks/serve_footprint.py [--config FILE] [--runs N] [--hold SECONDS] [--imports]
+    python benchmarks/serve_footprint.py [--config FILE] [--runs N] [--hold SECONDS] [--imports] [--steps]
 
 Starts ``urdaemon serve --config FILE --listen tcp/127.0.0.1:PORT`` (PORT free, from the OS) as a
 subprocess, queries the cell's ``robot_description`` through that endpoint until it answers (the
-moment the cell serves), keeps it serving for ``--hold`` seconds, then reads VmRSS and VmHWM from
-``/proc/PID/status``. Prints each run and the medians. ``--imports`` prints the serve modules' top
-imports by cumulative time (``python -X importtime``) instead, as a diagnosis.
+moment the cell serves; the querying session retries its connection every 10 ms, so the time is
+not rounded up to Zenoh's default 1 s retry), keeps it serving for ``--hold`` seconds, then reads
+VmRSS and VmHWM from ``/proc/PID/status``. Prints each run and the medians.
+
+As a diagnosis instead: ``--imports`` prints the serve modules' top imports by cumulative time
+(``python -X importtime``); ``--steps`` prints VmRSS after each step of serve's start in a fresh
+interpreter (the big imports in serve's order, loading and describing the cell, opening the
+daemon's Zenoh session, building the robots), each with what it added.
 """
 
 from __future__ import annotations
@@ -45,7 +50,12 @@ def _status_kib(pid: int) -> dict[str, int]:
 
 
 def _wait_serving(endpoint: str, key: str, proc: subprocess.Popen[bytes], limit: float) -> None:
-    session: Any = zenoh.open(zenoh_config("peer", [], [endpoint]))
+    conf = zenoh_config("peer", [], [endpoint])
+    # serve is not listening yet: retry every 10 ms rather than after Zenoh's default 1 s
+    conf.insert_json5(
+        "connect/retry", '{"period_init_ms": 10, "period_max_ms": 10, "period_increase_factor": 1}'
+    )
+    session: Any = zenoh.open(conf)
     try:
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:
@@ -95,16 +105,71 @@ def print_imports(top: int) -> None:
         print(f"{cumulative / 1000:8.1f} ms  {name}")
 
 
+STEPS = """
+import sys, time
+def rss():
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) / 1024 for line in status if line.startswith("VmRSS"))
+last = rss()
+def step(name, start):
+    global last
+    now, took = rss(), (time.perf_counter() - start) * 1000
+    print(f"{name:34s} {now:6.1f} MiB  +{now - last:5.1f}  {took:6.1f} ms")
+    last = now
+print(f"{'interpreter':34s} {last:6.1f} MiB")
+MODULES = (
+    "asyncio", "zenoh", "pydantic", "yaml", "xacro", "ruckig", "urdaemon.cell", "urdaemon.description",
+    "urdaemon.control", "urdaemon.publish.node", "urdaemon.robot", "urdaemon.daemon", "urdaemon.cli",
+)
+for module in MODULES:
+    start = time.perf_counter()
+    __import__(module)
+    step("import " + module, start)
+import asyncio
+from urdaemon.cell import load_cell
+from urdaemon.daemon import Daemon
+from urdaemon.publish.node import ZenohNode
+start = time.perf_counter()
+cell = load_cell(sys.argv[1])
+step("load the cell file", start)
+start = time.perf_counter()
+daemon = Daemon(cell, listen=(sys.argv[2],))
+step("describe the cell (URDF, limits)", start)
+async def serve():
+    start = time.perf_counter()
+    node = ZenohNode(cell.zenoh, asyncio.get_running_loop(), listen=(sys.argv[2],))
+    step("open the Zenoh session", start)
+    start = time.perf_counter()
+    daemon._build(node)
+    step("build backends, controllers", start)
+    await asyncio.sleep(2.0)
+    step("after 2 s, nobody connected", time.perf_counter())
+    node.close()
+asyncio.run(serve())
+print("numpy loaded:", "numpy" in sys.modules)
+"""
+
+
+def print_steps(config: Path) -> None:
+    """VmRSS after each step of serve's start, in a fresh interpreter."""
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    subprocess.run([sys.executable, "-c", STEPS, str(config), endpoint], cwd=ROOT, check=True)
+
+
 def main() -> None:
     """Parse the options and run."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path, default=ROOT / "configs" / "dual_robot_mock.yaml")
     parser.add_argument("--runs", type=int, default=5)
-    parser.add_argument("--hold", type=float, default=3.0)
+    parser.add_argument("--hold", type=float, default=5.0)
     parser.add_argument("--imports", action="store_true")
+    parser.add_argument("--steps", action="store_true")
     args = parser.parse_args()
     if args.imports:
         print_imports(25)
+        return
+    if args.steps:
+        print_steps(args.config)
         return
     times, rss, hwm = [], [], []
     for run in range(args.runs):
