@@ -27,12 +27,12 @@ CITATION = re.compile(r"(datasheet )?§(\d+(?:\.\d+)*)(?: step (\d+))?")
 """A citation, with an optional step; ``datasheet §7.3.3`` cites a chip's datasheet, not our notes."""
 HEADING = re.compile(r"^#{2,4} §(\d+(?:\.\d+)*) ", re.MULTILINE)
 
-PENDING: frozenset[str] = frozenset({"6.2.5"})
-"""Wrong citations in files this change does not own, waiting for their owner: ``§6.2.5`` (in the UR
-backend, on which runtime states frames go out) means "§6.2 step 5". The test fails once none is
-left, so the entry goes with the fix."""
+PENDING: frozenset[str] = frozenset()
+"""Wrong citations in files this change does not own, waiting for their owner (e.g. ``"6.2.5"`` for a
+``§6.2.5`` that means "§6.2 step 5"). The test fails once none is left, so the entry goes with the
+fix."""
 
-PENDING_OLD_HOME: frozenset[str] = frozenset({"resources/rtde/README.md"})
+PENDING_OLD_HOME: frozenset[str] = frozenset()
 """Files that still name the old location, waiting for their owner (same rule as ``PENDING``)."""
 
 

@@ -54,7 +54,7 @@ TOOL_VOLTAGES = (0, 12, 24)
 
 
 class RobotMode(enum.IntEnum):
-    """UR robot mode (primary interface int8, RTDE INT32); ur-protocols.md §6.1."""
+    """UR robot mode (primary interface int8, RTDE INT32); docs/protocols.md §6.1."""
 
     NO_CONTROLLER = -1
     DISCONNECTED = 0
@@ -69,7 +69,7 @@ class RobotMode(enum.IntEnum):
 
 
 class SafetyMode(enum.IntEnum):
-    """UR safety mode (primary uint8, RTDE INT32); ur-protocols.md §6.1."""
+    """UR safety mode (primary uint8, RTDE INT32); docs/protocols.md §6.1."""
 
     NORMAL = 1
     REDUCED = 2

@@ -1,6 +1,6 @@
 """Our own control URScript: fill ``resources/urscript/urdaemon_control.urscript`` for one robot.
 
-The template speaks the wire protocol of ur-protocols.md §4 and behaves as §5 describes (see
+The template speaks the wire protocol of docs/protocols.md §4 and behaves as §5 describes (see
 ``resources/urscript/README.md`` for what it implements and leaves out). Placeholders are ``{{NAME}}``,
 replaced by plain string substitution:
 
@@ -142,7 +142,7 @@ def _check_tool_setup(value: object) -> tuple[str, ...]:
 
 
 TARGET_PAYLOAD_SINCE = (5, 10, 0)
-"""First PolyScope version with ``set_target_payload`` (ur-protocols.md §5.1 version gates)."""
+"""First PolyScope version with ``set_target_payload`` (docs/protocols.md §5.1 version gates)."""
 TOOL_CONTACT_SINCE = (5, 4, 0)
 """First PolyScope version with ``tool_contact`` (the URScript manual; fakeur/urscript/functions.yaml)."""
 

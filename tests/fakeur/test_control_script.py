@@ -1,6 +1,6 @@
 """Our control script (resources/urscript/urdaemon_control.urscript), rendered and run in the fake's
 URScript interpreter against a test daemon: connecting back, the realtime modes, trajectories, script
-commands and leaving the program (ur-protocols.md §4, §5).
+commands and leaving the program (docs/protocols.md §4, §5).
 
 The script is the specification: what it does here is what a UR controller does with it. The rig
 (tests/fakeur/control_rig.py) plays the daemon on three loopback servers and steps the controller's cycle

@@ -1,4 +1,4 @@
-"""Dashboard server codec (ur-protocols.md §3): golden lines, both sides, caps, fuzz and a bring-up pair."""
+"""Dashboard server codec (docs/protocols.md §3): golden lines, both sides, caps, fuzz and a bring-up pair."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The kinematics hash of ur-protocols.md §2.6 against the worked example and the shipped model files."""
+"""The kinematics hash of docs/protocols.md §2.6 against the worked example and the shipped model files."""
 
 from __future__ import annotations
 

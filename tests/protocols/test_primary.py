@@ -1,4 +1,4 @@
-"""Primary / secondary interface codec (ur-protocols.md §2): captures, layouts, round trips, fuzz, pairs."""
+"""Primary / secondary interface codec (docs/protocols.md §2): captures, layouts, round trips, fuzz, pairs."""
 
 from __future__ import annotations
 

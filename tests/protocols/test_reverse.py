@@ -1,4 +1,4 @@
-"""Reverse interface codec (ur-protocols.md §4.2): golden frames, timeouts, both sides, fuzz and a pair."""
+"""Reverse interface codec (docs/protocols.md §4.2): golden frames, timeouts, both sides, fuzz and a pair."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Script command codec (ur-protocols.md §4.5): frame layouts, validation, both sides, fuzz and a pair."""
+"""Script command codec (docs/protocols.md §4.5): frame layouts, validation, both sides, fuzz and a pair."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Script sender codec (ur-protocols.md §4.3): the request, the program answer, both sides, fuzz, a pair."""
+"""Script sender codec (docs/protocols.md §4.3): the request, the program answer, both sides, fuzz, a pair."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Trajectory point codec (ur-protocols.md §4.4): frame layout, validation, both sides, fuzz and a pair."""
+"""Trajectory point codec (docs/protocols.md §4.4): frame layout, validation, both sides, fuzz and a pair."""
 
 from __future__ import annotations
 

@@ -77,7 +77,7 @@ __all__ = [
 ]
 
 SPEEDJ_DEFAULT_ACCELERATION = 40.0
-"""rad/s²: the acceleration the control script passes to speedj (ur-protocols.md §5.3)."""
+"""rad/s²: the acceleration the control script passes to speedj (docs/protocols.md §5.3)."""
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
 ACCELERATION_STEP_S = 1e-5

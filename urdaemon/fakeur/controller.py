@@ -59,7 +59,7 @@ __all__ = ["FakeController", "FakePorts", "SharedClock"]
 log = logging.getLogger("urdaemon.fakeur")
 
 STATE_PERIOD_S = 0.1
-"""Robot state on the primary/secondary interfaces: 10 Hz (ur-protocols.md §0)."""
+"""Robot state on the primary/secondary interfaces: 10 Hz (docs/protocols.md §0)."""
 EXTERNAL_CONTROL_PROGRAM = "external_control.urp"
 """The default program: the External Control URCap's, which fetches its script from the daemon."""
 DEFAULT_URCAP_PROGRAM = f"{PROGRAMS_DIR}/{EXTERNAL_CONTROL_PROGRAM}"

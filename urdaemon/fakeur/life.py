@@ -9,7 +9,7 @@ transitions at the start of each cycle (``advance``) and enforces the modes on i
 
 Pure: no asyncio, no clock; the transitions' times are the arm's controller time (``arm.timestamp``).
 
-State machine (robot mode, §6.1 of ur-protocols.md), as a real e-Series controller behaves:
+State machine (robot mode, §6.1 of docs/protocols.md), as a real e-Series controller behaves:
 POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
 Power off from anywhere → POWER_OFF. A protective stop keeps the mode but stops motion until
 unlocked; an emergency stop powers the arm off until released.
@@ -51,7 +51,7 @@ _POWERED = (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON, RobotMode.BAC
 
 
 class RuntimeState(enum.IntEnum):
-    """RTDE ``runtime_state`` (ur-protocols.md §1.9)."""
+    """RTDE ``runtime_state`` (docs/protocols.md §1.9)."""
 
     STOPPING = 0
     STOPPED = 1
@@ -213,7 +213,7 @@ class ArmLife:
 
     @property
     def safety_status_bits(self) -> int:
-        """RTDE ``safety_status_bits`` (ur-protocols.md §1.9)."""
+        """RTDE ``safety_status_bits`` (docs/protocols.md §1.9)."""
         mode = self.safety_mode
         bits = 0
         if mode is SafetyMode.NORMAL:

@@ -40,7 +40,7 @@ MAX_PENDING_SCRIPTS = 64
 URCAP_TIMEOUT_S = 5.0
 """How long the External Control program waits to connect to the daemon and for the first line."""
 URCAP_MORE_S = 0.2
-"""The URCap keeps reading lines only while more arrive this soon (ur-protocols.md §4.3)."""
+"""The URCap keeps reading lines only while more arrive this soon (docs/protocols.md §4.3)."""
 
 _COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="urscript-compile")
 """One thread compiles for every fake of the process: parsing is pure Python and holds the GIL, so

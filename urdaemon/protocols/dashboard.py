@@ -1,4 +1,4 @@
-"""Dashboard server (robot port 29999), PolyScope 3.x/5.x ("G5"): a text line protocol (ur-protocols.md §3).
+"""Dashboard server (robot port 29999), PolyScope 3.x/5.x ("G5"): a text line protocol (docs/protocols.md §3).
 
 Wire layout (§3.1); every line is text ended by one ``\\n``::
 

@@ -1,6 +1,6 @@
 """The kinematics hash UR's client library compares against a description's ``kinematics.hash``.
 
-ur-protocols.md §2.6: a text string is built from the DH parameters reported in KINEMATICS_INFO
+docs/protocols.md §2.6: a text string is built from the DH parameters reported in KINEMATICS_INFO
 (§2.2), joint by joint in the order theta, d, a, alpha (not the wire order), every number printed
 the way a default C++ ``ostream`` prints a ``double`` (printf ``%g``, 6 significant digits), and
 hashed with libstdc++'s 64-bit ``std::hash<std::string>`` (``_Hash_bytes``, a MurmurHash64A

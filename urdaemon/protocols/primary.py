@@ -1,4 +1,4 @@
-"""Primary / secondary interface (ports 30001, 30002, 30011, 30012) as a sans-IO codec; ur-protocols.md §2.
+"""Primary / secondary interface (ports 30001, 30002, 30011, 30012) as a sans-IO codec; docs/protocols.md §2.
 
 Robot → daemon: length-prefixed binary packages (§2.1), every number big-endian (§0)::
 

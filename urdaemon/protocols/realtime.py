@@ -16,7 +16,7 @@ clients of it), are :data:`FIELDS`; a controller version sends a prefix of them 
     =========================  ====  =====================================================
 
 Client → robot: URScript text, exactly as on the primary interface (a ``def``/``sec`` block or single
-lines, newline-terminated; ur-protocols.md §2.4).
+lines, newline-terminated; docs/protocols.md §2.4).
 
 ``RealtimeConnection(Side.ROBOT, version)`` sends :class:`RealtimeState` and receives the same
 ``ProgramReceived``/``CommandReceived`` events as the primary codec. ``RealtimeConnection(Side.DAEMON)``

@@ -1,4 +1,4 @@
-"""Script sender (port 50002): the External Control URCap fetches the control script (ur-protocols.md §4.3).
+"""Script sender (port 50002): the External Control URCap fetches the control script (docs/protocols.md §4.3).
 
 Used in URCap mode only (§5.8). The URCap dials the daemon and the exchange is plain text::
 

@@ -1,4 +1,4 @@
-"""Trajectory point interface (port 50003): motion points in, trajectory results out (ur-protocols.md §4.4).
+"""Trajectory point interface (port 50003): motion points in, trajectory results out (docs/protocols.md §4.4).
 
 The robot dials the daemon. The daemon sends one 84-byte frame per point (21 big-endian int32, no
 length prefix, no timeout, no mode); the robot answers one int32 when a trajectory ends::

@@ -487,7 +487,7 @@ def decode_freedrive(payload: bytes | None) -> bool:
 
 
 def decode_force_mode(payload: bytes | None) -> dict[str, Any]:
-    """Decode a start_force_mode request into the fields of the script command (ur-protocols.md §4.5)."""
+    """Decode a start_force_mode request into the fields of the script command (docs/protocols.md §4.5)."""
     what = "start_force_mode"
     data = decode_message(payload, what)
     _allowed(data, what, {"task_frame", "selection", "wrench", "type", "limits", "damping", "gain_scaling"})

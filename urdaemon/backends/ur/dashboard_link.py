@@ -15,7 +15,7 @@ __all__ = ["DASHBOARD_PORT", "DashboardLink"]
 
 DASHBOARD_PORT = 29999
 BANNER_TIMEOUT_S = 10.0
-"""urcl waits 10 s for the banner (ur-protocols.md §3.1)."""
+"""urcl waits 10 s for the banner (docs/protocols.md §3.1)."""
 REPLY_TIMEOUT_S = 5.0
 
 

@@ -267,7 +267,7 @@ class ReverseChannel:
 
     def frame(self, mode: CommandMode, playing: bool, now: float) -> Frame:
         """This cycle's frame. ``playing``: the program runs (a paused one reads no frames, and frames
-        queued meanwhile would be replayed on play, ur-protocols.md §6.2.5); ``mode``: the motion
+        queued meanwhile would be replayed on play, docs/protocols.md §6.2 step 5); ``mode``: the motion
         controller's command this cycle, which goes out as servoj or speedj while the program streams
         (the controller commands nothing while the robot runs a trajectory or is in freedrive)."""
         # (the 500 Hz path: members through module aliases, an enum's attribute lookup costs ~0.1 µs)

@@ -21,7 +21,7 @@ __all__ = ["KEPT_MESSAGES", "KINEMATICS_TIMEOUT_S", "RobotMessages"]
 log = logging.getLogger("urdaemon.ur")
 
 KINEMATICS_TIMEOUT_S = 10.0
-"""urcl waits up to 10 s for the first state package after connecting (ur-protocols.md §6.7)."""
+"""urcl waits up to 10 s for the first state package after connecting (docs/protocols.md §6.7)."""
 KEPT_MESSAGES = 20
 
 

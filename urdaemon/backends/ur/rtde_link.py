@@ -7,7 +7,7 @@ When one read brings several packages (the loop was held up and they queued in t
 older ones are delivered with ``catching_up`` set: the controller keeps the robot's time with them,
 but only the newest sends a command and publishes. Commands for states the robot has already left
 would be useless to it, and a full cycle for every package of every robot's backlog would hold the
-loop up further (ur-protocols.md §4.2: the program's read waits only the frame's timeout,
+loop up further (docs/protocols.md §4.2: the program's read waits only the frame's timeout,
 ``ur.receive_timeout``).
 ``StateMapper`` copies a package's values into ``RobotState`` through indices computed once.
 """
@@ -268,7 +268,7 @@ class StateMapper:
         runtime = values[self._runtime] if self._runtime >= 0 else 2
         self.runtime_state = runtime
         state.speed_slider = slider
-        # ur-protocols.md §6.2: slider × controller scaling; nothing moves while resuming
+        # docs/protocols.md §6.2: slider × controller scaling; nothing moves while resuming
         state.speed_scaling = 0.0 if runtime == RUNTIME_RESUMING else slider * scaling
         robot_mode = values[self._robot_mode] if self._robot_mode >= 0 else None
         safety_mode = values[self._safety_mode] if self._safety_mode >= 0 else None
