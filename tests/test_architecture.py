@@ -33,8 +33,12 @@ PURE = {
     "publish/keys.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     # the codecs: bytes in, events out (protocols/__init__.py)
     "protocols": {"asyncio", "socket", "selectors", "threading", "time", "zenoh", "logging", "pydantic"},
+    # the UR backend's reverse channel: a state machine, time passed in (backends/ur/reverse_channel.py)
+    "backends/ur/reverse_channel.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     # the fake's pure parts: the arm, its motions and surroundings, what it reports, program translation
     "fakeur/arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/life.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/pose.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/contact.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
