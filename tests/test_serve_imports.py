@@ -1,4 +1,4 @@
-"""The serve process imports only what serving needs (issue 15).
+"""The serve process carries only what serving needs (issue 15): its imports, its Zenoh session.
 
 Reproduction: before the ElementTree reader, ``urdaemon.daemon`` imported yourdfpy at module load
 and ``describe_cell`` parsed the cell with it, pulling trimesh, scipy and networkx (~110 MiB RSS,
@@ -15,6 +15,9 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+
+from urdaemon.cell.config import ZenohOptions
+from urdaemon.publish.node import serve_config
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("yourdfpy", "trimesh", "scipy", "networkx", "numpy")
@@ -101,3 +104,20 @@ def test_serving_a_large_reply_maps_no_shared_memory_pool() -> None:
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["sizes"] == [64 * 1024]  # the reply really went through
     assert sum(result["shm"].values()) < 1024, result["shm"]
+
+
+def test_the_daemon_session_keeps_what_the_cell_file_sets() -> None:
+    """Shared memory off must leave the cell's mode, endpoints, scouting and transport as given."""
+    options = ZenohOptions(
+        mode="client",
+        connect=("tcp/127.0.0.1:7448",),
+        multicast_scouting=True,
+        low_latency=True,
+    )
+    conf = serve_config(options, ("tcp/127.0.0.1:7449",))
+    assert json.loads(conf.get_json("mode")) == "client"
+    assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7448"]
+    assert json.loads(conf.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7449"]
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is True
+    assert json.loads(conf.get_json("transport/unicast/lowlatency")) is True
+    assert json.loads(conf.get_json("transport/shared_memory/enabled")) is False
