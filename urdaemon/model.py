@@ -13,12 +13,16 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = [
+    "CONFIGURABLE_IO_SHIFT",
     "FORCE_MODE_DAMPING",
     "FORCE_MODE_GAIN_SCALING",
     "FORCE_MODE_TYPE",
     "IO_SIZES",
+    "STANDARD_IO_SHIFT",
+    "TOOL_IO_SHIFT",
     "TOOL_VOLTAGES",
     "UR_JOINTS",
+    "UR_JOINT_COUNT",
     "CommandMode",
     "CycleStatsRequest",
     "DashboardRequest",
@@ -44,11 +48,19 @@ UR_JOINTS: tuple[str, ...] = (
     "wrist_3_joint",
 )
 """The six joint names of every UR arm, without the robot prefix."""
+UR_JOINT_COUNT = len(UR_JOINTS)
+"""Joints of every UR arm: the length of every joint vector on UR's wire formats and in the fake."""
 
 
 IO_SIZES: dict[str, int] = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}
 """Outputs (and inputs) of each kind a UR controller has: the state's IO lists have these lengths, and
 a ``set_io`` request names one of these kinds (analog outputs take 0..1, the others true or false)."""
+STANDARD_IO_SHIFT = 0
+"""Where each digital kind starts in a controller's digital IO bit word (RTDE's
+``actual_digital_input_bits`` / ``actual_digital_output_bits``, the fake's IO words): the standard
+pins are bits 0-7, the configurable ones 8-15, the tool's 16-17 (``IO_SIZES`` pins each)."""
+CONFIGURABLE_IO_SHIFT = STANDARD_IO_SHIFT + IO_SIZES["digital"]
+TOOL_IO_SHIFT = CONFIGURABLE_IO_SHIFT + IO_SIZES["configurable"]
 TOOL_VOLTAGES = (0, 12, 24)
 """The tool voltages a ``set_tool_voltage`` request may ask for (V)."""
 

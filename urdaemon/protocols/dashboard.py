@@ -63,7 +63,8 @@ from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._codec import Codec
 
 __all__ = [
-    "DASHBOARD_BANNER", "DASHBOARD_PORT", "MAX_LINE_BYTES", "ActionCommand", "AddToLog", "Banner",
+    "DASHBOARD_BANNER", "DASHBOARD_PORT", "MAX_LINE_BYTES", "REFUSAL_PREFIXES", "ActionCommand", "AddToLog",
+    "Banner",
     "BrakeRelease", "ClearOperationalMode", "ClosePopup", "CloseSafetyPopup", "Command", "CommandReceived",
     "CommandReply", "DashboardConnection", "Event", "GenerateFlightReport", "GenerateSupportFile",
     "GetLoadedProgram", "GetOperationalMode", "GetPolyscopeVersion", "GetProgramState", "GetRobotMode",
@@ -74,7 +75,7 @@ __all__ = [
     "RawReply", "RemoteControlReply", "Reply", "ReplyLine", "RestartSafety", "RobotModeReply",
     "RobotModelReply", "RunningReply", "SafetyModeReply", "SafetyStatusReply", "SaveLog",
     "SerialNumberReply", "SetOperationalMode", "SetUserRole", "Shutdown", "Stop", "UnknownCommand",
-    "UnlockProtectiveStop", "UserRole", "UserRoleReply", "VersionReply", "loaded_program_text",
+    "UnlockProtectiveStop", "UserRole", "UserRoleReply", "VersionReply", "is_refusal", "loaded_program_text",
     "operational_mode_text", "parse_command", "polyscope_version_text", "program_saved_text",
     "program_state_text", "remote_control_text", "robot_mode_text", "running_text", "safety_mode_text",
     "safety_status_text", "unknown_command_text", "user_role_text", "version_text",
@@ -912,6 +913,18 @@ def operational_mode_text(mode: OperationalMode) -> str:
 def user_role_text(role: UserRole) -> str:
     """Reply to ``getUserRole``."""
     return role.value
+
+
+REFUSAL_PREFIXES: Final = ("could not understand", "failed to execute", "error")
+"""How a controller's answer starts, lower-cased, when it refuses a line: what the daemon reads as a
+refusal of a line the codec does not type (§3.2 does not enumerate failure texts; these are the
+ones it quotes, and ``error`` for the rest)."""
+
+
+def is_refusal(text: str) -> bool:
+    """Whether an answer to a line the codec does not type says it was refused (an empty one does)."""
+    lowered = text.strip().lower()
+    return not lowered or lowered.startswith(REFUSAL_PREFIXES)
 
 
 def unknown_command_text(line: str) -> str:

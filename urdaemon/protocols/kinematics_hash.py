@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
+from urdaemon.model import UR_JOINT_COUNT
+
 __all__ = [
     "DH_JOINT_COUNT",
     "KINEMATICS_HASH_PREFIX",
@@ -23,7 +25,7 @@ __all__ = [
     "libstdcxx_hash_bytes",
 ]
 
-DH_JOINT_COUNT: Final = 6
+DH_JOINT_COUNT: Final = UR_JOINT_COUNT
 """Joints per DH parameter list (every UR arm has six); §2.2 KINEMATICS_INFO."""
 
 KINEMATICS_HASH_PREFIX: Final = "calib_"

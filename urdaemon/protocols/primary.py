@@ -32,6 +32,7 @@ from dataclasses import KW_ONLY, dataclass, fields
 from typing import Any, Final, Literal, TypeAlias, TypeVar
 
 from urdaemon.errors import LocalProtocolError, RemoteProtocolError
+from urdaemon.model import UR_JOINT_COUNT
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._codec import Codec, CodecState
 from urdaemon.protocols.kinematics_hash import kinematics_hash
@@ -40,7 +41,9 @@ __all__ = [
     "MAX_PACKAGE_BYTES",
     "MAX_SCRIPT_BYTES",
     "MAX_SCRIPT_NAME_LENGTH",
+    "PRIMARY_PORT",
     "PROTOCOL",
+    "SECONDARY_PORT",
     "AdditionalInfo",
     "CartesianInfo",
     "CommandReceived",
@@ -83,6 +86,10 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "primary"
+PRIMARY_PORT: Final = 30001
+"""TCP port of the primary interface on the robot (§0)."""
+SECONDARY_PORT: Final = 30002
+"""TCP port of the secondary interface on the robot (§0)."""
 
 MAX_PACKAGE_BYTES: Final = 64 * 1024
 """Largest package accepted or sent [bytes]. The largest one observed is the first ROBOT_STATE of
@@ -101,7 +108,7 @@ _HEADER_BYTES: Final = 5  # int32 length + uint8 type, §2.1; sub-packages use t
 _HEADER: Final = struct.Struct(">iB")
 _SUB_HEADER: Final = struct.Struct(">IB")
 _MESSAGE_HEADER: Final = struct.Struct(">QbB")  # timestamp, source, robot message type; §2.3
-_JOINTS: Final = 6
+_JOINTS: Final = UR_JOINT_COUNT
 
 _NAME_PATTERN: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # §2.4 step 5
 # a top-level block opens with `def NAME():` / `sec NAME():` at column 0 and closes with `end` at column 0

@@ -39,6 +39,7 @@ __all__ = [
     "FIELDS",
     "MAX_MESSAGE_BYTES",
     "PROTOCOL",
+    "REALTIME_PORT",
     "RealtimeConnection",
     "RealtimeEvent",
     "RealtimeState",
@@ -47,6 +48,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "realtime"
+REALTIME_PORT: Final = 30003
+"""TCP port of the real-time client interface on the robot (§0)."""
 MAX_MESSAGE_BYTES: Final = 4096
 """Largest message size accepted (bytes): today's layout is 1196; room for fields appended later."""
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any, Final, TypeAlias
 
 from urdaemon.errors import LocalProtocolError
+from urdaemon.model import UR_JOINT_COUNT
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._fixed import (
     INT32_MAX,
@@ -59,6 +60,7 @@ __all__ = [
     "NON_REALTIME_MODES",
     "PROTOCOL",
     "REALTIME_MODES",
+    "REVERSE_PORT",
     "STOPPED_TIMEOUT_S",
     "ControlMode",
     "FreedriveAction",
@@ -83,6 +85,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "reverse"
+REVERSE_PORT: Final = 50001
+"""The reverse interface's usual port, on the daemon's host (§0; the control script is told which)."""
 
 FRAME_INTS: Final = 8
 """int32 per frame: timeout, six fields, mode (§4.1)."""
@@ -90,7 +94,7 @@ FRAME_BYTES: Final = 4 * FRAME_INTS
 FRAME: Final = int32_frame(FRAME_INTS)
 """The precompiled 32-byte frame struct."""
 
-JOINTS: Final = 6
+JOINTS: Final = UR_JOINT_COUNT
 
 STOPPED_TIMEOUT_S: Final = 0.1
 """Timeout field of every STOPPED frame, s: urcl writes a fixed 100 ms (§4.2)."""

@@ -70,6 +70,7 @@ __all__ = [
     "MAX_RECIPE_NAMES_BYTES",
     "MAX_UNANSWERED_REQUESTS",
     "PROTOCOL",
+    "RTDE_PORT",
     "SUPPORTED_PROTOCOL_VERSIONS",
     "ControllerVersion",
     "ControllerVersionReply",
@@ -119,6 +120,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "rtde"
+RTDE_PORT: Final = 30004
+"""TCP port of the RTDE interface on the robot (§0)."""
 HEADER_BYTES: Final = 3
 MAX_PACKAGE_BYTES: Final = 0xFFFF
 """Largest package, header included: the size field is a uint16 (§1.1); also the receive-buffer cap."""

@@ -28,6 +28,7 @@ included: the fake controller models a current e-Series controller.
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Final
@@ -43,6 +44,8 @@ __all__ = [
     "NOT_FOUND",
     "NUMBER_REGISTER_COUNT",
     "OUTPUT_VARIABLES",
+    "POWER_ON_BIT",
+    "PROGRAM_RUNNING_BIT",
     "RTDE_TYPES",
     "UINT8",
     "UINT32",
@@ -51,6 +54,7 @@ __all__ = [
     "VECTOR6D",
     "VECTOR6INT32",
     "VECTOR6UINT32",
+    "RuntimeState",
     "input_types",
     "output_types",
     "type_size",
@@ -89,6 +93,24 @@ _SIZES: Final[Mapping[str, int]] = MappingProxyType(
 
 RTDE_TYPES: Final[frozenset[str]] = frozenset(_SIZES)
 """Every value type a recipe can hold (NOT_FOUND and IN_USE are answers, not types)."""
+
+
+class RuntimeState(enum.IntEnum):
+    """The values of the UINT32 output ``runtime_state``: the program's run state (§1.9)."""
+
+    STOPPING = 0
+    STOPPED = 1
+    PLAYING = 2
+    PAUSING = 3
+    PAUSED = 4
+    RESUMING = 5
+
+
+# The bits of the UINT32 output ``robot_status_bits`` (§1.9), as masks.
+POWER_ON_BIT: Final = 1 << 0
+"""``robot_status_bits``: the arm is powered on."""
+PROGRAM_RUNNING_BIT: Final = 1 << 1
+"""``robot_status_bits``: a program runs (it plays, or pauses and has not yet stopped)."""
 
 BIT_REGISTER_FIRST: Final = 64
 """Lowest single-bit register index a controller publishes (bits 0..63 only as UINT32 words)."""

@@ -47,6 +47,8 @@ from dataclasses import dataclass
 from typing import Any, Final, TypeAlias
 
 from urdaemon.errors import LocalProtocolError, RemoteProtocolError
+from urdaemon.model import FORCE_MODE_DAMPING, FORCE_MODE_GAIN_SCALING
+from urdaemon.model import TOOL_VOLTAGES as MODEL_TOOL_VOLTAGES
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._fixed import (
     INT32,
@@ -68,6 +70,7 @@ __all__ = [
     "FRAME_INTS",
     "PROTOCOL",
     "RESULT_BYTES",
+    "SCRIPT_COMMAND_PORT",
     "TOOL_VOLTAGES",
     "EndForceMode",
     "EndToolContact",
@@ -95,6 +98,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "script_command"
+SCRIPT_COMMAND_PORT: Final = 50004
+"""The script command interface's usual port, on the daemon's host (§0)."""
 
 FRAME_INTS: Final = 28
 """int32 per command: the id and 27 argument slots (§4.5)."""
@@ -104,14 +109,14 @@ FRAME: Final = int32_frame(FRAME_INTS)
 RESULT_BYTES: Final = 4
 """One int32 tool-contact result per message (§4.5)."""
 
-TOOL_VOLTAGES: Final = (0, 12, 24)
-"""Tool supply voltages the controller offers, V (§4.5)."""
+TOOL_VOLTAGES: Final = MODEL_TOOL_VOLTAGES
+"""Tool supply voltages the controller offers, V (§4.5; model.py's ``TOOL_VOLTAGES``)."""
 FORCE_MODE_TYPES: Final = (1, 2, 3)
 """URScript force_mode ``type`` values (§4.5)."""
-DEFAULT_FORCE_MODE_DAMPING: Final = 0.025
-"""urcl's default force-mode damping, in [0, 1] (§4.5)."""
-DEFAULT_FORCE_MODE_GAIN_SCALING: Final = 0.5
-"""urcl's default force-mode gain scaling, in [0, 2]; e-Series only (§4.5)."""
+DEFAULT_FORCE_MODE_DAMPING: Final = FORCE_MODE_DAMPING
+"""urcl's default force-mode damping, in [0, 1] (§4.5; URScript's, model.py's ``FORCE_MODE_DAMPING``)."""
+DEFAULT_FORCE_MODE_GAIN_SCALING: Final = FORCE_MODE_GAIN_SCALING
+"""urcl's default force-mode gain scaling, in [0, 2]; e-Series only (§4.5; model.py's)."""
 MAX_DAMPING: Final = 1.0
 MAX_GAIN_SCALING: Final = 2.0
 MAX_FRICTION_SCALE: Final = 1.0

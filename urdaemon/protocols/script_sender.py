@@ -37,6 +37,7 @@ __all__ = [
     "MAX_REQUEST_LINE_BYTES",
     "PROTOCOL",
     "REQUEST_LINE",
+    "SCRIPT_SENDER_PORT",
     "Program",
     "ProgramIncomplete",
     "ProgramReceived",
@@ -49,6 +50,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "script_sender"
+SCRIPT_SENDER_PORT: Final = 50002
+"""The script sender's usual port, on the daemon's host (§0; the URCap is told which)."""
 
 REQUEST_LINE: Final = b"request_program\n"
 """The URCap's request, byte for byte (§4.3 step 1)."""

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any, Final, TypeAlias
 
 from urdaemon.errors import LocalProtocolError, RemoteProtocolError
+from urdaemon.model import UR_JOINT_COUNT
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._fixed import (
     INT32,
@@ -60,6 +61,7 @@ __all__ = [
     "POSE_TARGET_TYPES",
     "PROTOCOL",
     "RESULT_BYTES",
+    "TRAJECTORY_PORT",
     "MotionPoint",
     "MotionType",
     "SplinePoint",
@@ -76,6 +78,8 @@ __all__ = [
 ]
 
 PROTOCOL: Final = "trajectory_point"
+TRAJECTORY_PORT: Final = 50003
+"""The trajectory point interface's usual port, on the daemon's host (§0)."""
 
 FRAME_INTS: Final = 21
 """int32 per point: 3 × 6 values + duration + blend/spline type + motion type (§4.4)."""
@@ -85,7 +89,7 @@ FRAME: Final = int32_frame(FRAME_INTS)
 RESULT_BYTES: Final = 4
 """One int32 trajectory result per message (§4.4; urcl expects exactly 4 bytes)."""
 
-JOINTS: Final = 6
+JOINTS: Final = UR_JOINT_COUNT
 MAX_DURATION_S: Final = 2147.0
 """Longest duration / segment time urcl sends, s (``MAX_GOAL_TIME_``; a scaled int32 tops out at 2147.48)."""
 DEFAULT_VELOCITY: Final = 1.05
