@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from urdaemon.backends.ur.primary_link import PrimaryLink
+from urdaemon.backends.ur.primary_link import FIRST_STATE_TIMEOUT_S, PRIMARY_PORT, PrimaryLink
 from urdaemon.errors import ProtocolError, UrDaemonError, UrTimeoutError
 from urdaemon.protocols import primary as prim
 
@@ -30,8 +30,8 @@ __all__ = [
     "read_calibration",
 ]
 
-DEFAULT_PORT = 30001
-DEFAULT_TIMEOUT_S = 10.0
+DEFAULT_PORT = PRIMARY_PORT
+DEFAULT_TIMEOUT_S = FIRST_STATE_TIMEOUT_S
 CONFIGURATION_GRACE_S = 1.0
 """How long to keep reading for CONFIGURATION_DATA once KINEMATICS_INFO has arrived without it."""
 

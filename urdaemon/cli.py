@@ -256,10 +256,10 @@ def _add_calibration(sub: Any) -> None:
     calibration.add_argument("--address", required=True, help="the controller's address")
     calibration.add_argument("--output", required=True, help="calibration file to write (YAML)")
     calibration.add_argument(
-        "--port", type=_port_arg, default=30001, help="primary interface port (default 30001)"
+        "--port", type=_port_arg, default=None, help="primary interface port (default 30001)"
     )
     calibration.add_argument(
-        "--timeout", type=_seconds_arg(False), default=10.0, help="give up after S seconds (default 10)"
+        "--timeout", type=_seconds_arg(False), default=None, help="give up after S seconds (default 10)"
     )
 
 
@@ -750,8 +750,12 @@ class _ProgressBar:
 def _calibration(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from urdaemon.calibration_tool import calibration_yaml, read_calibration
+    from urdaemon.calibration_tool import DEFAULT_PORT, DEFAULT_TIMEOUT_S, calibration_yaml, read_calibration
 
+    # the defaults are the calibration tool's (imported here, not when the parser is built: the
+    # primary codec behind them costs every other command its import time)
+    port = DEFAULT_PORT if args.port is None else args.port
+    timeout = DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout
     output = Path(args.output)
     if not output.parent.is_dir():
         print(
@@ -762,12 +766,12 @@ def _calibration(args: argparse.Namespace) -> int:
         print(f"error: --output {args.output} is a directory", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        reading = asyncio.run(read_calibration(args.address, args.port, args.timeout))
+        reading = asyncio.run(read_calibration(args.address, port, timeout))
     except UrDaemonError as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_FAILED
     try:
-        output.write_text(calibration_yaml(reading, f"{args.address}:{args.port}"), encoding="utf-8")
+        output.write_text(calibration_yaml(reading, f"{args.address}:{port}"), encoding="utf-8")
     except OSError as err:
         print(f"error: cannot write {args.output}: {err.strerror or err}", file=sys.stderr)
         return EXIT_FAILED

@@ -30,6 +30,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
+from urdaemon.protocols.dashboard import REFUSAL_PREFIXES
 from urdaemon.publish import codec
 from urdaemon.publish.codec import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
 
@@ -241,7 +242,9 @@ SERVICES: tuple[ServiceSpec, ...] = (
         ),
         reply_doc=(
             '`{"ok": bool, "reply": the robot\'s answer}` (UR only); `ok` is false when the controller '
-            "refused the line (its answer starts `could not understand`, `failed to execute` or `error`)"
+            "refused the line (its answer starts "
+            + ", ".join(f"`{prefix}`" for prefix in REFUSAL_PREFIXES[:-1])
+            + f" or `{REFUSAL_PREFIXES[-1]}`)"
         ),
         timeout=30.0,
     ),

@@ -13,7 +13,7 @@ from urdaemon.shell import Shell, connect
 
 __all__ = ["DASHBOARD_PORT", "DashboardLink"]
 
-DASHBOARD_PORT = 29999
+DASHBOARD_PORT = dash.DASHBOARD_PORT
 BANNER_TIMEOUT_S = 10.0
 """urcl waits 10 s for the banner (docs/protocols.md §3.1)."""
 REPLY_TIMEOUT_S = 5.0

@@ -16,9 +16,9 @@ from urdaemon.protocols import reverse, trajectory_point
 
 __all__ = ["IDLE_TIMEOUT_S", "PASSTHROUGH_TIMEOUT_S", "ReverseWriter", "encode_passthrough_point"]
 
-IDLE_TIMEOUT_S = 1.0
+IDLE_TIMEOUT_S = reverse.DEFAULT_KEEPALIVE_TIMEOUT_S
 """Read timeout sent with a keepalive (urcl's default, docs/protocols.md §4.2)."""
-PASSTHROUGH_TIMEOUT_S = 0.2
+PASSTHROUGH_TIMEOUT_S = reverse.DEFAULT_CONTROL_TIMEOUT_S
 """Read timeout sent with trajectory control frames (urcl's default for non-realtime control, §4.2)."""
 
 _SERVOJ, _SPEEDJ, _NONE = Frame.SERVOJ, Frame.SPEEDJ, Frame.NONE

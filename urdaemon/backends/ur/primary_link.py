@@ -13,9 +13,12 @@ from urdaemon.protocols import primary as prim
 from urdaemon.protocols._buffer import Side
 from urdaemon.shell import Shell, connect
 
-__all__ = ["PRIMARY_PORT", "PrimaryLink"]
+__all__ = ["FIRST_STATE_TIMEOUT_S", "PRIMARY_PORT", "PrimaryLink"]
 
-PRIMARY_PORT = 30001
+PRIMARY_PORT = prim.PRIMARY_PORT
+FIRST_STATE_TIMEOUT_S = 10.0
+"""How long a client waits for the first state package (with the kinematics) after connecting: urcl
+waits up to 10 s (docs/protocols.md §6.7)."""
 KEPT_MESSAGES = 50
 """Robot messages kept for the status and for diagnosing a failed program."""
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 from urdaemon.errors import BackendError
 from urdaemon.model import CommandMode
+from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.protocols.trajectory_point import TrajectoryResultCode
 
 __all__ = [
@@ -41,8 +42,8 @@ __all__ = [
     "Step",
 ]
 
-RUNTIME_PLAYING = 2
-RUNTIME_PAUSING = 3
+RUNTIME_PLAYING = int(RuntimeState.PLAYING)
+RUNTIME_PAUSING = int(RuntimeState.PAUSING)
 READING_FRAMES = frozenset((RUNTIME_PLAYING, RUNTIME_PAUSING))
 """RTDE ``runtime_state`` values in which the program reads its frames (pausing: until it has paused);
 the backend passes ``runtime_state in READING_FRAMES`` to ``frame`` as ``playing``."""

@@ -11,7 +11,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from urdaemon.backends.ur.primary_link import PrimaryLink
+from urdaemon.backends.ur.primary_link import FIRST_STATE_TIMEOUT_S, PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram
 from urdaemon.errors import RobotFaultError
 from urdaemon.protocols import primary as prim
@@ -20,8 +20,8 @@ __all__ = ["KEPT_MESSAGES", "KINEMATICS_TIMEOUT_S", "RobotMessages"]
 
 log = logging.getLogger("urdaemon.ur")
 
-KINEMATICS_TIMEOUT_S = 10.0
-"""urcl waits up to 10 s for the first state package after connecting (docs/protocols.md §6.7)."""
+KINEMATICS_TIMEOUT_S = FIRST_STATE_TIMEOUT_S
+"""How long the calibration check waits for the kinematics (the primary link's first state package)."""
 KEPT_MESSAGES = 20
 
 

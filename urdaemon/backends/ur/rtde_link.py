@@ -20,10 +20,20 @@ from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 from urdaemon.errors import ConnectionLostError, RemoteProtocolError, UrTimeoutError
-from urdaemon.model import Lifecycle, RobotMode, RobotState, SafetyMode
+from urdaemon.model import (
+    CONFIGURABLE_IO_SHIFT,
+    IO_SIZES,
+    STANDARD_IO_SHIFT,
+    TOOL_IO_SHIFT,
+    Lifecycle,
+    RobotMode,
+    RobotState,
+    SafetyMode,
+)
 from urdaemon.paths import resource_path
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.rtde_variables import PROGRAM_RUNNING_BIT, RuntimeState
 from urdaemon.shell import Shell, connect
 
 __all__ = [
@@ -37,11 +47,13 @@ __all__ = [
 
 _R = TypeVar("_R")
 
-RTDE_PORT = 30004
+RTDE_PORT = rtde.RTDE_PORT
 RTDE_REPLY_TIMEOUT_S = 5.0
 """How long a handshake request may wait for its reply (urcl waits up to 5 s for PAUSE)."""
-RUNTIME_PAUSED = 4
-RUNTIME_RESUMING = 5
+RUNTIME_PAUSED = int(RuntimeState.PAUSED)
+RUNTIME_RESUMING = int(RuntimeState.RESUMING)
+_RUNTIME_PLAYING = int(RuntimeState.PLAYING)
+"""What a recipe without ``runtime_state`` is taken to report."""
 
 
 def output_recipe() -> tuple[str, ...]:
@@ -243,7 +255,7 @@ class StateMapper:
         self._payload_cog = at("payload_cog")
         if min(self._timestamp, self._q, self._qd) < 0:
             raise ValueError("the output recipe needs timestamp, actual_q and actual_qd")
-        self.runtime_state = 0
+        self.runtime_state = int(RuntimeState.STOPPING)
         self._lifecycle = Lifecycle.DISCONNECTED
         self._last_modes: tuple[Any, ...] | None = None
         self._last_dout = -1
@@ -265,7 +277,7 @@ class StateMapper:
         state.cycle += 1
         slider = values[self._slider] if self._slider >= 0 else 1.0
         scaling = values[self._scaling] if self._scaling >= 0 else 1.0
-        runtime = values[self._runtime] if self._runtime >= 0 else 2
+        runtime = values[self._runtime] if self._runtime >= 0 else _RUNTIME_PLAYING
         self.runtime_state = runtime
         state.speed_slider = slider
         # docs/protocols.md §6.2: slider × controller scaling; nothing moves while resuming
@@ -281,7 +293,7 @@ class StateMapper:
                 state.safety_mode = _safety_mode(safety_mode)
             self._lifecycle = _lifecycle(state, runtime)
         if self._status_bits >= 0:
-            state.program_running = bool(values[self._status_bits] & 0b10)
+            state.program_running = bool(values[self._status_bits] & PROGRAM_RUNNING_BIT)
         if self._dout >= 0:
             bits = values[self._dout]
             if bits != self._last_dout:
@@ -331,9 +343,14 @@ def _safety_mode(value: int) -> SafetyMode:
 
 def _split_io_bits(bits: int, standard: list[bool], configurable: list[bool], tool: list[bool]) -> None:
     """RTDE's digital IO bit field (bits 0-7 standard, 8-15 configurable, 16-17 tool) into the lists."""
-    standard[:] = [bool(bits >> i & 1) for i in range(8)]
-    configurable[:] = [bool(bits >> (8 + i) & 1) for i in range(8)]
-    tool[:] = [bool(bits >> (16 + i) & 1) for i in range(2)]
+    standard[:] = [bool(bits >> i & 1) for i in _STANDARD_BITS]
+    configurable[:] = [bool(bits >> i & 1) for i in _CONFIGURABLE_BITS]
+    tool[:] = [bool(bits >> i & 1) for i in _TOOL_BITS]
+
+
+_STANDARD_BITS = range(STANDARD_IO_SHIFT, STANDARD_IO_SHIFT + IO_SIZES["digital"])
+_CONFIGURABLE_BITS = range(CONFIGURABLE_IO_SHIFT, CONFIGURABLE_IO_SHIFT + IO_SIZES["configurable"])
+_TOOL_BITS = range(TOOL_IO_SHIFT, TOOL_IO_SHIFT + IO_SIZES["tool"])
 
 
 def _lifecycle(state: RobotState, runtime: int) -> Lifecycle:

@@ -13,9 +13,11 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.errors import BackendError, ConnectionLostError, LocalProtocolError, UrTimeoutError
+from urdaemon.model import IO_SIZES, TOOL_VOLTAGES
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import script_command
+from urdaemon.protocols.rtde_variables import DOUBLE, INPUT_VARIABLES
 
 if TYPE_CHECKING:
     from urdaemon.backends.ur.backend import UrBackend
@@ -24,9 +26,11 @@ __all__ = ["UR_IO_SIZES", "UrServices"]
 
 log = logging.getLogger("urdaemon.ur")
 
-UR_IO_SIZES = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}
-_DOUBLE_INPUTS = {"speed_slider_fraction", "standard_analog_output_0", "standard_analog_output_1"}
-_REFUSALS = ("could not understand", "failed to execute", "error")
+UR_IO_SIZES = IO_SIZES
+"""A UR controller's IO (model.py's ``IO_SIZES``; the name stays for the backend's users)."""
+_DOUBLE_INPUTS = frozenset(name for name, kind in INPUT_VARIABLES.items() if kind == DOUBLE)
+"""The RTDE inputs sent as doubles (the rest of an input package are integers)."""
+_VOLTAGES_TEXT = ", ".join(str(v) for v in TOOL_VOLTAGES[:-1]) + f" or {TOOL_VOLTAGES[-1]}"
 
 
 class UrServices:
@@ -98,8 +102,8 @@ class UrServices:
 
     def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (script command)."""
-        if volts not in (0, 12, 24):
-            raise BackendError(f"tool voltage must be 0, 12 or 24 V, got {volts!r}")
+        if volts not in TOOL_VOLTAGES:
+            raise BackendError(f"tool voltage must be {_VOLTAGES_TEXT} V, got {volts!r}")
         self.script_command(script_command.SetToolVoltage(volts), "the tool voltage")
 
     def tool_contact(self, start: bool) -> None:
@@ -144,13 +148,7 @@ class UrServices:
         text = str(getattr(reply, "text", ""))
         success = getattr(reply, "success", None)
         if isinstance(reply, dash.RawReply):  # a line the codec does not type: the robot's words decide
-            success = not _is_refusal(text)
+            success = not dash.is_refusal(text)
         elif success is None:  # a query: it succeeded if it could be read
             success = all(getattr(reply, f, "") is not None for f in ("mode", "state", "running", "remote"))
         return bool(success), text
-
-
-def _is_refusal(text: str) -> bool:
-    """Whether a dashboard reply to a line the codec does not type says it was refused."""
-    lowered = text.strip().lower()
-    return not lowered or lowered.startswith(_REFUSALS)
