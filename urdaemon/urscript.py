@@ -28,6 +28,9 @@ from typing import Final
 
 from urdaemon.paths import resource_path
 from urdaemon.protocols._fixed import MULT_JOINTSTATE
+from urdaemon.protocols.reverse import REVERSE_PORT
+from urdaemon.protocols.script_command import SCRIPT_COMMAND_PORT
+from urdaemon.protocols.trajectory_point import TRAJECTORY_PORT
 
 __all__ = [
     "DEFAULT_REVERSE_PORT",
@@ -38,6 +41,7 @@ __all__ = [
     "PLACEHOLDERS",
     "SERVOJ_GAIN_RANGE",
     "SERVOJ_LOOKAHEAD_RANGE_S",
+    "SPEEDJ_ACCELERATION",
     "TEMPLATE_NAME",
     "URCAP_MARKERS",
     "ScriptParameters",
@@ -48,9 +52,9 @@ __all__ = [
 TEMPLATE_NAME: Final = "urdaemon_control.urscript"
 """The template's file name under ``resources/urscript``."""
 
-DEFAULT_REVERSE_PORT: Final = 50001
-DEFAULT_TRAJECTORY_PORT: Final = 50003
-DEFAULT_SCRIPT_COMMAND_PORT: Final = 50004
+DEFAULT_REVERSE_PORT: Final = REVERSE_PORT
+DEFAULT_TRAJECTORY_PORT: Final = TRAJECTORY_PORT
+DEFAULT_SCRIPT_COMMAND_PORT: Final = SCRIPT_COMMAND_PORT
 DEFAULT_SERVOJ_LOOKAHEAD_S: Final = 0.03
 """urcl's default servoj lookahead, s (§5.1)."""
 DEFAULT_SERVOJ_GAIN: Final = 2000
@@ -59,6 +63,9 @@ SERVOJ_LOOKAHEAD_RANGE_S: Final = (0.03, 0.2)
 """Allowed servoj lookahead_time, s (URScript servoj limits; §5.1)."""
 SERVOJ_GAIN_RANGE: Final = (100.0, 2000.0)
 """Allowed servoj gain (URScript servoj limits; §5.1)."""
+SPEEDJ_ACCELERATION: Final = 40.0
+"""rad/s²: the acceleration the control script passes to every speedj step while the daemon streams
+velocities (urcl's script does the same, §5.3). Our choice, not a URScript default: speedj has none."""
 
 PLACEHOLDERS: Final = (
     "SERVER_IP",
@@ -68,6 +75,7 @@ PLACEHOLDERS: Final = (
     "MULT_JOINTSTATE",
     "SERVOJ_LOOKAHEAD",
     "SERVOJ_GAIN",
+    "SPEEDJ_ACCEL",
     "TOOL_SETUP",
     "TARGET_PAYLOAD_CALL",
     "TOOL_CONTACT_CALL",
@@ -198,6 +206,7 @@ def _values(params: ScriptParameters) -> dict[str, str]:
         "MULT_JOINTSTATE": str(MULT_JOINTSTATE),
         "SERVOJ_LOOKAHEAD": _number(params.servoj_lookahead),
         "SERVOJ_GAIN": _number(params.servoj_gain),
+        "SPEEDJ_ACCEL": repr(SPEEDJ_ACCELERATION),
         "TOOL_SETUP": "\n".join(params.tool_setup),
         "TARGET_PAYLOAD_CALL": (
             "set_target_payload(raw[2] / UD_MULT, ud_scaled3(raw, 3), ud_scaled6(raw, 6), raw[12] / UD_MULT)"

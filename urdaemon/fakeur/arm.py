@@ -57,6 +57,7 @@ from urdaemon.fakeur.motion import (
 )
 from urdaemon.fakeur.pose import TcpPoses
 from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.urscript import SPEEDJ_ACCELERATION
 
 if TYPE_CHECKING:
     from urdaemon.description.ik import UrKinematics
@@ -76,8 +77,6 @@ __all__ = [
     "RuntimeState",
 ]
 
-SPEEDJ_DEFAULT_ACCELERATION = 40.0
-"""rad/s²: the acceleration the control script passes to speedj (docs/protocols.md §5.3)."""
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
 ACCELERATION_STEP_S = 1e-5
@@ -208,7 +207,8 @@ class FakeArm:
         """The time scaling of played motions that pausing and resuming ramp."""
         self._servo_target: list[float] | None = None
         self._speed_target = [0.0] * 6
-        self._acceleration = SPEEDJ_DEFAULT_ACCELERATION
+        self._acceleration = PROTECTIVE_STOP_DECELERATION
+        """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
         self._motion: Motion | None = None
         self._played: Motion | None = None
         self._ik: UrKinematics | None = None
@@ -234,8 +234,9 @@ class FakeArm:
         self._mode = MotionMode.SERVO
         self._servo_target = [float(v) for v in target]
 
-    def speedj(self, velocities: Sequence[float], acceleration: float = SPEEDJ_DEFAULT_ACCELERATION) -> None:
-        """Accelerate toward joint ``velocities`` (rad/s) at ``acceleration`` (rad/s²)."""
+    def speedj(self, velocities: Sequence[float], acceleration: float = SPEEDJ_ACCELERATION) -> None:
+        """Accelerate toward joint ``velocities`` (rad/s) at ``acceleration`` (rad/s²). URScript's speedj
+        has no default acceleration; without one this takes our control script's (urscript.py)."""
         if not self.life.can_move:
             return
         self._mode = MotionMode.SPEED
