@@ -52,6 +52,7 @@ from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import realtime as rt
 from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.rtde import RTDE_PORT, max_frequency
 from urdaemon.shell import Shell, serve
 
 __all__ = ["FakeController", "FakePorts", "SharedClock"]
@@ -71,11 +72,11 @@ CONTROLLER_COMMANDS = frozenset(prim.ControllerCommand)
 class FakePorts:
     """Ports the fake listens on (UR's standard ones by default)."""
 
-    dashboard: int = 29999
-    primary: int = 30001
-    secondary: int = 30002
-    realtime: int = 30003
-    rtde: int = 30004
+    dashboard: int = dash.DASHBOARD_PORT
+    primary: int = prim.PRIMARY_PORT
+    secondary: int = prim.SECONDARY_PORT
+    realtime: int = rt.REALTIME_PORT
+    rtde: int = RTDE_PORT
 
 
 def _serving_parts(
@@ -130,7 +131,7 @@ class FakeController:
         self.arm = FakeArm(
             self.model, dh or self.model.dh, initial_positions=initial_positions, powered=powered
         )
-        self.rate_hz = 125.0 if controller_version[0] < 5 else 500.0
+        self.rate_hz = max_frequency(controller_version[0])
         self.step_time = 1.0 / self.rate_hz
         self.faults = faults or FaultInjector()
         self.rtde_versions = rtde_versions

@@ -17,10 +17,10 @@ unlocked; an emergency stop powers the arm off until released.
 
 from __future__ import annotations
 
-import enum
 from typing import TYPE_CHECKING
 
 from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.protocols.rtde_variables import POWER_ON_BIT, PROGRAM_RUNNING_BIT, RuntimeState
 
 if TYPE_CHECKING:
     from urdaemon.fakeur.arm import FakeArm
@@ -31,7 +31,7 @@ __all__ = [
     "EMERGENCY_STOP_DECELERATION",
     "PROTECTIVE_STOP_DECELERATION",
     "ArmLife",
-    "RuntimeState",
+    "RuntimeState",  # defined in protocols/rtde_variables.py, kept importable here
 ]
 
 BOOT_TIME_S = 0.5
@@ -48,17 +48,6 @@ _MOVING_SAFETY = (SafetyMode.NORMAL, SafetyMode.REDUCED)
 _EMERGENCY = (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP)
 _POWERED = (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON, RobotMode.BACKDRIVE)
 """The robot modes RTDE reports as powered on (``robot_status_bits`` bit 0)."""
-
-
-class RuntimeState(enum.IntEnum):
-    """RTDE ``runtime_state`` (docs/protocols.md §1.9)."""
-
-    STOPPING = 0
-    STOPPED = 1
-    PLAYING = 2
-    PAUSING = 3
-    PAUSED = 4
-    RESUMING = 5
 
 
 class ArmLife:
@@ -208,8 +197,10 @@ class ArmLife:
 
     @property
     def robot_status_bits(self) -> int:
-        """RTDE ``robot_status_bits``: bit 0 power on, bit 1 program running."""
-        return int(self.robot_mode in _POWERED) | (int(self.program_running) << 1)
+        """RTDE ``robot_status_bits``: power on, program running."""
+        return (POWER_ON_BIT if self.robot_mode in _POWERED else 0) | (
+            PROGRAM_RUNNING_BIT if self.program_running else 0
+        )
 
     @property
     def safety_status_bits(self) -> int:

@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from typing import Final, Protocol
 
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
+from urdaemon.model import UR_JOINT_COUNT
 
 __all__ = [
     "JOINTS",
@@ -51,7 +52,7 @@ __all__ = [
     "servo_modes",
 ]
 
-JOINTS: Final = 6
+JOINTS: Final = UR_JOINT_COUNT
 TIME_EPSILON_S: Final = 1e-9
 """s: a motion with less than this left is over (float noise of summing cycle times)."""
 

@@ -22,13 +22,14 @@ import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from urdaemon.errors import ProtocolError
 from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.connections import Connections, ServiceShell
 from urdaemon.fakeur.reports import output_getter
 from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.model import CONFIGURABLE_IO_SHIFT, STANDARD_IO_SHIFT, TOOL_IO_SHIFT
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
@@ -38,6 +39,13 @@ __all__ = ["MAX_PENDING_INPUTS", "RtdeService"]
 log = logging.getLogger("urdaemon.fakeur")
 
 
+_DIGITAL_OUTPUT_SHIFTS: Final = (
+    ("standard", STANDARD_IO_SHIFT),
+    ("configurable", CONFIGURABLE_IO_SHIFT),
+    ("tool", TOOL_IO_SHIFT),
+)
+"""RTDE's digital output inputs (``<kind>_digital_output`` and its mask) and where each kind's pins sit
+in the arm's output word."""
 MAX_PENDING_INPUTS = 8
 """Input packages of one client waiting for their cycle (a model parameter: 16 ms at 500 Hz). When a
 client is further ahead than this (the fake was held up longer, or the client sends faster than the
@@ -228,7 +236,7 @@ class RtdeService:
         if values.get("speed_slider_mask"):
             fraction = float(values.get("speed_slider_fraction", arm.speed_slider))
             arm.speed_slider = min(max(fraction, 0.0), 1.0)
-        for kind, shift in (("standard", 0), ("configurable", 8), ("tool", 16)):
+        for kind, shift in _DIGITAL_OUTPUT_SHIFTS:
             mask = int(values.get(f"{kind}_digital_output_mask", 0)) & 0xFF
             if mask:
                 value = int(values.get(f"{kind}_digital_output", 0)) & mask

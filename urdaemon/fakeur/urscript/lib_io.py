@@ -23,6 +23,13 @@ from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_settings import INPUT_ACTIONS, settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
+from urdaemon.model import (
+    CONFIGURABLE_IO_SHIFT,
+    IO_SIZES,
+    STANDARD_IO_SHIFT,
+    TOOL_IO_SHIFT,
+    TOOL_VOLTAGES,
+)
 
 __all__ = [
     "BIT_REGISTERS",
@@ -30,15 +37,14 @@ __all__ = [
     "IO_DIGITAL_OUT_GET",
     "IO_DIGITAL_OUT_SET",
     "NUMBER_REGISTERS",
-    "TOOL_VOLTAGES",
+    "TOOL_VOLTAGES",  # model.py's, kept importable here
 ]
 
 NUMBER_REGISTERS: Final = 48
 """Integer and float registers per direction: addresses 0..47."""
 BIT_REGISTERS: Final = 128
 """Boolean registers per direction: addresses 0..127 (64..127 are RTDE's ``*_bit_register_X``)."""
-TOOL_VOLTAGES: Final = (0, 12, 24)
-"""Volts ``set_tool_voltage`` accepts."""
+_VOLTAGES: Final = ", ".join(str(v) for v in TOOL_VOLTAGES)
 _INT32: Final = (-(2**31), 2**31 - 1)
 
 IO_DIGITAL_OUT_GET: Final = "_digital_out_get"
@@ -49,10 +55,10 @@ IO_DIGITAL_OUT_SET: Final = "_digital_out_set"
 IO_DIGITAL_IN_GET: Final = "_digital_in_get"
 
 # (first bit in the word, how many) of each digital IO group
-_STANDARD: Final = (0, 8)
-_CONFIGURABLE: Final = (8, 8)
-_TOOL: Final = (16, 2)
-_ALL: Final = (0, 18)
+_STANDARD: Final = (STANDARD_IO_SHIFT, IO_SIZES["digital"])
+_CONFIGURABLE: Final = (CONFIGURABLE_IO_SHIFT, IO_SIZES["configurable"])
+_TOOL: Final = (TOOL_IO_SHIFT, IO_SIZES["tool"])
+_ALL: Final = (STANDARD_IO_SHIFT, TOOL_IO_SHIFT + IO_SIZES["tool"])
 """The deprecated ``*_digital_*(n)`` numbering: 0-7 standard, 8-15 configurable, 16-17 tool."""
 
 
@@ -146,7 +152,7 @@ for _infix, _group in _DIGITAL_GROUPS.items():
 
 # ---- the controller's IO variables (``digital_out[n]``) -----------------------------------------------
 
-_LEGACY: Final = ((0, 8), (16, 2))
+_LEGACY: Final = (_STANDARD, _TOOL)
 """The legacy IO variables' numbering (CB2's): 0-7 the standard IO (bits 0-7), 8-9 the tool IO (bits
 16-17). Configurable IO has no number in it: it came with CB3, after this syntax.
 
@@ -157,9 +163,9 @@ secondary interface's ``digitalOutputBits`` (configurable output 0 on CB3) staye
 
 
 def _legacy_bit(name: str, n: Any) -> int:
-    index = _index(name, n, 10)
-    group = _LEGACY[0] if index < 8 else _LEGACY[1]
-    return group[0] + index - (0 if index < 8 else 8)
+    standard, tool = _LEGACY
+    index = _index(name, n, standard[1] + tool[1])
+    return standard[0] + index if index < standard[1] else tool[0] + index - standard[1]
 
 
 @builtin(IO_DIGITAL_OUT_GET)
@@ -257,7 +263,7 @@ def set_tool_voltage(host: ScriptHost, voltage: Any) -> None:
     if isinstance(voltage, float) and voltage.is_integer():
         voltage = int(voltage)
     if isinstance(voltage, bool) or voltage not in TOOL_VOLTAGES:
-        raise ScriptRuntimeError(f"set_tool_voltage: {voltage!r} V is not one of 0, 12, 24")
+        raise ScriptRuntimeError(f"set_tool_voltage: {voltage!r} V is not one of {_VOLTAGES}")
     host.arm.io.tool_voltage = int(voltage)
 
 
@@ -340,7 +346,12 @@ def set_analog_inputrange(host: ScriptHost, port: Any, range: Any) -> None:
 
 # ---- input actions and run-state outputs ----------------------------------------------------------------
 
-_INPUT_GROUPS: Final = {"standard": 8, "configurable": 8, "tool": 2, "gp_boolean": BIT_REGISTERS}
+_INPUT_GROUPS: Final = {
+    "standard": IO_SIZES["digital"],
+    "configurable": IO_SIZES["configurable"],
+    "tool": IO_SIZES["tool"],
+    "gp_boolean": BIT_REGISTERS,
+}
 
 
 def _input_action(host: ScriptHost, function: str, group: str, port: Any, action: Any) -> None:
@@ -394,7 +405,7 @@ _OUTPUT_GROUPS: Final = {
     "configurable": _CONFIGURABLE,
     "tool": _TOOL,
     "gp_boolean": (0, BIT_REGISTERS),
-    "analog": (0, 2),
+    "analog": (0, IO_SIZES["analog"]),
 }
 
 

@@ -34,7 +34,7 @@ from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.lib_settings import settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
-from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.model import CONFIGURABLE_IO_SHIFT, TOOL_IO_SHIFT, TOOL_VOLTAGES, RobotMode, SafetyMode
 
 __all__ = ["GENERAL_PURPOSE"]
 
@@ -45,9 +45,10 @@ ANALOG_CURRENT_MA: Final = (4.0, 20.0)
 ANALOG_VOLTAGE_MV: Final = (0.0, 10000.0)
 """mV: an analog output's range in voltage mode."""
 
-# bit positions in arm.io's words: standard 0-7, configurable 8-15, tool 16-17
-_TOOL_SHIFT: Final = 16
-_CONFIGURABLE_SHIFT: Final = 8
+# bit positions in arm.io's words: standard 0-7, configurable 8-15, tool 16-17 (model.py's)
+_TOOL_SHIFT: Final = TOOL_IO_SHIFT
+_CONFIGURABLE_SHIFT: Final = CONFIGURABLE_IO_SHIFT
+_VOLTAGES: Final = ", ".join(str(v) for v in TOOL_VOLTAGES)
 
 
 def _address(function: str, value: Any) -> int:
@@ -190,8 +191,8 @@ def _write_register(host: ScriptHost, address: int, value: int) -> None:
     elif address in (17, 19):
         _set_domain_bit(arm, 2 + (address - 17) // 2, value)
     elif address == 20:
-        if value not in (0, 12, 24):
-            raise ScriptRuntimeError(f"write_port_register: tool voltage {value} V is not one of 0, 12, 24")
+        if value not in TOOL_VOLTAGES:
+            raise ScriptRuntimeError(f"write_port_register: tool voltage {value} V is not one of {_VOLTAGES}")
         io.tool_voltage = value
     elif address == 22:
         io.digital_out = io.digital_out & ~(0x3 << _TOOL_SHIFT) | (value & 0x3) << _TOOL_SHIFT
