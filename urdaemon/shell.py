@@ -259,12 +259,22 @@ class Shell(asyncio.Protocol):
             self.transport.resume_reading()
 
 
-async def connect(factory: Callable[[], _S], host: str, port: int, *, timeout: float, name: str) -> _S:
-    """Open a connection to ``host``:``port`` for the shell ``factory`` makes; UrTimeoutError or
-    ConnectionLostError (``<name>: cannot connect to …``) if it cannot."""
+async def connect(
+    factory: Callable[[], _S],
+    host: str,
+    port: int,
+    *,
+    timeout: float,
+    name: str,
+    local_addr: tuple[str, int] | None = None,
+) -> _S:
+    """Open a connection to ``host``:``port`` for the shell ``factory`` makes (from ``local_addr`` if
+    given: a fake robot dials from its own address); UrTimeoutError or ConnectionLostError
+    (``<name>: cannot connect to …``) if it cannot."""
     loop = asyncio.get_running_loop()
     try:
-        _, shell = await asyncio.wait_for(loop.create_connection(factory, host, port), timeout)
+        opening = loop.create_connection(factory, host, port, local_addr=local_addr)
+        _, shell = await asyncio.wait_for(opening, timeout)
     except TimeoutError as err:
         raise UrTimeoutError(f"{name}: no connection to {host}:{port} within {timeout} s") from err
     except OSError as err:

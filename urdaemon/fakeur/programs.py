@@ -25,11 +25,15 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from urdaemon.errors import ProtocolError, UrDaemonError
 from urdaemon.fakeur.arm import FakeArm, RuntimeState
 from urdaemon.fakeur.urp import UrpProgram
 from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.fakeur.urscript.lib_io import apply_runstate_outputs
 from urdaemon.protocols import primary as prim
+from urdaemon.protocols import script_sender
+from urdaemon.protocols._buffer import Side
+from urdaemon.shell import Shell, connect
 
 __all__ = ["MAX_PENDING_SCRIPTS", "Programs", "RunningScript"]
 
@@ -343,30 +347,79 @@ class Programs:
         """What the External Control URCap does on play: fetch the script, then ``start`` it."""
         host, port = urcap
         try:
-            reader, writer = await asyncio.wait_for(
-                asyncio.open_connection(host, port, local_addr=(self.address, 0)), URCAP_TIMEOUT_S
+            fetch = await connect(
+                ScriptFetch,
+                host,
+                port,
+                timeout=URCAP_TIMEOUT_S,
+                name="External Control",
+                local_addr=(self.address, 0),
             )
-        except (OSError, TimeoutError) as err:
-            text = f"External Control: connection to {host}:{port} could not be established: {err}"
+        except UrDaemonError as err:  # the URCap's popup names the socket's own error
+            reason = err.__cause__ or err
+            text = f"External Control: connection to {host}:{port} could not be established: {reason}"
             self.broadcast(prim.TextMessage(text))
             self.arm.stop_program()
             return
         try:
-            writer.write(b"request_program\n")
-            await writer.drain()
-            chunks = [await asyncio.wait_for(reader.readline(), URCAP_TIMEOUT_S)]
-            while True:  # more lines only while they keep coming
-                try:
-                    line = await asyncio.wait_for(reader.readline(), URCAP_MORE_S)
-                except TimeoutError:
-                    break
-                if not line:
-                    break
-                chunks.append(line)
+            text = await fetch.program()
+        except ProtocolError as err:  # more than a script can be, or not UTF-8 text
+            self.broadcast(prim.TextMessage(f"External Control: {err}"))
+            self.arm.stop_program()
+            return
         finally:
-            writer.close()
+            fetch.close()
         self.arm.life.runtime_state = RuntimeState.STOPPED
-        start("externalControl", b"".join(chunks).decode("utf-8", "replace"))
+        start("externalControl", text)
+
+
+class ScriptFetch(Shell):
+    """The External Control URCap's fetch of the control script: the robot's side of the script sender
+    (docs/protocols.md §4.3), which dials the daemon. It asks once, waits ``URCAP_TIMEOUT_S`` for the
+    first line, then takes more lines only while each comes within ``URCAP_MORE_S`` of the last."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            script_sender.ScriptSenderConnection(Side.ROBOT), "script sender", peer_name="daemon"
+        )
+        self.lines = 0
+        """Complete lines received so far."""
+        self._news = asyncio.Event()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        self.send(script_sender.RequestProgram())
+
+    def receive(self, data: bytes) -> list[Any]:
+        self.lines += data.count(b"\n")
+        self._news.set()
+        return super().receive(data)
+
+    def end(self, reason: Exception) -> None:
+        super().end(reason)
+        self._news.set()
+
+    async def program(self) -> str:
+        """The script's text as received (its lines with their newlines); TimeoutError if no first
+        line comes in time, RemoteProtocolError if what came is no script."""
+        await asyncio.wait_for(self._beyond(0), URCAP_TIMEOUT_S)
+        while not self.closed.done():  # more lines only while they keep coming
+            try:
+                await asyncio.wait_for(self._beyond(self.lines), URCAP_MORE_S)
+            except TimeoutError:
+                break
+        for event in self.codec.close():
+            if isinstance(event, script_sender.ProgramReceived):
+                return event.text + "\n"
+            if isinstance(event, script_sender.ProgramIncomplete):
+                return event.data.decode("utf-8", "replace")
+        return ""
+
+    async def _beyond(self, lines: int) -> None:
+        """Until more than ``lines`` lines have come, or the connection ended."""
+        while self.lines <= lines and not self.closed.done():
+            self._news.clear()
+            await self._news.wait()
 
 
 COMPILE_SWITCH_INTERVAL_S = 0.0005
