@@ -21,6 +21,7 @@ from typing import Any
 
 import zenoh
 
+from urdaemon.cell import config as cell_config
 from urdaemon.errors import ConnectionLostError, GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.model import (
     FORCE_MODE_DAMPING,
@@ -50,7 +51,7 @@ __all__ = [
     "zenoh_message",
 ]
 
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+DEFAULT_ENDPOINT = cell_config.DEFAULT_ENDPOINT
 QUERY_TIMEOUT_S = services.CLIENT_TIMEOUT_S
 """How long a query waits for its answer unless told (a service's own wait is in its table entry)."""
 RESULT_POLL_S = 0.5

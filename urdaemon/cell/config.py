@@ -23,8 +23,16 @@ from pydantic import (
 
 from urdaemon.model import UR_JOINTS
 from urdaemon.paths import resource_path
+from urdaemon.urscript import (
+    DEFAULT_REVERSE_PORT,
+    DEFAULT_SERVOJ_GAIN,
+    DEFAULT_SERVOJ_LOOKAHEAD_S,
+    SERVOJ_GAIN_RANGE,
+    SERVOJ_LOOKAHEAD_RANGE_S,
+)
 
 __all__ = [
+    "DEFAULT_ENDPOINT",
     "DEFAULT_PORT_BASE",
     "DEFAULT_PORT_STRIDE",
     "Cell",
@@ -47,10 +55,15 @@ NAME_PATTERN = r"^[a-z][a-z0-9_]{0,30}$"
 """Robot names: a key chunk and a joint/link prefix (``alice`` → ``alice_`` and ``<cell>/alice/``)."""
 CELL_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,62}$"
 ENDPOINT_PATTERN = r"^(tcp|udp|tls|quic|ws|unixsock-stream|serial)/\S+$"
-DEFAULT_PORT_BASE = 50001
+DEFAULT_PORT_BASE = DEFAULT_REVERSE_PORT
 """UR's reverse port; the first robot gets 50001..50004 like UR's own driver."""
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+"""Where the daemon listens for Zenoh sessions by default, and where clients look for it."""
 DEFAULT_PORT_STRIDE = 10
 """Each further robot's default ports are 10 higher, so defaults never clash."""
+_LOOKAHEAD = SERVOJ_LOOKAHEAD_RANGE_S
+_GAIN = (int(SERVOJ_GAIN_RANGE[0]), int(SERVOJ_GAIN_RANGE[1]))
+"""servoj's limits (urscript.py), the gain as the whole numbers the cell file takes."""
 HOST_NAME_PATTERN = r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*\.?$"
 
 
@@ -107,7 +120,7 @@ class ZenohOptions(_Frozen):
     """How the daemon joins the Zenoh network."""
 
     mode: Literal["peer", "client", "router"] = "peer"
-    listen: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = (DEFAULT_ENDPOINT,)
     connect: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ()
     multicast_scouting: bool = False
     low_latency: bool = False
@@ -221,9 +234,9 @@ class UrOptions(_Frozen):
     """Address the robot connects back to; default: the daemon's end of its RTDE connection."""
     listen_address: str = "0.0.0.0"
     """Where the four callback servers listen."""
-    servoj_lookahead: Annotated[float, Field(ge=0.03, le=0.2)] = 0.03
+    servoj_lookahead: Annotated[float, Field(ge=_LOOKAHEAD[0], le=_LOOKAHEAD[1])] = DEFAULT_SERVOJ_LOOKAHEAD_S
     """servoj lookahead time (s); UR allows 0.03–0.2."""
-    servoj_gain: Annotated[int, Field(ge=100, le=2000)] = 2000
+    servoj_gain: Annotated[int, Field(ge=_GAIN[0], le=_GAIN[1])] = DEFAULT_SERVOJ_GAIN
     receive_timeout: Annotated[float, Field(ge=0.004, le=1.0)] = 0.1
     """The robot halts the program when no command arrives for this long (s)."""
     calibration_check: Literal["warn", "error"] = "warn"
