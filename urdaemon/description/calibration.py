@@ -29,7 +29,6 @@ the axis crosses the previous joint's z = 0 plane, which leaves FK unchanged.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -51,6 +50,7 @@ from urdaemon.description._transforms import (
 from urdaemon.description.frames import IDENTITY, Frame, compose
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model, parse_dh
 from urdaemon.errors import ConfigError, DescriptionError
+from urdaemon.protocols.kinematics_hash import KINEMATICS_HASH_PATTERN
 
 __all__ = [
     "FLANGE_RPY",
@@ -68,7 +68,7 @@ FLANGE_RPY = (0.0, -math.pi / 2, -math.pi / 2)
 TOOL0_RPY = (math.pi / 2, 0.0, math.pi / 2)
 """flange → tool0 (tool0: z out of the tool plate; base → tool0 equals the DH FK)."""
 
-_HASH = re.compile(r"^calib_[0-9]+$")
+_HASH = KINEMATICS_HASH_PATTERN
 _ALPHA_TOLERANCE = 0.1
 # Below this |z_z| the next joint's axis (nearly) lies in the plane and has no single crossing point.
 _MIN_AXIS_Z = 1e-6

@@ -21,6 +21,7 @@ from urdaemon.description._checks import BadKey, as_float, floats, mapping, only
 from urdaemon.errors import DescriptionError
 from urdaemon.model import UR_JOINTS
 from urdaemon.paths import resource_path
+from urdaemon.protocols.kinematics_hash import KINEMATICS_HASH_PATTERN
 
 __all__ = [
     "INERTIA_KEYS",
@@ -50,7 +51,7 @@ INERTIA_KEYS: tuple[str, ...] = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
 
 DH_KEYS: tuple[str, ...] = ("theta", "a", "d", "alpha")
 _MODEL_NAME = re.compile(r"^[a-z0-9]+$")
-_HASH = re.compile(r"^calib_[0-9]+$")
+_HASH = KINEMATICS_HASH_PATTERN
 _TOP_KEYS = ("model", "series", "robot_type", "control_rate_hz", "kinematics_hash", "dh", "joints", "links")
 _SERIES = ("cb3", "e-series", "ur-series")
 _RATE_KEYS = ("max_velocity", "max_effort", "max_acceleration", "max_jerk")

@@ -12,6 +12,7 @@ descriptions: it depends on libstdc++, so a build against another C++ library pr
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Final
 
@@ -19,6 +20,7 @@ from urdaemon.model import UR_JOINT_COUNT
 
 __all__ = [
     "DH_JOINT_COUNT",
+    "KINEMATICS_HASH_PATTERN",
     "KINEMATICS_HASH_PREFIX",
     "kinematics_hash",
     "kinematics_hash_text",
@@ -30,6 +32,8 @@ DH_JOINT_COUNT: Final = UR_JOINT_COUNT
 
 KINEMATICS_HASH_PREFIX: Final = "calib_"
 """Prefix of the printed hash; §2.6 step 4."""
+KINEMATICS_HASH_PATTERN: Final = re.compile(rf"^{KINEMATICS_HASH_PREFIX}[0-9]+$")
+"""A whole printed hash, ``calib_<unsigned decimal>`` (what calibration files and model data hold)."""
 
 _MASK64: Final = (1 << 64) - 1
 # libstdc++ libsupc++/hash_bytes.cc, 64-bit branch; constants as listed in §2.6 step 3
