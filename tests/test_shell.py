@@ -180,3 +180,30 @@ async def test_connect_names_the_link_when_nobody_listens() -> None:
     await server.wait_closed()
     with pytest.raises(ConnectionLostError, match=f"probe: cannot connect to 127.0.0.1:{port}"):
         await connect(lambda: Shell(_dashboard(), "probe"), "127.0.0.1", port, timeout=WAIT_S, name="probe")
+
+
+async def test_a_handler_that_raises_ends_the_connection_with_its_error() -> None:
+    """A handler's bug (here a KeyError) on the direct path ends the connection with that error named
+    and reported to the loop's exception handler, as on the deferred path. Reproduction on the old code:
+    ``handle`` caught only ProtocolError and ConnectionError, so the KeyError escaped
+    ``data_received``; asyncio logged "Fatal error" and the shell ended with ``connection lost: 'x'``."""
+    bug = KeyError("x")
+    reported: list[dict[str, Any]] = []
+    loop = asyncio.get_running_loop()
+    previous = loop.get_exception_handler()
+    loop.set_exception_handler(lambda _, context: reported.append(context))
+
+    def on_event(event: Any) -> None:
+        raise bug
+
+    try:
+        async with served(_dashboard, on_event=on_event) as (side, reader, writer):
+            writer.write(b"robotmode\n")
+            await asyncio.wait_for(side.ended.wait(), WAIT_S)
+            assert side.reasons == [bug]
+            assert side.shells[0].closed.result() is bug
+            assert await asyncio.wait_for(reader.read(), WAIT_S) == b""  # the shell closed the socket
+    finally:
+        loop.set_exception_handler(previous)
+    assert [context.get("exception") for context in reported] == [bug]
+    assert reported[0]["message"] == "test: an event handler failed"

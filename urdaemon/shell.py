@@ -186,8 +186,8 @@ class Shell(asyncio.Protocol):
                 if pending is not None:
                     self._hold(pending, events[index + 1 :])
                     return
-        except (ProtocolError, ConnectionError) as err:
-            self.fail(err)
+        except Exception as err:  # as in ``_finish``: the connection ends, the error named
+            self._failed(err)
             return
         self.flush()
         if self._backlog or (self.paced and self._writable is not None and not self._writable.done()):
@@ -234,10 +234,14 @@ class Shell(asyncio.Protocol):
                 if decoded is None:
                     return
                 await self._deliver(decoded)
-        except (ProtocolError, ConnectionError) as err:
-            self.fail(err)
-        except Exception as err:  # a handler's bug: the connection ends, the loop reports it
-            self.fail(err)
+        except Exception as err:  # a handler failed: the connection ends, the error named
+            self._failed(err)
+
+    def _failed(self, err: Exception) -> None:
+        """A handler raised ``err``: the connection ends with it; an error that is not a protocol or
+        connection error is a handler's bug, which the loop's exception handler also reports."""
+        self.fail(err)
+        if not isinstance(err, (ProtocolError, ConnectionError)):
             asyncio.get_running_loop().call_exception_handler(
                 {"message": f"{self.name}: an event handler failed", "exception": err, "protocol": self}
             )
@@ -277,8 +281,9 @@ async def connect(
         _, shell = await asyncio.wait_for(opening, timeout)
     except TimeoutError as err:
         raise UrTimeoutError(f"{name}: no connection to {host}:{port} within {timeout} s") from err
-    except OSError as err:
-        raise ConnectionLostError(f"{name}: cannot connect to {host}:{port}: {err.strerror or err}") from err
+    except (OSError, UnicodeError) as err:  # UnicodeError: a host name IDNA cannot encode
+        why = getattr(err, "strerror", None) or err
+        raise ConnectionLostError(f"{name}: cannot connect to {host}:{port}: {why}") from err
     return shell
 
 
