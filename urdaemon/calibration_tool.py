@@ -21,6 +21,7 @@ import yaml
 from urdaemon.backends.ur.primary_link import FIRST_STATE_TIMEOUT_S, PRIMARY_PORT, PrimaryLink
 from urdaemon.errors import ProtocolError, UrDaemonError, UrTimeoutError
 from urdaemon.protocols import primary as prim
+from urdaemon.shell import connect
 
 __all__ = [
     "ControllerCalibration",
@@ -173,12 +174,7 @@ async def read_calibration(
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
     where = f"{address}:{port}"
-    try:
-        _, link = await asyncio.wait_for(loop.create_connection(_CalibrationReader, address, port), timeout)
-    except TimeoutError:
-        raise UrTimeoutError(f"cannot connect to {where}: no answer within {timeout:g} s") from None
-    except (OSError, UnicodeError) as err:  # UnicodeError: a host name IDNA cannot encode
-        raise UrDaemonError(f"cannot connect to {where}: {getattr(err, 'strerror', None) or err}") from err
+    link = await connect(_CalibrationReader, address, port, timeout=timeout, name="calibration")
     try:
         return await _read(link, where, deadline, timeout)
     finally:
