@@ -8,6 +8,11 @@ from collections.abc import Callable
 import pytest
 
 from urdaemon.backends.ur.reverse_channel import (
+    ENDED_BY_HAND_BACK,
+    ENDED_BY_NEW_PROGRAM,
+    ENDED_BY_PROGRAM_LOST,
+    ENDED_BY_STOP,
+    ENDED_BY_TRAJECTORY_LOST,
     FAILURE,
     HANDED_BACK_REFUSAL,
     NOT_CONNECTED,
@@ -64,7 +69,6 @@ EVENTS: dict[str, Event] = {
     "freedrive off": lambda c: c.freedrive(False, 0.5, 1.0),
 }
 
-ENDS_G1 = Step(Action.END_GOAL, "g1", FAILURE)
 NOTHING = Step(Action.NOTHING)
 
 TABLE: list[tuple[Channel, str, Channel, Step]] = [
@@ -76,6 +80,7 @@ TABLE: list[tuple[Channel, str, Channel, Step]] = [
     (NO, "stop", NO, NOTHING),
     (NO, "cancel", NO, NOTHING),
     (NO, "result SUCCESS", NO, NOTHING),
+    (NO, "freedrive off", NO, NOTHING),  # nothing to end: never refused
     (STREAM, "program connected", STREAM, NOTHING),
     (STREAM, "program lost", NO, NOTHING),
     (STREAM, "trajectory lost", STREAM, NOTHING),
@@ -87,12 +92,12 @@ TABLE: list[tuple[Channel, str, Channel, Step]] = [
     (STREAM, "result SUCCESS", STREAM, NOTHING),
     (STREAM, "freedrive on", FREE, Step(Action.SEND_FREEDRIVE_START)),
     (STREAM, "freedrive off", STREAM, NOTHING),
-    (PASS, "program connected", STREAM, ENDS_G1),
-    (PASS, "program lost", NO, ENDS_G1),
-    (PASS, "trajectory lost", STREAM, ENDS_G1),
-    (PASS, "hand back", BACK, Step(Action.SEND_STOPPED, "g1", FAILURE)),
+    (PASS, "program connected", STREAM, Step(Action.END_GOAL, "g1", FAILURE, ENDED_BY_NEW_PROGRAM)),
+    (PASS, "program lost", NO, Step(Action.END_GOAL, "g1", FAILURE, ENDED_BY_PROGRAM_LOST)),
+    (PASS, "trajectory lost", STREAM, Step(Action.END_GOAL, "g1", FAILURE, ENDED_BY_TRAJECTORY_LOST)),
+    (PASS, "hand back", BACK, Step(Action.SEND_STOPPED, "g1", FAILURE, ENDED_BY_HAND_BACK)),
     (PASS, "take back", PASS, NOTHING),
-    (PASS, "stop", NO, Step(Action.SEND_STOPPED, "g1", FAILURE)),
+    (PASS, "stop", NO, Step(Action.SEND_STOPPED, "g1", FAILURE, ENDED_BY_STOP)),
     (PASS, "cancel", STREAM, Step(Action.SEND_CANCEL)),
     (PASS, "result SUCCESS", STREAM, Step(Action.END_GOAL, "g1", 0)),
     (PASS, "freedrive off", PASS, NOTHING),
@@ -113,6 +118,7 @@ TABLE: list[tuple[Channel, str, Channel, Step]] = [
     (BACK, "stop", BACK, NOTHING),
     (BACK, "cancel", BACK, NOTHING),
     (BACK, "result SUCCESS", BACK, NOTHING),
+    (BACK, "freedrive off", BACK, NOTHING),  # nothing to end: never refused
 ]
 
 REFUSED: list[tuple[Channel, str, str]] = [
@@ -120,7 +126,6 @@ REFUSED: list[tuple[Channel, str, str]] = [
     (NO, "hand back", NOT_CONNECTED),
     (NO, "start g2", f"{NOT_CONNECTED} (no reverse or trajectory connection)"),
     (NO, "freedrive on", NOT_CONNECTED),
-    (NO, "freedrive off", NOT_CONNECTED),
     (STREAM, "start g2 without trajectory link", f"{NOT_CONNECTED} (no reverse or trajectory connection)"),
     (PASS, "start g2", "passthrough goal g1 is still running on the robot"),
     (PASS, "freedrive on", "passthrough goal g1 runs on the robot; freedrive starts at rest"),
@@ -128,7 +133,6 @@ REFUSED: list[tuple[Channel, str, str]] = [
     (BACK, "hand back", HANDED_BACK_REFUSAL),
     (BACK, "start g2", HANDED_BACK_REFUSAL),
     (BACK, "freedrive on", HANDED_BACK_REFUSAL),
-    (BACK, "freedrive off", HANDED_BACK_REFUSAL),
 ]
 
 

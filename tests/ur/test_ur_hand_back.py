@@ -10,6 +10,7 @@ import pytest
 
 from tests.ur.test_ur_passthrough_answers import StandInLink, connected_backend
 from urdaemon.backends.ur.backend import UrBackend
+from urdaemon.backends.ur.reverse_channel import ENDED_BY_HAND_BACK
 from urdaemon.errors import BackendError
 from urdaemon.model import CommandMode
 from urdaemon.protocols import reverse
@@ -46,6 +47,7 @@ async def test_a_handed_back_program_gets_no_more_frames_and_no_freedrive() -> N
     cycle(backend)
     with pytest.raises(BackendError, match="handed back"):
         backend.freedrive(True, 1.0)
+    backend.freedrive(False, 1.0)  # ending a freedrive that is not on is never refused
     assert not backend.freedrive_active
     assert frames(reverse_link) == count, "nothing after STOPPED"
     assert backend.passthrough_problem() == (
@@ -55,14 +57,15 @@ async def test_a_handed_back_program_gets_no_more_frames_and_no_freedrive() -> N
 
 async def test_hand_back_ends_the_passthrough_goal_the_robot_ran() -> None:
     """STOPPED ends the program's trajectory with it: the goal ends FAILURE at once (it ended when the
-    program's link dropped before), and a new program that connects takes frames again."""
+    program's link dropped before), and a new program that connects takes frames again. The goal's
+    end names the hand back (it read "the robot reported that the trajectory failed" before)."""
     backend, reverse_link = connected_backend()
-    results: list[tuple[str, int]] = []
+    results: list[tuple[str, int, str | None]] = []
     point = backend.encode_passthrough_point((0.0,) * 6, (0.0,) * 6, None, 1.0)
-    backend.start_encoded_passthrough("g1", point, 1, lambda g, c: results.append((g, c)))
+    backend.start_encoded_passthrough("g1", point, 1, lambda g, c, why: results.append((g, c, why)))
     assert backend.passthrough_problem() == "passthrough goal g1 is still running on the robot"
     await backend.hand_back_control()
-    assert results == [("g1", int(TrajectoryResultCode.FAILURE))]
+    assert results == [("g1", int(TrajectoryResultCode.FAILURE), ENDED_BY_HAND_BACK)]
     assert backend.passthrough_goal is None
     backend.servers.reverse.link = None
     backend.on_link("reverse", False, "reverse: connection closed by the robot")

@@ -53,9 +53,9 @@ async def test_two_canceled_goals_answers_do_not_end_the_goal_after_them() -> No
     results: list[tuple[str, int]] = []
     point = backend.encode_passthrough_point(HOME, (0.0,) * 6, None, 1.0)
     for goal in ("g1", "g2"):
-        backend.start_encoded_passthrough(goal, point, 1, lambda g, c: results.append((g, c)))
+        backend.start_encoded_passthrough(goal, point, 1, lambda g, c, _why: results.append((g, c)))
         backend.cancel_passthrough()
-    backend.start_encoded_passthrough("g3", point, 1, lambda g, c: results.append((g, c)))
+    backend.start_encoded_passthrough("g3", point, 1, lambda g, c, _why: results.append((g, c)))
     cancels = [
         m
         for m in reverse_link.sent

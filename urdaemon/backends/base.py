@@ -17,6 +17,10 @@ from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
 from urdaemon.model import IO_SIZES, JointCommand, RobotState
 
+PassthroughResult = Callable[[str, int, "str | None"], None]
+"""How a passthrough goal's end is told: (goal id, the trajectory result code, why the daemon's side
+ended it, or None for the robot's own result)."""
+
 __all__ = ["IO_KINDS", "Backend", "BackendStatistics"]
 
 log = logging.getLogger("urdaemon.backends")
@@ -124,7 +128,7 @@ class Backend(abc.ABC):
         raise BackendError(self.passthrough_problem() or "passthrough unavailable")
 
     def start_encoded_passthrough(
-        self, goal_id: str, frames: bytes, count: int, on_result: Callable[[str, int], None]
+        self, goal_id: str, frames: bytes, count: int, on_result: PassthroughResult
     ) -> None:
         """Send ``count`` points encoded by ``encode_passthrough_point`` (joined) for the robot to run;
         nothing is encoded here, so this costs one write whatever the goal's length."""

@@ -239,8 +239,8 @@ class Goals:
             planner=planner,
         )
 
-    def _on_passthrough_result(self, goal_id: str, code: int) -> None:
-        if self.passthrough.finish(goal_id, code):
+    def _on_passthrough_result(self, goal_id: str, code: int, why: str | None) -> None:
+        if self.passthrough.finish(goal_id, code, why):
             self.publish_events()
             self._status.publish()
 

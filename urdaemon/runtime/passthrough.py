@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
 
-from urdaemon.backends.base import Backend
+from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.control import GoalStatus, MotionController, Tolerances
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import BackendError, GoalRejected
@@ -74,7 +73,7 @@ class Passthrough:
         planner: TrajectoryPlanner,
         tolerances: Tolerances | None,
         frames: tuple[bytes, int],
-        on_result: Callable[[str, int], None],
+        on_result: PassthroughResult,
     ) -> float:
         """Accept a goal the robot interpolates itself and send it its pre-encoded points (one write,
         no await in between). Everything that can refuse it ran before: accepting is the last step."""
@@ -91,11 +90,15 @@ class Passthrough:
             return duration
         return duration
 
-    def finish(self, goal_id: str, code: int) -> bool:
-        """The robot's result of ``goal_id``; True when it ended the goal (its result is an event)."""
-        status, reason = ROBOT_RESULTS.get(
-            code, (GoalStatus.ABORTED, "the robot reported that the trajectory failed")
-        )
+    def finish(self, goal_id: str, code: int, why: str | None = None) -> bool:
+        """The result of ``goal_id``: the robot's code, or (``why``) the daemon's side ended it; True
+        when it ended the goal (its result is an event)."""
+        if why is not None:
+            status, reason = GoalStatus.ABORTED, why
+        else:
+            status, reason = ROBOT_RESULTS.get(
+                code, (GoalStatus.ABORTED, "the robot reported that the trajectory failed")
+            )
         return self._controller.finish_external(goal_id, status, reason, self._backend.state)
 
     def ended_here(self, goal_id: str) -> None:

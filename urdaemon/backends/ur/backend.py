@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from urdaemon.backends.base import Backend
+from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.frames import (
     IDLE_TIMEOUT_S,
@@ -96,7 +96,7 @@ class UrBackend(Backend):
         self._on_cycle: Callable[[], None] = lambda: None
         self._channel = ReverseChannel()
         """What the program does with the reverse socket: the one owner of the passthrough goal."""
-        self._on_result: Callable[[str, int], None] | None = None
+        self._on_result: PassthroughResult | None = None
         """Who hears the running passthrough goal's result."""
         self._writer = ReverseWriter(self.servers)
         self._program = ControlProgram(robot, self.options, self.ports, self.servers, program)
@@ -302,7 +302,7 @@ class UrBackend(Backend):
     """One spline point's 84-byte frame (``frames.encode_passthrough_point``)."""
 
     def start_encoded_passthrough(
-        self, goal_id: str, frames: bytes, count: int, on_result: Callable[[str, int], None]
+        self, goal_id: str, frames: bytes, count: int, on_result: PassthroughResult
     ) -> None:
         """START(count) on the reverse socket, then the pre-encoded points on the trajectory socket.
 
@@ -338,7 +338,7 @@ class UrBackend(Backend):
         if step.goal is not None:
             on_result, self._on_result = self._on_result, None
             if on_result is not None:
-                on_result(step.goal, step.code)
+                on_result(step.goal, step.code, step.reason)
 
     # ---- the cycle ---------------------------------------------------------------------------------------
 

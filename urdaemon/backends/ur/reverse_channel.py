@@ -31,6 +31,11 @@ from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.protocols.trajectory_point import TrajectoryResultCode
 
 __all__ = [
+    "ENDED_BY_HAND_BACK",
+    "ENDED_BY_NEW_PROGRAM",
+    "ENDED_BY_PROGRAM_LOST",
+    "ENDED_BY_STOP",
+    "ENDED_BY_TRAJECTORY_LOST",
     "FAILURE",
     "HANDED_BACK_REFUSAL",
     "NOT_CONNECTED",
@@ -51,6 +56,11 @@ FAILURE = int(TrajectoryResultCode.FAILURE)
 """The trajectory result code of a goal whose program or trajectory link was lost (``FAILURE``)."""
 NOT_CONNECTED = "the control program is not connected"
 HANDED_BACK_REFUSAL = "control was handed back to the robot (resend_program takes it back)"
+ENDED_BY_HAND_BACK = "control was handed back to the robot while it ran the trajectory"
+ENDED_BY_STOP = "the daemon stopped while the robot ran the trajectory"
+ENDED_BY_NEW_PROGRAM = "a new control program connected while the robot ran the trajectory"
+ENDED_BY_PROGRAM_LOST = "the control program's reverse connection was lost while the robot ran the trajectory"
+ENDED_BY_TRAJECTORY_LOST = "the trajectory connection was lost while the robot ran the trajectory"
 
 
 class Channel(enum.Enum):
@@ -92,11 +102,13 @@ class Frame(enum.IntEnum):
 class Step:
     """An event's outcome: the action, and for ``END_GOAL`` the goal and its trajectory result code.
 
-    ``SEND_STOPPED`` may end a goal too (``goal`` set): the program stops its trajectory with it."""
+    ``SEND_STOPPED`` may end a goal too (``goal`` set): the program stops its trajectory with it.
+    ``reason`` says why a goal ended when the daemon's side ended it (None: the robot's own result)."""
 
     action: Action
     goal: str | None = None
     code: int = 0
+    reason: str | None = None
 
 
 _NOTHING = Step(Action.NOTHING)
@@ -167,14 +179,14 @@ class ReverseChannel:
 
     def program_connected(self) -> Step:
         """The program's reverse link came up: it reads the daemon's frames (a new program)."""
-        step = self._end_goal()
+        step = self._end_goal(reason=ENDED_BY_NEW_PROGRAM)
         self.state = Channel.STREAMING
         self._owed = 0
         return step
 
     def program_lost(self) -> Step:
         """The reverse link dropped: the program ended, and with it its trajectory and freedrive."""
-        step = self._end_goal()
+        step = self._end_goal(reason=ENDED_BY_PROGRAM_LOST)
         if self.state is not Channel.HANDED_BACK:
             self.state = Channel.NO_PROGRAM
         self._owed = 0
@@ -186,7 +198,7 @@ class ReverseChannel:
         if self.state is not Channel.PASSTHROUGH:
             return _NOTHING
         self.state = Channel.STREAMING
-        return self._end_goal()
+        return self._end_goal(reason=ENDED_BY_TRAJECTORY_LOST)
 
     def hand_back(self) -> Step:
         """STOPPED: the program leaves its loop (a running trajectory ends with it)."""
@@ -195,7 +207,7 @@ class ReverseChannel:
         goal = self._goal
         self._goal = None
         self.state = Channel.HANDED_BACK
-        return Step(Action.SEND_STOPPED, goal, FAILURE)
+        return Step(Action.SEND_STOPPED, goal, FAILURE, ENDED_BY_HAND_BACK if goal is not None else None)
 
     def take_back(self) -> Step:
         """startup or resend_program: a program may be sent or played again."""
@@ -210,7 +222,7 @@ class ReverseChannel:
         goal = self._goal
         self._goal = None
         self.state = Channel.NO_PROGRAM
-        return Step(Action.SEND_STOPPED, goal, FAILURE)
+        return Step(Action.SEND_STOPPED, goal, FAILURE, ENDED_BY_STOP if goal is not None else None)
 
     # ---- passthrough -------------------------------------------------------------------------------
 
@@ -247,15 +259,15 @@ class ReverseChannel:
     def freedrive(self, active: bool, now: float, timeout: float) -> Step:
         """Keep freedrive on until ``now + timeout`` (a deadman), or end it now."""
         state = self.state
-        if state is Channel.HANDED_BACK:
-            raise BackendError(HANDED_BACK_REFUSAL)
-        if state is Channel.NO_PROGRAM:
-            raise BackendError(NOT_CONNECTED)
-        if not active:
+        if not active:  # nothing to refuse: freedrive ends, or was not on
             if state is not Channel.FREEDRIVE:
                 return _NOTHING
             self.state = Channel.STREAMING
             return Step(Action.SEND_FREEDRIVE_STOP)
+        if state is Channel.HANDED_BACK:
+            raise BackendError(HANDED_BACK_REFUSAL)
+        if state is Channel.NO_PROGRAM:
+            raise BackendError(NOT_CONNECTED)
         if state is Channel.PASSTHROUGH:
             raise BackendError(f"passthrough goal {self._goal} runs on the robot; freedrive starts at rest")
         self._freedrive_until = now + timeout
@@ -288,9 +300,9 @@ class ReverseChannel:
             return _FREEDRIVE_STOP
         return _FREEDRIVE_NOOP
 
-    def _end_goal(self, code: int = FAILURE) -> Step:
+    def _end_goal(self, code: int = FAILURE, reason: str | None = None) -> Step:
         goal = self._goal
         if goal is None:
             return _NOTHING
         self._goal = None
-        return Step(Action.END_GOAL, goal, code)
+        return Step(Action.END_GOAL, goal, code, reason)
