@@ -1,5 +1,6 @@
-"""The fake takes RTDE input packages as a controller does, one per client per cycle, in arrival order
-(the fake's clock turned by hand: the packages arrive between two cycles, as after a stall)."""
+"""The fake takes RTDE input packages as a controller does: while it keeps time, as they arrive (the
+last write of a cycle wins); after it was held up, one per client per cycle, in arrival order (the
+fake's clock turned by hand, its wall clock too: the packages arrive between two cycles)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,20 @@ from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 
 pytestmark = pytest.mark.timeout(60)
+
+
+class Wall:
+    """The fake's wall clock, moved by hand (``held_up``: as if the fake's process did not run)."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def held_up(self, seconds: float = 0.05) -> None:
+        self.now += seconds
+
 
 MIRROR = (
     "def mirror():\n  while True:\n"
@@ -61,8 +76,10 @@ async def test_two_input_packages_in_one_cycle_reach_the_program_in_turn() -> No
     """Reproduction: ur_rtde's speedj package and its first watchdog kick arrived while the fake was
     held up; the fake applied both at once, so its program never read the speedj command (the arm
     stood still while the program ran). The program must see the first, then the second."""
-    async with manual_fake(powered=True) as (controller, clock):
+    wall = Wall()
+    async with manual_fake(powered=True, wall_clock=wall) as (controller, clock):
         link = await _mirroring(controller, clock)
+        wall.held_up()
         await _arrive_together(link, [7, 8])
         assert controller.input_registers.ints[0] == 7  # the first applies at once, as before
         clock.turn(1)
@@ -78,8 +95,10 @@ async def test_a_client_far_ahead_loses_no_package_and_catches_up_within_the_bou
     """More packages than the queue holds: the first is applied at once, the oldest waiting ones too
     as room is needed, the rest one per cycle, so the program sees the last MAX_PENDING_INPUTS + 1 in
     order and reaches the latest within that many cycles."""
-    async with manual_fake(powered=True) as (controller, clock):
+    wall = Wall()
+    async with manual_fake(powered=True, wall_clock=wall) as (controller, clock):
         link = await _mirroring(controller, clock)
+        wall.held_up()
         values = list(range(1, MAX_PENDING_INPUTS + 6))
         await _arrive_together(link, values)
         seen = []
@@ -87,4 +106,22 @@ async def test_a_client_far_ahead_loses_no_package_and_catches_up_within_the_bou
             clock.turn(1)
             seen.append(controller.arm.io.registers_int[0])
         assert seen == values[-MAX_PENDING_INPUTS - 1 :] + [values[-1]] * 2
+        link.close()
+
+
+async def test_a_client_faster_than_the_cycles_never_falls_behind_a_fake_that_keeps_time() -> None:
+    """Reproduction: a client sending several packages per cycle to a fake that kept time built a
+    queue applied one per cycle, so its program ran MAX_PENDING_INPUTS cycles behind for as long as it
+    sent. A controller applies what arrived by the next cycle: the last write wins."""
+    wall = Wall()
+    async with manual_fake(powered=True, wall_clock=wall) as (controller, clock):
+        link = await _mirroring(controller, clock)
+        for first in range(1, 30, 3):
+            await _arrive_together(link, [first, first + 1, first + 2])
+            assert controller.input_registers.ints[0] == first + 2
+            wall.now += controller.step_time
+            clock.turn(1)
+            assert controller.arm.io.registers_int[0] == first + 2
+            await link.send(rtde.Start())  # (each arrival ends with a pause request)
+            assert (await link.next(rtde.StartReply)).accepted
         link.close()

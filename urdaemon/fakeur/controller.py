@@ -32,6 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,6 +103,7 @@ def _serving_parts(
         versions=rtde_versions,
         input_registers=fake.input_registers,
         input_times=programs.input_times,
+        wall_clock=fake.wall_clock,
     )
     return connections, programs, rtde
 
@@ -123,6 +125,7 @@ class FakeController:
         faults: FaultInjector | None = None,
         rtde_versions: tuple[int, ...] = (1, 2),
         programs: str | Path | None = None,
+        wall_clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.model = load_ur_model(model) if isinstance(model, str) else model
         self.address = address
@@ -137,6 +140,8 @@ class FakeController:
         self.rtde_versions = rtde_versions
         """RTDE protocol versions it accepts: ``(1,)`` is a controller that speaks only v1 (no output
         frequency, no recipe ids), which a client must fall back to when v2 is refused."""
+        self.wall_clock = wall_clock
+        """The wall clock the I/O side reads (to tell that the fake was held up); tests pass their own."""
         self.urcap = urcap
         """Where a loaded External Control program fetches its script: the daemon's script sender."""
         self.programs_dir = Path(programs) if programs is not None else None

@@ -7,18 +7,23 @@ RTDE input registers (``input_*_register_X`` and the words ``input_bit_registers
 ``32_to_63``), and note when each variable last arrived (what a program's RTDE watchdogs check). An
 input variable belongs to the first client that sets it up (IN_USE for the others).
 
-Inputs are taken the way a controller takes them, once per cycle: between two steps of the programs
-at most one input package of each client is applied. The first to arrive applies at once; the
-ones after it wait in arrival order, and ``after_cycle`` (called at the end of every controller
-cycle) applies the oldest waiting one of each client. So a fake that was held up and finds two
-packages of one client (ur_rtde's speedj and its first watchdog kick) lets its program see each in
-a cycle of its own, as the cycles a controller would have run in that time would have.
+Inputs are taken the way a controller takes them, once per cycle. While the fake keeps time, a
+package applies as it arrives (several from one client within one cycle: the last write wins, as on
+a controller, so a client sending faster than the controller cycles never falls behind). When the
+fake was held up (no cycle for more than ``STALL_PERIODS`` periods: the machine was busy), the
+packages it then finds were sent over the cycles it missed: at most one package of each client is
+applied between two steps of the programs; the ones after it wait in arrival order and
+``after_cycle`` (called at the end of every controller cycle) applies the oldest waiting one of each
+client. So a fake that was held up and finds two packages of one client (ur_rtde's speedj and its
+first watchdog kick) lets its program see each in a cycle of its own, as the cycles a controller
+would have run in that time would have. Only this I/O side reads the clock (to tell a stall).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -34,7 +39,7 @@ from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
 
-__all__ = ["MAX_PENDING_INPUTS", "RtdeService"]
+__all__ = ["MAX_PENDING_INPUTS", "STALL_PERIODS", "RtdeService"]
 
 log = logging.getLogger("urdaemon.fakeur")
 
@@ -46,6 +51,9 @@ _DIGITAL_OUTPUT_SHIFTS: Final = (
 )
 """RTDE's digital output inputs (``<kind>_digital_output`` and its mask) and where each kind's pins sit
 in the arm's output word."""
+STALL_PERIODS = 2.0
+"""No controller cycle for longer than this many periods: the fake was held up, and input packages
+found now were sent over the cycles it missed (they are then applied one per cycle)."""
 MAX_PENDING_INPUTS = 8
 """Input packages of one client waiting for their cycle (a model parameter: 16 ms at 500 Hz). When a
 client is further ahead than this (the fake was held up longer, or the client sends faster than the
@@ -81,6 +89,7 @@ class RtdeService:
         versions: tuple[int, ...],
         input_registers: InputRegisters,
         input_times: dict[str, float],
+        wall_clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.arm = arm
         self.address = address
@@ -95,6 +104,12 @@ class RtdeService:
         """The clients with input packages waiting for a cycle."""
         self.cycle = 0
         """Controller cycles ended (``after_cycle``): inputs applied in one are seen by the next step."""
+        self._stall = STALL_PERIODS / rate_hz
+        self._wall_clock = wall_clock
+        self._cycle_ended_at = wall_clock()
+        """When the latest cycle ended, on the wall clock (how a stall is told)."""
+        self._held_up = False
+        """The latest cycle came more than ``STALL_PERIODS`` periods after the one before."""
         self.input_owner: dict[str, _RtdeClient] = {}
 
     def shell(self, connections: Connections, on_read: Callable[[], None]) -> ServiceShell:
@@ -140,6 +155,9 @@ class RtdeService:
         """A controller cycle ended (its programs stepped): the oldest waiting input package of each
         client is applied, for the next step to see."""
         self.cycle += 1
+        ended = self._wall_clock()
+        self._held_up = ended - self._cycle_ended_at > self._stall
+        self._cycle_ended_at = ended
         if self.waiting:
             for client in self.waiting:
                 client.applied_in = self.cycle
@@ -147,9 +165,10 @@ class RtdeService:
             self.waiting = [client for client in self.waiting if client.pending]
 
     def _receive_inputs(self, client: _RtdeClient, values: dict[str, Any]) -> None:
-        """Apply one input package now if none of this client's was applied since the last step, else
-        queue it for a later cycle (the oldest waiting one applied at once when the queue is full)."""
-        if not client.pending and client.applied_in != self.cycle:
+        """Apply one input package now if none of this client's was applied since the last step or the
+        fake keeps time, else queue it for a later cycle (the oldest waiting one applied at once when
+        the queue is full)."""
+        if not client.pending and (client.applied_in != self.cycle or not self._behind()):
             client.applied_in = self.cycle
             self.apply_inputs(values)
             return
@@ -158,6 +177,10 @@ class RtdeService:
         if not client.pending:
             self.waiting.append(client)
         client.pending.append(values)
+
+    def _behind(self) -> bool:
+        """True when the fake was held up: its latest cycle came late, or none came for too long."""
+        return self._held_up or self._wall_clock() - self._cycle_ended_at > self._stall
 
     def _send(self, client: _RtdeClient, message: Any) -> None:
         try:
