@@ -25,7 +25,7 @@ from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
-from urdaemon.runtime.services import ServiceRunner
+from urdaemon.runtime.service_runner import ServiceRunner
 from urdaemon.runtime.status import StatusPublisher
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]

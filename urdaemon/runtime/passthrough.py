@@ -1,8 +1,9 @@
 """Trajectory goals the robot interpolates itself (passthrough): encoded before they are accepted,
 sent in one write, ended by the robot's result or by the daemon.
 
-The goal the robot runs is tracked here (``goal_id``) so that a goal ended by the daemon (stopped,
-aborted, not ready) also stops the robot's trajectory.
+Which goal the robot runs is the backend's to say (``Backend.passthrough_goal``, the UR backend's
+reverse channel): a goal ended by the daemon (stopped, aborted, not ready) that is the one the robot
+runs also stops the robot's trajectory.
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ This module supervises the links (connect, watch, close), runs the cycle and rou
 the jobs it composes have their own modules: ``reverse_channel`` (what the program does with the
 reverse socket), ``frames`` (the bytes written to it), ``program`` (the control program), ``startup``
 (power, brakes, play), ``services`` (script commands, RTDE inputs, the dashboard), ``readiness`` (the
-status's reason). Only this shell reads the clock; the parts take ``now``.
+status's reason). The logic takes ``now`` (the reverse channel, the program's windows); only the
+asyncio parts read the clock: this module, start-up's waits and the servers' admission window.
 """
 
 from __future__ import annotations
