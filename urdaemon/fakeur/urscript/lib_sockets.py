@@ -11,6 +11,13 @@ cycle, timed in controller time (``host.now``); a timeout of 0 or less waits for
 socket fails a read at once. Sends are non-blocking; what the kernel does not take at once is kept and
 sent first by the socket's next operation.
 
+These are the one kind of socket the fake keeps off the asyncio shell (``urdaemon.shell``), on purpose:
+a controller's program reads its socket in its own cycle, at the moment of the read, and gets every
+byte the kernel holds by then. A shell pushes only what the event loop has read, after a loop turn, so
+a frame that reached the kernel just before a cycle would wait for the next one; the control-script
+tests (tests/fakeur/test_control_script.py) send a frame and run the cycle at once, and fail on that
+model. Reading in the cycle also keeps a flooding peer's bytes in the kernel, not in the fake.
+
 Results follow UR's URScript manual: ``socket_read_binary_integer(3)`` gives ``[3, a, b, c]``, or
 ``[0, -1, -1, -1]`` on a timeout, a closed socket or an unknown name; ``socket_read_ascii_float`` reads
 ``(1.5, 2, 3)`` and fails with ``[0, nan, ...]``; string reads fail with ``""``.
