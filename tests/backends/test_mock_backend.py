@@ -8,9 +8,8 @@ import math
 import pytest
 
 from urdaemon.backends import MockBackend
-from urdaemon.backends.mock import MOCK_IO_SIZES
 from urdaemon.errors import BackendError
-from urdaemon.model import CommandMode, Lifecycle, RobotMode, SafetyMode
+from urdaemon.model import IO_SIZES, CommandMode, Lifecycle, RobotMode, SafetyMode
 
 JOINTS = ("a_j1", "a_j2", "a_j3")
 RATE = 500.0
@@ -260,10 +259,10 @@ async def test_set_payload_is_reflected_in_state() -> None:
 
 def test_mock_io_sizes_match_the_state() -> None:
     backend = make()
-    assert len(backend.state.digital_out) == MOCK_IO_SIZES["digital"]
-    assert len(backend.state.configurable_out) == MOCK_IO_SIZES["configurable"]
-    assert len(backend.state.tool_out) == MOCK_IO_SIZES["tool"]
-    assert len(backend.state.analog_out) == MOCK_IO_SIZES["analog"]
+    assert len(backend.state.digital_out) == IO_SIZES["digital"]
+    assert len(backend.state.configurable_out) == IO_SIZES["configurable"]
+    assert len(backend.state.tool_out) == IO_SIZES["tool"]
+    assert len(backend.state.analog_out) == IO_SIZES["analog"]
 
 
 # --- run(): a real loop, bounded by cycle count ---

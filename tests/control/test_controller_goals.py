@@ -535,7 +535,7 @@ def test_after_a_goal_the_final_setpoint_is_held_until_a_lagging_robot_settles_o
     """The goal succeeds within its tolerance while the robot still lags; the controller keeps sending
     the final point until the robot rests on it (within SETTLE_POSITION), and only then goes idle. Before
     it held (972271b) it went idle at once and the robot stopped where the lag had it."""
-    from urdaemon.control.controller import SETTLE_POSITION
+    from urdaemon.control.stopping import SETTLE_POSITION
 
     robot = SimRobot.create(UR10E_LIMITS)
     goal = [0.3, -0.2, 0.1, 0.0, 0.0, 0.0]
@@ -555,7 +555,7 @@ def test_after_a_goal_the_final_setpoint_is_held_until_a_lagging_robot_settles_o
 
 def test_a_robot_that_never_settles_is_let_go_after_the_settle_time() -> None:
     """A robot that stays off its setpoint (a steady error) is held at most SETTLE_TIME after the stop."""
-    from urdaemon.control.controller import SETTLE_TIME
+    from urdaemon.control.stopping import SETTLE_TIME
 
     robot = SimRobot.create(UR10E_LIMITS)
     robot.offset = [1e-3] + [0.0] * 5  # always 1 mrad off what it is told

@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from urdaemon.control import GoalStatus, MotionController, PlannedTrajectory, TrajectoryPoint
-from urdaemon.control.controller import RELEASE_SEGMENTS
+from urdaemon.control.ledger import RELEASE_SEGMENTS
 from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS

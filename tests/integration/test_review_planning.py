@@ -18,6 +18,7 @@ import pytest
 
 from tests.helpers import swing_trajectory
 from tests.integration.conftest import TWO_MOCKS
+from urdaemon.backends.base import PassthroughResult
 from urdaemon.backends.mock import MockBackend
 from urdaemon.cell import parse_cell
 from urdaemon.control import MotionController
@@ -131,7 +132,7 @@ class HandBackend(MockBackend):
             raise BackendError(f"cannot send the trajectory to the robot: {err}") from None
 
     def start_encoded_passthrough(
-        self, goal_id: str, frames: bytes, count: int, on_result: Callable[[str, int], None]
+        self, goal_id: str, frames: bytes, count: int, on_result: PassthroughResult
     ) -> None:
         assert len(frames) == count * trajectory_point.FRAME_BYTES
         self.passthrough = (goal_id, count)

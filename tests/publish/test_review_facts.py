@@ -5,7 +5,7 @@ from __future__ import annotations
 import ast
 import inspect
 
-from urdaemon.control import controller, trajectory
+from urdaemon.control import intake, trajectory
 from urdaemon.publish import codec
 
 
@@ -23,4 +23,4 @@ def test_codec_takes_the_goal_time_and_tolerance_limits_from_control() -> None:
     assert "MAX_GOAL_TIME_S" not in assigned
     assert "MAX_JOINT_TOLERANCE" not in assigned
     assert vars(codec)["MAX_GOAL_TIME_S"] is trajectory.MAX_GOAL_TIME_S
-    assert vars(codec)["MAX_JOINT_TOLERANCE"] is controller.MAX_JOINT_TOLERANCE
+    assert vars(codec)["MAX_JOINT_TOLERANCE"] is intake.MAX_JOINT_TOLERANCE

@@ -109,5 +109,5 @@ async def test_the_backend_encodes_a_point_at_a_time_and_sends_pre_encoded_point
         with pytest.raises(BackendError, match=r"segment of 2147\.5 s is longer than the robot can take"):
             backend.encode_passthrough_point(HOME, (0.0,) * 6, None, 2147.5)
         with pytest.raises(BackendError, match="not 2 encoded trajectory points"):
-            backend.start_encoded_passthrough("g1", encoded_ok(backend), 2, lambda goal, code: None)
+            backend.start_encoded_passthrough("g1", encoded_ok(backend), 2, lambda goal, code, why: None)
         assert backend.passthrough_problem() is None, "no START went out"

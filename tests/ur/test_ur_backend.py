@@ -10,7 +10,7 @@ import pytest
 from tests.helpers import fake_address, free_tcp_port, run_cli_in_thread
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
-from urdaemon.control.controller import SETTLE_POSITION
+from urdaemon.control.stopping import SETTLE_POSITION
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import GoalRejected
 from urdaemon.fakeur.controller import FakeController

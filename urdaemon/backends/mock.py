@@ -16,10 +16,7 @@ from urdaemon.backends.clock import PeriodicClock
 from urdaemon.errors import BackendError, ConfigError
 from urdaemon.model import IO_SIZES, TOOL_VOLTAGES, CommandMode, Lifecycle, RobotMode, SafetyMode
 
-__all__ = ["MOCK_IO_SIZES", "MockBackend"]
-
-MOCK_IO_SIZES = IO_SIZES
-"""The mock has a UR controller's outputs."""
+__all__ = ["MockBackend"]
 
 
 class MockBackend(Backend):
@@ -92,7 +89,7 @@ class MockBackend(Backend):
 
     async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
         """Set an output; the state shows it from the next cycle on."""
-        self.check_io(kind, pin, value, MOCK_IO_SIZES)
+        self.check_io(kind, pin, value, IO_SIZES)  # a UR controller's outputs
         state = self.state
         if kind == "digital":
             state.digital_out[pin] = bool(value)

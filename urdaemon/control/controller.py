@@ -35,24 +35,19 @@ from collections.abc import Sequence
 
 from urdaemon.control.goal_run import GoalRun
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
-from urdaemon.control.intake import MAX_JOINT_TOLERANCE, GoalIntake, GoalTolerances
-from urdaemon.control.ledger import RELEASE_SEGMENTS, ControllerStatistics, GoalLedger
+from urdaemon.control.intake import GoalIntake, GoalTolerances
+from urdaemon.control.ledger import ControllerStatistics, GoalLedger
 from urdaemon.control.limits import apply_permutation
 from urdaemon.control.online import OnlineGenerator
 from urdaemon.control.scaling import planning_limits
 from urdaemon.control.setpoint import Setpoint, write_idle
-from urdaemon.control.stopping import SETTLE_POSITION, SETTLE_TIME, SETTLE_VELOCITY, StopRamp
+from urdaemon.control.stopping import StopRamp
 from urdaemon.control.streams import STREAM_EXPIRED, StreamFollower
 from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, TrajectoryPlanner, plan_move
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointCommand, JointLimits, RobotState
 
 __all__ = [
-    "MAX_JOINT_TOLERANCE",
-    "RELEASE_SEGMENTS",
-    "SETTLE_POSITION",
-    "SETTLE_TIME",
-    "SETTLE_VELOCITY",
     "ControllerStatistics",
     "MotionController",
 ]

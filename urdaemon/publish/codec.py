@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from urdaemon.control.controller import MAX_JOINT_TOLERANCE
 from urdaemon.control.goals import GoalFeedback, GoalResult, TrajectoryPoint
+from urdaemon.control.intake import MAX_JOINT_TOLERANCE
 from urdaemon.control.trajectory import MAX_GOAL_TIME_S
 from urdaemon.errors import MessageError
 from urdaemon.model import (

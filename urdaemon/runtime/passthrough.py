@@ -107,7 +107,3 @@ class Passthrough:
         robot must stop its trajectory too, or it would carry on after play."""
         if goal_id == self._backend.passthrough_goal:
             self._backend.cancel_passthrough()
-
-    def cancel_if_running(self) -> None:
-        """Stop the trajectory the robot runs, if the controller follows one (stop)."""
-        self._backend.cancel_passthrough()  # (nothing when the robot runs none)

@@ -63,7 +63,7 @@ class ServiceRunner:
     def on_stop(self, query: Any) -> None:
         """Stop whatever moves the robot (a trajectory being planned is refused); answered at once."""
         planned = self._gate.interrupt_planning()
-        self._goals.passthrough.cancel_if_running()
+        self._backend.cancel_passthrough()  # the trajectory the robot runs, if any, stops too
         self._controller.stop("stop requested", time.monotonic())
         self._goals.publish_events()
         reply(query, {"ok": True} if planned is None else {"ok": True, "planned": planned})

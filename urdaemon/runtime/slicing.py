@@ -42,12 +42,12 @@ _BATONS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Lock] = we
 """One slicing baton per event loop, shared by every robot's sliced work."""
 
 
-async def sliced(step: Callable[[float], bool], budget: float | None = None) -> None:
-    """Run ``step(deadline)`` until it returns False (done), one slice of ``budget`` s (default
-    PLANNING_SLICE_S) per turn of the event loop for the whole process: each slice holds the loop's
-    baton until the next turn, so however many robots slice at once, one turn runs one slice and
-    every robot's cycle runs between."""
-    budget = PLANNING_SLICE_S if budget is None else budget
+async def sliced(step: Callable[[float], bool]) -> None:
+    """Run ``step(deadline)`` until it returns False (done), one slice of ``PLANNING_SLICE_S`` per turn
+    of the event loop for the whole process: each slice holds the loop's baton until the next turn,
+    so however many robots slice at once, one turn runs one slice and every robot's cycle runs
+    between."""
+    budget = PLANNING_SLICE_S  # read at each call (tests set it)
     loop = asyncio.get_running_loop()
     baton = _BATONS.get(loop)
     if baton is None:
@@ -59,7 +59,7 @@ async def sliced(step: Callable[[float], bool], budget: float | None = None) -> 
             await asyncio.sleep(0)  # the next slice, anyone's (the next stage's too), in a later turn
 
 
-async def release(owned: list[object], budget: float | None = None) -> None:
+async def release(owned: list[object]) -> None:
     """Free what the caller hands over in slices: it keeps no reference to the list's items, so a
     planner among them is ours to take apart attribute by attribute. What they reach is only dropped
     (a big list or tuple item by item, never changed): whoever else holds it keeps it intact."""
@@ -86,21 +86,21 @@ async def release(owned: list[object], budget: float | None = None) -> None:
                 return True
         return False  # unreachable: itertools.count never ends
 
-    await sliced(step, budget)
+    await sliced(step)
 
 
-async def check_sliced(check: TrajectoryCheck, budget: float | None = None) -> TrajectoryPlanner:
+async def check_sliced(check: TrajectoryCheck) -> TrajectoryPlanner:
     """Check a trajectory's points in slices (``sliced``), letting every robot's cycle run between."""
     try:
-        await sliced(until_deadline(lambda: check.step(CHECK_STEPS)), budget)
+        await sliced(until_deadline(lambda: check.step(CHECK_STEPS)))
         return check.result()
     finally:
         check.close()
 
 
-async def decode_sliced(decoder: TrajectoryGoalDecoder, budget: float | None = None) -> TrajectoryGoalMessage:
+async def decode_sliced(decoder: TrajectoryGoalDecoder) -> TrajectoryGoalMessage:
     """Decode a goal in slices (``sliced``), letting every robot's cycle run between."""
-    await sliced(decoder.step, budget)
+    await sliced(decoder.step)
     return decoder.result()
 
 

@@ -27,35 +27,24 @@ from typing import Any
 from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.frames import (
-    IDLE_TIMEOUT_S,
-    PASSTHROUGH_TIMEOUT_S,
     ReverseWriter,
     encode_passthrough_point,
 )
 from urdaemon.backends.ur.primary_link import PrimaryLink
-from urdaemon.backends.ur.program import PROGRAM_RESEND_S, ControlProgram, ProgramBuilder
+from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
-from urdaemon.backends.ur.robot_messages import KINEMATICS_TIMEOUT_S, RobotMessages
+from urdaemon.backends.ur.robot_messages import RobotMessages
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.backends.ur.servers import CallbackServers
-from urdaemon.backends.ur.services import UR_IO_SIZES, UrServices
-from urdaemon.backends.ur.startup import STARTUP_TIMEOUT_S, StartUp
+from urdaemon.backends.ur.services import UrServices
+from urdaemon.backends.ur.startup import StartUp
 from urdaemon.cell.config import Robot, UrOptions
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrDaemonError
 from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, SafetyMode
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 
-__all__ = [
-    "IDLE_TIMEOUT_S",
-    "KINEMATICS_TIMEOUT_S",
-    "PASSTHROUGH_TIMEOUT_S",
-    "PROGRAM_RESEND_S",
-    "RTDE_WATCHDOG_S",
-    "STARTUP_TIMEOUT_S",
-    "UR_IO_SIZES",
-    "UrBackend",
-]
+__all__ = ["RTDE_WATCHDOG_S", "UrBackend"]
 
 log = logging.getLogger("urdaemon.ur")
 
@@ -319,8 +308,11 @@ class UrBackend(Backend):
         self._on_result = on_result
 
     def cancel_passthrough(self) -> None:
-        """CANCEL on the reverse socket; the robot answers CANCELED on the trajectory socket."""
-        self._act(self._channel.cancel_passthrough())
+        """CANCEL on the reverse socket; the robot's answer is owed and dropped (the goal ended here)."""
+        step = self._channel.cancel_passthrough()
+        if step.action is Action.SEND_CANCEL:
+            self._on_result = None
+        self._act(step)
 
     @property
     def freedrive_active(self) -> bool:
