@@ -5,8 +5,9 @@ to ``codec.receive_data``, each event to the owner's ``on_event`` in order, and 
 is written out (``transmit``, a hook the fake overrides to apply its faults). ``send(message)``
 encodes and writes at once. The connection ends once, with a reason (``closed`` and ``on_close``): a
 ``ConnectionLostError`` naming the shell (``<name>: connection lost: …`` or ``<name>: connection
-closed by the <peer_name>``), or the codec's own ``ProtocolError`` when the peer sent bad bytes, which
-also closes the socket. After that ``send`` is refused.
+closed by the <peer_name>``), the codec's own ``ProtocolError`` when the peer sent bad bytes, or the
+error an event handler raised (one that is not a protocol or connection error is also handed to the
+loop's exception handler); either closes the socket. After that ``send`` is refused.
 
 For servers that answer requests (the fake's), a handler may return an awaitable: the shell stops
 reading until it is done and hands the rest of the read over in order afterwards. ``chunk`` caps the
