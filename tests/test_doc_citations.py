@@ -11,8 +11,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 NOTES = ROOT / "docs" / "protocols.md"
 SCANNED = ("urdaemon", "tests", "docs", "resources", "benchmarks")
@@ -26,14 +24,6 @@ NO_OLD_HOME = ("urdaemon", "docs", "resources")
 CITATION = re.compile(r"(datasheet )?§(\d+(?:\.\d+)*)(?: step (\d+))?")
 """A citation, with an optional step; ``datasheet §7.3.3`` cites a chip's datasheet, not our notes."""
 HEADING = re.compile(r"^#{2,4} §(\d+(?:\.\d+)*) ", re.MULTILINE)
-
-PENDING: frozenset[str] = frozenset()
-"""Wrong citations in files this change does not own, waiting for their owner (e.g. ``"6.2.5"`` for a
-``§6.2.5`` that means "§6.2 step 5"). The test fails once none is left, so the entry goes with the
-fix."""
-
-PENDING_OLD_HOME: frozenset[str] = frozenset()
-"""Files that still name the old location, waiting for their owner (same rule as ``PENDING``)."""
 
 
 def _files(tops: tuple[str, ...]) -> list[Path]:
@@ -80,9 +70,7 @@ def test_every_citation_names_a_section_of_the_notes() -> None:
     """Reproduction: before docs/protocols.md existed every citation pointed outside the repository."""
     sections = _sections()
     missing = [
-        f"{rel}:{line}: §{section}"
-        for rel, line, section, _ in _citations()
-        if section not in sections and section not in PENDING
+        f"{rel}:{line}: §{section}" for rel, line, section, _ in _citations() if section not in sections
     ]
     assert not missing, "cited sections with no heading in docs/protocols.md:\n" + "\n".join(missing)
 
@@ -99,19 +87,10 @@ def test_every_cited_step_is_an_item_of_its_section() -> None:
     assert not missing, "cited steps that are no numbered item of their section:\n" + "\n".join(missing)
 
 
-@pytest.mark.parametrize("section", sorted(PENDING))
-def test_pending_citations_are_still_there(section: str) -> None:
-    """A pending citation that has been fixed is taken off the list."""
-    cited = {cited for _, _, cited, _ in _citations()}
-    assert section in cited, f"nothing cites §{section} any more: remove it from PENDING"
-
-
 def test_nothing_names_the_notes_old_home() -> None:
     """Reproduction: protocols/__init__.py named the note outside the repository as the reference."""
     naming = {p.relative_to(ROOT).as_posix() for p in _files(NO_OLD_HOME) if OLD_HOME in p.read_text("utf-8")}
-    assert naming <= PENDING_OLD_HOME, f"these still name {OLD_HOME}: {sorted(naming - PENDING_OLD_HOME)}"
-    fixed = sorted(PENDING_OLD_HOME - naming)
-    assert not fixed, f"these no longer name it, remove them from PENDING_OLD_HOME: {fixed}"
+    assert not naming, f"these still name {OLD_HOME}: {sorted(naming)}"
 
 
 def test_the_protocols_package_names_the_notes() -> None:
