@@ -10,7 +10,7 @@ input variable belongs to the first client that sets it up (IN_USE for the other
 Inputs are taken the way a controller takes them, once per cycle. While the fake keeps time, a
 package applies as it arrives (several from one client within one cycle: the last write wins, as on
 a controller, so a client sending faster than the controller cycles never falls behind). When the
-fake was held up (no cycle for more than ``STALL_PERIODS`` periods: the machine was busy), the
+fake was held up (a cycle came late, or the next one is overdue: the machine was busy), the
 packages it then finds were sent over the cycles it missed: at most one package of each client is
 applied between two steps of the programs; the ones after it wait in arrival order and
 ``after_cycle`` (called at the end of every controller cycle) applies the oldest waiting one of each
@@ -39,7 +39,7 @@ from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde_variables import IN_USE, INPUT_VARIABLES, NOT_FOUND, OUTPUT_VARIABLES
 
-__all__ = ["MAX_PENDING_INPUTS", "STALL_PERIODS", "RtdeService"]
+__all__ = ["LATE_CYCLE_PERIODS", "MAX_PENDING_INPUTS", "RtdeService"]
 
 log = logging.getLogger("urdaemon.fakeur")
 
@@ -51,9 +51,12 @@ _DIGITAL_OUTPUT_SHIFTS: Final = (
 )
 """RTDE's digital output inputs (``<kind>_digital_output`` and its mask) and where each kind's pins sit
 in the arm's output word."""
-STALL_PERIODS = 2.0
-"""No controller cycle for longer than this many periods: the fake was held up, and input packages
-found now were sent over the cycles it missed (they are then applied one per cycle)."""
+LATE_CYCLE_PERIODS = 1.5
+"""A cycle that ends more than this many periods after the one before came late: the fake was held up,
+and input packages found around it were sent over the cycles it missed (they are then applied one per
+cycle). A package that arrives when the next cycle is overdue (more than one period after the latest
+ended) is late in the same way. Held up by less, the fake takes a package as a controller would in
+that cycle's window: the last write wins."""
 MAX_PENDING_INPUTS = 8
 """Input packages of one client waiting for their cycle (a model parameter: 16 ms at 500 Hz). When a
 client is further ahead than this (the fake was held up longer, or the client sends faster than the
@@ -104,12 +107,12 @@ class RtdeService:
         """The clients with input packages waiting for a cycle."""
         self.cycle = 0
         """Controller cycles ended (``after_cycle``): inputs applied in one are seen by the next step."""
-        self._stall = STALL_PERIODS / rate_hz
+        self._period = 1.0 / rate_hz
         self._wall_clock = wall_clock
         self._cycle_ended_at = wall_clock()
         """When the latest cycle ended, on the wall clock (how a stall is told)."""
         self._held_up = False
-        """The latest cycle came more than ``STALL_PERIODS`` periods after the one before."""
+        """The latest cycle came more than ``LATE_CYCLE_PERIODS`` periods after the one before."""
         self.input_owner: dict[str, _RtdeClient] = {}
 
     def shell(self, connections: Connections, on_read: Callable[[], None]) -> ServiceShell:
@@ -156,7 +159,7 @@ class RtdeService:
         client is applied, for the next step to see."""
         self.cycle += 1
         ended = self._wall_clock()
-        self._held_up = ended - self._cycle_ended_at > self._stall
+        self._held_up = ended - self._cycle_ended_at > LATE_CYCLE_PERIODS * self._period
         self._cycle_ended_at = ended
         if self.waiting:
             for client in self.waiting:
@@ -180,7 +183,7 @@ class RtdeService:
 
     def _behind(self) -> bool:
         """True when the fake was held up: its latest cycle came late, or none came for too long."""
-        return self._held_up or self._wall_clock() - self._cycle_ended_at > self._stall
+        return self._held_up or self._wall_clock() - self._cycle_ended_at > self._period
 
     def _send(self, client: _RtdeClient, message: Any) -> None:
         try:
