@@ -1,4 +1,4 @@
-"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, service, dashboard.
+"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, stop, service, dashboard.
 
 Exit codes: 0 success; 1 a command failed (goal aborted, no answer); 2 bad input (config, arguments);
 130 ``move`` interrupted by Ctrl-C (its goal canceled first).
@@ -247,6 +247,11 @@ def _add_goal_tools(sub: Any) -> None:
     cancel.add_argument("--cell", default=None)
     _connect_arg(cancel)
 
+    stop = sub.add_parser("stop", help="stop a robot, or with no robot every robot of the cell")
+    stop.add_argument("robot", nargs="?", default=None, help="the robot (default: the whole cell)")
+    stop.add_argument("--cell", default=None, help="cell name (default: the one cell served)")
+    _connect_arg(stop)
+
 
 def _add_calibration(sub: Any) -> None:
     """``calibration``: read a controller's calibration into a file."""
@@ -300,6 +305,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             return asyncio.run(_move(args))
         if args.command == "cancel":
             return asyncio.run(_cancel(args))
+        if args.command == "stop":
+            return asyncio.run(_stop(args))
         if args.command == "dashboard":
             return asyncio.run(_dashboard(args))
         if args.command == "service":
@@ -604,6 +611,40 @@ async def _dashboard(args: argparse.Namespace) -> int:
     else:
         print(f"error: {reply.get('reason', 'refused')}", file=sys.stderr)
     return EXIT_OK if reply.get("ok") else EXIT_FAILED
+
+
+async def _stop(args: argparse.Namespace) -> int:
+    """``urdaemon stop [ROBOT]``: the robot's stop, or the cell's (every robot) without one."""
+    from urdaemon.client import Client
+
+    problem = _bad_target(args) if args.robot is not None else _bad_cell(args)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.robot is not None:
+        reply = await _ask_robot(args, lambda robot: robot.stop())
+    else:
+        try:
+            async with await Client.connect(args.connect) as client:
+                reply = await client.stop_cell(args.cell)
+        except UrDaemonError as err:
+            return _fail(err)
+    if isinstance(reply, int):
+        return reply
+    print(json.dumps(reply))
+    return EXIT_OK if reply.get("ok") else EXIT_FAILED
+
+
+def _bad_cell(args: argparse.Namespace) -> str | None:
+    """Why the endpoint or cell name of a cell-wide command cannot be used (None when fine)."""
+    import re
+
+    from urdaemon.cell.config import CELL_NAME_PATTERN
+
+    problem = _bad_endpoint(args.connect)
+    if problem is None and args.cell is not None and not re.match(CELL_NAME_PATTERN, args.cell):
+        problem = f"--cell {args.cell!r} is not a cell name"
+    return problem
 
 
 async def _cancel(args: argparse.Namespace) -> int:

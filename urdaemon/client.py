@@ -299,6 +299,19 @@ class Client:
                 )
             await asyncio.sleep(0.1)
 
+    async def stop_cell(self, cell: str | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any]:
+        """Stop every robot of ``cell`` at once (default: the one cell served); the reply names each
+        robot's outcome (``{"ok": true, "robots": {"alice": {"ok": true}, ...}}``)."""
+        if cell is None:
+            cells = sorted({c for c, _ in await self.robots()})
+            if len(cells) != 1:
+                raise UrDaemonError(
+                    f"{'no cell is' if not cells else 'several cells are'} served at {self.endpoint}"
+                    + (f" ({', '.join(cells)}); name one" if cells else "")
+                )
+            cell = cells[0]
+        return await self.request(CellKeys(cell).stop, timeout=timeout)
+
     async def robot_description(self, cell: str, *, timeout: float = QUERY_TIMEOUT_S) -> str:
         """The cell URDF."""
         replies = await self.query(CellKeys(cell).robot_description, timeout=timeout)

@@ -31,6 +31,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
+from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
 __all__ = ["CellDescription", "Daemon", "describe_cell"]
@@ -166,6 +167,7 @@ class Daemon:
             self._build(node)
             node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)
             node.cell_queryable(self.keys.any_robot, self._on_any_robot)
+            node.queryable(self.keys.stop, self._on_cell_stop, max_bytes=None)  # never refused: any payload
             tf_pub = node.publisher(self.keys.tf)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
@@ -213,6 +215,18 @@ class Daemon:
             query.reply(self.keys.robot_description, self.description.urdf.encode())
         finally:
             query.drop()
+
+    def _on_cell_stop(self, query: Any) -> None:
+        """Stop every robot of the cell at once (each as its own ``stop`` would); answered once, naming
+        each robot's outcome."""
+        robots: dict[str, Any] = {}
+        for runtime in self.runtimes:
+            try:
+                robots[runtime.robot.name] = runtime.services.stop("cell stop requested")
+            except Exception as err:  # one robot failing must not keep the others moving
+                log.exception("cell stop: %s failed", runtime.robot.name)
+                robots[runtime.robot.name] = {"ok": False, "reason": internal_error(err)}
+        reply(query, {"ok": all(r.get("ok") for r in robots.values()), "robots": robots})
 
     def _on_any_robot(self, query: Any) -> None:
         """Answer a query on a robot this cell does not serve, or on a service a robot does not

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = [
+    "CELL_LEVEL_KEYS",
     "CONFIGURABLE_IO_SHIFT",
     "FORCE_MODE_DAMPING",
     "FORCE_MODE_GAIN_SCALING",
@@ -49,6 +50,9 @@ UR_JOINTS: tuple[str, ...] = (
 )
 """The six joint names of every UR arm, without the robot prefix."""
 UR_JOINT_COUNT = len(UR_JOINTS)
+CELL_LEVEL_KEYS = frozenset({"tf", "robot_description", "service"})
+"""The chunks after ``<cell>/`` that name a key of the cell, not a robot (``<cell>/tf``,
+``<cell>/service/stop``): no robot may be named so."""
 """Joints of every UR arm: the length of every joint vector on UR's wire formats and in the fake."""
 
 

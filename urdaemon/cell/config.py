@@ -21,7 +21,7 @@ from pydantic import (
     model_validator,
 )
 
-from urdaemon.model import UR_JOINTS
+from urdaemon.model import CELL_LEVEL_KEYS, UR_JOINTS
 from urdaemon.paths import resource_path
 from urdaemon.urscript import (
     DEFAULT_REVERSE_PORT,
@@ -481,6 +481,11 @@ class Cell(_Frozen):
         for i, robot in enumerate(self.robots):
             if robot.name in seen:
                 raise ValueError(f"robots[{i}] ({robot.name}).name: duplicate robot name {robot.name!r}")
+            if robot.name in CELL_LEVEL_KEYS:
+                raise ValueError(
+                    f"robots[{i}] ({robot.name}).name: {robot.name!r} names a key of the cell itself "
+                    f"({', '.join(sorted(CELL_LEVEL_KEYS))}); choose another name"
+                )
             seen.add(robot.name)
         owner: dict[int, str] = {}
         for robot in self.robots:

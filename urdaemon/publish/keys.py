@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from urdaemon.model import CELL_LEVEL_KEYS
+
 __all__ = ["CellKeys", "RobotKeys"]
 
 
@@ -31,7 +33,12 @@ class CellKeys:
     @property
     def cell_level(self) -> frozenset[str]:
         """The chunks after ``<cell>/`` that name a key of the cell, not a robot."""
-        return frozenset({"tf", "robot_description"})
+        return CELL_LEVEL_KEYS
+
+    @property
+    def stop(self) -> str:
+        """The cell's stop: every robot of the cell stops (the queryable answers once, for all)."""
+        return f"{self.cell}/service/stop"
 
     def robot(self, name: str) -> RobotKeys:
         """The keys of one robot."""

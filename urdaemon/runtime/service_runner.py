@@ -62,11 +62,16 @@ class ServiceRunner:
 
     def on_stop(self, query: Any) -> None:
         """Stop whatever moves the robot (a trajectory being planned is refused); answered at once."""
+        reply(query, self.stop("stop requested"))
+
+    def stop(self, reason: str) -> dict[str, Any]:
+        """Stop whatever moves the robot now, for ``reason``; the reply body (``planned``: the goal being
+        planned that was refused, if any)."""
         planned = self._gate.interrupt_planning()
         self._backend.cancel_passthrough()  # the trajectory the robot runs, if any, stops too
-        self._controller.stop("stop requested", time.monotonic())
+        self._controller.stop(reason, time.monotonic())
         self._goals.publish_events()
-        reply(query, {"ok": True} if planned is None else {"ok": True, "planned": planned})
+        return {"ok": True} if planned is None else {"ok": True, "planned": planned}
 
     def run(self, query: Any, spec: ServiceSpec) -> None:
         """Run ``spec``'s service with the query's payload and answer once; a second call while it runs
