@@ -203,6 +203,14 @@ def test_compose_publishes_only_web_vnc_and_zenoh() -> None:
     assert all(e.startswith("tcp/0.0.0.0:") for e in listen), "the published port needs all interfaces"
 
 
+def test_compose_publishes_on_the_hosts_loopback_only() -> None:
+    """Reproduction (issue 16): compose.yaml published Zenoh and the pendants' VNC on every host
+    interface, so any machine that reached the host could command the arms."""
+    for name, svc in compose()["services"].items():
+        for entry in svc.get("ports", []):
+            assert str(entry).startswith("127.0.0.1:"), f"{name} publishes {entry!r} beyond the host"
+
+
 def test_no_zenoh_router_while_the_daemon_is_a_listening_peer() -> None:
     cell = load_cell(URSIM)
     images = {str(svc.get("image", "")) for svc in compose()["services"].values()}
