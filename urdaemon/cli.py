@@ -350,14 +350,12 @@ def _bad_target(args: argparse.Namespace) -> str | None:
     """Why the endpoint, robot or cell name of a client command cannot be used (None when fine)."""
     import re
 
-    from urdaemon.cell.config import CELL_NAME_PATTERN, NAME_PATTERN
+    from urdaemon.cell.config import NAME_PATTERN
 
     problem = _bad_endpoint(args.connect)
     if problem is None and not re.match(NAME_PATTERN, args.robot):
         problem = f"{args.robot!r} is not a robot name (lower-case letters, digits, '_')"
-    if problem is None and args.cell is not None and not re.match(CELL_NAME_PATTERN, args.cell):
-        problem = f"--cell {args.cell!r} is not a cell name"
-    return problem
+    return problem or _bad_cell_name(args.cell)
 
 
 def _fail(err: BaseException, prefix: str = "") -> int:
@@ -637,14 +635,18 @@ async def _stop(args: argparse.Namespace) -> int:
 
 def _bad_cell(args: argparse.Namespace) -> str | None:
     """Why the endpoint or cell name of a cell-wide command cannot be used (None when fine)."""
+    return _bad_endpoint(args.connect) or _bad_cell_name(args.cell)
+
+
+def _bad_cell_name(cell: str | None) -> str | None:
+    """Why ``--cell`` cannot be used (None when fine, or not given)."""
     import re
 
     from urdaemon.cell.config import CELL_NAME_PATTERN
 
-    problem = _bad_endpoint(args.connect)
-    if problem is None and args.cell is not None and not re.match(CELL_NAME_PATTERN, args.cell):
-        problem = f"--cell {args.cell!r} is not a cell name"
-    return problem
+    if cell is not None and not re.match(CELL_NAME_PATTERN, cell):
+        return f"--cell {cell!r} is not a cell name"
+    return None
 
 
 async def _cancel(args: argparse.Namespace) -> int:

@@ -54,40 +54,41 @@ class Commands:
 
     def on_stream_position(self, key: str, payload: bytes) -> None:
         """A joint position command: the controller follows it until the deadman times out."""
+        self._follow(key, payload, self._stream_position)
+
+    def on_stream_velocity(self, key: str, payload: bytes) -> None:
+        """A joint velocity command: the controller follows it until the deadman times out."""
+        self._follow(key, payload, self._stream_velocity)
+
+    def _follow(self, key: str, payload: bytes, start: Callable[[bytes], None]) -> None:
+        """Run ``start(payload)``; whatever it refuses, or a bug in it, is reported as a rejection."""
         try:
-            message = codec.decode_stream_position(payload)
-            self._gate.check_accepting()
-            assert message.positions is not None
-            self._controller.stream_positions(
-                self._joint_names(message.joint_names),
-                message.positions,
-                message.velocities,
-                self._backend.state,
-                time.monotonic(),
-            )
+            start(payload)
         except (MessageError, GoalRejected) as err:
             self.reject(key, err)
         except Exception as err:  # a bug must not kill the subscriber; the client hears of it
             self._log.exception("streaming command failed")
             self.reject(key, GoalRejected(internal_error(err)))
 
-    def on_stream_velocity(self, key: str, payload: bytes) -> None:
-        """A joint velocity command: the controller follows it until the deadman times out."""
-        try:
-            message = codec.decode_stream_velocity(payload)
-            self._gate.check_accepting()
-            assert message.velocities is not None
-            self._controller.stream_velocities(
-                self._joint_names(message.joint_names),
-                message.velocities,
-                self._backend.state,
-                time.monotonic(),
-            )
-        except (MessageError, GoalRejected) as err:
-            self.reject(key, err)
-        except Exception as err:  # a bug must not kill the subscriber; the client hears of it
-            self._log.exception("streaming command failed")
-            self.reject(key, GoalRejected(internal_error(err)))
+    def _stream_position(self, payload: bytes) -> None:
+        message = codec.decode_stream_position(payload)
+        self._gate.check_accepting()
+        assert message.positions is not None
+        self._controller.stream_positions(
+            self._joint_names(message.joint_names),
+            message.positions,
+            message.velocities,
+            self._backend.state,
+            time.monotonic(),
+        )
+
+    def _stream_velocity(self, payload: bytes) -> None:
+        message = codec.decode_stream_velocity(payload)
+        self._gate.check_accepting()
+        assert message.velocities is not None
+        self._controller.stream_velocities(
+            self._joint_names(message.joint_names), message.velocities, self._backend.state, time.monotonic()
+        )
 
     def on_refused(self, key: str, reason: str) -> None:
         """A command put on a wildcard key expression, or too large to read: it did nothing."""
