@@ -17,7 +17,7 @@ from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
 from urdaemon.model import IO_SIZES, JointCommand, RobotState
 
-PassthroughResult = Callable[[str, int, "str | None"], None]
+PassthroughResult = Callable[[str, int, str | None], None]
 """How a passthrough goal's end is told: (goal id, the trajectory result code, why the daemon's side
 ended it, or None for the robot's own result)."""
 
