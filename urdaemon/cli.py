@@ -405,7 +405,7 @@ def _busy_ports(cell: Cell, source: str) -> list[str]:
     for i, robot in enumerate(cell.robots):
         if not robot.listens:
             continue
-        host = robot.ur.listen_address if robot.ur is not None else "0.0.0.0"
+        host = (robot.ur.listen_address if robot.ur is not None else None) or "0.0.0.0"
         for role, port in robot.ports.as_dict().items():
             wanted.append((f"robots[{i}] ({robot.name}).ports.{role}", host, port))
     problems = []

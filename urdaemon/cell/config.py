@@ -232,8 +232,9 @@ class UrOptions(_Frozen):
     """At start-up (and after every reconnect): power on, release the brakes and start the program."""
     reverse_ip: str | None = None
     """Address the robot connects back to; default: the daemon's end of its RTDE connection."""
-    listen_address: str = "0.0.0.0"
-    """Where the four callback servers listen."""
+    listen_address: str | None = None
+    """Where the four callback servers listen; default: the address of this machine's interface that
+    reaches the robot (they accept connections from the robot's address only, on either)."""
     servoj_lookahead: Annotated[float, Field(ge=_LOOKAHEAD[0], le=_LOOKAHEAD[1])] = DEFAULT_SERVOJ_LOOKAHEAD_S
     """servoj lookahead time (s); UR allows 0.03–0.2."""
     servoj_gain: Annotated[int, Field(ge=_GAIN[0], le=_GAIN[1])] = DEFAULT_SERVOJ_GAIN
@@ -447,6 +448,11 @@ class Cell(_Frozen):
     """``SCHED_FIFO`` priority (1–99) of the daemon's event loop thread, which clocks every robot; 0
     keeps normal scheduling. Needs ``CAP_SYS_NICE`` or an ``rtprio`` limit; without it the daemon
     warns and serves at normal priority. See docs/performance.md."""
+    command_lease: bool = True
+    """Every robot has a command lease (docs/security.md): goals, streams and commanding services are
+    taken only from the client holding the robot's lease, and a robot whose holder's session goes away
+    stops. ``false``: any client may command any robot (the lease can still be taken, and is not
+    checked)."""
     robots: tuple[Robot, ...]
 
     @model_validator(mode="before")

@@ -40,6 +40,39 @@ class CellKeys:
         """The cell's stop: every robot of the cell stops (the queryable answers once, for all)."""
         return f"{self.cell}/service/stop"
 
+    @property
+    def goal_trajectory(self) -> str:
+        """Queryable: a cell goal, trajectories that start together on several robots."""
+        return f"{self.cell}/goal/trajectory"
+
+    @property
+    def goal_cancel(self) -> str:
+        """Queryable: cancel a cell goal (every robot's part of it stops)."""
+        return f"{self.cell}/goal/cancel"
+
+    def goal_feedback(self, goal_id: str) -> str:
+        """Feedback of one cell goal while it runs."""
+        return f"{self.cell}/goal/{goal_id}/feedback"
+
+    def goal_result(self, goal_id: str) -> str:
+        """The one result of a cell goal (published, and answered to queries afterwards)."""
+        return f"{self.cell}/goal/{goal_id}/result"
+
+    @property
+    def goal_results(self) -> str:
+        """Every cell goal's result (wildcard)."""
+        return f"{self.cell}/goal/*/result"
+
+    @property
+    def goal_messages(self) -> str:
+        """Every cell goal's feedback and result (wildcard: what a client follows)."""
+        return f"{self.cell}/goal/*/*"
+
+    @property
+    def lease_holders(self) -> str:
+        """Every robot's lease holders' liveliness tokens (wildcard: what the daemon watches)."""
+        return f"{self.cell}/*/lease/*"
+
     def robot(self, name: str) -> RobotKeys:
         """The keys of one robot."""
         return RobotKeys(self.cell, name)
@@ -157,6 +190,15 @@ class RobotKeys:
     def goal_messages(self) -> str:
         """Every goal's feedback and result (wildcard: what a client follows)."""
         return f"{self.base}/goal/*/*"
+
+    @property
+    def lease(self) -> str:
+        """Queryable: acquire, release, take over or show the robot's command lease."""
+        return f"{self.base}/lease"
+
+    def lease_holder(self, session: str) -> str:
+        """The liveliness token a lease holder declares, binding the lease to its Zenoh session."""
+        return f"{self.base}/lease/{session}"
 
     def service(self, name: str) -> str:
         """Queryable service ``name`` (publish/services.py lists them)."""

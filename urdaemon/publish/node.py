@@ -27,6 +27,7 @@ import zenoh
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import UrDaemonError
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.transport_security import configure_daemon
 
 __all__ = [
     "MAX_IN_FLIGHT",
@@ -165,6 +166,7 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...]) -> Any:
         low_latency=options.low_latency,
     )
     conf.insert_json5("transport/shared_memory/enabled", "false")
+    configure_daemon(conf, options)
     return conf
 
 

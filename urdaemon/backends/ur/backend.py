@@ -109,7 +109,7 @@ class UrBackend(Backend):
         self._on_cycle = on_cycle
         self._begin_run()
         if not self._servers_started and not self.options.read_only:
-            await self.servers.start(self.options.listen_address)
+            await self.servers.start(self.options.listen_address or "0.0.0.0")
             self._servers_started = True
         try:
             rtde = await self._connect_rtde()
