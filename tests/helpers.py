@@ -1,11 +1,12 @@
 """Shared test helpers: free loopback ports and fake-robot addresses, the ``urdaemon`` command run
-in-process, waiting on a subprocess's log lines."""
+in-process, waiting on a subprocess's log lines, a robot's command lease taken over raw Zenoh."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
 import io
+import json
 import logging
 import math
 import secrets
@@ -23,6 +24,8 @@ from typing import Any, TextIO
 __all__ = [
     "UR_PORTS",
     "CliRun",
+    "LeaseGrant",
+    "acquire_lease",
     "drain_in_background",
     "fake_address",
     "free_tcp_port",
@@ -32,6 +35,7 @@ __all__ = [
     "run_cli_in_thread",
     "run_script",
     "wait_for_line",
+    "zenoh_ask",
 ]
 
 
@@ -355,3 +359,55 @@ async def rtde_sample(address: str, names: Sequence[str]) -> dict[str, Any]:
         raise AssertionError("no data package")
     finally:
         writer.close()
+
+
+@dataclass
+class LeaseGrant:
+    """A robot's command lease held by a raw Zenoh session: the attachment its commanding messages
+    carry, and the liveliness token that binds the lease to the session (keep it; undeclare it to
+    let the lease go as a vanished client would)."""
+
+    token: bytes
+    liveliness: Any
+    reply: dict[str, Any]
+
+
+async def zenoh_ask(
+    session: Any,
+    key: str,
+    body: dict[str, Any] | bytes | None = None,
+    *,
+    attachment: bytes | None = None,
+    timeout: float = 10.0,
+) -> list[dict[str, Any]]:
+    """Every reply to a ``get`` on ``key`` (a dict is sent as JSON, bytes as they are), decoded as JSON
+    (an error reply as ``{"error": text}``); asked in a thread, so a daemon in this loop answers."""
+    payload = json.dumps(body).encode() if isinstance(body, dict) else body
+
+    def ask() -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = []
+        for reply in session.get(key, payload=payload, attachment=attachment, timeout=timeout):
+            if reply.ok is not None:
+                out.append(json.loads(bytes(reply.ok.payload.to_bytes())))
+            else:
+                out.append({"error": bytes(reply.err.payload.to_bytes()).decode(errors="replace")})
+        return out
+
+    return await asyncio.get_running_loop().run_in_executor(None, ask)
+
+
+async def acquire_lease(
+    session: Any, cell: str, robot: str, *, holder: str = "tests", force: str | None = None
+) -> LeaseGrant:
+    """Acquire ``robot``'s command lease for ``session`` as a client does: declare the liveliness token
+    ``<cell>/<robot>/lease/<zid>``, then ask ``acquire`` (with ``force``: take it over, for that
+    reason); fails the test if it is not granted."""
+    zid = str(session.zid())
+    liveliness = session.liveliness().declare_token(f"{cell}/{robot}/lease/{zid}")
+    body: dict[str, Any] = {"action": "acquire", "session": zid, "holder": holder}
+    if force is not None:
+        body.update(force=True, reason=force)
+    replies = await zenoh_ask(session, f"{cell}/{robot}/lease", body)
+    assert len(replies) == 1, f"lease of {robot}: {replies}"
+    assert replies[0].get("ok") is True, f"lease of {robot} not granted: {replies}"
+    return LeaseGrant(replies[0]["token"].encode(), liveliness, replies[0])

@@ -10,6 +10,12 @@ can fill the loop's queue ahead of the robots' cycles: each queryable has at mos
 thread), and each subscriber at most one sample: a newer sample replaces the pending one (for a
 streaming command only the newest matters) and the replaced ones are counted and reported. The
 counters are the node's own, behind a small lock; no daemon state is touched off the loop.
+
+A commanding queryable or subscriber has a guard (the robot's command lease): a message whose
+attachment is not the lease holder's token is refused on Zenoh's thread too, after the wildcard and
+size checks, so a flood of them never displaces the holder's messages. The guard's check reads one
+immutable object (runtime/lease.py). Lease holders' liveliness tokens are watched with
+``liveliness_watch``: the set of tokens present is kept here, and the loop hears that it changed.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import json
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
@@ -31,6 +37,9 @@ from urdaemon.transport_security import configure_daemon
 
 __all__ = [
     "MAX_IN_FLIGHT",
+    "MAX_WATCHED_TOKENS",
+    "Guard",
+    "LivelinessWatch",
     "Matching",
     "ZenohNode",
     "busy_refusal",
@@ -48,6 +57,29 @@ MAX_IN_FLIGHT = 4
 so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
 4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
 of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
+
+
+MAX_WATCHED_TOKENS = 4096
+"""Most liveliness tokens a watch keeps: beyond, a new token is not recorded (counted and logged);
+a token going away is always recorded."""
+
+
+class Guard(Protocol):
+    """What decides, on Zenoh's thread, whether a commanding message may reach the loop."""
+
+    def refusal(self, attachment: bytes | None) -> str | None:
+        """Why a message with this attachment is refused; None: it passes."""
+
+
+def _attachment(message: Any, limit: int = 64) -> bytes | None:
+    """A query's or sample's attachment, or None; one longer than ``limit`` is never copied (it
+    cannot be a token) and reads as an empty one."""
+    attachment = message.attachment
+    if attachment is None:
+        return None
+    if len(attachment) > limit:
+        return b""
+    return bytes(attachment.to_bytes())
 
 
 class _InFlight:
@@ -238,6 +270,7 @@ class ZenohNode:
         max_bytes: int | None = SMALL_MESSAGE_BYTES,
         answer: str = "ok",
         any_id: bool = False,
+        guard: Guard | None = None,
     ) -> None:
         """Declare a queryable whose ``handler(query)`` runs on the loop; it must reply.
 
@@ -247,7 +280,9 @@ class ZenohNode:
         ``*`` chunk, the goal results) any concrete key matching it is handled and a wildcard query is
         not answered. A payload larger than ``max_bytes`` is refused before anyone reads it, with
         ``{answer: false, "reason": ...}``, and so is a query arriving while ``MAX_IN_FLIGHT`` of
-        this key's queries wait for the loop ("busy: too many requests in flight on <key>").
+        this key's queries wait for the loop ("busy: too many requests in flight on <key>"). With a
+        ``guard``, a query it refuses (one without the lease holder's token) is answered
+        ``{answer: false, "reason": ...}`` there too.
         """
 
         def on_query(query: Any) -> None:
@@ -262,6 +297,10 @@ class ZenohNode:
             size = 0 if payload is None else len(payload)
             if max_bytes is not None and size > max_bytes:
                 _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
+                return
+            refusal = None if guard is None else guard.refusal(_attachment(query))
+            if refusal is not None:
+                _refuse_query(query, refusal, error=False, answer=answer)
                 return
             if not flight.enter():
                 _refuse_query(query, busy_refusal(key), error=False, answer=answer)
@@ -301,12 +340,14 @@ class ZenohNode:
         *,
         max_bytes: int = SMALL_MESSAGE_BYTES,
         refused: Callable[[str, str], None] | None = None,
+        guard: Guard | None = None,
     ) -> None:
         """Declare a subscriber whose ``handler(key, payload)`` runs on the loop.
 
         Only a sample put on exactly ``key`` is handled: a put on a wildcard expression that covers
         it (``<cell>/*/command/joint_position``) never acts. Such a sample, or one larger than
-        ``max_bytes``, is not copied; ``refused(key expression, reason)`` hears of it on the loop.
+        ``max_bytes``, or one the ``guard`` refuses (not the lease holder's), is not copied;
+        ``refused(key expression, reason)`` hears of it on the loop.
 
         Only the newest sample is handled: one that arrives while another still waits for the
         loop replaces it, and ``refused`` hears how many were replaced along with the newest.
@@ -335,6 +376,8 @@ class ZenohNode:
                 reason = wildcard_refusal(put_on, key)
             elif size > max_bytes:
                 reason = size_refusal(key, size, max_bytes)
+            elif guard is not None and (refusal := guard.refusal(_attachment(sample))) is not None:
+                reason = refusal
             else:
                 if latest.offer(sample.payload.to_bytes()):
                     self._to_loop(handle_latest)
@@ -348,6 +391,15 @@ class ZenohNode:
     def liveliness_token(self, key: str) -> None:
         """Declare a liveliness token held until ``close``."""
         self._entities.append(self.session.liveliness().declare_token(key))
+
+    def liveliness_watch(self, key: str, changed: Callable[[], None]) -> LivelinessWatch:
+        """Watch the liveliness tokens under ``key`` (those present already too); ``changed()`` runs
+        on the loop after tokens came or went, at most one call waiting for the loop at a time."""
+        watch = LivelinessWatch(lambda: self._to_loop(watch.handed))
+        watch.changed = changed
+        subscriber = self.session.liveliness().declare_subscriber(key, watch.on_sample, history=True)
+        self._entities.append(subscriber)
+        return watch
 
     def close(self) -> None:
         """Undeclare everything and close the session."""
@@ -383,6 +435,57 @@ class ZenohNode:
         if not self._to_loop(handle):
             flight.leave()
             _drop(query)
+
+
+class LivelinessWatch:
+    """The liveliness tokens present under a key expression, kept on Zenoh's thread (thread-safe).
+
+    Bounded: at most ``MAX_WATCHED_TOKENS`` tokens are kept (a new one beyond is counted in
+    ``dropped`` and not kept; a token going away is always applied), and at most one "changed" call
+    waits for the loop, however many tokens come and go meanwhile.
+    """
+
+    def __init__(self, notify: Callable[[], bool]) -> None:
+        self._lock = threading.Lock()
+        self._alive: set[str] = set()
+        self._notify = notify
+        self._pending = False
+        self.changed: Callable[[], None] = lambda: None
+        """Runs on the loop after a change (set by the node)."""
+        self.dropped = 0
+        """New tokens not kept because ``MAX_WATCHED_TOKENS`` were."""
+
+    def alive(self, key: str) -> bool:
+        """Whether the token ``key`` is present."""
+        with self._lock:
+            return key in self._alive
+
+    def on_sample(self, sample: Any) -> None:
+        """A token came (PUT) or went (DELETE): on Zenoh's thread."""
+        key = str(sample.key_expr)
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._alive.discard(key)
+            elif len(self._alive) < MAX_WATCHED_TOKENS:
+                self._alive.add(key)
+            else:
+                self.dropped += 1
+                dropped = self.dropped
+                if 10 ** (len(str(dropped)) - 1) == dropped:
+                    log.warning(
+                        "%d liveliness token(s) not watched: %d kept already", dropped, len(self._alive)
+                    )
+                return
+            notify, self._pending = not self._pending, True
+        if notify and not self._notify():
+            with self._lock:
+                self._pending = False
+
+    def handed(self) -> None:
+        """On the loop: tell ``changed`` (changes arriving from now on ask for another call)."""
+        with self._lock:
+            self._pending = False
+        self.changed()
 
 
 def wildcard_refusal(asked: str, key: str) -> str:

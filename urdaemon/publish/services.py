@@ -94,6 +94,9 @@ class ServiceSpec:
     """The reply column of docs/keys.md."""
     timeout: float = CLIENT_TIMEOUT_S
     """How long the client waits for the reply by default (s)."""
+    commanding: bool = True
+    """Whether only the command lease's holder may call it (its token as the query's attachment);
+    ``stop`` never needs the lease, whatever this says."""
 
     @property
     def payloadless(self) -> bool:
@@ -343,6 +346,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         lambda payload: CycleStatsRequest(codec.decode_cycle_stats(payload)),
         _cycle_stats,
         needs=None,
+        commanding=False,  # reads counters only: anyone may ask
         request_doc="`reset`? (false), or an empty payload",
         reply_doc=(
             '`{"ok": true, "cycles", "missed_cycles", "late_cycles", "turnaround": {"count", "p50_us", '
@@ -368,6 +372,7 @@ STOP = ServiceSpec(
     _ignored,
     None,
     needs=None,
+    commanding=False,  # never refused, from anyone
     request_doc="anything (ignored)",
     reply_doc=(
         "smooth stop of whatever moves the robot; a running goal ends `aborted`. Unconditional: a stop "

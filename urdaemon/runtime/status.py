@@ -2,7 +2,8 @@
 
 The status goes out at once when what users act on changes (lifecycle, modes, a percent of speed
 scaling, the program, the active goal) and every status period; the IO when it changes (looked at
-every IO period) and at least once a second. Events are notices and rejected commands.
+every IO period) and at least once a second. Events are notices, rejected commands and the command
+lease's changes; the status names the lease's holder.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ class StatusPublisher:
         """Backend restarts since start."""
         self.rejected_commands = 0
         """Streaming and freedrive commands rejected since start."""
+        self.lease: dict[str, Any] | None = None
+        """Who holds the command lease (``holder``, ``since``), None: nobody (runtime/lease_keeper.py)."""
 
     def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
         """Declare the status, IO and events publishers."""
@@ -82,6 +85,7 @@ class StatusPublisher:
             "rejected_stream_commands": self.rejected_commands,
             # UR robots: does the robot's kinematics hash match the configured calibration (None: not checked)
             "calibration_ok": getattr(backend, "calibration_ok", None),
+            "lease": self.lease,
         }
 
     def io_message(self) -> dict[str, Any]:
