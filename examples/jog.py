@@ -3,8 +3,9 @@
     urdaemon serve --config configs/dual_robot_mock.yaml      # in one terminal
     python examples/jog.py                                    # in another
 
-Streaming commands must keep coming faster than the robot's ``motion.stream_timeout`` (0.2 s by
-default); here one goes out with every tenth joint state (every 20 ms at 500 Hz).
+Streaming commands need the robot's command lease, acquired once before the first (the client
+releases it when it closes), and must keep coming faster than the robot's ``motion.stream_timeout``
+(0.2 s by default); here one goes out with every tenth joint state (every 20 ms at 500 Hz).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ async def main(endpoint: str, seconds: float, speed: float) -> int:
     """Jog, stop sending, and report where the joint came to rest."""
     async with await Client.connect(endpoint) as client:
         alice = await client.robot("alice")
+        await alice.ensure_lease()  # stream commands need the lease; they never wait to acquire it
         states = alice.joint_states()
         start = (await states.get_json(timeout=5.0))["position"][0]
         for _ in range(int(seconds * 50)):

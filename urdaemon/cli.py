@@ -1,7 +1,12 @@
-"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, stop, service, dashboard.
+"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, stop, service, dashboard, lease.
 
-Exit codes: 0 success; 1 a command failed (goal aborted, no answer); 2 bad input (config, arguments);
-130 ``move`` interrupted by Ctrl-C (its goal canceled first).
+Client commands that command a robot (``move``, ``cancel``, ``service``, ``dashboard``) acquire its
+command lease first and release it when they exit; ``stop`` never needs it; ``lease`` shows or takes
+it over. Each connects with ``--connect`` and, for TLS, ``--zenoh-config``.
+
+Exit codes: 0 success; 1 a command failed (goal aborted, no answer, refused: also for the lease, with
+the daemon's reason naming the holder); 2 bad input (config, arguments); 130 ``move`` interrupted by
+Ctrl-C (its goal canceled first).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from urdaemon import __version__
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell
-    from urdaemon.client import RobotClient
+    from urdaemon.client import Client, RobotClient
 
 from urdaemon.errors import ConfigError, DescriptionError, GoalRejected, UrDaemonError
 
@@ -252,6 +257,18 @@ def _add_goal_tools(sub: Any) -> None:
     stop.add_argument("--cell", default=None, help="cell name (default: the one cell served)")
     _connect_arg(stop)
 
+    lease = sub.add_parser("lease", help="show who holds a robot's command lease, or take it over")
+    lease.add_argument("robot")
+    lease.add_argument(
+        "--take-over",
+        metavar="REASON",
+        default=None,
+        help="take the lease from its holder (the robot stops; REASON is logged and published), "
+        "then release it",
+    )
+    lease.add_argument("--cell", default=None)
+    _connect_arg(lease)
+
 
 def _add_calibration(sub: Any) -> None:
     """``calibration``: read a controller's calibration into a file."""
@@ -273,6 +290,12 @@ def _connect_arg(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument(
         "--connect", default=DEFAULT_ENDPOINT, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})"
+    )
+    parser.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        default=None,
+        help="Zenoh JSON5 config to start from, e.g. TLS certificates (the endpoint is still --connect)",
     )
 
 
@@ -300,7 +323,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         if args.command == "fake-robot":
             return _fake_robot(args)
         if args.command == "echo":
-            return asyncio.run(_echo(args.key, args.count, args.timeout, args.connect))
+            return asyncio.run(_echo(args))
         if args.command == "move":
             return asyncio.run(_move(args))
         if args.command == "cancel":
@@ -311,6 +334,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             return asyncio.run(_dashboard(args))
         if args.command == "service":
             return asyncio.run(_call_service(args))
+        if args.command == "lease":
+            return asyncio.run(_lease(args))
         if args.command == "calibration":
             return _calibration(args)
     except (ConfigError, DescriptionError) as err:
@@ -346,13 +371,32 @@ def _bad_endpoint(endpoint: str) -> str | None:
     return None
 
 
+def _bad_connection(args: argparse.Namespace) -> str | None:
+    """Why ``--connect`` or ``--zenoh-config`` cannot be used (None when fine)."""
+    import os
+
+    problem = _bad_endpoint(args.connect)
+    if problem is None and args.zenoh_config is not None and not os.path.isfile(args.zenoh_config):
+        problem = f"--zenoh-config {args.zenoh_config!r} is not a file"
+    return problem
+
+
+async def _connect(args: argparse.Namespace) -> Client:
+    """A client of ``--connect`` (with ``--zenoh-config`` as its base) whose leases name this command."""
+    from urdaemon.client import Client, default_holder
+
+    return await Client.connect(
+        args.connect, config_file=args.zenoh_config, holder=default_holder(f"urdaemon {args.command}")
+    )
+
+
 def _bad_target(args: argparse.Namespace) -> str | None:
     """Why the endpoint, robot or cell name of a client command cannot be used (None when fine)."""
     import re
 
     from urdaemon.cell.config import NAME_PATTERN
 
-    problem = _bad_endpoint(args.connect)
+    problem = _bad_connection(args)
     if problem is None and not re.match(NAME_PATTERN, args.robot):
         problem = f"{args.robot!r} is not a robot name (lower-case letters, digits, '_')"
     return problem or _bad_cell_name(args.cell)
@@ -519,12 +563,13 @@ def _run_loop(main: Coroutine[Any, Any, None]) -> None:
     asyncio.run(main)
 
 
-async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
+async def _echo(args: argparse.Namespace) -> int:
     import zenoh
 
-    from urdaemon.client import Client, zenoh_message
+    from urdaemon.client import zenoh_message
 
-    problem = _bad_endpoint(endpoint)
+    key, count, timeout = args.key, args.count, args.timeout
+    problem = _bad_connection(args)
     try:
         zenoh.KeyExpr(key)
     except zenoh.ZError as err:
@@ -533,7 +578,7 @@ async def _echo(key: str, count: int, timeout: float, endpoint: str) -> int:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        client = await Client.connect(endpoint)
+        client = await _connect(args)
     except UrDaemonError as err:
         return _fail(err)
     async with client:
@@ -586,10 +631,8 @@ async def _ask_robot(
 ) -> dict[str, Any] | int:
     """Connect to ``--connect``, find ``args.robot`` and return ``ask(robot)``'s reply, or the exit
     code after saying what failed (the endpoint, or the robots there)."""
-    from urdaemon.client import Client
-
     try:
-        async with await Client.connect(args.connect) as client:
+        async with await _connect(args) as client:
             robot = await client.robot(args.robot, cell=args.cell)
             return await ask(robot)
     except UrDaemonError as err:
@@ -613,8 +656,6 @@ async def _dashboard(args: argparse.Namespace) -> int:
 
 async def _stop(args: argparse.Namespace) -> int:
     """``urdaemon stop [ROBOT]``: the robot's stop, or the cell's (every robot) without one."""
-    from urdaemon.client import Client
-
     problem = _bad_target(args) if args.robot is not None else _bad_cell(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
@@ -623,7 +664,7 @@ async def _stop(args: argparse.Namespace) -> int:
         reply = await _ask_robot(args, lambda robot: robot.stop())
     else:
         try:
-            async with await Client.connect(args.connect) as client:
+            async with await _connect(args) as client:
                 reply = await client.stop_cell(args.cell)
         except UrDaemonError as err:
             return _fail(err)
@@ -635,7 +676,7 @@ async def _stop(args: argparse.Namespace) -> int:
 
 def _bad_cell(args: argparse.Namespace) -> str | None:
     """Why the endpoint or cell name of a cell-wide command cannot be used (None when fine)."""
-    return _bad_endpoint(args.connect) or _bad_cell_name(args.cell)
+    return _bad_connection(args) or _bad_cell_name(args.cell)
 
 
 def _bad_cell_name(cell: str | None) -> str | None:
@@ -674,14 +715,12 @@ def _move_problem(args: argparse.Namespace) -> tuple[list[float], str | None]:
 
 
 async def _move(args: argparse.Namespace) -> int:
-    from urdaemon.client import Client
-
     joints, problem = _move_problem(args)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        client = await Client.connect(args.connect)
+        client = await _connect(args)
     except UrDaemonError as err:
         return _fail(err)
     async with client:
@@ -708,6 +747,48 @@ async def _move(args: argparse.Namespace) -> int:
         except asyncio.CancelledError:  # Ctrl-C: asyncio cancels this task; the robot must stop too
             bar.end()
             return await _cancel_on_interrupt(goal)
+
+
+async def _lease(args: argparse.Namespace) -> int:
+    """``urdaemon lease ROBOT``: who holds its lease; with ``--take-over REASON`` take it (the robot
+    stops), say from whom, and release it on exit."""
+    problem = _bad_target(args)
+    if problem is None and args.take_over is not None and not args.take_over.strip():
+        problem = "--take-over needs a reason (it is logged and published)"
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        async with await _connect(args) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            if args.take_over is None:
+                print(_lease_text(robot.name, await robot.lease_info()))
+                return EXIT_OK
+            before = await robot.lease_info()
+            reply = await robot.take_over(args.take_over)
+            previous = reply.get("previous", before)
+            held = _lease_text(robot.name, previous if isinstance(previous, dict) else None)
+            print(f"took over: {held}")
+            await robot.release()
+            print(f"released {robot.name}'s lease")
+            return EXIT_OK
+    except UrDaemonError as err:
+        return _fail(err)
+
+
+def _lease_text(robot: str, lease: dict[str, Any] | None) -> str:
+    """One line about a lease: its holder, since when and its session, or that it is free."""
+    import datetime
+
+    if lease is None:
+        return f"{robot}: free"
+    since = lease.get("since")
+    when = (
+        datetime.datetime.fromtimestamp(since, datetime.UTC).isoformat(timespec="seconds")
+        if isinstance(since, int | float)
+        else "an unknown time"
+    )
+    return f"{robot}: held by {lease.get('holder')} since {when} (session {lease.get('session')})"
 
 
 async def _follow(goal: Any, bar: _ProgressBar) -> int:

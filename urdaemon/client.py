@@ -8,6 +8,17 @@
         async for feedback in goal.feedback():
             print(feedback["progress"])
         result = await goal.result()
+
+Commanding a robot needs its command lease (docs/security.md): the first goal, cancel or commanding
+service call of a ``RobotClient`` acquires it transparently (``LeaseHeld`` when another client holds
+it), and ``Client.close()`` releases it. Stream commands (``stream_positions``, ``stream_velocities``,
+``freedrive``) are plain publications that never wait: call ``await robot.ensure_lease()`` once before
+the first, as a ur_rtde program opens its control interface before ``servoJ``. ``stop`` never needs
+the lease.
+
+A goal's feedback and result are taken only when they carry the signature of the key the accepting
+reply gave this client: another session can publish on a goal's keys, but what it publishes is dropped
+and counted (``GoalHandle.forged``).
 """
 
 from __future__ import annotations
@@ -15,9 +26,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import re
+import socket
+import sys
 from collections.abc import AsyncIterator, Callable, Sequence
-from typing import Any
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import zenoh
 
@@ -35,7 +50,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, services
+from urdaemon.publish import codec, services, signing
 from urdaemon.publish.codec import SCHEMA_VERSION
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
@@ -44,10 +59,14 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "Client",
     "GoalHandle",
+    "Lease",
+    "LeaseHeld",
     "NoSuchRobot",
     "NoSuchService",
+    "Received",
     "RobotClient",
     "Subscription",
+    "default_holder",
     "zenoh_message",
 ]
 
@@ -60,6 +79,13 @@ LOST_GRACE_S = 1.0
 """When a robot's liveliness token disappears, how long a waiting goal still listens and asks for its
 result before it fails (the token's deletion can overtake the result's publication)."""
 PEER_WAIT_S = 0.05
+RELEASE_ON_CLOSE_S = 2.0
+"""How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""
+HOLDER_MAX = 120
+"""The longest holder text the daemon takes (printable characters)."""
+_LEASE_TOKEN = re.compile(r"[0-9a-f]{32}")
+_NOT_COMMANDING = frozenset({"stop", "cycle_stats"})
+"""Services that need no lease until publish/services.py says so per entry (``commanding``)."""
 
 _RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
 
@@ -81,39 +107,81 @@ class NoSuchService(UrDaemonError):
     """Nothing answers the key: the daemon serves no such service (or goal key) for that robot."""
 
 
+class LeaseHeld(GoalRejected):
+    """The daemon refused a command for the robot's command lease: another client holds it (the
+    reason names the holder and since when), or this client's lease ended (taken over, released)."""
+
+
+def default_holder(program: str | None = None) -> str:
+    """The holder text a lease shows to humans: the program, its pid and host
+    (``"urdaemon move (pid 1234 on cell-pc)"``), cut to what the daemon takes."""
+    name = program or _program_name(sys.argv[0] if sys.argv else "")
+    text = f"{name} (pid {os.getpid()} on {socket.gethostname()})"
+    return _printable(text)
+
+
+def _program_name(argv0: str) -> str:
+    """The script's name; a package's for ``python -m package``; "python" for ``-c`` or none."""
+    path = Path(argv0)
+    if path.name == "__main__.py" and path.parent.name:
+        return path.parent.name
+    if not path.name or path.name.startswith("-"):
+        return "python"
+    return path.name
+
+
+def _printable(text: str) -> str:
+    shown = "".join(c if c.isprintable() else "?" for c in text).strip()
+    return shown[:HOLDER_MAX] or "python"
+
+
 def _encode(body: dict[str, Any]) -> bytes:
     return json.dumps({"v": SCHEMA_VERSION, **body}, separators=(",", ":")).encode()
 
 
+class Received(NamedTuple):
+    """One sample as a subscription received it: its key, payload and Zenoh attachment (or None)."""
+
+    key: str
+    payload: bytes
+    attachment: bytes | None
+
+
 class Subscription:
-    """Samples of a key expression, delivered to the loop; iterate with ``async for``."""
+    """Samples of a key expression, delivered to the loop; iterate with ``async for`` over
+    ``(key, payload)``, or over ``samples()`` for each sample's attachment too."""
 
     def __init__(
         self, session: Any, key_expr: str, loop: asyncio.AbstractEventLoop, maxsize: int = 1000
     ) -> None:
         self.key_expr = key_expr
-        self._queue: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize)
+        self._queue: asyncio.Queue[Received] = asyncio.Queue(maxsize)
         self._loop = loop
         self.dropped = 0
         self._sub = session.declare_subscriber(key_expr, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
-        item = (str(sample.key_expr), sample.payload.to_bytes())
+        item = _received(sample)
         with contextlib.suppress(RuntimeError):
             self._loop.call_soon_threadsafe(self._put, item)
 
-    def _put(self, item: tuple[str, bytes]) -> None:
+    def _put(self, item: Received) -> None:
         try:
             self._queue.put_nowait(item)
         except asyncio.QueueFull:
             self.dropped += 1
 
-    async def get(self, timeout: float | None = None) -> tuple[str, bytes]:
-        """The next (key, payload); raises ``UrTimeoutError`` after ``timeout`` seconds."""
+    async def get_sample(self, timeout: float | None = None) -> Received:
+        """The next sample with its attachment; raises ``UrTimeoutError`` after ``timeout`` seconds."""
         try:
             return await asyncio.wait_for(self._queue.get(), timeout)
         except TimeoutError as err:
             raise UrTimeoutError(f"no sample on {self.key_expr} within {timeout} s") from err
+
+    async def get(self, timeout: float | None = None) -> tuple[str, bytes]:
+        """The next (key, payload); raises ``UrTimeoutError`` after ``timeout`` seconds."""
+        item = await self.get_sample(timeout)
+        return item.key, item.payload
 
     async def get_json(self, timeout: float | None = None) -> dict[str, Any]:
         """The next sample decoded as JSON."""
@@ -125,6 +193,12 @@ class Subscription:
         return self._iterate()
 
     async def _iterate(self) -> AsyncIterator[tuple[str, bytes]]:
+        while True:
+            item = await self._queue.get()
+            yield item.key, item.payload
+
+    async def samples(self) -> AsyncIterator[Received]:
+        """Every sample with its attachment, as it comes."""
         while True:
             yield await self._queue.get()
 
@@ -138,29 +212,47 @@ class Client:
     """A Zenoh session connected to a urdaemon cell."""
 
     def __init__(
-        self, session: Any, loop: asyncio.AbstractEventLoop, endpoint: str = DEFAULT_ENDPOINT
+        self,
+        session: Any,
+        loop: asyncio.AbstractEventLoop,
+        endpoint: str = DEFAULT_ENDPOINT,
+        *,
+        holder: str | None = None,
     ) -> None:
         self.session = session
         self.endpoint = endpoint
         """Where this client connected (named in error messages)."""
+        self.holder = default_holder() if holder is None else _printable(holder)
+        """Who this client is, as its leases show it to others (``urdaemon lease``)."""
         self._loop = loop
         self._subscriptions: list[Subscription] = []
         self._tasks: list[asyncio.Task[None]] = []
         self._closers: list[Callable[[], object]] = []
+        self._leases: dict[str, Lease] = {}
 
     @classmethod
     async def connect(
-        cls, endpoint: str = DEFAULT_ENDPOINT, *, timeout: float = 5.0, low_latency: bool = False
+        cls,
+        endpoint: str = DEFAULT_ENDPOINT,
+        *,
+        timeout: float = 5.0,
+        low_latency: bool = False,
+        holder: str | None = None,
+        config_file: str | None = None,
     ) -> Client:
         """Open a Zenoh session connected to ``endpoint`` (no multicast scouting); ``low_latency``
         to match a daemon whose cell sets ``zenoh: {low_latency: true}`` (half the CPU per sample
         for both; without it the client still works).
 
+        ``config_file``: a Zenoh JSON5 configuration to start from (TLS certificates, docs/security.md);
+        the endpoint, mode and scouting are still set as above. ``holder``: how this client's leases
+        name it (default: the program, its pid and host).
+
         Raises ``UrDaemonError`` naming ``endpoint`` when nothing answers there within ``timeout`` s.
         """
         loop = asyncio.get_running_loop()
         try:
-            conf = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
+            conf = _session_config(endpoint, low_latency, config_file)
             conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
             session = await loop.run_in_executor(None, zenoh.open, conf)
         except zenoh.ZError as err:
@@ -174,7 +266,7 @@ class Client:
                     "(is the daemon running and listening there?)"
                 )
             await asyncio.sleep(PEER_WAIT_S)
-        return cls(session, loop, endpoint)
+        return cls(session, loop, endpoint, holder=holder)
 
     async def __aenter__(self) -> Client:
         return self
@@ -183,7 +275,11 @@ class Client:
         await self.close()
 
     async def close(self) -> None:
-        """Stop background tasks, undeclare subscriptions and close the session."""
+        """Release every lease this client holds, stop background tasks, undeclare subscriptions and
+        close the session."""
+        for lease in list(self._leases.values()):
+            with contextlib.suppress(UrDaemonError):
+                await lease.release(timeout=RELEASE_ON_CLOSE_S)
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
@@ -212,14 +308,38 @@ class Client:
         return sub
 
     async def query(
-        self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S
+        self,
+        key: str,
+        body: dict[str, Any] | None = None,
+        *,
+        timeout: float = QUERY_TIMEOUT_S,
+        attachment: bytes | None = None,
     ) -> list[bytes]:
-        """Ask a queryable; every reply's payload."""
-        payload = None if body is None else _encode(body)
+        """Ask a queryable; every reply's payload. ``attachment``: e.g. a lease's token."""
+        replies = await self.query_replies(key, body, timeout=timeout, attachment=attachment)
+        return [reply.payload for reply in replies]
 
-        def ask() -> list[bytes]:
-            replies = self.session.get(key, payload=payload, timeout=timeout)
-            return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
+    async def query_replies(
+        self,
+        key: str,
+        body: dict[str, Any] | None = None,
+        *,
+        timeout: float = QUERY_TIMEOUT_S,
+        attachment: bytes | None = None,
+        every_queryable: bool = False,
+    ) -> list[Received]:
+        """Ask a queryable; every reply with its attachment. ``every_queryable``: ask all that serve
+        ``key`` and keep every reply (not just the best match, nor one reply per key)."""
+        payload = None if body is None else _encode(body)
+        options: dict[str, Any] = {}
+        if every_queryable:
+            options = {"target": zenoh.QueryTarget.ALL, "consolidation": zenoh.ConsolidationMode.NONE}
+
+        def ask() -> list[Received]:
+            replies = self.session.get(
+                key, payload=payload, timeout=timeout, attachment=attachment, **options
+            )
+            return [_received(r.ok) for r in replies if r.ok is not None]
 
         try:
             return await self._loop.run_in_executor(None, ask)
@@ -227,7 +347,12 @@ class Client:
             raise UrDaemonError(f"cannot ask {key!r} at {self.endpoint}: {zenoh_message(err)}") from err
 
     async def request(
-        self, key: str, body: dict[str, Any] | None = None, *, timeout: float = QUERY_TIMEOUT_S
+        self,
+        key: str,
+        body: dict[str, Any] | None = None,
+        *,
+        timeout: float = QUERY_TIMEOUT_S,
+        attachment: bytes | None = None,
     ) -> dict[str, Any]:
         """Ask a queryable that must answer once.
 
@@ -235,7 +360,7 @@ class Client:
         ``UrTimeoutError`` when nobody answers within ``timeout`` s.
         """
         start = self._loop.time()
-        replies = await self.query(key, body, timeout=timeout)
+        replies = await self.query(key, body, timeout=timeout, attachment=attachment)
         if not replies:
             if self._loop.time() - start < min(0.5 * timeout, 1.0):
                 raise NoSuchService(f"nothing at {self.endpoint} serves {key}")
@@ -319,6 +444,39 @@ class Client:
             raise UrTimeoutError(f"no robot_description from cell {cell!r} at {self.endpoint}")
         return replies[0].decode()
 
+    def lease(self, keys: RobotKeys) -> Lease:
+        """This client's lease on the robot of ``keys`` (one per robot, whichever handle asks)."""
+        lease = self._leases.get(keys.base)
+        if lease is None:
+            lease = self._leases[keys.base] = Lease(self, keys)
+        return lease
+
+
+def _session_config(endpoint: str, low_latency: bool, config_file: str | None) -> Any:
+    """The client session's Zenoh config: ``config_file`` (if any) as the base, then a peer with
+    ``endpoint`` and no scouting, as ``zenoh_config`` makes it."""
+    ours = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
+    if config_file is None:
+        return ours
+    try:
+        conf = zenoh.Config.from_file(config_file)
+    except (zenoh.ZError, OSError) as err:
+        reason = zenoh_message(err) if isinstance(err, zenoh.ZError) else (err.strerror or str(err))
+        raise UrDaemonError(f"cannot read the Zenoh config {config_file}: {reason}") from err
+    keys = ["mode", "listen/endpoints", "connect/endpoints", "scouting/multicast/enabled"]
+    if low_latency:
+        keys += ["transport/unicast/lowlatency", "transport/unicast/qos/enabled"]
+    for key in keys:
+        conf.insert_json5(key, ours.get_json(key))
+    return conf
+
+
+def _received(sample: Any) -> Received:
+    attachment = sample.attachment
+    return Received(
+        str(sample.key_expr), sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes()
+    )
+
 
 def _has_peer(session: Any) -> bool:
     info = session.info
@@ -337,12 +495,32 @@ class GoalHandle:
     MAX_QUEUED_FEEDBACK = 1000
     """Feedback kept for a reader that falls behind; older messages are dropped first."""
 
-    def __init__(self, robot: RobotClient, goal_id: str, duration: float) -> None:
+    def __init__(
+        self, robot: RobotClient, goal_id: str, duration: float, result_key: str | None = None
+    ) -> None:
         self.robot = robot
         self.goal_id = goal_id
         self.duration = duration
+        self.result_key = result_key
+        """The key the accepting reply gave: only messages signed with it are taken (None: a daemon
+        that signs nothing, whose messages are taken as they come)."""
+        self.forged = 0
+        """Messages on this goal's keys (or replies to its result query) that were not signed with
+        its key: published by some other session, and ignored."""
         self._feedback: asyncio.Queue[dict[str, Any]] = asyncio.Queue(self.MAX_QUEUED_FEEDBACK)
         self._result: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
+
+    def _receive(self, kind: str, payload: bytes, attachment: bytes | None) -> bool:
+        """Take one feedback or result message if it is this goal's and signed with its key
+        (forgeries are counted); whether it was taken."""
+        if self.result_key is not None and not signing.verify(self.result_key, payload, attachment):
+            self.forged += 1
+            return False
+        data = _result_message(payload, self.goal_id)
+        if data is None:
+            return False
+        self._deliver(kind, data)
+        return True
 
     def _deliver(self, kind: str, data: dict[str, Any]) -> None:
         if kind == "result":
@@ -395,16 +573,16 @@ class GoalHandle:
         return self._result.result()
 
     async def _poll_result(self, timeout: float = 1.0) -> None:
+        """Ask every queryable of the goal's result key (another session may answer it too: only a
+        reply signed with the goal's key counts)."""
         try:
-            replies = await self.robot.client.query(
-                self.robot.keys.goal_result(self.goal_id), timeout=timeout
+            replies = await self.robot.client.query_replies(
+                self.robot.keys.goal_result(self.goal_id), timeout=timeout, every_queryable=True
             )
         except UrDaemonError:
             return
-        for payload in replies:
-            data = _result_message(payload, self.goal_id)
-            if data is not None:
-                self._deliver("result", data)
+        for reply in replies:
+            if self._receive("result", reply.payload, reply.attachment):
                 self.robot._forget(self.goal_id)
                 return
 
@@ -425,6 +603,127 @@ def _result_message(payload: bytes, goal_id: str) -> dict[str, Any] | None:
     return None
 
 
+class Lease:
+    """A client's command lease on one robot (docs/security.md): the liveliness token that binds it
+    to the client's session, and the token the daemon granted, attached to every command.
+
+    Acquiring declares the liveliness token ``<cell>/<robot>/lease/<session id>`` first (the daemon
+    grants only once it sees it) and keeps it while the lease is wanted; a refusal, a release or a
+    lease that ended undeclares it.
+    """
+
+    def __init__(self, client: Client, keys: RobotKeys) -> None:
+        self.client = client
+        self.keys = keys
+        self.token: str | None = None
+        """The daemon's grant while this client holds the lease, else None."""
+        self.unchecked = False
+        """The daemon serves no lease for this robot (one older than leases): commands go without."""
+        self._alive: Any = None
+        self._lock = asyncio.Lock()
+
+    @property
+    def session_id(self) -> str:
+        """The id in this client's liveliness token: its Zenoh session's."""
+        return str(self.client.session.zid())
+
+    @property
+    def usable(self) -> bool:
+        """Whether commands can be sent now: the lease is held, or the daemon checks none."""
+        return self.token is not None or self.unchecked
+
+    def attachment(self) -> bytes | None:
+        """What goes with a command: the token's ASCII bytes (None without one)."""
+        return None if self.token is None else self.token.encode()
+
+    async def acquire(self, *, force: bool = False, reason: str = "") -> dict[str, Any]:
+        """The daemon's grant (acquired unless held already, or taken over with ``force``); raises
+        ``LeaseHeld`` with the daemon's reason when refused."""
+        async with self._lock:
+            if self.usable and not force:
+                return {"ok": True, "token": self.token}
+            body: dict[str, Any] = {"action": "acquire", "session": self.session_id}
+            body["holder"] = self.client.holder
+            if force:
+                body.update(force=True, reason=reason)
+            self._declare()
+            try:
+                reply = await self.client.request(self.keys.lease, body)
+            except NoSuchService:
+                self._undeclare()
+                self.unchecked = True
+                return {"ok": True, "token": None}
+            except BaseException:
+                self._undeclare()
+                raise
+            token = reply.get("token")
+            if reply.get("ok") is True and isinstance(token, str) and _LEASE_TOKEN.fullmatch(token):
+                self.token = token
+                return reply
+            self._undeclare()
+            raise LeaseHeld(str(reply.get("reason") or f"lease: not granted ({reply})"))
+
+    async def release(self, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any] | None:
+        """Give the lease back (stops whatever still moves the robot); the daemon's reply, or None
+        when this client held none."""
+        async with self._lock:
+            attachment = self.attachment()
+            self.token = None
+            try:
+                if attachment is None:
+                    return None
+                return await self.client.request(
+                    self.keys.lease, {"action": "release"}, timeout=timeout, attachment=attachment
+                )
+            finally:
+                self._undeclare()
+
+    def ended(self) -> None:
+        """The daemon refused a command for the lease: it is no longer this client's (taken over,
+        or the daemon restarted); the next command acquires again."""
+        self.token = None
+        self._undeclare()
+
+    async def show(self) -> dict[str, Any] | None:
+        """The lease as the daemon shows it (``holder``, ``session``, ``since``), None when free."""
+        reply = await self.client.request(self.keys.lease, {"action": "show"})
+        if reply.get("ok") is not True:
+            raise UrDaemonError(str(reply.get("reason") or f"lease: no answer to show ({reply})"))
+        lease = reply.get("lease")
+        return lease if isinstance(lease, dict) else None
+
+    def _declare(self) -> None:
+        if self._alive is None:
+            key = self.keys.lease_holder(self.session_id)
+            try:
+                self._alive = self.client.session.liveliness().declare_token(key)
+            except zenoh.ZError as err:
+                raise UrDaemonError(f"cannot declare the lease token {key}: {zenoh_message(err)}") from err
+
+    def _undeclare(self) -> None:
+        alive, self._alive = self._alive, None
+        if alive is not None:
+            with contextlib.suppress(Exception):
+                alive.undeclare()
+
+
+def _lease_refusal(reply: dict[str, Any], answer: str) -> str | None:
+    """The daemon's reason when ``reply`` refuses a command for the lease (None otherwise)."""
+    reason = reply.get("reason")
+    if reply.get(answer) is False and isinstance(reason, str) and reason.startswith("lease: "):
+        return reason
+    return None
+
+
+def _commanding(service: str) -> bool:
+    """Whether a service needs the lease (unknown names: no, the daemon names what it serves)."""
+    try:
+        entry = services.spec(service)
+    except KeyError:
+        return False
+    return bool(getattr(entry, "commanding", service not in _NOT_COMMANDING))
+
+
 class RobotClient:
     """Commands and state of one robot."""
 
@@ -432,7 +731,7 @@ class RobotClient:
         self.client = client
         self.keys = keys
         self._goals: dict[str, GoalHandle] = {}
-        self._early: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+        self._early: dict[str, list[tuple[str, bytes, bytes | None]]] = {}
         self._goal_sub: Subscription | None = None
         self._pump: asyncio.Task[None] | None = None
         self._alive_sub: Any = None
@@ -442,6 +741,58 @@ class RobotClient:
     def name(self) -> str:
         """The robot's name."""
         return self.keys.robot
+
+    @property
+    def lease(self) -> Lease:
+        """This client's command lease on the robot."""
+        return self.client.lease(self.keys)
+
+    async def ensure_lease(self) -> str:
+        """Acquire the robot's command lease unless this client holds it; its token ("" when the
+        daemon checks none). Raises ``LeaseHeld`` naming the holder when another client holds it.
+
+        Goals, cancels and commanding services call it themselves; call it once before streaming.
+        """
+        await self.lease.acquire()
+        return self.lease.token or ""
+
+    async def release(self) -> None:
+        """Give the lease back (the daemon stops whatever still moves the robot)."""
+        reply = await self.lease.release()
+        if reply is not None and reply.get("ok") is not True:
+            raise UrDaemonError(str(reply.get("reason") or f"lease: release refused ({reply})"))
+
+    async def take_over(self, reason: str) -> dict[str, Any]:
+        """Take the lease from whoever holds it (the daemon stops the robot first, logs ``reason`` and
+        publishes it as a lease event); the daemon's grant (``lease``: now this client's)."""
+        if not reason.strip():
+            raise UrDaemonError("taking over a lease needs a reason (it is logged and published)")
+        return await self.lease.acquire(force=True, reason=reason)
+
+    async def lease_info(self) -> dict[str, Any] | None:
+        """Who holds the lease (``holder``, ``session``, ``since`` as unix time), None when free."""
+        return await self.lease.show()
+
+    async def _command(self, key: str, body: dict[str, Any], answer: str, timeout: float) -> dict[str, Any]:
+        """Send a commanding query with the lease's token (acquired first); raises ``LeaseHeld``
+        when the daemon refuses it for the lease."""
+        lease = self.lease
+        await lease.acquire()
+        reply = await self.client.request(key, body, timeout=timeout, attachment=lease.attachment())
+        refusal = _lease_refusal(reply, answer)
+        if refusal is not None:
+            lease.ended()
+            raise LeaseHeld(refusal)
+        return reply
+
+    def _stream_attachment(self) -> bytes | None:
+        lease = self.lease
+        if not lease.usable:
+            raise UrDaemonError(
+                f"robot {self.name!r}: stream commands need this client's command lease; "
+                "call `await robot.ensure_lease()` before the first (a stream command never waits)"
+            )
+        return lease.attachment()
 
     def joint_states(self, maxsize: int = 1000) -> Subscription:
         """Subscribe to joint states."""
@@ -506,8 +857,11 @@ class RobotClient:
         """Call service ``service``; the reply (``ok``, and a ``reason`` when not: an unknown service's
         reason lists the robot's services).
 
-        Raises ``NoSuchService`` when nothing answers at all (no daemon serves this robot's cell).
+        Raises ``NoSuchService`` when nothing answers at all (no daemon serves this robot's cell),
+        ``LeaseHeld`` when the service commands the robot and another client holds its lease.
         """
+        if _commanding(service):
+            return await self._command(self.keys.service(service), body or {}, "ok", timeout)
         return await self.client.request(self.keys.service(service), body or {}, timeout=timeout)
 
     async def service(
@@ -517,13 +871,15 @@ class RobotClient:
         model.py; None for a service without arguments), waiting the table's time unless ``timeout``."""
         entry = services.spec(name)
         wait = entry.timeout if timeout is None else timeout
-        return await self.client.request(self.keys.service(name), codec.request_body(request), timeout=wait)
+        body = codec.request_body(request)
+        if _commanding(name):
+            return await self._command(self.keys.service(name), body, "ok", wait)
+        return await self.client.request(self.keys.service(name), body, timeout=wait)
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
-        """Cancel a goal (default: the active one)."""
-        return await self.client.request(
-            self.keys.goal_cancel, {} if goal_id is None else {"goal_id": goal_id}
-        )
+        """Cancel a goal (default: the active one); needs the lease like any command."""
+        body = {} if goal_id is None else {"goal_id": goal_id}
+        return await self._command(self.keys.goal_cancel, body, "canceled", QUERY_TIMEOUT_S)
 
     async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
         """Set an output; the reply says ok or the reason."""
@@ -567,19 +923,28 @@ class RobotClient:
         return await self.service("set_tool_voltage", ToolVoltageRequest(volts))
 
     async def stop(self) -> dict[str, Any]:
-        """Stop whatever moves the robot."""
+        """Stop whatever moves the robot (anyone may: no lease needed, none acquired)."""
         return await self.service("stop")
 
     def stream_positions(self, positions: Sequence[float], velocities: Sequence[float] | None = None) -> None:
-        """Publish one streaming position command (repeat faster than the deadman timeout)."""
+        """Publish one streaming position command (repeat faster than the deadman timeout).
+
+        Needs the lease held (``await ensure_lease()`` first; ``UrDaemonError`` otherwise); a command
+        the daemon refuses is reported as a ``command_rejected`` event on the robot's events.
+        """
         body: dict[str, Any] = {"positions": list(positions)}
         if velocities is not None:
             body["velocities"] = list(velocities)
-        self.client.session.put(self.keys.command_joint_position, _encode(body))
+        attachment = self._stream_attachment()
+        self.client.session.put(self.keys.command_joint_position, _encode(body), attachment=attachment)
 
     def freedrive(self, active: bool = True) -> None:
-        """Keep freedrive (hand guiding) on for one deadman period, or end it; repeat while it should last."""
-        self.client.session.put(self.keys.command_freedrive, _encode({"active": active}))
+        """Keep freedrive (hand guiding) on for one deadman period, or end it; repeat while it should
+        last. Needs the lease held, as ``stream_positions``."""
+        attachment = self._stream_attachment()
+        self.client.session.put(
+            self.keys.command_freedrive, _encode({"active": active}), attachment=attachment
+        )
 
     async def start_force_mode(
         self,
@@ -617,18 +982,28 @@ class RobotClient:
         return await self.service("end_tool_contact")
 
     def stream_velocities(self, velocities: Sequence[float]) -> None:
-        """Publish one streaming velocity command (repeat faster than the deadman timeout)."""
-        self.client.session.put(self.keys.command_joint_velocity, _encode({"velocities": list(velocities)}))
+        """Publish one streaming velocity command (repeat faster than the deadman timeout). Needs
+        the lease held, as ``stream_positions``."""
+        attachment = self._stream_attachment()
+        body = _encode({"velocities": list(velocities)})
+        self.client.session.put(self.keys.command_joint_velocity, body, attachment=attachment)
 
     async def _send_goal(self, key: str, body: dict[str, Any]) -> GoalHandle:
         self._ensure_goal_subscription()
-        reply = await self.client.request(key, body)
+        reply = await self._command(key, body, "accepted", QUERY_TIMEOUT_S)
         if not reply.get("accepted"):
             raise GoalRejected(str(reply.get("reason", "rejected without a reason")))
-        handle = GoalHandle(self, str(reply["goal_id"]), float(reply.get("duration", 0.0)))
+        result_key = reply.get("result_key")
+        handle = GoalHandle(
+            self,
+            str(reply["goal_id"]),
+            float(reply.get("duration", 0.0)),
+            result_key if isinstance(result_key, str) else None,
+        )
         self._goals[handle.goal_id] = handle
-        for kind, data in self._early.pop(handle.goal_id, []):
-            handle._deliver(kind, data)
+        for kind, payload, attachment in self._early.pop(handle.goal_id, []):
+            if handle._receive(kind, payload, attachment) and kind == "result":
+                self._forget(handle.goal_id)
         return handle
 
     def _ensure_goal_subscription(self) -> None:
@@ -678,22 +1053,20 @@ class RobotClient:
                 self._forget(handle.goal_id)
 
     async def _pump_goals(self, sub: Subscription) -> None:
-        async for key, payload in sub:
+        async for key, payload, attachment in sub.samples():
             parts = key.split("/")
             if len(parts) < 2 or parts[-1] not in ("feedback", "result"):
                 continue
             goal_id, kind = parts[-2], parts[-1]
-            data = _result_message(payload, goal_id)
-            if data is None:  # not JSON, not an object, or about another goal: someone else's garbage
-                continue
             handle = self._goals.get(goal_id)
             if handle is not None:
-                handle._deliver(kind, data)
-                if kind == "result":  # the handle keeps its result; the robot need not track it further
+                # the handle keeps its result; the robot need not track it further
+                if handle._receive(kind, payload, attachment) and kind == "result":
                     self._forget(goal_id)
-            else:
+            elif _result_message(payload, goal_id) is not None:  # else someone else's garbage
+                # before the accepting reply: checked once the reply gives the goal's key
                 early = self._early.setdefault(goal_id, [])
                 if len(early) < 100:
-                    early.append((kind, data))
+                    early.append((kind, payload, attachment))
                 if len(self._early) > 100:
                     self._early.pop(next(iter(self._early)))

@@ -111,8 +111,19 @@ async def test_an_unknown_service_fails_fast_and_lists_the_services(
     assert "nocell/alice/service/stop" in str(caught.value)
 
 
-async def test_cancel_command_cancels_the_active_goal(served: tuple[Daemon, Client, str]) -> None:
-    _, client, endpoint = served
+NO_LEASE = TWO_MOCKS.replace("cell: testcell", "cell: testcell\ncommand_lease: false")
+"""The test cell without command leases: any client may cancel any goal, as before leases."""
+
+
+async def test_cancel_command_cancels_the_active_goal() -> None:
+    """About ``cancel``'s own replies and exit codes, so in a cell without leases (it says so):
+    with leases on, another process's cancel is refused naming the holder
+    (test_client_lease.py::test_cancel_from_another_process_is_refused_naming_the_holder)."""
+    async with running_daemon(NO_LEASE) as (daemon, client):
+        await _cancel_from_the_cli(client, daemon.listen_endpoints[0])
+
+
+async def _cancel_from_the_cli(client: Client, endpoint: str) -> None:
     alice = await client.robot("alice")
     goal = await alice.move(AWAY, duration=30.0)
     run = await run_cli_in_thread("cancel", "alice", "--connect", endpoint, timeout=FAST_S)

@@ -189,10 +189,12 @@ async def _bad_goals_are_rejected(alice: RobotClient, limits: JointLimits) -> No
     new_goal = await alice.move(here, duration=2.0, preempt=True)
     assert (await long_goal.result(timeout=10))["status"] == "preempted"
     assert (await new_goal.result(timeout=30))["status"] == "succeeded"
-    # malformed messages get a reason naming the problem, not silence
-    reply = await alice.client.request(alice.keys.goal_trajectory, {"points": "nope"})
+    # malformed messages get a reason naming the problem, not silence (sent raw, with the lease's
+    # token as a client attaches it: without it the lease would refuse them first)
+    token = (await alice.ensure_lease()).encode()
+    reply = await alice.client.request(alice.keys.goal_trajectory, {"points": "nope"}, attachment=token)
     assert reply["accepted"] is False
     assert "points" in reply["reason"]
-    raw = await alice.client.query(alice.keys.goal_move, None)
+    raw = await alice.client.query(alice.keys.goal_move, None, attachment=token)
     assert raw
     assert json.loads(raw[0])["accepted"] is False
