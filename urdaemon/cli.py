@@ -767,8 +767,7 @@ async def _lease(args: argparse.Namespace) -> int:
             before = await robot.lease_info()
             reply = await robot.take_over(args.take_over)
             previous = reply.get("previous", before)
-            held = _lease_text(robot.name, previous if isinstance(previous, dict) else None)
-            print(f"took over: {held}")
+            print(f"took over {robot.name}'s lease {_taken_from(previous)}")
             await robot.release()
             print(f"released {robot.name}'s lease")
             return EXIT_OK
@@ -778,17 +777,25 @@ async def _lease(args: argparse.Namespace) -> int:
 
 def _lease_text(robot: str, lease: dict[str, Any] | None) -> str:
     """One line about a lease: its holder, since when and its session, or that it is free."""
-    import datetime
-
     if lease is None:
         return f"{robot}: free"
+    return f"{robot}: held by {lease.get('holder')} since {_since(lease)} (session {lease.get('session')})"
+
+
+def _taken_from(lease: object) -> str:
+    """Whom a take-over took the lease from (the lease it replaced, None when it was free)."""
+    if not isinstance(lease, dict):
+        return "(it was free)"
+    return f"from {lease.get('holder')} (held since {_since(lease)}, session {lease.get('session')})"
+
+
+def _since(lease: dict[str, Any]) -> str:
+    import datetime
+
     since = lease.get("since")
-    when = (
-        datetime.datetime.fromtimestamp(since, datetime.UTC).isoformat(timespec="seconds")
-        if isinstance(since, int | float)
-        else "an unknown time"
-    )
-    return f"{robot}: held by {lease.get('holder')} since {when} (session {lease.get('session')})"
+    if not isinstance(since, int | float) or not math.isfinite(since):
+        return "an unknown time"
+    return datetime.datetime.fromtimestamp(since, datetime.UTC).isoformat(timespec="seconds")
 
 
 async def _follow(goal: Any, bar: _ProgressBar) -> int:

@@ -84,8 +84,6 @@ RELEASE_ON_CLOSE_S = 2.0
 HOLDER_MAX = 120
 """The longest holder text the daemon takes (printable characters)."""
 _LEASE_TOKEN = re.compile(r"[0-9a-f]{32}")
-_NOT_COMMANDING = frozenset({"stop", "cycle_stats"})
-"""Services that need no lease until publish/services.py says so per entry (``commanding``)."""
 
 _RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
 
@@ -721,7 +719,7 @@ def _commanding(service: str) -> bool:
         entry = services.spec(service)
     except KeyError:
         return False
-    return bool(getattr(entry, "commanding", service not in _NOT_COMMANDING))
+    return entry.commanding
 
 
 class RobotClient:
