@@ -32,11 +32,15 @@ from urdaemon.urscript import (
 )
 
 __all__ = [
+    "ALL_ROBOTS",
     "DEFAULT_ENDPOINT",
     "DEFAULT_PORT_BASE",
     "DEFAULT_PORT_STRIDE",
+    "AccessOptions",
     "Cell",
     "CustomDescription",
+    "Grant",
+    "Identity",
     "JointLimitOverride",
     "MockOptions",
     "MotionOptions",
@@ -46,6 +50,7 @@ __all__ = [
     "Robot",
     "ServoJoint",
     "ServoOptions",
+    "TlsOptions",
     "UrOptions",
     "ZenohOptions",
     "ur_models",
@@ -116,6 +121,118 @@ class _Frozen(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
+IDENTITY_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,31}$"
+"""Names of access-control identities in the cell file (``operator``, ``line-pc``)."""
+ALL_ROBOTS = "*"
+"""In a grant's ``read`` or ``command`` list: every robot of the cell, and the cell's own keys."""
+SECURE_PROTOCOLS = ("tls/", "quic/")
+"""Endpoints whose links are encrypted and carry the peer's certificate."""
+
+
+class TlsOptions(_Frozen):
+    """TLS for the daemon's Zenoh links (``tls/`` and ``quic/`` endpoints); docs/security.md."""
+
+    root_ca: str
+    """The certificate authority (PEM) that signed the daemon's and the clients' certificates."""
+    certificate: str
+    """The daemon's certificate (PEM): its name or IP address in subjectAltName, as clients dial it."""
+    private_key: str
+    """The daemon's private key (PEM); keep it readable by the daemon's user only."""
+    mutual: bool = True
+    """Mutual TLS: a client must show a certificate the root CA signed, or its link is refused; the
+    certificate's common name is the client's identity for ``access``. ``false``: encryption only,
+    anyone who reaches the port may connect."""
+
+    @field_validator("root_ca", "certificate", "private_key")
+    @classmethod
+    def _exists(cls, value: str, info: ValidationInfo) -> str:
+        return _resolve_file(value, info)
+
+
+class Identity(_Frozen):
+    """Who a connection is, for ``access``: each list given must match (common name AND interface)."""
+
+    cert_common_names: tuple[Annotated[str, Field(min_length=1, max_length=64)], ...] | None = None
+    """The common name (CN) of the client certificate the link was opened with (needs mutual TLS)."""
+    interfaces: tuple[Annotated[str, Field(pattern=r"^[A-Za-z0-9_.:@-]{1,15}$")], ...] | None = None
+    """The daemon's network interface the link arrived on (``lo``, ``eth1``)."""
+
+    @model_validator(mode="after")
+    def _says_who(self) -> Identity:
+        for field in ("cert_common_names", "interfaces"):
+            if getattr(self, field) == ():
+                raise ValueError(f"{field}: an empty list matches nobody; leave the field out instead")
+        if self.cert_common_names is None and self.interfaces is None:
+            raise ValueError(
+                "an identity needs cert_common_names or interfaces (one without either would match "
+                "every connection)"
+            )
+        return self
+
+
+RobotRef = Annotated[str, Field(pattern=rf"^(\{ALL_ROBOTS}|[a-z][a-z0-9_]{{0,30}})$")]
+
+
+class Grant(_Frozen):
+    """What some identities may do: read robots' state, command robots."""
+
+    identities: tuple[Annotated[str, Field(pattern=IDENTITY_PATTERN)], ...]
+    read: tuple[RobotRef, ...] = ()
+    """Robots whose state these identities may subscribe to and ask for (joint states, status, io,
+    events, goal feedback and results, cycle stats); ``"*"``: every robot and the cell's tf,
+    description and cell-goal results."""
+    command: tuple[RobotRef, ...] = ()
+    """Robots these identities may command (goals, cancel, services, command streams, the command
+    lease and its liveliness token), and read as above; ``"*"``: every robot and cell goals."""
+
+    @model_validator(mode="after")
+    def _grants_something(self) -> Grant:
+        if not self.identities:
+            raise ValueError("identities: list at least one identity the grant is for")
+        if not self.read and not self.command:
+            raise ValueError("a grant needs 'read' or 'command' (robot names, or '*' for all)")
+        return self
+
+
+class AccessOptions(_Frozen):
+    """Zenoh access control on the daemon's links: only what a grant allows passes (docs/security.md).
+
+    ``stop`` (every robot's and the cell's) and finding the cell's robots are allowed to every
+    connection that reaches the daemon, whatever the grants say: a stop is never refused.
+    """
+
+    default: Literal["deny"] = "deny"
+    """What no grant allows is dropped by the daemon's Zenoh session (the only choice: said here so
+    the cell file reads as it works)."""
+    identities: dict[Annotated[str, Field(pattern=IDENTITY_PATTERN)], Identity]
+    grants: tuple[Grant, ...]
+
+    @model_validator(mode="after")
+    def _grants_name_identities(self) -> AccessOptions:
+        if not self.identities:
+            raise ValueError("identities: name at least one identity")
+        for i, grant in enumerate(self.grants):
+            unknown = [name for name in grant.identities if name not in self.identities]
+            if unknown:
+                raise ValueError(
+                    f"grants[{i}].identities: unknown identity {', '.join(map(repr, unknown))}; "
+                    f"identities: {', '.join(sorted(self.identities))}"
+                )
+        return self
+
+    def unknown_robots(self, robots: tuple[str, ...] | list[str]) -> str | None:
+        """The first grant entry naming a robot not in ``robots``, as an error naming its field."""
+        for i, grant in enumerate(self.grants):
+            for kind, names in (("read", grant.read), ("command", grant.command)):
+                for j, name in enumerate(names):
+                    if name != ALL_ROBOTS and name not in robots:
+                        return (
+                            f"zenoh.access.grants[{i}].{kind}[{j}]: {name!r} is not a robot of this cell "
+                            f"({', '.join(robots)}; or '*' for all)"
+                        )
+        return None
+
+
 class ZenohOptions(_Frozen):
     """How the daemon joins the Zenoh network."""
 
@@ -127,12 +244,46 @@ class ZenohOptions(_Frozen):
     """Zenoh's low-latency unicast transport (no batching, no QoS priorities): about half the CPU per
     published sample when the subscriber enables it too (``Client.connect(..., low_latency=True)``);
     peers without it still connect. See docs/performance.md."""
+    tls: TlsOptions | None = None
+    """Certificates for ``tls/`` endpoints; with it every listen endpoint must be ``tls/`` (or
+    ``quic/``), so no client gets in around it."""
+    access: AccessOptions | None = None
+    """Zenoh access control: which identities may read and command which robots."""
 
     @model_validator(mode="after")
     def _client_needs_connect(self) -> ZenohOptions:
         if self.mode == "client" and not self.connect:
             raise ValueError("mode 'client' needs at least one connect endpoint")
+        self._tls_consistent()
         return self
+
+    def _tls_consistent(self) -> None:
+        # Messages start with their own key path, as in Cell: a model validator has no location.
+        for field in ("listen", "connect"):
+            for i, endpoint in enumerate(getattr(self, field)):
+                secure = endpoint.startswith(SECURE_PROTOCOLS)
+                if secure and self.tls is None:
+                    raise ValueError(
+                        f"{field}[{i}]: {endpoint} needs the 'tls' section "
+                        "(root_ca, certificate, private_key)"
+                    )
+                if field == "listen" and self.tls is not None and not secure:
+                    raise ValueError(
+                        f"listen[{i}]: {endpoint} is not encrypted; with 'tls' every listen endpoint must "
+                        "be tls/ or quic/ (this one would let clients in without a certificate)"
+                    )
+        if self.tls is not None and not any(
+            e.startswith(SECURE_PROTOCOLS) for e in self.listen + self.connect
+        ):
+            raise ValueError("tls: no listen or connect endpoint uses it (tls/HOST:PORT)")
+        if self.access is None:
+            return
+        for name, identity in self.access.identities.items():
+            if identity.cert_common_names is not None and (self.tls is None or not self.tls.mutual):
+                raise ValueError(
+                    f"access.identities.{name}.cert_common_names: clients show a certificate only with "
+                    "mutual TLS ('tls' with mutual: true)"
+                )
 
 
 class PublishOptions(_Frozen):
