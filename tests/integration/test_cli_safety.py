@@ -15,6 +15,7 @@ import asyncio
 import io
 import json
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -217,3 +218,41 @@ async def test_a_vanished_token_still_asks_for_the_result_before_failing_the_goa
         for queryable in queryables:
             queryable.undeclare()  # type: ignore[no-untyped-call]
         await loop.run_in_executor(None, server.close)
+
+
+async def test_zenoh_config_is_the_base_and_connect_still_names_the_endpoint(
+    served: tuple[Daemon, Client, str], tmp_path: Path
+) -> None:
+    """A JSON5 config file (as the TLS helper writes one) is the session's base; the file's own
+    endpoint is overridden by --connect, so a stale file cannot send a command elsewhere."""
+    _, _, endpoint = served
+    config = tmp_path / "client.json5"
+    config.write_text(
+        '{\n  // a stale endpoint: --connect wins\n  connect: { endpoints: ["' + _nobody() + '"] },\n}\n',
+        encoding="utf-8",
+    )
+    joints = ",".join(repr(v) for v in AWAY)
+    move = await run_cli_in_thread(
+        "move", "bob", "--joints", joints, "--duration", "1", "--connect", endpoint,
+        "--zenoh-config", str(config), timeout=FAST_S,
+    )  # fmt: skip
+    assert move.code == 0, move
+    assert json.loads(move.stdout)["status"] == "succeeded"
+    async with await Client.connect(endpoint, config_file=str(config)) as client:
+        assert [r for c, r in await client.robots()] == ["alice", "bob"]
+
+
+async def test_a_zenoh_config_that_cannot_be_used_is_named(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.json5"
+    run = await run_cli_in_thread(
+        "lease", "alice", "--zenoh-config", str(missing), "--connect", _nobody(), timeout=FAST_S
+    )
+    assert run.code == 2, run
+    assert f"--zenoh-config {str(missing)!r} is not a file" in run.stderr
+    broken = tmp_path / "broken.json5"
+    broken.write_text("{ mode: ", encoding="utf-8")
+    run = await run_cli_in_thread(
+        "echo", "a/b", "--zenoh-config", str(broken), "--connect", _nobody(), timeout=FAST_S
+    )
+    assert run.code == 1, run
+    assert f"cannot read the Zenoh config {broken}" in run.stderr, run.stderr
