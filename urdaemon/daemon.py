@@ -31,6 +31,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
+from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
@@ -165,6 +166,8 @@ class Daemon:
                 except RealtimeUnavailable as err:
                     log.warning("serving at normal priority: %s", err)
             self._build(node)
+            cell_goals = CellGoals(node, self.keys, self.runtimes)  # trajectories started together
+            cell_goals.declare()
             node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)
             node.cell_queryable(self.keys.any_robot, self._on_any_robot)
             node.queryable(self.keys.stop, self._on_cell_stop, max_bytes=None)  # never refused: any payload
@@ -175,6 +178,7 @@ class Daemon:
                 async with asyncio.TaskGroup() as group:
                     tasks = [group.create_task(rt.run()) for rt in self.runtimes]
                     tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
+                    tasks.append(group.create_task(cell_goals.run()))
                     await stop.wait()
                     for task in tasks:
                         task.cancel()

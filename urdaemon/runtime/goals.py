@@ -1,8 +1,15 @@
 """One robot's goals: trajectory and move goals, cancel, and their feedback and results.
 
 A trajectory goal is decoded, checked, planned (and for passthrough encoded) in slices between
-robot cycles, then started; it is accepted only if nothing ended motion meanwhile (gate.py). Every
-accepted goal ends with exactly one result, published and kept to answer late queries.
+robot cycles, then started; it is accepted only if nothing ended motion meanwhile (gate.py). The
+same pipeline plans each robot's part of a cell goal (runtime/cell_goals.py). Every accepted goal
+ends with exactly one result, published and kept to answer late queries.
+
+Every goal gets a key of its own (publish/signing.py) when it starts: the accepting reply gives it
+to the client, and every feedback and result message of the goal (and every answer to a query for
+its result) carries the message's signature as its Zenoh attachment. The signature is made when a
+message is published, at the feedback rate (10 Hz by default) and once per result, never once per
+cycle; a kept result keeps its signature, not the key.
 """
 
 from __future__ import annotations
@@ -14,15 +21,18 @@ import logging
 import secrets
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
+
+import zenoh
 
 from urdaemon.backends.base import Backend
 from urdaemon.cell.config import Robot
 from urdaemon.control import GoalFeedback, GoalResult, MotionController, Tolerances
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec
+from urdaemon.publish import codec, signing
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
@@ -33,10 +43,36 @@ from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, pa
 from urdaemon.runtime.slicing import check_sliced, decode_sliced, plan_tail, release
 from urdaemon.runtime.status import StatusPublisher
 
-__all__ = ["KEPT_RESULTS", "Goals"]
+__all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "ResultListener", "put_signed"]
 
 KEPT_RESULTS = 256
-"""Finished goal results kept to answer late queries."""
+"""Finished goal results kept to answer late queries (each with its signature)."""
+
+ResultListener = Callable[[GoalResult, bytes], None]
+"""Told a goal's result (and its message as published) once it is published: a cell goal's part."""
+
+
+def put_signed(node: ZenohNode, key: str, payload: bytes, attachment: bytes) -> None:
+    """Publish once on ``key`` with ``attachment`` (a goal message's signature), dropped rather than
+    blocking when congested, as ``ZenohNode.put`` publishes (which takes no attachment)."""
+    session = getattr(node, "session", None)
+    if session is None:  # a node without a Zenoh session of its own publishes as its put does
+        node.put(key, payload)
+        return
+    with contextlib.suppress(zenoh.ZError):  # the session closed: nobody is left to hear it
+        session.put(key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.DROP)
+
+
+@dataclass(slots=True)
+class PlannedGoal:
+    """A trajectory goal decoded, checked and planned (for passthrough encoded), not started yet."""
+
+    preempt: bool
+    passthrough: bool
+    tolerances: Tolerances | None
+    planner: TrajectoryPlanner
+    frames: tuple[bytes, int] | None
+    """The points as the robot receives them (passthrough only), and how many."""
 
 
 class Goals:
@@ -60,7 +96,12 @@ class Goals:
         self._log = log
         self._node = node
         self.passthrough = Passthrough(backend, controller, log)
-        self._results: OrderedDict[str, bytes] = OrderedDict()
+        self._results: OrderedDict[str, tuple[bytes, bytes]] = OrderedDict()
+        """Finished goals' result messages and their signatures, oldest first."""
+        self._keys_of: dict[str, str] = {}
+        """Each running goal's signing key (until its result is published)."""
+        self.result_listeners: dict[str, ResultListener] = {}
+        """Who is told a goal's result when it is published, by goal id (told once, then forgotten)."""
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
 
@@ -77,41 +118,57 @@ class Goals:
     # ---- events and results ----------------------------------------------------------------------
 
     def publish_events(self) -> None:
-        """Publish the controller's goal feedback and results."""
+        """Publish the controller's goal feedback and results, each signed with its goal's key."""
         for event in self._controller.drain_events():
             if isinstance(event, GoalResult):
                 self.passthrough.ended_here(event.goal_id)
             if isinstance(event, GoalFeedback):
-                self._node.put(
-                    self._keys.goal_feedback(event.goal_id), codec.encode_feedback(self._robot.name, event)
-                )
+                message = codec.encode_feedback(self._robot.name, event)
+                key = self._keys_of.get(event.goal_id)
+                if key is not None:  # at the feedback rate, never once per cycle
+                    put_signed(
+                        self._node,
+                        self._keys.goal_feedback(event.goal_id),
+                        message,
+                        signing.sign(key, message),
+                    )
             else:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
-        payload = codec.encode_result(self._robot.name, result)
-        self._results[result.goal_id] = payload
+        message = codec.encode_result(self._robot.name, result)
+        key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
+        signature = signing.sign(key, message)
+        self._results[result.goal_id] = (message, signature)
         while len(self._results) > KEPT_RESULTS:
             self._results.popitem(last=False)
-        self._node.put(self._keys.goal_result(result.goal_id), payload)
+        put_signed(self._node, self._keys.goal_result(result.goal_id), message, signature)
         log = self._log.info if result.status.value == "succeeded" else self._log.warning
         log(
             "goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else ""
         )
+        listener = self.result_listeners.pop(result.goal_id, None)
+        if listener is not None:
+            listener(result, message)
 
     def on_result_query(self, query: Any) -> None:
-        """Answer a query for a finished goal's result (nothing while it runs or once forgotten)."""
+        """Answer a query for a finished goal's result, signed (nothing while it runs or once forgotten)."""
         parts = str(query.key_expr).split("/")
         goal_id = parts[-2] if len(parts) >= 2 else ""
-        payload = self._results.get(goal_id)
-        if payload is not None:
-            query.reply(self._keys.goal_result(goal_id), payload)
-        query.drop()
+        kept = self._results.get(goal_id)
+        if kept is not None:
+            with contextlib.suppress(Exception):  # the querier may have timed out and gone
+                query.reply(self._keys.goal_result(goal_id), kept[0], attachment=kept[1])
+        with contextlib.suppress(Exception):
+            query.drop()
 
     # ---- shared by both kinds of goal ------------------------------------------------------------
 
-    def _new_goal_id(self) -> str:
-        return f"{self._robot.name}-{self._salt}-{next(self._ids)}"
+    def _new_goal(self) -> tuple[str, str]:
+        """A new goal's id and signing key (kept until its result is published)."""
+        goal_id = f"{self._robot.name}-{self._salt}-{next(self._ids)}"
+        key = self._keys_of[goal_id] = signing.new_key()
+        return goal_id, key
 
     def joint_names(self, names: Sequence[str] | None) -> tuple[str, ...]:
         """Client joint names → controller names; names may leave out the robot prefix."""
@@ -147,9 +204,15 @@ class Goals:
         )
 
     def _accept(self, query: Any, kind: str, goal_id: str, duration: float) -> None:
+        key = self._keys_of.get(goal_id)
+        reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration, "result_key": key})
+        self.started(kind, goal_id, duration)
+
+    def started(self, kind: str, goal_id: str, duration: float) -> None:
+        """Log a goal just started, publish what it ended (a preempted goal's result goes out before
+        the new goal's feedback) and the status."""
         self._log.info("%s goal %s accepted (%.3f s)", kind, goal_id, duration)
-        reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration})
-        self.publish_events()  # a preempted goal's result goes out before the new goal's feedback
+        self.publish_events()
         self._status.publish()
 
     def _fail(self, query: Any, kind: str, err: Exception) -> None:
@@ -190,24 +253,10 @@ class Goals:
             await release(owned)
 
     async def _handle_trajectory_goal(self, query: Any, generation: int, owned: list[object]) -> None:
-        gate, controller = self._gate, self._controller
         try:
-            goal = await decode_sliced(TrajectoryGoalDecoder(payload(query)))
-            owned.append(goal.points)  # decoded here: nobody else holds the list
-            names = self.joint_names(goal.joint_names)
-            tolerances = self._tolerances(goal.tolerances, names)
-            gate.check_still_wanted(generation)
-            if goal.passthrough:
-                self.passthrough.check_available()
-            controller.check_can_start(self._backend.state, time.monotonic(), goal.preempt)
-            gate.planning = f"of {len(goal.points)} points"
-            planner = await check_sliced(controller.check_trajectory(names, goal.points, self._backend.state))
-            owned.append(planner)  # the controller keeps the plan it finishes, never the planner
-            await plan_tail(planner)
-            frames = await self.passthrough.encode(planner) if goal.passthrough else None
-            gate.check_still_wanted(generation)  # nothing ended motion while it was planned
-            goal_id = self._new_goal_id()
-            duration = self._start_trajectory(goal_id, goal.preempt, tolerances, planner, frames)
+            planned = await self.plan_trajectory(payload(query), generation, owned)
+            self.check_startable(planned, generation)  # nothing ended motion while it was planned
+            goal_id, duration = self.start_planned(planned)
         except (MessageError, GoalRejected) as err:
             self._reject(query, "trajectory", err)
             return
@@ -215,8 +264,83 @@ class Goals:
             self._fail(query, "trajectory", err)
             return
         finally:  # cancelled (shutting down): the task's done-callback answers
-            gate.planning = None
-        self._accept(query, "passthrough trajectory" if goal.passthrough else "trajectory", goal_id, duration)
+            self._gate.planning = None
+        self._accept(
+            query, "passthrough trajectory" if planned.passthrough else "trajectory", goal_id, duration
+        )
+
+    async def plan_trajectory(
+        self,
+        body: bytes | memoryview | None,
+        generation: int,
+        owned: list[object],
+        *,
+        no_passthrough: str | None = None,
+    ) -> PlannedGoal:
+        """Decode, check and plan a trajectory goal's ``body`` (for passthrough encode it too), all in
+        slices between robot cycles; what it decoded and planned goes into ``owned`` (to be freed in
+        slices). Raises ``MessageError`` or ``GoalRejected`` (``no_passthrough``: the reason a
+        passthrough goal is refused here); the caller clears ``gate.planning``."""
+        gate, controller = self._gate, self._controller
+        goal = await decode_sliced(TrajectoryGoalDecoder(body))
+        owned.append(goal.points)  # decoded here: nobody else holds the list
+        if goal.passthrough and no_passthrough is not None:
+            raise GoalRejected(no_passthrough)
+        names = self.joint_names(goal.joint_names)
+        tolerances = self._tolerances(goal.tolerances, names)
+        gate.check_still_wanted(generation)
+        if goal.passthrough:
+            self.passthrough.check_available()
+        controller.check_can_start(self._backend.state, time.monotonic(), goal.preempt)
+        gate.planning = f"of {len(goal.points)} points"
+        planner = await check_sliced(controller.check_trajectory(names, goal.points, self._backend.state))
+        owned.append(planner)  # the controller keeps the plan it finishes, never the planner
+        await plan_tail(planner)
+        frames = await self.passthrough.encode(planner) if goal.passthrough else None
+        return PlannedGoal(goal.preempt, goal.passthrough, tolerances, planner, frames)
+
+    def check_startable(self, planned: PlannedGoal, generation: int) -> None:
+        """Refuse (``GoalRejected``) a planned goal that could not start now: shutting down, something
+        ended motion since ``generation``, not ready, busy."""
+        self._gate.check_still_wanted(generation)
+        if planned.passthrough:
+            self.passthrough.check_available()
+        self._controller.check_can_start(self._backend.state, time.monotonic(), planned.preempt)
+
+    def start_planned(self, planned: PlannedGoal) -> tuple[str, float]:
+        """Start a planned goal now (on the robot's next cycle); its id and planned duration."""
+        goal_id, _ = self._new_goal()
+        try:
+            return goal_id, self._start_trajectory(
+                goal_id, planned.preempt, planned.tolerances, planned.planner, planned.frames
+            )
+        except BaseException:
+            self._keys_of.pop(goal_id, None)
+            raise
+
+    def result_key(self, goal_id: str) -> str | None:
+        """The signing key of a running goal (None once its result is published)."""
+        return self._keys_of.get(goal_id)
+
+    def stop_goal(self, goal_id: str, reason: str) -> bool:
+        """Stop the goal ``goal_id`` if it runs (it ends ``aborted`` with ``reason``); False if not."""
+        if self._controller.active_goal_id != goal_id:
+            return False
+        self._controller.stop(reason, time.monotonic())
+        self.publish_events()  # the robot stops a passthrough trajectory too (ended_here)
+        self._status.publish()
+        return True
+
+    def cancel_goal(self, goal_id: str) -> bool:
+        """Cancel the goal ``goal_id`` if it runs (it ends ``canceled``); False if not."""
+        running = self._backend.passthrough_goal
+        canceled = self._controller.cancel(goal_id)
+        if canceled and running == goal_id:
+            self._backend.cancel_passthrough()
+        if canceled:
+            self.publish_events()
+            self._status.publish()
+        return canceled
 
     def _start_trajectory(
         self,
@@ -254,8 +378,22 @@ class Goals:
             goal = codec.decode_move_goal(payload(query))
             self._gate.check_free_to_move()
             names = self.joint_names(goal.joint_names)
-            goal_id = self._new_goal_id()
-            duration = self._controller.accept_move(
+            tolerances = self._tolerances(goal.tolerances, names)
+            goal_id, _ = self._new_goal()
+            duration = self._accept_move(goal_id, goal, names, tolerances)
+        except (MessageError, GoalRejected) as err:
+            self._reject(query, "move", err)
+            return
+        except Exception as err:  # a bug must still answer the client, once
+            self._fail(query, "move", err)
+            return
+        self._accept(query, "move", goal_id, duration)
+
+    def _accept_move(
+        self, goal_id: str, goal: codec.MoveGoalMessage, names: tuple[str, ...], tolerances: Tolerances | None
+    ) -> float:
+        try:
+            return self._controller.accept_move(
                 goal_id,
                 names,
                 goal.positions,
@@ -264,16 +402,12 @@ class Goals:
                 duration=goal.duration,
                 velocity_scale=goal.velocity_scale,
                 acceleration_scale=goal.acceleration_scale,
-                tolerances=self._tolerances(goal.tolerances, names),
+                tolerances=tolerances,
                 preempt=goal.preempt,
             )
-        except (MessageError, GoalRejected) as err:
-            self._reject(query, "move", err)
-            return
-        except Exception as err:  # a bug must still answer the client, once
-            self._fail(query, "move", err)
-            return
-        self._accept(query, "move", goal_id, duration)
+        except BaseException:
+            self._keys_of.pop(goal_id, None)  # never started: no result will use it
+            raise
 
     def on_cancel(self, query: Any) -> None:
         """Cancel a goal (default: the active one, and a trajectory being planned)."""

@@ -1,0 +1,219 @@
+"""The cell goal (``<cell>/goal/trajectory``): trajectories on several robots that start together, or
+not at all, and end as one signed result (issue 16, "Cell coordination"; contract sections 2 and 3).
+
+Before it, nothing answered the cell goal's keys: starting two arms together meant two goals sent one
+after the other, and one arm failing left the other moving. A daemon on the mock cell runs in the
+test's loop; waits are on replies, results and samples, each bounded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import pytest
+
+from tests.integration.conftest import TWO_MOCKS, running_daemon
+from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
+from urdaemon.client import Client
+from urdaemon.daemon import Daemon
+from urdaemon.errors import GoalRejected
+from urdaemon.publish import signing
+from urdaemon.publish.keys import CellKeys
+from urdaemon.runtime import cell_goals
+
+pytestmark = pytest.mark.timeout(120)
+
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+ALICE = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
+BOB = [-0.3, -1.7, 1.7, -1.6, -1.5, -0.2]
+CELL = "testcell"
+
+
+def _points(target: list[float], duration: float) -> list[dict[str, Any]]:
+    return [{"positions": target, "time_from_start": duration}]
+
+
+@asynccontextmanager
+async def _cell(monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[tuple[Daemon, Client, list[str]]]:
+    """The mock cell, and every cell goal result the daemon publishes (its key, in order)."""
+    published: list[str] = []
+    put = cell_goals.put_signed
+
+    def counted(node: Any, key: str, payload: bytes, attachment: bytes) -> None:
+        published.append(key)
+        put(node, key, payload, attachment)
+
+    monkeypatch.setattr(cell_goals, "put_signed", counted)
+    async with running_daemon(TWO_MOCKS) as (daemon, client):
+        yield daemon, client, published
+
+
+def _part(daemon: Daemon, robot: str) -> str | None:
+    runtime = next(rt for rt in daemon.runtimes if rt.robot.name == robot)
+    return runtime.controller.active_goal_id
+
+
+async def _long_goal(client: Client, on_abort: str = "stop_all") -> CellGoalHandle:
+    return await send_cell_trajectory(
+        client, CELL, {"alice": _points(ALICE, 30.0), "bob": _points(BOB, 30.0)}, on_abort=on_abort
+    )
+
+
+async def test_both_parts_start_with_one_reply_and_the_cell_goal_succeeds_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    async with _cell(monkeypatch) as (daemon, client, published):
+        goal = await send_cell_trajectory(
+            client, CELL, {"alice": _points(ALICE, 1.0), "bob": _points(BOB, 1.2)}
+        )
+        assert set(goal.goals) == {"alice", "bob"}
+        # both run from the one reply on (the reply is sent in the turn both parts started)
+        assert _part(daemon, "alice") == goal.goals["alice"]
+        assert _part(daemon, "bob") == goal.goals["bob"]
+        assert len(goal.result_key) == 2 * signing.KEY_BYTES
+        assert goal.duration == pytest.approx(1.2, abs=0.05)
+        assert goal.goals["alice"].startswith("alice-")
+        assert goal.goals["bob"].startswith("bob-")
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "succeeded", result
+        assert result["reason"] == ""
+        assert {r: m["status"] for r, m in result["robots"].items()} == {
+            "alice": "succeeded",
+            "bob": "succeeded",
+        }
+        assert result["robots"]["alice"]["goal_id"] == goal.goals["alice"]
+        assert result["robots"]["alice"]["final_positions"] == pytest.approx(ALICE, abs=0.01)
+        assert published == [CellKeys(CELL).goal_result(goal.goal_id)]
+        # a late query is answered with the same result, signed
+        late = await client.query_replies(CellKeys(CELL).goal_result(goal.goal_id))
+        assert len(late) == 1
+        assert signing.verify(goal.result_key, late[0].payload, late[0].attachment)
+        assert json.loads(late[0].payload)["status"] == "succeeded"
+
+
+async def test_one_part_refused_starts_none(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with _cell(monkeypatch) as (daemon, client, published):
+        before = list(daemon.runtimes[0].state.positions)
+        far = [10.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]  # beyond bob's first joint's limit
+        with pytest.raises(GoalRejected) as refused:
+            await send_cell_trajectory(client, CELL, {"alice": _points(ALICE, 1.0), "bob": _points(far, 1.0)})
+        assert refused.value.reason.startswith("bob: "), refused.value.reason
+        for runtime in daemon.runtimes:
+            assert runtime.controller.statistics().goals_accepted == 0, runtime.robot.name
+            assert runtime.controller.mode == "idle"
+        assert list(daemon.runtimes[0].state.positions) == before, "alice did not move"
+        carol = await client.request(
+            CellKeys(CELL).goal_trajectory, {"robots": {"carol": {"points": _points(ALICE, 1.0)}}}
+        )
+        assert carol["accepted"] is False
+        assert carol["reason"] == "carol: no robot 'carol' in cell 'testcell'; its robots: alice, bob"
+        passthrough = {"points": _points(BOB, 1.0), "passthrough": True}
+        with pytest.raises(GoalRejected, match=r"^bob: passthrough is not supported in a cell goal"):
+            await send_cell_trajectory(client, CELL, {"alice": _points(ALICE, 1.0), "bob": passthrough})
+        assert all(rt.controller.statistics().goals_accepted == 0 for rt in daemon.runtimes)
+        assert published == []
+
+
+async def test_alice_aborting_stops_bob_and_the_cell_goal_ends_aborted_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    async with _cell(monkeypatch) as (daemon, client, published):
+        goal = await _long_goal(client)
+        assert _part(daemon, "bob") == goal.goals["bob"]
+        alice = await client.robot("alice")
+        assert (await alice.stop())["ok"] is True  # alice's part ends aborted, "stop requested"
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "aborted", result
+        assert result["reason"] == "robot 'alice' ended aborted: stop requested"
+        assert result["robots"]["alice"]["status"] == "aborted"
+        bob = result["robots"]["bob"]
+        assert bob["status"] == "aborted"
+        assert bob["reason"] == f"cell goal {goal.goal_id}: robot 'alice' ended aborted: stop requested"
+        assert _part(daemon, "bob") is None
+        assert published == [CellKeys(CELL).goal_result(goal.goal_id)], "one result, once"
+
+
+async def test_continue_leaves_bob_running(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with _cell(monkeypatch) as (daemon, client, published):
+        goal = await _long_goal(client, on_abort="continue")
+        alice = await client.robot("alice")
+        await alice.stop()
+        bob = await client.robot("bob")
+        status = await bob.status()  # a status published after alice's stop was handled
+        assert status["active_goal"] == goal.goals["bob"], status
+        assert _part(daemon, "bob") == goal.goals["bob"]
+        assert published == [], "no cell result while bob's part runs"
+        await bob.stop()
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "aborted"
+        assert result["robots"]["bob"]["reason"] == "stop requested"
+        assert published == [CellKeys(CELL).goal_result(goal.goal_id)]
+
+
+async def test_cancel_cancels_every_part(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with _cell(monkeypatch) as (daemon, client, published):
+        assert all(rt.controller.active_goal_id is None for rt in daemon.runtimes)
+        goal = await _long_goal(client)
+        reply = await goal.cancel()
+        assert reply["canceled"] is True, reply
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "canceled"
+        assert {r: m["status"] for r, m in result["robots"].items()} == {
+            "alice": "canceled",
+            "bob": "canceled",
+        }
+        again = await goal.cancel()
+        assert again["canceled"] is False
+        assert again["reason"] == f"cell goal {goal.goal_id} is not active"
+        assert published == [CellKeys(CELL).goal_result(goal.goal_id)]
+
+
+async def test_a_forged_cell_result_is_never_returned(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with _cell(monkeypatch) as (_, client, _published):
+        goal = await _long_goal(client)
+        key = CellKeys(CELL).goal_result(goal.goal_id)
+        watch = client.subscribe(key)
+        # anyone on the network can publish on the key (the lease guards commands, not state); only
+        # the daemon can sign with the key the accepting reply gave this client
+        forged = {"v": 1, "goal_id": goal.goal_id, "status": "succeeded", "robots": {}, "reason": "forged"}
+        client.session.put(key, json.dumps(forged).encode(), attachment=b"0" * 64)
+        client.session.put(key, json.dumps(forged).encode())
+        for _ in range(2):
+            seen = await watch.get_json(timeout=10.0)  # it reached this client's session
+            assert seen["reason"] == "forged"
+        await goal.cancel()
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "canceled", result
+        assert goal.ignored == 2
+
+
+async def test_bad_requests_are_refused_naming_what_is_wrong(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with _cell(monkeypatch) as (_, client, _published):
+        key = CellKeys(CELL).goal_trajectory
+        cases = {
+            b"[]": "cell goal: not valid JSON: expected a JSON object",
+            b'{"robots": {}}': "cell goal.robots: expected an object naming at least one",
+            b'{"robots": {"alice": {"points": []}}, "on_abort": "maybe"}': "cell goal.on_abort",
+            b'{"robots": {"alice": {"points": []}}, "speed": 1}': "cell goal: unknown field(s) speed",
+        }
+        for body, reason in cases.items():
+            answer = json.loads((await _ask(client, key, body))[0])
+            assert answer["accepted"] is False
+            assert answer["reason"].startswith(reason), (body, answer)
+        cancel = json.loads((await _ask(client, CellKeys(CELL).goal_cancel, b"{}"))[0])
+        assert cancel == {
+            "v": 1,
+            "canceled": False,
+            "reason": "cell cancel.goal_id: required (the cell goal's id)",
+        }
+
+
+async def _ask(client: Client, key: str, body: bytes) -> list[bytes]:
+    def ask() -> list[bytes]:
+        return [r.ok.payload.to_bytes() for r in client.session.get(key, payload=body, timeout=10.0) if r.ok]
+
+    return await asyncio.get_running_loop().run_in_executor(None, ask)
