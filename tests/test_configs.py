@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from urdaemon.cell import Cell, load_cell
+from urdaemon.errors import ConfigError
 from urdaemon.fakeur.controller import FakePorts
 
 REPO = Path(__file__).resolve().parents[1]
@@ -252,3 +253,45 @@ def test_docs_name_every_connect_back_port_and_the_commands() -> None:
     for name, host_port in (("alice", 6080), ("bob", 6081)):
         assert f"http://localhost:{host_port}/vnc.html" in text
         assert host_port in published(service(name))
+
+
+SECURE = CONFIGS / "secure_cell" / "secure_cell.yaml"
+"""The TLS + mutual TLS + access control example (docs/security.md); its certs/ folder is made by the
+docs' openssl commands, never committed."""
+
+
+def test_the_secure_cell_loads_once_its_certificates_exist(tmp_path: Path) -> None:
+    import trustme
+
+    (tmp_path / "certs").mkdir()
+    ca = trustme.CA()
+    ca.cert_pem.write_to_path(str(tmp_path / "certs" / "ca.pem"))
+    daemon = ca.issue_cert("127.0.0.1", common_name="urdaemon")
+    daemon.cert_chain_pems[0].write_to_path(str(tmp_path / "certs" / "daemon.pem"))
+    daemon.private_key_pem.write_to_path(str(tmp_path / "certs" / "daemon-key.pem"))
+    copy = tmp_path / SECURE.name
+    copy.write_text(SECURE.read_text(encoding="utf-8"), encoding="utf-8")
+    cell = load_cell(copy)
+    assert cell.zenoh.tls is not None
+    assert cell.zenoh.tls.mutual
+    assert cell.zenoh.tls.certificate == str((tmp_path / "certs" / "daemon.pem").resolve())
+    assert all(e.startswith("tls/127.0.0.1:") for e in cell.zenoh.listen)
+    assert cell.zenoh.access is not None
+    assert cell.zenoh.access.unknown_robots([r.name for r in cell.robots]) is None
+
+
+def test_the_secure_cell_without_certificates_names_each_missing_file(tmp_path: Path) -> None:
+    copy = tmp_path.resolve() / SECURE.name
+    copy.write_text(SECURE.read_text(encoding="utf-8"), encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_cell(copy)
+    for field, name in (
+        ("root_ca", "ca.pem"),
+        ("certificate", "daemon.pem"),
+        ("private_key", "daemon-key.pem"),
+    ):
+        assert any(
+            f"zenoh.tls.{field}: file not found: {copy.parent / 'certs' / name}" in line
+            and "docs/security.md" in line
+            for line in info.value.errors
+        ), info.value.errors

@@ -146,7 +146,10 @@ class TlsOptions(_Frozen):
     @field_validator("root_ca", "certificate", "private_key")
     @classmethod
     def _exists(cls, value: str, info: ValidationInfo) -> str:
-        return _resolve_file(value, info)
+        try:
+            return _resolve_file(value, info)
+        except ValueError as err:
+            raise ValueError(f"{err} (docs/security.md shows how to make the certificates)") from None
 
 
 class Identity(_Frozen):
