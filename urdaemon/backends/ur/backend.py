@@ -9,10 +9,12 @@ reconnect starts from scratch and motion resumes only from a new command, seeded
 
 This module supervises the links (connect, watch, close), runs the cycle and routes the links' events;
 the jobs it composes have their own modules: ``reverse_channel`` (what the program does with the
-reverse socket), ``frames`` (the bytes written to it), ``program`` (the control program), ``startup``
-(power, brakes, play), ``services`` (script commands, RTDE inputs, the dashboard), ``readiness`` (the
-status's reason). The logic takes ``now`` (the reverse channel, the program's windows); only the
-asyncio parts read the clock: this module, start-up's waits and the servers' admission window.
+reverse socket), ``frames`` (the bytes written to it), ``program`` (the control program, and the
+address it connects back to), ``route`` (where the callback servers listen: the interface that reaches
+the robot), ``startup`` (power, brakes, play), ``services`` (script commands, RTDE inputs, the
+dashboard), ``readiness`` (the status's reason). The logic takes ``now`` (the reverse channel, the
+program's windows); only the asyncio parts read the clock: this module, start-up's waits and the
+servers' admission window.
 """
 
 from __future__ import annotations
@@ -76,7 +78,6 @@ class UrBackend(Backend):
         self.ports = robot.ports.as_dict()
         self.expected_hash = expected_hash
         self.servers = CallbackServers(self.address, self.ports, self)
-        self._servers_started = False
         self._mapper = StateMapper(output_recipe())
         self._inputs = input_recipe()
         self._rtde: RtdeLink | None = None
@@ -108,9 +109,8 @@ class UrBackend(Backend):
         """Connect every link, start streaming, keep the program running; raise when a link drops."""
         self._on_cycle = on_cycle
         self._begin_run()
-        if not self._servers_started and not self.options.read_only:
-            await self.servers.start(self.options.listen_address or "0.0.0.0")
-            self._servers_started = True
+        if not self.options.read_only:  # before RTDE: a URCap may fetch the program as soon as it plays
+            await self._program.listen(self.address)
         try:
             rtde = await self._connect_rtde()
             primary = self._primary = await PrimaryLink.connect(self.address, self._messages.on_message)
@@ -157,11 +157,9 @@ class UrBackend(Backend):
         if rtde.controller_version is not None:
             version = rtde.controller_version
             self._program.controller_version = (version.major, version.minor, version.bugfix)
-        sockname = rtde.transport.get_extra_info("sockname") if rtde.transport else None
-        self._program.host_ip = self.options.reverse_ip or (str(sockname[0]) if sockname else "127.0.0.1")
         peer = rtde.transport.get_extra_info("peername") if rtde.transport else None
-        if peer:  # a host name in the cell file: the robot's connections come from its IP
-            self.servers.set_robot_address(str(peer[0]))
+        sockname = rtde.transport.get_extra_info("sockname") if rtde.transport else None
+        await self._program.rtde_connected(str(peer[0]) if peer else "", str(sockname[0]) if sockname else "")
         return rtde
 
     async def _serve(self, primary: PrimaryLink, primary_task: asyncio.Task[None], rtde: RtdeLink) -> None:
@@ -203,9 +201,7 @@ class UrBackend(Backend):
         """Hand control back (STOPPED), close the links and the callback servers (the daemon stops)."""
         self._act(self._channel.stop())
         self._close_links()
-        if self._servers_started:
-            await self.servers.close()
-            self._servers_started = False
+        await self.servers.close()
 
     async def _dashboard_link(self) -> DashboardLink:
         """The dashboard connection, opened now if there is none (it does not need the other links)."""

@@ -1,6 +1,8 @@
 """The control program the UR backend runs on the robot: its text, when it is sent, and what is known of it.
 
-The text is rendered once per (host address, controller version) and cached. Headless, the backend
+The text is rendered once per (host address, controller version) and cached. The host address is
+where the callback servers listen (``route.listen_plan``, placed here before RTDE connects), or the
+daemon's end of its RTDE link when they listen on every interface. Headless, the backend
 sends it on the primary interface, again at most every ``PROGRAM_RESEND_S`` while it has not connected
 back; with the External Control URCap the robot fetches it from the script sender. Time is a
 parameter (``now``, monotonic seconds): the caller reads the clock.
@@ -19,6 +21,7 @@ from typing import Any
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.readiness import ProgramFacts, not_ready_reason
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, ReverseChannel
+from urdaemon.backends.ur.route import ListenPlan
 from urdaemon.backends.ur.servers import REPLACED, CallbackServers
 from urdaemon.cell.config import Robot, UrOptions
 from urdaemon.model import Lifecycle, RobotMode, RobotState
@@ -54,7 +57,10 @@ class ControlProgram:
         self.builder = builder
         """Renders the text instead of ``urscript.render_control_script`` (tests)."""
         self.host_ip = ""
-        """The address the program connects back to (the daemon's side of the RTDE link)."""
+        """The address the program connects back to: where the servers listen (``plan``), else the
+        daemon's side of the RTDE link."""
+        self.plan: ListenPlan | None = None
+        """Where the callback servers listen and why (``route``; None before they do)."""
         self.controller_version = (5, 10, 0)
         self.sent_at = -1e9
         """When the program was last sent headless."""
@@ -71,6 +77,23 @@ class ControlProgram:
         self._cache: tuple[tuple[Any, ...], str] | None = None
         self._reason_key: tuple[Any, ...] = ()
         self._reason = ""
+
+    # ---- where it connects back to ----------------------------------------------------------------
+
+    async def listen(self, robot: str) -> None:
+        """Have the callback servers listen where the robot at ``robot`` reaches them
+        (``CallbackServers.place``), and the program connect back there."""
+        plan = self.plan = await self.servers.place(robot, self.options, self.robot.name)
+        self.host_ip = plan.connect_back or self.host_ip
+
+    async def rtde_connected(self, peer: str, sockname: str) -> None:
+        """RTDE reached the robot at ``peer`` (its IP) from our ``sockname``: if the servers listen for
+        another of its IPs (a name that resolves to several), they move; the program connects back to
+        where they listen, or to ``sockname`` when they listen on every interface."""
+        if self.plan is not None and peer and peer.split("%")[0] != self.plan.robot_ip.split("%")[0]:
+            await self.listen(peer)
+        back = self.plan.connect_back if self.plan is not None else self.options.reverse_ip
+        self.host_ip = back or sockname or "127.0.0.1"
 
     # ---- the text ----------------------------------------------------------------------------------
 

@@ -35,6 +35,8 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from urdaemon.backends.ur.route import ListenPlan, listen_plan
+from urdaemon.cell.config import UrOptions
 from urdaemon.errors import BackendError, ConnectionLostError
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 from urdaemon.protocols._buffer import Side
@@ -206,8 +208,9 @@ class CallbackServer:
             self.link.close()
         if self._server is not None:
             self._server.close()
+            server, self._server = self._server, None
             with contextlib.suppress(Exception):
-                await self._server.wait_closed()
+                await server.wait_closed()
 
 
 class CallbackServers:
@@ -243,6 +246,8 @@ class CallbackServers:
         self.program_links = (self.reverse, self.trajectory, self.script_command)
         """The links the control program holds while it runs (it dials them in the order
         trajectory, script command, reverse)."""
+        self.listening_on: str | None = None
+        """The address the servers listen on (None: they do not)."""
 
     def expect_program(self) -> None:
         """The daemon started a new program: its connections may replace the old program's."""
@@ -271,9 +276,31 @@ class CallbackServers:
         except BackendError:
             await self.close()
             raise
+        self.listening_on = host
+
+    async def place(self, robot: str, options: UrOptions, name: str) -> ListenPlan:
+        """Listen where the robot at ``robot`` reaches them (``route.listen_plan``, in a thread: it may
+        resolve a name) and accept only its IP; ``name`` is the robot's, for the log."""
+        plan = await asyncio.to_thread(listen_plan, robot, options)
+        self.set_robot_address(plan.robot_ip)
+        if await self.listen(plan.address):
+            log.info("[%s] callback servers listening on %s, %s", name, plan.address, plan.why)
+        return plan
+
+    async def listen(self, host: str) -> bool:
+        """Listen on ``host`` (see ``start``); if they listen on another address (the robot is now
+        reached through another interface), close there first. True if they started now."""
+        if host == self.listening_on:
+            return False
+        if self.listening_on is not None:
+            log.info("callback servers: leaving %s for %s", self.listening_on, host)
+            await self.close()
+        await self.start(host)
+        return True
 
     async def close(self) -> None:
-        """Close every server."""
+        """Close every server (and their links); nothing if they do not listen."""
+        self.listening_on = None
         for server in self.all:
             await server.close()
 
