@@ -159,6 +159,13 @@ def _add_cell_tools(sub: Any) -> None:
     urdf = sub.add_parser("urdf", help="print the cell URDF")
     urdf.add_argument("--config", required=True)
 
+    # its arguments are transport_security's own (parsed there: see main), not loaded for every command
+    sub.add_parser(
+        "client-config",
+        help="write a client's Zenoh config (TLS certificates) for a cell file; use it with --zenoh-config",
+        add_help=False,
+    )
+
 
 def _add_client_tools(sub: Any) -> None:
     """``echo``, ``service``, ``dashboard``: Zenoh clients of a serving daemon."""
@@ -303,7 +310,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
     from urdaemon.logs import setup_logging, shutdown_logging
 
-    args = _parser().parse_args(_join_option_values(sys.argv[1:] if argv is None else list(argv)))
+    words = sys.argv[1:] if argv is None else list(argv)
+    if words[:1] == ["client-config"]:
+        from urdaemon.transport_security import client_config_main
+
+        return client_config_main(words[1:])
+    args = _parser().parse_args(_join_option_values(words))
     installed = setup_logging(args.verbose)  # a bounded queue to stderr: never blocks the loop
     try:
         return _dispatch(args)
