@@ -38,8 +38,9 @@ __all__ = [
     "write_client_config",
 ]
 
-ANYONE = "urdaemon-anyone"
-"""The Zenoh ACL subject every connection matches: it may stop robots and find the cell's robots."""
+ANYONE = "urdaemon:anyone"
+"""The Zenoh ACL subject every connection matches: it may stop robots and find the cell's robots (the
+colon keeps it apart from the cell file's identity names)."""
 ANY_CELL = "*"
 """The cell chunk of the access rules when the caller does not name the cell (see ``configure_daemon``)."""
 
@@ -57,8 +58,6 @@ _WATCH = (
 """A client watches or asks for the daemon's liveliness tokens."""
 _HOLD = (("ingress", "liveliness_token"),)
 """A client declares a liveliness token (the lease holder's)."""
-_WATCHED = (("egress", "declare_liveliness_subscriber"), ("egress", "liveliness_query"))
-"""The daemon's watch of liveliness tokens reaches the client (so the client's token reaches it)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,8 +191,6 @@ def _command_rules(cell: str, robot: str) -> list[_Rule]:
         _Rule(f"command {robot}: queries", _GET, queries),
         _Rule(f"command {robot}: streams", _PUT, streams),
         _Rule(f"command {robot}: lease token", _HOLD, (keys.lease_holder("*"),)),
-        # the daemon watches every holder's token with one wildcard (runtime/lease_keeper.py)
-        _Rule("lease watch", _WATCHED, (CellKeys(cell).lease_holders,)),
     ]
     if robot == ALL_ROBOTS:
         whole = CellKeys(cell)

@@ -116,8 +116,18 @@ class Secure:
         cert, key = self.certs.pair(name)
         return _config(client_config(self.cell, certificate=cert, private_key=key, endpoint=self.listen))
 
-    async def session(self, name: str) -> Any:
-        return await _open(self.config(name))
+    async def session(self, name: str, mode: str = "peer") -> Any:
+        """A session of identity ``name`` that reached the daemon (it sees alice's liveliness token,
+        which every connection may). ``peer`` as the Python client opens its session."""
+        conf = self.config(name)
+        conf.insert_json5("mode", json.dumps(mode))
+        session = await _open(conf)
+        try:
+            await _wait_alive(session, f"{CELL}/alice/alive")
+        except BaseException:
+            session.close()
+            raise
+        return session
 
 
 @asynccontextmanager
@@ -131,7 +141,7 @@ async def secure_daemon(certs: Certs, *, lease: bool) -> AsyncIterator[Secure]:
         stop = asyncio.Event()
         task = asyncio.create_task(daemon.run(stop))
         secure = Secure(daemon, cell, listen, certs)
-        opening = asyncio.ensure_future(secure.session("operator"))
+        opening = asyncio.ensure_future(_open(secure.config("operator")))  # client mode: waits to connect
         await asyncio.wait({task, opening}, return_when=asyncio.FIRST_COMPLETED)
         if task.done():  # the daemon could not start (its port was taken meanwhile): another port
             with contextlib.suppress(BaseException):
