@@ -381,19 +381,33 @@ async def zenoh_ask(
     timeout: float = 10.0,
 ) -> list[dict[str, Any]]:
     """Every reply to a ``get`` on ``key`` (a dict is sent as JSON, bytes as they are), decoded as JSON
-    (an error reply as ``{"error": text}``); asked in a thread, so a daemon in this loop answers."""
+    (an error reply as ``{"error": text}``). Replies come on Zenoh's threads, so a daemon in this loop
+    answers, and any number of asks may wait at once."""
+    import zenoh
+
     payload = json.dumps(body).encode() if isinstance(body, dict) else body
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[None] = loop.create_future()
+    replies: list[dict[str, Any]] = []
 
-    def ask() -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = []
-        for reply in session.get(key, payload=payload, attachment=attachment, timeout=timeout):
-            if reply.ok is not None:
-                out.append(json.loads(bytes(reply.ok.payload.to_bytes())))
-            else:
-                out.append({"error": bytes(reply.err.payload.to_bytes()).decode(errors="replace")})
-        return out
+    def on_reply(reply: Any) -> None:
+        if reply.ok is not None:
+            decoded = json.loads(bytes(reply.ok.payload.to_bytes()))
+        else:
+            decoded = {"error": bytes(reply.err.payload.to_bytes()).decode(errors="replace")}
+        loop.call_soon_threadsafe(replies.append, decoded)
 
-    return await asyncio.get_running_loop().run_in_executor(None, ask)
+    def finish() -> None:  # on the loop, after every reply was appended (the loop's order)
+        if not done.done():
+            done.set_result(None)
+
+    def on_done() -> None:
+        loop.call_soon_threadsafe(finish)
+
+    handler = zenoh.handlers.Callback(on_reply, on_done)
+    session.get(key, handler, payload=payload, attachment=attachment, timeout=timeout)
+    await asyncio.wait_for(done, timeout + 10.0)
+    return replies
 
 
 async def acquire_lease(

@@ -115,9 +115,10 @@ async def _flood(client: Client, robot: RobotClient, fake: FakeController, pause
     """Goals the daemon rejects and logs (an unknown field name echoed), until the pause is over."""
     sent = 0
     body: dict[str, Any] = {"positions": HOME, FLOOD_FIELD: 1}
+    token = (await robot.ensure_lease()).encode()  # the robot's holder floods: each goal is decoded
     while not paused.is_set() and sent < 5_000:
         with contextlib.suppress(UrDaemonError):
-            await client.query(robot.keys.goal_move, body, timeout=1.0)
+            await client.query(robot.keys.goal_move, body, timeout=1.0, attachment=token)
         sent += 1
         # one per 3 of the robot's cycles (at most ~170 a second): each logged 450 bytes, the 64 KiB
         # pipe fills in under a second, and the flood tests the log, not how many queries a busy
@@ -211,7 +212,9 @@ async def test_a_client_field_name_cannot_forge_a_daemon_log_line(tmp_path: Path
     try:
         async with await Client.connect(listen, timeout=30.0) as client:
             alice = await client.robot("alice", timeout=30.0)
-            reply = await client.request(alice.keys.goal_move, {"positions": HOME, f"x\n{forged}\r": 1})
+            token = (await alice.ensure_lease()).encode()  # the holder's goal is decoded, and logged
+            body = {"positions": HOME, f"x\n{forged}\r": 1}
+            reply = await client.request(alice.keys.goal_move, body, attachment=token)
             assert reply["accepted"] is False
     finally:
         daemon.send_signal(signal.SIGTERM)

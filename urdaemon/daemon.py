@@ -32,6 +32,7 @@ from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals
+from urdaemon.runtime.lease_keeper import watch_lease_holders
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
@@ -166,6 +167,7 @@ class Daemon:
                 except RealtimeUnavailable as err:
                     log.warning("serving at normal priority: %s", err)
             self._build(node)
+            watch_lease_holders(node, self.cell, self.runtimes)  # leases: checked or not; end with the holder
             cell_goals = CellGoals(node, self.keys, self.runtimes)  # trajectories started together
             cell_goals.declare()
             node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)

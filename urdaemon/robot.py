@@ -1,9 +1,10 @@
 """One robot served by the daemon: backend + motion controller + its Zenoh keys, supervised.
 
 ``RobotRuntime`` keeps the supervision of the backend (restarts with backoff) and the cycle, and
-composes the rest (urdaemon/runtime/): the status, goals, commands and services. The backend clocks
-``_on_cycle`` (the robot is the clock). That path only ticks the controller, encodes the joint state
-and TCP pose and publishes them; everything else happens on requests or on slow timers.
+composes the rest (urdaemon/runtime/): the status, goals, commands, services and the command lease.
+The backend clocks ``_on_cycle`` (the robot is the clock). That path only ticks the controller,
+encodes the joint state and TCP pose and publishes them; everything else happens on requests or on
+slow timers.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from urdaemon.backends.base import Backend
 from urdaemon.cell.config import PublishOptions, Robot
 from urdaemon.control import MotionController
 from urdaemon.description.kinematics import DhKinematics
-from urdaemon.errors import UrDaemonError
+from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
@@ -24,6 +25,8 @@ from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
+from urdaemon.runtime.lease import LeaseBook
+from urdaemon.runtime.lease_keeper import LeaseKeeper
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.service_runner import ServiceRunner
 from urdaemon.runtime.status import StatusPublisher
@@ -74,6 +77,13 @@ class RobotRuntime:
         self.services = ServiceRunner(
             backend, controller, (self.gate, self.requests, self.status, self.goals), self.log
         )
+        self.lease = LeaseKeeper(
+            self.keys,
+            LeaseBook(robot.name, self.keys.lease),  # checked unless the cell says not (daemon.py)
+            self._lease_ended,
+            (self.requests, self.status),
+            self.log,
+        )
         self.service_names: frozenset[str] = frozenset()
         """The services this robot answers (once declared)."""
         self._kinematics = kinematics
@@ -97,12 +107,15 @@ class RobotRuntime:
         self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)
         self.status.declare(node, keys)
         # every queryable and subscriber acts on its exact key only and refuses oversized messages
-        # before reading them (publish/node.py)
-        self.goals.declare()
-        self.service_names = self.services.declare(node, keys)
+        # before reading them, and a commanding one what does not carry the lease holder's token
+        # (publish/node.py)
+        guard = self.lease.book
+        self.goals.declare(guard)
+        self.service_names = self.services.declare(node, keys, guard)
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self.status.publish
-        self.commands.declare(node, keys)
+        self.commands.declare(node, keys, guard)
+        self.lease.declare(node)
         node.liveliness_token(keys.alive)
 
     async def run(self) -> None:
@@ -149,6 +162,17 @@ class RobotRuntime:
         self.controller.abort(reason)
         self.backend.state.program_running = False
         self.goals.publish_events()
+        self.status.publish()
+
+    def _lease_ended(self, reason: str) -> None:
+        """The command lease ended or passed on: stop whatever moves the robot, as ``stop`` does, and
+        end freedrive (nobody may keep it on now)."""
+        self.services.stop(reason)
+        if self.backend.freedrive_active:
+            try:
+                self.backend.freedrive(False, 0.0)
+            except BackendError as err:
+                self.log.warning("ending freedrive as the lease ended failed: %s", err)
         self.status.publish()
 
     # ---- the cycle (hot path) --------------------------------------------------------------------

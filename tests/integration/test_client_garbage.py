@@ -1,5 +1,8 @@
 """Any client may send nonsense: every queryable still answers once, every stream rejection is reported,
 and the daemon keeps serving both robots without losing a task, a setting or a cycle.
+
+The test's session holds both robots' command leases (issue 16) and sends the token with every
+message, so the garbage reaches the decoders behind the lease check.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from typing import Any
 import pytest
 import zenoh
 
+from tests.helpers import LeaseGrant, acquire_lease
 from urdaemon.client import Client, RobotClient
 from urdaemon.daemon import Daemon
 
@@ -153,11 +157,13 @@ def loop_errors() -> Iterator[list[dict[str, Any]]]:
         loop.set_exception_handler(previous)
 
 
-async def ask_raw(client: Client, key: str, payload: bytes | None) -> list[tuple[bool, bytes]]:
+async def ask_raw(
+    client: Client, key: str, payload: bytes | None, attachment: bytes | None = None
+) -> list[tuple[bool, bytes]]:
     """Every reply (ok?, payload) to a ``get`` on ``key`` carrying ``payload`` as it is."""
 
     def ask() -> list[tuple[bool, bytes]]:
-        replies = client.session.get(key, payload=payload, timeout=QUERY_TIMEOUT_S)
+        replies = client.session.get(key, payload=payload, attachment=attachment, timeout=QUERY_TIMEOUT_S)
         out = []
         for reply in replies:
             if reply.ok is not None:
@@ -187,8 +193,10 @@ def _check_refusal(key: str, suffix: str, raw: bytes, sent: object) -> None:
     assert reply["reason"].strip(), f"{what}: empty reason"
 
 
-async def _one_reply(client: Client, key: str, payload: bytes | None) -> bytes:
-    replies = await ask_raw(client, key, payload)
+async def _one_reply(
+    client: Client, key: str, payload: bytes | None, attachment: bytes | None = None
+) -> bytes:
+    replies = await ask_raw(client, key, payload, attachment)
     sent = payload[:80] if payload is not None else None
     assert len(replies) == 1, f"{key} <- {sent!r}: {len(replies)} replies, expected exactly one"
     ok, body = replies[0]
@@ -249,10 +257,19 @@ async def assert_still_serving(daemon: Daemon, client: Client, errors: list[dict
     assert not errors, f"a handler raised on the loop: {[str(c.get('exception')) for c in errors]}"
 
 
+async def leases(daemon: Daemon, client: Client) -> dict[str, LeaseGrant]:
+    """Every robot's command lease, held by the client's session."""
+    return {
+        rt.robot.name: await acquire_lease(client.session, daemon.cell.cell, rt.robot.name)
+        for rt in daemon.runtimes
+    }
+
+
 async def test_every_queryable_answers_garbage_once_with_a_refusal_and_the_daemon_keeps_serving(
     cell: tuple[Daemon, Client],
 ) -> None:
     daemon, client = cell
+    held = await leases(daemon, client)
     rng = random.Random(SEED)
     raws = raw_garbage(rng)
     dicts = dict_garbage()
@@ -262,12 +279,13 @@ async def test_every_queryable_answers_garbage_once_with_a_refusal_and_the_daemo
     with loop_errors() as errors:
         for rt in daemon.runtimes:
             base = rt.keys.base
+            token = held[rt.robot.name].token
             for suffix in FLAG_OF:
                 key = f"{base}/{suffix}"
                 for payload in [None, *raws]:
-                    _check_refusal(key, suffix, await _one_reply(client, key, payload), payload)
+                    _check_refusal(key, suffix, await _one_reply(client, key, payload, token), payload)
                 for body in dicts:
-                    replies = await client.query(key, body, timeout=QUERY_TIMEOUT_S)
+                    replies = await client.query(key, body, timeout=QUERY_TIMEOUT_S, attachment=token)
                     assert len(replies) == 1, f"{key} <- {str(body)[:120]}: {len(replies)} replies"
                     _check_refusal(key, suffix, replies[0], body)
             # results of goals that never existed: no answer, and no harm
@@ -298,6 +316,7 @@ async def _status_with(robot: RobotClient, client: Client, at_least: int) -> dic
 
 async def test_garbage_stream_commands_are_each_reported_and_counted(cell: tuple[Daemon, Client]) -> None:
     daemon, client = cell
+    held = await leases(daemon, client)
     rng = random.Random(SEED + 1)
     bad_commands = [
         *raw_garbage(rng),
@@ -321,7 +340,12 @@ async def test_garbage_stream_commands_are_each_reported_and_counted(cell: tuple
             for key in keys:
                 for payload in bad_commands:
                     # one at a time: each bad command must come back as its own event
-                    client.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+                    client.session.put(
+                        key,
+                        payload,
+                        congestion_control=zenoh.CongestionControl.BLOCK,
+                        attachment=held[robot.name].token,
+                    )
                     sent += 1
                     event = await events.get_json(timeout=5.0)
                     what = f"{key} <- {payload[:80]!r}: {event}"
@@ -344,15 +368,17 @@ async def test_goals_beyond_the_planners_time_range_are_refused_with_a_reason(
 ) -> None:
     daemon, client = cell
     alice = daemon.runtimes[0].keys
+    lease = await acquire_lease(client.session, daemon.cell.cell, alice.robot)
     target = [0.2, *HOME[1:]]
     with loop_errors() as errors:
         for key, body in (
             (alice.goal_move, {"positions": target, "duration": 1e4}),
             (alice.goal_trajectory, {"points": [{"positions": target, "time_from_start": 1e4}]}),
         ):
-            replies = await client.query(key, body, timeout=2.0)
+            replies = await client.query(key, body, timeout=2.0, attachment=lease.token)
             assert len(replies) == 1, f"{key}: {len(replies)} replies to a 10 000 s goal"
             reply = json.loads(replies[0])
             assert reply["accepted"] is False
             assert reply["reason"]
+            assert not reply["reason"].startswith("lease:"), reply  # refused for its time, not the lease
         assert not errors, [str(c.get("exception")) for c in errors]

@@ -136,6 +136,7 @@ async def test_position_stream_moves_the_robot_and_the_deadman_stops_it(cell: tu
     states = alice.joint_states(100_000)
     start = list(state.positions)
     target = [start[0] + 0.3, *start[1:]]
+    await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
     # stream at ~100 Hz of joint-state time for 1 s: each command is sent after 5 new joint states
     for _ in range(100):
         alice.stream_positions(target)
@@ -162,7 +163,8 @@ async def test_position_stream_moves_the_robot_and_the_deadman_stops_it(cell: tu
 async def test_stream_commands_are_refused_while_a_goal_runs(cell: tuple[Daemon, Client]) -> None:
     _, client = cell
     alice = await client.robot("alice")
-    events = client.subscribe(alice.keys.events, 100)
+    await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
+    events = client.subscribe(alice.keys.events, 100)  # from here on: no lease event to skip
     goal = await alice.move([0.5, *HOME[1:]], duration=2.0)
     alice.stream_velocities([0.1] * 6)
     event = await events.get_json(timeout=5.0)

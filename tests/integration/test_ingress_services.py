@@ -2,18 +2,20 @@
 range before anything acts; a running service refuses a second call of itself.
 
 A cell of two mock robots; service calls are counted on the backend. Waits are on query replies.
+The test's session holds alice's command lease (issue 16) and sends its token with every request,
+so what is checked here is the service's own refusal, never the lease's.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 from collections import Counter
 from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 
+from tests.helpers import LeaseGrant, acquire_lease, zenoh_ask
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
@@ -48,16 +50,21 @@ async def cell(monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[tuple[Daemon, C
         yield daemon, client, calls
 
 
-async def _ask(client: Client, key: str, payload: bytes | None) -> dict[str, Any]:
-    def ask() -> list[bytes]:
-        return [
-            r.ok.payload.to_bytes() for r in client.session.get(key, payload=payload, timeout=5.0) if r.ok
-        ]
+@pytest.fixture
+async def lease(cell: tuple[Daemon, Client, Counter[str]]) -> LeaseGrant:
+    """alice's command lease, held by the client's session."""
+    return await acquire_lease(cell[1].session, "testcell", "alice")
 
-    replies = await asyncio.get_running_loop().run_in_executor(None, ask)
+
+async def _ask(
+    client: Client, key: str, payload: bytes | dict[str, Any] | None, lease: LeaseGrant
+) -> dict[str, Any]:
+    """The one reply to a query sent with the lease's token, as the client does (``"v": 1`` added to a
+    dict, bytes sent as they are)."""
+    body = {"v": 1, **payload} if isinstance(payload, dict) else payload
+    replies = await zenoh_ask(client.session, key, body, attachment=lease.token, timeout=10.0)
     assert len(replies) == 1, (key, replies)
-    reply: dict[str, Any] = json.loads(replies[0])
-    return reply
+    return replies[0]
 
 
 GARBAGE = [
@@ -76,7 +83,7 @@ GARBAGE = [
 
 
 async def test_payloadless_services_refuse_any_payload_but_nothing_or_an_empty_object(
-    cell: tuple[Daemon, Client, Counter[str]],
+    cell: tuple[Daemon, Client, Counter[str]], lease: LeaseGrant
 ) -> None:
     """Reproduction: the payload-less services (startup, resend_program, hand_back_control,
     zero_ft_sensor, end_force_mode, start/end_tool_contact) ignored their payload, so every garbage
@@ -85,7 +92,7 @@ async def test_payloadless_services_refuse_any_payload_but_nothing_or_an_empty_o
     for name in ACTIONS:
         key = f"testcell/alice/service/{name}"
         for payload in GARBAGE:
-            reply = await _ask(client, key, payload)
+            reply = await _ask(client, key, payload, lease)
             assert reply["ok"] is False, (name, payload, reply)
             reason = reply["reason"]
             assert reason.startswith(name), reason
@@ -94,16 +101,16 @@ async def test_payloadless_services_refuse_any_payload_but_nothing_or_an_empty_o
         assert not calls, (name, calls)
         accepted: list[bytes | None] = [None, b"", b"{}", b'{"v": 1}', b' { "v" : 1 } ']
         for empty in accepted:
-            reply = await _ask(client, key, empty)
+            reply = await _ask(client, key, empty, lease)
             assert reply == {"v": 1, "ok": True}, (name, empty, reply)
         assert calls[f"alice.{ACTIONS[name]}"] >= 5, (name, calls)
         calls.clear()
-    reply = await _ask(client, "testcell/alice/service/startup", b'{"now": 1}')
+    reply = await _ask(client, "testcell/alice/service/startup", b'{"now": 1}', lease)
     assert reply["reason"] == "startup takes no arguments, but got: unknown field(s) now"
 
 
 async def test_a_running_service_refuses_a_second_call_of_itself(
-    cell: tuple[Daemon, Client, Counter[str]], monkeypatch: pytest.MonkeyPatch
+    cell: tuple[Daemon, Client, Counter[str]], lease: LeaseGrant, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Reproduction: 14 `resend_program` requests within a few ms each sent a program (14 programs)."""
     daemon, client, _ = cell
@@ -116,7 +123,7 @@ async def test_a_running_service_refuses_a_second_call_of_itself(
 
     monkeypatch.setattr(daemon.runtimes[0].backend, "resend_program", resend_program)
     asks = [
-        asyncio.create_task(client.request("testcell/alice/service/resend_program", timeout=10.0))
+        asyncio.create_task(_ask(client, "testcell/alice/service/resend_program", None, lease))
         for _ in range(14)
     ]
     # every request but the running one is answered at once: busy
@@ -144,7 +151,7 @@ async def test_a_running_service_refuses_a_second_call_of_itself(
     assert (await last) == {"v": 1, "ok": True}
     assert sent["programs"] == 1
     # once it answered, the service runs again
-    assert (await client.request("testcell/alice/service/resend_program", timeout=10.0))["ok"] is True
+    assert (await _ask(client, "testcell/alice/service/resend_program", None, lease))["ok"] is True
     assert sent["programs"] == 2
 
 
@@ -180,13 +187,17 @@ OUT_OF_RANGE = [
 
 @pytest.mark.parametrize(("service", "body", "reason"), OUT_OF_RANGE)
 async def test_out_of_range_service_values_are_refused_with_the_range(
-    cell: tuple[Daemon, Client, Counter[str]], service: str, body: dict[str, Any], reason: str
+    cell: tuple[Daemon, Client, Counter[str]],
+    lease: LeaseGrant,
+    service: str,
+    body: dict[str, Any],
+    reason: str,
 ) -> None:
     """Reproduction: a payload mass of 1e9 or a cog of 1e6 was accepted (the mock stored it; a UR
     robot's script command gave an internal-error traceback), as was a force-mode wrench of 1e9."""
     daemon, client, _ = cell
     before = daemon.runtimes[0].backend.state.payload_mass
-    reply = await client.request(f"testcell/alice/service/{service}", body, timeout=10.0)
+    reply = await _ask(client, f"testcell/alice/service/{service}", body, lease)
     assert reply == {"v": 1, "ok": False, "reason": reason}
     assert daemon.runtimes[0].backend.state.payload_mass == before
 
@@ -203,24 +214,24 @@ async def test_out_of_range_service_values_are_refused_with_the_range(
     ],
 )
 async def test_out_of_range_tolerances_are_refused(
-    cell: tuple[Daemon, Client, Counter[str]], tolerances: dict[str, Any], reason: str
+    cell: tuple[Daemon, Client, Counter[str]], lease: LeaseGrant, tolerances: dict[str, Any], reason: str
 ) -> None:
     """Reproduction: tolerances of 1e9 were accepted (a check switched off by an absurd number)."""
     daemon, client, _ = cell
     body = {"positions": [0.1, -1.5, 1.5, -1.5, -1.5, 0.1], "tolerances": tolerances}
-    reply = await client.request("testcell/alice/goal/move", body, timeout=10.0)
+    reply = await _ask(client, "testcell/alice/goal/move", body, lease)
     assert reply == {"v": 1, "accepted": False, "reason": reason}
     assert daemon.runtimes[0].controller.active_goal_id is None
 
 
 async def test_client_text_echoed_in_replies_is_short_and_has_no_control_characters(
-    cell: tuple[Daemon, Client, Counter[str]], caplog: pytest.LogCaptureFixture
+    cell: tuple[Daemon, Client, Counter[str]], lease: LeaseGrant, caplog: pytest.LogCaptureFixture
 ) -> None:
     """Reproduction: an unknown field name of 1 KB came back (and went to the log) whole, and one with
     a newline forged a log line."""
     _, client, _ = cell
     name = "x" * 1000 + "\n2026-01-01 00:00:00 CRITICAL forged"
-    reply = await client.request("testcell/alice/goal/move", {"positions": HOME, name: 1}, timeout=10.0)
+    reply = await _ask(client, "testcell/alice/goal/move", {"positions": HOME, name: 1}, lease)
     assert reply["accepted"] is False
     assert len(reply["reason"]) < 120, reply
     assert "\n" not in reply["reason"]

@@ -71,14 +71,14 @@ async def spied(monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[tuple[Daemon, 
 
 
 async def _get(
-    client: Client, key: str, body: dict[str, Any] | None = None
+    client: Client, key: str, body: dict[str, Any] | None = None, attachment: bytes | None = None
 ) -> tuple[list[bytes], list[bytes]]:
     """(ok payloads, error payloads) of every reply to a raw Zenoh get on ``key``."""
     payload = None if body is None else json.dumps(body).encode()
 
     def ask() -> tuple[list[bytes], list[bytes]]:
         ok, err = [], []
-        for reply in client.session.get(key, payload=payload, timeout=5.0):
+        for reply in client.session.get(key, payload=payload, attachment=attachment, timeout=5.0):
             if reply.ok is not None:
                 ok.append(reply.ok.payload.to_bytes())
             else:
@@ -94,12 +94,16 @@ async def test_wildcard_queries_and_puts_never_act_on_any_robot(
     """Reproduction: with a goal running on each robot, `get testcell/**`, `get **`,
     `get testcell/*/goal/move` (a valid move), `get testcell/*/service/stop` and the like, and a put of
     a valid joint_position command on `testcell/*/command/joint_position`. Before the fix they cancelled
-    and stopped both goals, fired every service of both robots and started goals on both."""
+    and stopped both goals, fired every service of both robots and started goals on both.
+
+    The test's session holds both robots' command leases; each wildcard is sent once with each
+    robot's token, so only the wildcard check can refuse it, never the lease."""
     daemon, client, calls = spied
     alice, bob = await client.robot("alice"), await client.robot("bob")
     goal_a = await alice.move(TARGET, duration=2.0)
     goal_b = await bob.move(TARGET, duration=2.0)
     calls.clear()  # the two accepted moves above
+    tokens = [(await robot.ensure_lease()).encode() for robot in (alice, bob)]
 
     move = {"positions": HOME, "duration": 0.5, "preempt": True}
     refusals: list[bytes] = []
@@ -119,16 +123,19 @@ async def test_wildcard_queries_and_puts_never_act_on_any_robot(
         ("testcell/*/service/resend_program", {}),
         ("testcell/bob/**", {"fraction": 0.1}),
     ):
-        ok, err = await _get(client, key, body)
-        # nothing answers "ok"/"accepted" (the URDF, read-only, may answer a wildcard)
-        for payload in ok:
-            if payload.startswith(b"{"):
-                reply = json.loads(payload)
-                assert reply.get("ok") is not True, (key, reply)
-                assert reply.get("accepted") is not True, (key, reply)
-        refusals += err
-    client.session.put("testcell/*/command/joint_position", json.dumps({"positions": HOME}).encode())
-    client.session.put("testcell/**", json.dumps({"positions": HOME}).encode())
+        for token in tokens:
+            ok, err = await _get(client, key, body, token)
+            # nothing answers "ok"/"accepted" (the URDF, read-only, may answer a wildcard)
+            for payload in ok:
+                if payload.startswith(b"{"):
+                    reply = json.loads(payload)
+                    assert reply.get("ok") is not True, (key, reply)
+                    assert reply.get("accepted") is not True, (key, reply)
+            refusals += err
+    for token in tokens:
+        position = json.dumps({"positions": HOME}).encode()
+        client.session.put("testcell/*/command/joint_position", position, attachment=token)
+        client.session.put("testcell/**", position, attachment=token)
 
     # both goals run to the end: nothing canceled, stopped or preempted them
     result_a, result_b = await goal_a.result(timeout=20), await goal_b.result(timeout=20)

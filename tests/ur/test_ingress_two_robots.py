@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import fake_address, free_tcp_port, swing_trajectory
+from tests.helpers import acquire_lease, fake_address, free_tcp_port, swing_trajectory
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.fakeur.controller import FakeController
@@ -103,15 +103,17 @@ async def _fake_in_thread(model: str) -> AsyncIterator[FakeController]:
         await loop.run_in_executor(None, thread.join, 30.0)
 
 
-async def _send(client: Client, key: str, payload: bytes, put: bool) -> list[dict[str, Any]]:
+async def _send(client: Client, key: str, payload: bytes, put: bool, token: bytes) -> list[dict[str, Any]]:
+    """Send as the holder of alice's command lease (``token``): what is tested is each input's own
+    cost and refusal, never the lease's."""
     if put:
-        client.session.put(key, payload)
+        client.session.put(key, payload, attachment=token)
         return []
 
     def ask() -> list[dict[str, Any]]:
         return [
             json.loads(r.ok.payload.to_bytes())
-            for r in client.session.get(key, payload=payload, timeout=30.0)
+            for r in client.session.get(key, payload=payload, attachment=token, timeout=30.0)
             if r.ok
         ]
 
@@ -162,6 +164,7 @@ async def _attack(
         await _ready(client, "alice")
         await _ready(client, "bob")
         bob = await client.robot("bob")
+        lease = await acquire_lease(client.session, "ingress", "alice")
         assert programs["started"] == 1, programs
         before = Counter(programs)
         inputs = _worst_inputs()
@@ -169,8 +172,9 @@ async def _attack(
         for _ in range(2):  # two goals of bob, each while alice gets every input
             goal = await bob.move(BOB_TARGET, duration=3.0)
             for key, payload, put in inputs:
-                replies += await _send(client, f"ingress/alice/{key}", payload, put)
-                await client.request("ingress/alice/goal/cancel", timeout=10.0)  # the trajectory, if accepted
+                replies += await _send(client, f"ingress/alice/{key}", payload, put, lease.token)
+                # the trajectory, if accepted
+                await client.request("ingress/alice/goal/cancel", timeout=10.0, attachment=lease.token)
             result = await goal.result(timeout=30.0)
             assert result["status"] == "succeeded", result
             back = await bob.move(HOME, duration=1.0)

@@ -140,6 +140,7 @@ async def test_dashboard_and_program_services_and_robot_messages_over_zenoh() ->
             # the fake's DH differs from the nominal one the cell expects: a mismatch is published
             assert daemon.runtimes[0].backend.calibration_ok is False  # type: ignore[attr-defined]
             endpoint = daemon.listen_endpoints[0]
+            await alice.release()  # the CLI is another client: it takes the command lease for its call
             run = await run_cli_in_thread("dashboard", "alice", "robotmode", "--connect", endpoint)
             assert run.code == 0, run.stderr
             assert run.stdout.strip() == "Robotmode: RUNNING"

@@ -144,6 +144,7 @@ async def test_freedrive_moves_the_tool_along_a_push_and_stops_when_it_goes() ->
         states = alice.joint_states(10_000)
         surroundings = surroundings_of(fake.arm)
         start = _position(fake)
+        await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
         for _ in range(40):  # freedrive commands every 5 cycles keep its deadman alive
             alice.freedrive(True)
             for _ in range(5):

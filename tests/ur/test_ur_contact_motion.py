@@ -73,6 +73,7 @@ async def test_a_contact_refuses_motion_until_it_ends_and_then_nothing_jumps() -
         _wall_across(fake, [HOME[0] + 0.4, *HOME[1:]], 0.1)
         states = alice.joint_states(10_000)
         assert (await alice.start_tool_contact())["ok"] is True
+        await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
         for k in range(1500):  # stream toward the wall until the robot reports the contact
             if _kinds(seen, "tool_contact"):
                 break

@@ -41,6 +41,7 @@ def _freedrive(fake: FakeController) -> bool:
 async def test_freedrive_holds_while_commanded_blocks_motion_and_the_deadman_ends_it() -> None:
     async with _ready_alice() as (fake, _, _, alice):
         states = alice.joint_states(10_000)
+        await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
         for _ in range(40):  # 0.4 s of commands, one every 5 cycles (10 ms) at 500 Hz
             alice.freedrive(True)
             for _ in range(5):
@@ -67,8 +68,12 @@ async def test_force_mode_and_tool_contact_reach_the_robot() -> None:
         assert reply["ok"] is True
         await _until(client, alice.keys.joint_states, lambda m: fake.arm.force_mode, limit=2000)
         assert fake.arm.force_mode is True
-        bad = await alice.client.request(alice.keys.service("start_force_mode"), {"selection": [2] * 6})
+        token = (await alice.ensure_lease()).encode()  # refused for its selection, not for the lease
+        bad = await alice.client.request(
+            alice.keys.service("start_force_mode"), {"selection": [2] * 6}, attachment=token
+        )
         assert bad["ok"] is False
+        assert bad["reason"].startswith("start_force_mode"), bad
         assert (await alice.end_force_mode())["ok"] is True
         await _until(client, alice.keys.joint_states, lambda m: not fake.arm.force_mode, limit=2000)
         assert (await alice.start_tool_contact())["ok"] is True
@@ -88,7 +93,8 @@ async def test_freedrive_and_force_mode_on_a_mock_robot_are_refused_with_reasons
         client,
     ):
         alice = await client.robot("alice")
-        events = client.subscribe(alice.keys.events, 10)
+        await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
+        events = client.subscribe(alice.keys.events, 10)  # from here on: no lease event to skip
         alice.freedrive(True)
         event = await events.get_json(timeout=10.0)
         assert event["kind"] == "command_rejected"
@@ -136,6 +142,7 @@ async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services
     async with _ready_alice() as (fake, daemon, client, alice):
         states = alice.joint_states(10_000)
         target = [0.15, *HOME[1:]]
+        await alice.ensure_lease()  # stream commands need the lease held first; they never wait for it
         for _ in range(60):  # 0.6 s of streaming, one command every 5 cycles
             alice.stream_positions(target)
             for _ in range(5):
@@ -146,6 +153,7 @@ async def test_position_streaming_drives_the_ur_robot_and_the_cli_calls_services
             if all(v == 0.0 for v in sample["velocity"]) and daemon.runtimes[0].controller.mode == "idle":
                 break
         assert daemon.runtimes[0].controller.mode == "idle"
+        await alice.release()  # the CLI below is another client: it takes the lease for each call
 
         async def cli(*args: str) -> tuple[int, str]:
             """``urdaemon service alice ARGS`` in-process (in a thread; the daemon keeps serving)."""

@@ -16,7 +16,7 @@ from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
 from urdaemon.runtime.queries import SHUTTING_DOWN, internal_error
 from urdaemon.runtime.status import StatusPublisher
@@ -43,14 +43,15 @@ class Commands:
         self._joint_names = joint_names
         self._log = log
 
-    def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
-        """Subscribe to the command keys (a put on a wildcard, or too large, is refused)."""
+    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> None:
+        """Subscribe to the command keys (a put on a wildcard, too large, or without the command lease
+        holder's token when there is a ``guard``, is refused)."""
         for key, handler in (
             (keys.command_joint_position, self.on_stream_position),
             (keys.command_joint_velocity, self.on_stream_velocity),
             (keys.command_freedrive, self.on_freedrive),
         ):
-            node.subscriber(key, handler, refused=self.on_refused)
+            node.subscriber(key, handler, refused=self.on_refused, guard=guard)
 
     def on_stream_position(self, key: str, payload: bytes) -> None:
         """A joint position command: the controller follows it until the deadman times out."""
@@ -91,7 +92,8 @@ class Commands:
         )
 
     def on_refused(self, key: str, reason: str) -> None:
-        """A command put on a wildcard key expression, or too large to read: it did nothing."""
+        """A command put on a wildcard key expression, too large to read, or not the lease holder's:
+        it did nothing."""
         self.reject(key, GoalRejected(reason))
 
     def reject(self, key: str, err: UrDaemonError) -> None:

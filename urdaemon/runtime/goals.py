@@ -105,14 +105,20 @@ class Goals:
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
 
-    def declare(self) -> None:
-        """Declare the goal queryables (each acts on its exact key only: publish/node.py)."""
+    def declare(self, guard: Any = None) -> None:
+        """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and
+        cancel need the command lease holder's token (``guard``: a ``publish.node.Guard``), results are
+        open to all."""
         node, keys = self._node, self._keys
         node.queryable(
-            keys.goal_trajectory, self.on_trajectory_goal, max_bytes=MAX_MESSAGE_BYTES, answer="accepted"
+            keys.goal_trajectory,
+            self.on_trajectory_goal,
+            max_bytes=MAX_MESSAGE_BYTES,
+            answer="accepted",
+            guard=guard,
         )
-        node.queryable(keys.goal_move, self.on_move_goal, answer="accepted")
-        node.queryable(keys.goal_cancel, self.on_cancel, answer="canceled")
+        node.queryable(keys.goal_move, self.on_move_goal, answer="accepted", guard=guard)
+        node.queryable(keys.goal_cancel, self.on_cancel, answer="canceled", guard=guard)
         node.queryable(keys.goal_results, self.on_result_query, any_id=True)
 
     # ---- events and results ----------------------------------------------------------------------

@@ -3,6 +3,7 @@
 Every service but ``stop`` runs through ``run``: refused once the daemon shuts down, refused while
 the same service still runs (a burst never acts more than once at a time), its request decoded and
 checked before anything acts, answered exactly once. ``stop`` is answered at once, never refused.
+A commanding service (every one but ``stop`` and ``cycle_stats``) needs the robot's command lease.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from urdaemon.backends.base import Backend
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, MessageError
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.publish.services import SERVICES, STOP, ServiceSpec, names
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
@@ -47,11 +48,17 @@ class ServiceRunner:
         """The robot's backend."""
         return self._backend
 
-    def declare(self, node: ZenohNode, keys: RobotKeys) -> frozenset[str]:
-        """Declare a queryable for every service; the names of the services this robot answers."""
-        node.queryable(keys.service(STOP.name), self.on_stop, max_bytes=None)  # never refused for its payload
+    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> frozenset[str]:
+        """Declare a queryable for every service; the names of the services this robot answers.
+
+        A commanding service is refused without the command lease holder's token (``guard``);
+        ``stop`` never is, neither for its payload nor for the lease.
+        """
+        node.queryable(keys.service(STOP.name), self.on_stop, max_bytes=None)
         for spec in SERVICES:
-            node.queryable(keys.service(spec.name), self._handler(spec))
+            node.queryable(
+                keys.service(spec.name), self._handler(spec), guard=guard if spec.commanding else None
+            )
         return frozenset(names())
 
     def _handler(self, spec: ServiceSpec) -> Callable[[Any], None]:

@@ -1,0 +1,351 @@
+"""The command lease over raw Zenoh sessions (no urdaemon client code): only the holder's session
+commands a robot; the holder gone stops it and frees the lease; take-over, stop and state are open.
+
+Issue 16 ("a command lease per robot"). Reproduction before it: a bare Zenoh session with no urdaemon
+code moved alice, preempted and canceled another client's goals; there was no lease key at all.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import signal
+import subprocess
+import sys
+import textwrap
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from tests.helpers import LeaseGrant, acquire_lease, free_tcp_port, wait_for_line, zenoh_ask
+from tests.integration.conftest import ROOT, TWO_MOCKS
+from urdaemon.cell import parse_cell
+from urdaemon.daemon import Daemon
+
+pytestmark = pytest.mark.timeout(120)
+
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+TARGET = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
+LONG_MOVE_S = 30.0
+"""Long enough that no move ends on its own while a test runs."""
+WAIT_S = 20.0
+"""Bound of every wait for a message (a busy machine is slow, never this slow)."""
+
+
+def open_session(endpoint: str) -> Any:
+    """A bare Zenoh client session to the daemon."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+class Inbox:
+    """Samples of a subscription, decoded, handed to the test's loop."""
+
+    def __init__(self, session: Any, key: str) -> None:
+        self._loop = asyncio.get_running_loop()
+        self.queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: Any) -> None:
+        body = json.loads(bytes(sample.payload.to_bytes()))
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self.queue.put_nowait, body)
+
+    async def next(self, match: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
+        """The next message ``match`` accepts (at most 10 000 read, within ``WAIT_S``)."""
+        async with asyncio.timeout(WAIT_S):
+            for _ in range(10_000):
+                body = await self.queue.get()
+                if match(body):
+                    return body
+        raise AssertionError("no such message")
+
+
+@asynccontextmanager
+async def served(text: str = TWO_MOCKS) -> AsyncIterator[tuple[Daemon, str]]:
+    """A daemon serving ``text`` in this loop; yields it and its endpoint once alice's lease answers."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    daemon = Daemon(parse_cell(text, base_dir=ROOT / "configs"), listen=(endpoint,))
+    stop = asyncio.Event()
+    task = asyncio.create_task(daemon.run(stop))
+    for _ in range(1000):  # the daemon's first step opens its session and declares everything
+        if daemon.node is not None or task.done():
+            break
+        await asyncio.sleep(0)
+    if task.done():
+        task.result()
+    probe = await asyncio.to_thread(open_session, endpoint)
+    try:
+        (shown,) = await zenoh_ask(probe, "testcell/alice/lease", {"action": "show"})
+        assert shown["ok"] is True, shown
+        yield daemon, endpoint
+    finally:
+        probe.close()
+        stop.set()
+        await asyncio.wait_for(task, 20.0)
+
+
+def runtime(daemon: Daemon, name: str = "alice") -> Any:
+    return next(r for r in daemon.runtimes if r.robot.name == name)
+
+
+def is_lease_event(action: str) -> Callable[[dict[str, Any]], bool]:
+    return lambda body: body.get("kind") == "lease" and body.get("action") == action
+
+
+async def move(session: Any, grant: LeaseGrant | None, positions: list[float] = TARGET) -> dict[str, Any]:
+    body = {"positions": positions, "duration": LONG_MOVE_S}
+    (reply,) = await zenoh_ask(session, "testcell/alice/goal/move", body, attachment=grant and grant.token)
+    return reply
+
+
+async def test_a_second_session_commands_nothing_while_the_first_holds_the_lease() -> None:
+    """Goals, cancel, streams, freedrive and a commanding service from a second session (no token, a
+    wrong one) are refused naming the holder; the robot never moves; state stays readable."""
+    async with served() as (daemon, endpoint):
+        first, second = open_session(endpoint), open_session(endpoint)
+        try:
+            grant = await acquire_lease(first, "testcell", "alice", holder="first client")
+            events = Inbox(second, "testcell/alice/events")
+            states = Inbox(second, "testcell/alice/joint_states")
+            statuses = Inbox(second, "testcell/alice/status")
+            assert len((await states.next(lambda _: True))["position"]) == 6, "state is open to all"
+            wrong = b"0" * 32
+            trajectory = {"points": [{"positions": TARGET, "time_from_start": 2.0}]}
+            for attachment in (None, wrong):
+                for key, body, answer in (
+                    ("goal/trajectory", trajectory, "accepted"),
+                    ("goal/move", {"positions": TARGET}, "accepted"),
+                    ("goal/cancel", {}, "canceled"),
+                    ("service/set_speed_slider", {"fraction": 0.5}, "ok"),
+                    ("service/start_tool_contact", {}, "ok"),
+                ):
+                    (reply,) = await zenoh_ask(second, f"testcell/alice/{key}", body, attachment=attachment)
+                    assert reply[answer] is False, (key, reply)
+                    assert reply["reason"].startswith("lease: robot 'alice' is held by first client since"), (
+                        reply
+                    )
+                for key, body in (
+                    ("command/joint_position", {"positions": TARGET}),
+                    ("command/joint_velocity", {"velocities": [0.1] * 6}),
+                    ("command/freedrive", {"active": True}),
+                ):
+                    second.put(f"testcell/alice/{key}", json.dumps(body).encode(), attachment=attachment)
+                    rejected = await events.next(lambda e, k=key: e.get("key") == f"testcell/alice/{k}")
+                    assert rejected["kind"] == "command_rejected"
+                    assert rejected["reason"].startswith("lease: robot 'alice' is held by first client"), (
+                        rejected
+                    )
+            alice = runtime(daemon)
+            assert alice.controller.mode == "idle"
+            assert not alice.backend.freedrive_active
+            assert alice.state.positions == pytest.approx(HOME, abs=1e-9)
+            assert alice.backend.state.speed_slider == 1.0
+            status = await statuses.next(lambda m: m.get("lease") is not None)
+            assert status["lease"]["holder"] == "first client", "the status names the holder, to all"
+            # the holder itself commands it
+            reply = await move(first, grant)
+            assert reply["accepted"] is True, reply
+            (stopped,) = await zenoh_ask(first, "testcell/alice/service/stop", None)
+            assert stopped["ok"] is True
+        finally:
+            first.close()
+            second.close()
+
+
+async def test_the_holders_session_closing_aborts_its_goal_and_frees_the_lease() -> None:
+    async with served() as (daemon, endpoint):
+        holder, other = open_session(endpoint), open_session(endpoint)
+        try:
+            events = Inbox(other, "testcell/alice/events")
+            results = Inbox(other, "testcell/alice/goal/*/result")
+            grant = await acquire_lease(holder, "testcell", "alice", holder="closing client")
+            reply = await move(holder, grant)
+            assert reply["accepted"] is True, reply
+            holder.close()
+            result = await results.next(lambda r: r["goal_id"] == reply["goal_id"])
+            assert result["status"] == "aborted"
+            assert result["reason"] == "lease holder closing client is gone"
+            lost = await events.next(is_lease_event("lost"))
+            assert lost["holder"] == "closing client"
+            assert runtime(daemon).controller.mode in ("stopping", "idle")
+            (shown,) = await zenoh_ask(other, "testcell/alice/lease", {"action": "show"})
+            assert shown == {"v": 1, "ok": True, "lease": None}
+            await acquire_lease(other, "testcell", "alice", holder="next client")
+        finally:
+            other.close()
+
+
+HOLDER_SCRIPT = textwrap.dedent(
+    """
+    import json, sys, time, zenoh
+    endpoint = sys.argv[1]
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(conf)
+    zid = str(session.zid())
+    token = session.liveliness().declare_token(f"testcell/alice/lease/{zid}")
+
+    def ask(key, body, attachment=None):
+        replies = session.get(key, payload=json.dumps(body).encode(), attachment=attachment, timeout=10.0)
+        return [json.loads(bytes(r.ok.payload.to_bytes())) for r in replies if r.ok is not None][0]
+
+    grant = ask("testcell/alice/lease", {"action": "acquire", "session": zid, "holder": "doomed"})
+    goal = ask("testcell/alice/goal/move", {"positions": json.loads(sys.argv[2]), "duration": 30.0},
+               grant["token"].encode())
+    print("READY " + json.dumps(goal), file=sys.stderr, flush=True)
+    time.sleep(120)
+    """
+)
+
+
+async def test_a_killed_holder_process_stops_the_robot_and_frees_the_lease(tmp_path: Path) -> None:
+    """The holder is SIGKILLed mid-goal: the goal ends aborted naming the holder gone, the lease is
+    free (judged by the daemon's own messages, not by time)."""
+    script = tmp_path / "holder.py"
+    script.write_text(HOLDER_SCRIPT)
+    async with served() as (daemon, endpoint):
+        watcher = open_session(endpoint)
+        proc = subprocess.Popen(
+            [sys.executable, str(script), endpoint, json.dumps(TARGET)],
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            events = Inbox(watcher, "testcell/alice/events")
+            results = Inbox(watcher, "testcell/alice/goal/*/result")
+            lines = await wait_for_line(proc, "READY ", timeout=60.0)
+            goal = json.loads(lines[-1].split("READY ", 1)[1])
+            assert goal["accepted"] is True, goal
+            assert runtime(daemon).controller.active_goal_id == goal["goal_id"]
+            proc.send_signal(signal.SIGKILL)
+            result = await results.next(lambda r: r["goal_id"] == goal["goal_id"])
+            assert result["status"] == "aborted"
+            assert result["reason"] == "lease holder doomed is gone"
+            await events.next(is_lease_event("lost"))
+            await acquire_lease(watcher, "testcell", "alice", holder="survivor")
+        finally:
+            proc.kill()
+            proc.wait(10)
+            watcher.close()
+
+
+async def test_a_take_over_needs_force_and_a_reason_and_is_logged_and_published(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger="urdaemon.robot")
+    async with served() as (daemon, endpoint):
+        first, second = open_session(endpoint), open_session(endpoint)
+        try:
+            events = Inbox(second, "testcell/alice/events")
+            old = await acquire_lease(first, "testcell", "alice", holder="stuck client")
+            goal = await move(first, old)
+            zid = str(second.zid())
+            token = second.liveliness().declare_token(f"testcell/alice/lease/{zid}")
+            ask: dict[str, Any] = {"action": "acquire", "session": zid, "holder": "rescuer"}
+            (refused,) = await zenoh_ask(second, "testcell/alice/lease", ask)
+            assert refused["ok"] is False
+            assert "held by stuck client" in refused["reason"]
+            assert refused["lease"]["holder"] == "stuck client"
+            (no_reason,) = await zenoh_ask(second, "testcell/alice/lease", {**ask, "force": True})
+            assert no_reason["ok"] is False
+            assert "'reason'" in no_reason["reason"]
+            assert runtime(daemon).controller.active_goal_id == goal["goal_id"], "nothing changed"
+            (taken,) = await zenoh_ask(
+                second, "testcell/alice/lease", {**ask, "force": True, "reason": "its operator went home"}
+            )
+            assert taken["ok"] is True, taken
+            event = await events.next(is_lease_event("taken_over"))
+            assert event["holder"] == "rescuer"
+            assert event["previous"]["holder"] == "stuck client"
+            assert event["reason"] == "its operator went home"
+            assert any("its operator went home" in r.getMessage() for r in caplog.records), caplog.text
+            assert runtime(daemon).controller.active_goal_id is None, "the take-over stopped the robot"
+            refused_old = await move(first, old)
+            assert refused_old["accepted"] is False
+            assert refused_old["reason"].startswith("lease: robot 'alice' is held by rescuer")
+            assert (await move(second, LeaseGrant(taken["token"].encode(), token, taken)))["accepted"] is True
+        finally:
+            first.close()
+            second.close()
+
+
+async def test_stop_works_from_any_session_without_a_lease() -> None:
+    async with served() as (_, endpoint):
+        holder, stranger = open_session(endpoint), open_session(endpoint)
+        try:
+            results = Inbox(stranger, "testcell/*/goal/*/result")
+            grant = await acquire_lease(holder, "testcell", "alice")
+            first = await move(holder, grant)
+            (stopped,) = await zenoh_ask(stranger, "testcell/alice/service/stop", None)
+            assert stopped["ok"] is True
+            result = await results.next(lambda r: r["goal_id"] == first["goal_id"])
+            assert (result["status"], result["reason"]) == ("aborted", "stop requested")
+            second = await move(holder, grant)
+            (cell_stop,) = await zenoh_ask(stranger, "testcell/service/stop", None)
+            assert cell_stop["ok"] is True
+            result = await results.next(lambda r: r["goal_id"] == second["goal_id"])
+            assert (result["status"], result["reason"]) == ("aborted", "cell stop requested")
+            (stats,) = await zenoh_ask(stranger, "testcell/alice/service/cycle_stats", None)
+            assert stats["ok"] is True, "cycle_stats reads counters: open to all"
+        finally:
+            holder.close()
+            stranger.close()
+
+
+async def test_acquire_without_a_liveliness_token_is_refused_naming_the_key(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from urdaemon.runtime import lease_keeper  # here: the test runs (and fails) on code without it
+
+    monkeypatch.setattr(lease_keeper, "LEASE_BIND_TIMEOUT_S", 0.3)
+    async with served() as (_, endpoint):
+        session = open_session(endpoint)
+        try:
+            zid = str(session.zid())
+            ask = {"action": "acquire", "session": zid, "holder": "tokenless"}
+            (refused,) = await zenoh_ask(session, "testcell/alice/lease", ask)
+            assert refused["ok"] is False
+            assert f"testcell/alice/lease/{zid}" in refused["reason"]
+            grant = await acquire_lease(session, "testcell", "alice")
+            again = await acquire_lease(session, "testcell", "alice")
+            assert again.token == grant.token, "acquiring again is idempotent"
+            (released,) = await zenoh_ask(session, "testcell/alice/lease", {"action": "release"})
+            assert released["ok"] is False, "release needs the token"
+            (released,) = await zenoh_ask(
+                session, "testcell/alice/lease", {"action": "release"}, attachment=grant.token
+            )
+            assert released["ok"] is True
+            assert (await move(session, grant))["accepted"] is False, "released: the token is void"
+        finally:
+            session.close()
+
+
+async def test_without_command_lease_any_session_commands_the_robot() -> None:
+    async with served(TWO_MOCKS.replace("cell: testcell", "cell: testcell\ncommand_lease: false")) as (
+        _,
+        endpoint,
+    ):
+        session = open_session(endpoint)
+        try:
+            reply = await move(session, None)
+            assert reply["accepted"] is True, reply
+            (shown,) = await zenoh_ask(session, "testcell/alice/lease", {"action": "show"})
+            assert shown["lease"] is None
+            grant = await acquire_lease(session, "testcell", "alice", holder="advisory")
+            assert grant.reply["lease"]["holder"] == "advisory"
+            (stopped,) = await zenoh_ask(session, "testcell/alice/service/stop", None)
+            assert stopped["ok"] is True
+        finally:
+            session.close()
