@@ -184,3 +184,47 @@ def test_the_wall_option_help_names_the_fakes_default_stiffness() -> None:
     text = " ".join(run.stdout.split())
     assert "--wall X,Y,Z,NX,NY,NZ[,K]" in text
     assert f"its stiffness K in N/m (default {DEFAULT_WALL_STIFFNESS:g})" in text
+
+
+@pytest.mark.parametrize(
+    ("ur_options", "expected"),
+    [
+        ("", "robot"),  # the daemon listens on the interface that reaches the robot: its own loopback
+        ("listen_address: 127.0.0.1", "127.0.0.1"),
+        ("listen_address: 0.0.0.0", "127.0.0.1"),
+        ("{reverse_ip}", "reverse"),
+    ],
+)
+def test_a_urcap_fake_from_a_cell_file_fetches_where_the_daemon_listens(
+    tmp_path: Path, ur_options: str, expected: str
+) -> None:
+    """A fake built from a cell file with ``headless: false`` plays the URCap, whose Host IP must be
+    where the daemon's callback servers listen. Since they listen on the interface that reaches the
+    robot (backends/ur/route.py), not 0.0.0.0, the fixed 127.0.0.1 the fake used before fetched from
+    an address nothing listened on."""
+    import argparse
+
+    from urdaemon.fakeur.cli import build_fakes
+
+    robot, reverse = fake_address(), fake_address()
+    options = ur_options.replace("{reverse_ip}", f"reverse_ip: {reverse}")
+    ur = f"\n    ur: {{{options}}}" if options else ""
+    config = tmp_path / "cell.yaml"
+    config.write_text(
+        "cell: c\nrobots:\n  - name: alice\n    model: ur5e\n    backend: ur\n"
+        f"    address: {robot}\n    headless: false{ur}\n"
+    )
+    args = argparse.Namespace(
+        config=str(config),
+        controller_version="5.15.0",
+        powered=True,
+        refuse=[],
+        split=[],
+        delay=0.0,
+        programs=None,
+        wall=[],
+    )
+    (fake,) = build_fakes(args)
+    assert fake.urcap is not None
+    host = {"robot": robot, "reverse": reverse}.get(expected, expected)
+    assert fake.urcap[0] == host

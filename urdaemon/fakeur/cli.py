@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from urdaemon.cell import load_cell
+from urdaemon.cell.config import Robot
 from urdaemon.description.calibration import load_calibration, robot_dh
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError
@@ -72,6 +73,17 @@ def build_fakes(args: argparse.Namespace) -> list[FakeController]:
     return _place_walls(_build_fakes(args), args)
 
 
+def _daemon_host(robot: Robot) -> str:
+    """The URCap's Host IP for a fake built from a cell file: where the daemon's callback servers
+    listen for it (backends/ur/route.py): ``reverse_ip``, else ``listen_address``, else the robot's
+    own loopback address; ``DAEMON_HOST`` when they listen on every interface."""
+    ur = robot.ur
+    given = (ur.reverse_ip or ur.listen_address) if ur is not None else None
+    if given in ("0.0.0.0", "::"):
+        return DAEMON_HOST
+    return given or robot.address or DAEMON_HOST
+
+
 def _build_fakes(args: argparse.Namespace) -> list[FakeController]:
     version = parse_version(args.controller_version)
     if args.config:
@@ -80,7 +92,7 @@ def _build_fakes(args: argparse.Namespace) -> list[FakeController]:
         for robot in cell.robots:
             if robot.backend != "ur" or robot.address is None:
                 continue
-            urcap = None if robot.headless else (DAEMON_HOST, robot.ports.script_sender)
+            urcap = None if robot.headless else (_daemon_host(robot), robot.ports.script_sender)
             fakes.append(
                 FakeController(
                     robot.model,
