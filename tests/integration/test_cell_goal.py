@@ -217,3 +217,35 @@ async def _ask(client: Client, key: str, body: bytes) -> list[bytes]:
         return [r.ok.payload.to_bytes() for r in client.session.get(key, payload=body, timeout=10.0) if r.ok]
 
     return await asyncio.get_running_loop().run_in_executor(None, ask)
+
+
+async def test_every_robot_needs_its_lease_token(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The attachment names each robot's lease token; a robot whose token is missing or not its
+    holder's refuses the whole cell goal (none starts), and so does a cancel without the tokens."""
+    async with _cell(monkeypatch) as (daemon, client, published):
+        alice_token = await (await client.robot("alice")).ensure_lease()
+        other = await Client.connect(daemon.listen_endpoints[0])
+        try:
+            await (await other.robot("bob")).ensure_lease()  # another client holds bob's lease
+            body = {
+                "robots": {"alice": {"points": _points(ALICE, 30.0)}, "bob": {"points": _points(BOB, 30.0)}}
+            }
+            only_alice = json.dumps({"alice": alice_token}).encode()
+            reply = await client.request(CellKeys(CELL).goal_trajectory, body, attachment=only_alice)
+            assert reply["accepted"] is False
+            assert reply["reason"].startswith("bob: lease: robot 'bob' is held by "), reply
+            assert all(rt.controller.statistics().goals_accepted == 0 for rt in daemon.runtimes)
+            forged = json.dumps({"alice": alice_token, "bob": "0" * 32}).encode()
+            reply = await client.request(CellKeys(CELL).goal_trajectory, body, attachment=forged)
+            assert reply["reason"].startswith("bob: lease: robot 'bob' is held by "), reply
+            # bob's holder starts it (and takes alice's lease over for it)
+            await (await other.robot("alice")).take_over("the cell goal needs both")
+            goal = await _long_goal(other)
+            refused = await client.request(CellKeys(CELL).goal_cancel, {"goal_id": goal.goal_id})
+            assert refused["canceled"] is False
+            assert refused["reason"].startswith("alice: lease: robot 'alice' is held by "), refused
+            assert (await goal.cancel())["canceled"] is True
+            assert (await goal.result(timeout=20.0))["status"] == "canceled"
+        finally:
+            await other.close()
+        assert published == [CellKeys(CELL).goal_result(goal.goal_id)]

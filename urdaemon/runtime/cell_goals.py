@@ -60,12 +60,9 @@ CANCELED = "canceled by request"
 
 
 def lease_refusal(runtime: RobotRuntime, token: bytes | None) -> str | None:
-    """Why ``token`` may not command ``runtime``'s robot (its command lease); None: it may."""
-    keeper = getattr(runtime, "lease", None)
-    if keeper is None:  # a runtime without a command lease: nothing to check
-        return None
-    refusal: str | None = keeper.book.refusal(token)
-    return refusal
+    """Why ``token`` may not command ``runtime``'s robot (its command lease, as the robot's own goal
+    queryables check it); None: it may."""
+    return runtime.lease.book.refusal(token)
 
 
 @dataclass(slots=True)
