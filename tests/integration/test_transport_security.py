@@ -52,6 +52,8 @@ robots:
 CONNECT_TIMEOUT_MS = 5000
 """How long a client session tries to reach the daemon before ``zenoh.open`` gives up."""
 WAIT_S = 10.0
+"""The longest any one wait lasts. A query nothing serves (what access control leaves a session
+that may not ask) ends at once with no reply, so the negative checks do not wait this long."""
 
 
 @dataclass(frozen=True)
@@ -247,7 +249,7 @@ async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs
                 ("service/set_speed_slider", {"fraction": 0.1}),
                 ("service/dashboard", {"command": "power off"}),
             ):
-                replies = await zenoh_ask(viewer, f"{CELL}/alice/{key}", body, timeout=2.0)
+                replies = await zenoh_ask(viewer, f"{CELL}/alice/{key}", body, timeout=WAIT_S)
                 assert replies == [], f"the viewer's {key} reached the daemon: {replies}"
             viewer.put(f"{CELL}/alice/command/joint_position", json.dumps({"positions": target}))
             viewer.put(f"{CELL}/alice/command/joint_velocity", json.dumps({"velocities": [0.1] * 6}))
@@ -309,7 +311,7 @@ async def test_stop_passes_for_every_connection_whatever_the_grants(certs: Certs
                 replies = await zenoh_ask(visitor, f"{CELL}/{key}", {})
                 assert [r.get("ok") for r in replies] == [True], (key, replies)
             for key, body in (("alice/service/cycle_stats", {}), ("alice/goal/move", {"positions": target})):
-                replies = await zenoh_ask(visitor, f"{CELL}/{key}", body, timeout=2.0)
+                replies = await zenoh_ask(visitor, f"{CELL}/{key}", body, timeout=WAIT_S)
                 assert replies == [], f"the visitor's {key} reached the daemon: {replies}"
         finally:
             _close(viewer, operator, visitor)
@@ -333,7 +335,7 @@ async def test_the_command_lease_works_through_access_control(certs: Certs) -> N
         viewer, operator = await secure.session("viewer"), await secure.session("operator")
         try:
             events = Samples(viewer, f"{CELL}/alice/events")
-            asked = await zenoh_ask(viewer, f"{CELL}/alice/lease", {"action": "show"}, timeout=2.0)
+            asked = await zenoh_ask(viewer, f"{CELL}/alice/lease", {"action": "show"}, timeout=WAIT_S)
             assert asked == [], f"the viewer reached the lease: {asked}"
             grant = await acquire_lease(operator, CELL, "alice", holder="operator")
             target = [q + 0.1 for q in START]
