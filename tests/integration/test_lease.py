@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import re
 import signal
 import subprocess
 import sys
@@ -98,13 +99,18 @@ def runtime(daemon: Daemon, name: str = "alice") -> Any:
     return next(r for r in daemon.runtimes if r.robot.name == name)
 
 
+def on_key(key: str) -> Callable[[dict[str, Any]], bool]:
+    return lambda body: body.get("key") == key
+
+
 def is_lease_event(action: str) -> Callable[[dict[str, Any]], bool]:
     return lambda body: body.get("kind") == "lease" and body.get("action") == action
 
 
 async def move(session: Any, grant: LeaseGrant | None, positions: list[float] = TARGET) -> dict[str, Any]:
     body = {"positions": positions, "duration": LONG_MOVE_S}
-    (reply,) = await zenoh_ask(session, "testcell/alice/goal/move", body, attachment=grant and grant.token)
+    token = None if grant is None else grant.token
+    (reply,) = await zenoh_ask(session, "testcell/alice/goal/move", body, attachment=token)
     return reply
 
 
@@ -121,26 +127,28 @@ async def test_a_second_session_commands_nothing_while_the_first_holds_the_lease
             assert len((await states.next(lambda _: True))["position"]) == 6, "state is open to all"
             wrong = b"0" * 32
             trajectory = {"points": [{"positions": TARGET, "time_from_start": 2.0}]}
+            asks: list[tuple[str, dict[str, Any], str]] = [
+                ("goal/trajectory", trajectory, "accepted"),
+                ("goal/move", {"positions": TARGET}, "accepted"),
+                ("goal/cancel", {}, "canceled"),
+                ("service/set_speed_slider", {"fraction": 0.5}, "ok"),
+                ("service/start_tool_contact", {}, "ok"),
+            ]
+            puts: list[tuple[str, dict[str, Any]]] = [
+                ("command/joint_position", {"positions": TARGET}),
+                ("command/joint_velocity", {"velocities": [0.1] * 6}),
+                ("command/freedrive", {"active": True}),
+            ]
             for attachment in (None, wrong):
-                for key, body, answer in (
-                    ("goal/trajectory", trajectory, "accepted"),
-                    ("goal/move", {"positions": TARGET}, "accepted"),
-                    ("goal/cancel", {}, "canceled"),
-                    ("service/set_speed_slider", {"fraction": 0.5}, "ok"),
-                    ("service/start_tool_contact", {}, "ok"),
-                ):
+                for key, body, answer in asks:
                     (reply,) = await zenoh_ask(second, f"testcell/alice/{key}", body, attachment=attachment)
                     assert reply[answer] is False, (key, reply)
                     assert reply["reason"].startswith("lease: robot 'alice' is held by first client since"), (
                         reply
                     )
-                for key, body in (
-                    ("command/joint_position", {"positions": TARGET}),
-                    ("command/joint_velocity", {"velocities": [0.1] * 6}),
-                    ("command/freedrive", {"active": True}),
-                ):
+                for key, body in puts:
                     second.put(f"testcell/alice/{key}", json.dumps(body).encode(), attachment=attachment)
-                    rejected = await events.next(lambda e, k=key: e.get("key") == f"testcell/alice/{k}")
+                    rejected = await events.next(on_key(f"testcell/alice/{key}"))
                     assert rejected["kind"] == "command_rejected"
                     assert rejected["reason"].startswith("lease: robot 'alice' is held by first client"), (
                         rejected
@@ -349,3 +357,53 @@ async def test_without_command_lease_any_session_commands_the_robot() -> None:
             assert stopped["ok"] is True
         finally:
             session.close()
+
+
+async def test_a_flood_of_puts_without_the_token_never_reaches_the_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """200 joint_position commands from a session without the lease, then one from the holder: none
+    of the 200 is decoded or takes the holder's place waiting for the loop (refused on Zenoh's thread,
+    reported in bounded ``command_rejected`` events that count them all); the holder's is acted on."""
+    from urdaemon.publish import codec
+
+    seen: list[bytes] = []
+    decoded = asyncio.Event()
+    original = codec.decode_stream_position
+
+    def counted(payload: bytes | None) -> Any:
+        seen.append(b"" if payload is None else bytes(payload))
+        decoded.set()
+        return original(payload)
+
+    monkeypatch.setattr(codec, "decode_stream_position", counted)
+    async with served() as (daemon, endpoint):
+        holder, stranger = open_session(endpoint), open_session(endpoint)
+        try:
+            grant = await acquire_lease(holder, "testcell", "alice", holder="streamer")
+            events = Inbox(holder, "testcell/alice/events")
+            key = "testcell/alice/command/joint_position"
+            assert daemon.node is not None
+            latest = daemon.node.latest[key]
+            count = 200
+            for i in range(count):
+                body = {"positions": [HOME[0] + 0.2, *HOME[1:]], "velocities": [0.0] * 5 + [i * 1e-9]}
+                stranger.put(key, json.dumps(body).encode(), congestion_control=zenoh.CongestionControl.BLOCK)
+            mine = json.dumps({"positions": HOME}).encode()
+            holder.put(key, mine, attachment=grant.token)
+            refused = 0
+            for _ in range(count):
+                event = await events.next(lambda e: e.get("kind") == "command_rejected")
+                reason = event["reason"]
+                assert reason.startswith("lease: robot 'alice' is held by streamer"), reason
+                more = re.search(r"\(and (\d+) more refused like it\)$", reason)
+                refused += 1 + (int(more.group(1)) if more else 0)
+                if refused >= count:
+                    break
+            assert refused == count
+            await asyncio.wait_for(decoded.wait(), WAIT_S)  # the holder's command reaches the loop
+            assert seen == [mine], "only the holder's command was decoded"
+            assert latest.replaced_total == 0, "no refused sample took the holder's place"
+        finally:
+            holder.close()
+            stranger.close()
