@@ -16,7 +16,9 @@ from typing import Any
 
 import pytest
 
+from tests.helpers import free_tcp_port, swing_trajectory
 from tests.integration.conftest import TWO_MOCKS, running_daemon
+from urdaemon.cell import parse_cell
 from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
@@ -249,3 +251,41 @@ async def test_every_robot_needs_its_lease_token(monkeypatch: pytest.MonkeyPatch
         finally:
             await other.close()
         assert published == [CellKeys(CELL).goal_result(goal.goal_id)]
+
+
+async def test_a_cell_goal_being_planned_at_shutdown_is_answered_once_and_starts_nothing() -> None:
+    """Two 2 500-point parts take many turns of the loop to plan; the daemon stops meanwhile."""
+    listen = f"tcp/127.0.0.1:{free_tcp_port()}"
+    daemon = Daemon(parse_cell(TWO_MOCKS), listen=(listen,))
+    stop = asyncio.Event()
+    served = asyncio.create_task(daemon.run(stop))
+    try:
+        client = await Client.connect(listen, timeout=20.0)
+        try:
+            tokens = {
+                name: await (await client.robot(name, timeout=10.0)).ensure_lease()
+                for name in ("alice", "bob")
+            }
+            body = {"robots": {name: swing_trajectory(2500, HOME) for name in tokens}}
+            asked = asyncio.create_task(
+                client.query_replies(
+                    CellKeys(CELL).goal_trajectory, body, attachment=json.dumps(tokens).encode(), timeout=20.0
+                )
+            )
+            states = client.subscribe(CellKeys(CELL).robot("alice").joint_states)
+            for _ in range(20_000):  # one sample per alice cycle until a part is being planned
+                if all(rt.gate.planning is not None for rt in daemon.runtimes) or asked.done():
+                    break
+                await states.get(timeout=10.0)
+            assert not asked.done(), asked.result()
+            stop.set()
+            replies = await asked
+        finally:
+            await client.close()
+    finally:
+        stop.set()
+        await asyncio.wait_for(served, 20.0)
+    assert [json.loads(r.payload) for r in replies] == [
+        {"v": 1, "accepted": False, "reason": "daemon shutting down"}
+    ]
+    assert all(rt.controller.statistics().goals_accepted == 0 for rt in daemon.runtimes)
