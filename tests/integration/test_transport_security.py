@@ -25,7 +25,8 @@ import zenoh
 from tests.helpers import acquire_lease, free_tcp_port, zenoh_ask
 from urdaemon.cell import Cell, parse_cell
 from urdaemon.daemon import Daemon
-from urdaemon.transport_security import client_config
+from urdaemon.publish import node
+from urdaemon.transport_security import client_config, configure_daemon
 
 CELL = "seccell"
 START = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
@@ -64,6 +65,18 @@ class Certs:
 
     def pair(self, name: str) -> tuple[str, str]:
         return str(self.folder / f"{name}.pem"), str(self.folder / f"{name}-key.pem")
+
+
+@pytest.fixture(params=["named cell", "any cell"])
+def rules_for(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The cell the daemon's access rules name: ``seccell`` (what ``configure_daemon`` writes when the
+    daemon passes its cell's name) or ``*`` (when it does not: the same robots of any cell)."""
+    if request.param == "named cell":
+
+        def named(conf: Any, options: Any, cell: str | None = None) -> None:
+            configure_daemon(conf, options, CELL)
+
+        monkeypatch.setattr(node, "configure_daemon", named)
 
 
 @pytest.fixture(scope="module")
@@ -227,6 +240,7 @@ async def test_mtls_lets_in_only_clients_with_a_certificate_of_the_cells_ca(cert
             assert isinstance(result, zenoh.ZError), f"{name}: the session reached the daemon"
 
 
+@pytest.mark.usefixtures("rules_for")
 async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs: Certs) -> None:
     """Reproduction (issue 16): any session could command any robot. With access control the viewer
     (granted ``read: [alice]``) receives alice's joint states, but its move goal, trajectory goal,
@@ -289,6 +303,7 @@ async def _wait_matched(session: Any, key: str) -> None:
         publisher.undeclare()
 
 
+@pytest.mark.usefixtures("rules_for")
 async def test_stop_passes_for_every_connection_whatever_the_grants(certs: Certs) -> None:
     """A stop is never refused: the viewer (read only) stops the operator's running goal, and a
     ``visitor`` whose certificate the cell's CA signed but that no grant names may stop alice and the
@@ -326,6 +341,7 @@ async def _result(goals: Samples, goal_id: str) -> dict[str, Any]:
     raise AssertionError(f"no result of goal {goal_id}")
 
 
+@pytest.mark.usefixtures("rules_for")
 async def test_the_command_lease_works_through_access_control(certs: Certs) -> None:
     """With the lease on, the operator's grant carries everything the lease needs: its liveliness
     token reaches the daemon (the acquire is granted, which the daemon does only once it has seen the
