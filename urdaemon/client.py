@@ -54,6 +54,7 @@ from urdaemon.publish import codec, services, signing
 from urdaemon.publish.codec import SCHEMA_VERSION
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
+from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES
 
 __all__ = [
     "DEFAULT_ENDPOINT",
@@ -81,9 +82,7 @@ result before it fails (the token's deletion can overtake the result's publicati
 PEER_WAIT_S = 0.05
 RELEASE_ON_CLOSE_S = 2.0
 """How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""
-HOLDER_MAX = 120
-"""The longest holder text the daemon takes (printable characters)."""
-_LEASE_TOKEN = re.compile(r"[0-9a-f]{32}")
+_LEASE_TOKEN = re.compile(rf"[0-9a-f]{{{2 * TOKEN_BYTES}}}")
 
 _RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
 
@@ -130,7 +129,7 @@ def _program_name(argv0: str) -> str:
 
 def _printable(text: str) -> str:
     shown = "".join(c if c.isprintable() else "?" for c in text).strip()
-    return shown[:HOLDER_MAX] or "python"
+    return shown[:HOLDER_MAX_CHARS] or "python"
 
 
 def _encode(body: dict[str, Any]) -> bytes:
