@@ -407,3 +407,36 @@ async def test_a_flood_of_puts_without_the_token_never_reaches_the_loop(
         finally:
             holder.close()
             stranger.close()
+
+
+async def test_an_acquire_waiting_for_its_token_holds_up_no_other_request(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An acquire whose liveliness token is not there yet waits for it (here up to 60 s) in a task of
+    its own: meanwhile other sessions' lease requests and goals are answered; once the token appears
+    the waiting acquire is granted."""
+    from urdaemon.runtime import lease_keeper  # here: the test runs (and fails) on code without it
+
+    monkeypatch.setattr(lease_keeper, "LEASE_BIND_TIMEOUT_S", 60.0)
+    async with served() as (_, endpoint):
+        late, other = open_session(endpoint), open_session(endpoint)
+        try:
+            zid = str(late.zid())
+            ask = {"action": "acquire", "session": zid, "holder": "late binder"}
+            waiting = asyncio.create_task(zenoh_ask(late, "testcell/alice/lease", ask, timeout=90.0))
+            bob = await acquire_lease(other, "testcell", "bob", holder="bob's client")
+            (goal,) = await zenoh_ask(
+                other, "testcell/bob/goal/move", {"positions": TARGET, "duration": 1.0}, attachment=bob.token
+            )
+            assert goal["accepted"] is True, goal
+            (shown,) = await zenoh_ask(other, "testcell/alice/lease", {"action": "show"})
+            assert shown["lease"] is None
+            assert not waiting.done(), "the acquire still waits for its token"
+            token = late.liveliness().declare_token(f"testcell/alice/lease/{zid}")
+            (granted,) = await asyncio.wait_for(waiting, WAIT_S)
+            assert granted["ok"] is True, granted
+            assert granted["lease"]["holder"] == "late binder"
+            token.undeclare()
+        finally:
+            late.close()
+            other.close()

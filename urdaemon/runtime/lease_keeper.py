@@ -90,6 +90,8 @@ class LeaseKeeper:
             self._acquire(query, request)
 
     def _acquire(self, query: Any, request: LeaseRequest) -> None:
+        if self._watch is not None:  # a holder whose token is gone holds nothing (its change may wait)
+            self.tokens_changed()
         refused = self.book.refused_now(request)
         if refused is not None:
             reply(query, refused.reply)
