@@ -173,7 +173,9 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
     assert _allowed(acl, "viewer", "ingress", "query") == {
         "sec/alice/goal/*/result",
         "sec/alice/service/cycle_stats",
+        "sec/robot_description",
     }
+    assert "sec/tf" not in _allowed(acl, "viewer", "ingress", "declare_subscriber")  # bob's poses too
     assert "sec/alice/joint_states" in _allowed(acl, "viewer", "ingress", "declare_subscriber")
     assert "sec/alice/goal/*/*" in _allowed(acl, "viewer", "egress", "put")
     assert _allowed(acl, ANYONE, "ingress", "query") == {"sec/*/service/stop", "sec/service/stop"}

@@ -182,8 +182,8 @@ class Grant(_Frozen):
     identities: tuple[Annotated[str, Field(pattern=IDENTITY_PATTERN)], ...]
     read: tuple[RobotRef, ...] = ()
     """Robots whose state these identities may subscribe to and ask for (joint states, status, io,
-    events, goal feedback and results, cycle stats); ``"*"``: every robot and the cell's tf,
-    description and cell-goal results."""
+    events, goal feedback and results, cycle stats, the cell's description); ``"*"``: every robot,
+    the cell's tf and the cell goals' messages."""
     command: tuple[RobotRef, ...] = ()
     """Robots these identities may command (goals, cancel, services, command streams, the command
     lease and its liveliness token), and read as above; ``"*"``: every robot and cell goals."""
