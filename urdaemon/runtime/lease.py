@@ -27,6 +27,7 @@ from urdaemon.publish.codec import client_text, decode_message
 __all__ = [
     "HOLDER_MAX_CHARS",
     "LEASE_BIND_TIMEOUT_S",
+    "TOKEN_BYTES",
     "Lease",
     "LeaseBook",
     "LeaseOutcome",
