@@ -35,8 +35,11 @@ ROBOTS = "robots: [{name: alice, model: ur5e, backend: mock}, {name: bob, model:
 @pytest.fixture
 def folder(tmp_path: Path) -> Path:
     """A cell folder with (dummy) certificate files: the schema checks they exist, not their content."""
-    for name in ("ca.pem", "daemon.pem", "daemon-key.pem", "operator.pem", "operator-key.pem"):
+    for name in ("ca.pem", "daemon.pem", "operator.pem"):
         (tmp_path / name).write_text("-----BEGIN CERTIFICATE-----\n", encoding="utf-8")
+    for name in ("daemon-key.pem", "operator-key.pem"):
+        (tmp_path / name).write_text("-----BEGIN PRIVATE KEY-----\n", encoding="utf-8")
+    (tmp_path / "encrypted-key.pem").write_text("-----BEGIN ENCRYPTED PRIVATE KEY-----\n", encoding="utf-8")
     return tmp_path
 
 
@@ -63,6 +66,21 @@ def error_of(folder: Path, zenoh_section: str) -> str:
             f'listen: ["tls/127.0.0.1:7447"], {TLS.replace("ca.pem", "nope/ca.pem")}',
             "zenoh.tls.root_ca",
             "not found",
+        ),
+        (
+            f'listen: ["tls/127.0.0.1:7447"], {TLS.replace("daemon-key.pem", "daemon.pem")}',
+            "zenoh.tls.private_key",
+            "holds no -----BEGIN PRIVATE KEY-----",
+        ),
+        (
+            f'listen: ["tls/127.0.0.1:7447"], {TLS.replace("daemon-key.pem", "encrypted-key.pem")}',
+            "zenoh.tls.private_key",
+            "holds no",
+        ),
+        (
+            f'listen: ["tls/127.0.0.1:7447"], {TLS.replace("ca.pem", "daemon-key.pem")}',
+            "zenoh.tls.root_ca",
+            "holds no -----BEGIN CERTIFICATE-----",
         ),
         ('listen: ["tls/127.0.0.1:7447"]', "listen[0]", "needs the 'tls' section"),
         (f'listen: ["tls/127.0.0.1:7447", "tcp/127.0.0.1:7448"], {TLS}', "listen[1]", "not encrypted"),
@@ -104,6 +122,9 @@ def error_of(folder: Path, zenoh_section: str) -> str:
     ],
     ids=[
         "missing-file",
+        "certificate-as-key",
+        "encrypted-key",
+        "key-as-ca",
         "tls-endpoint-without-tls",
         "tcp-beside-tls",
         "tls-unused",

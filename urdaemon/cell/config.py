@@ -129,6 +129,11 @@ SECURE_PROTOCOLS = ("tls/", "quic/")
 """Endpoints whose links are encrypted and carry the peer's certificate."""
 
 
+_PEM_CERTIFICATE = "-----BEGIN CERTIFICATE-----"
+_PEM_KEY = "-----BEGIN (RSA |EC )?PRIVATE KEY-----"
+"""What Zenoh reads: PEM certificates, and unencrypted PKCS#8, RSA or EC private keys."""
+
+
 class TlsOptions(_Frozen):
     """TLS for the daemon's Zenoh links (``tls/`` and ``quic/`` endpoints); docs/security.md."""
 
@@ -147,9 +152,17 @@ class TlsOptions(_Frozen):
     @classmethod
     def _exists(cls, value: str, info: ValidationInfo) -> str:
         try:
-            return _resolve_file(value, info)
+            path = _resolve_file(value, info)
         except ValueError as err:
             raise ValueError(f"{err} (docs/security.md shows how to make the certificates)") from None
+        try:
+            text = Path(path).read_text(encoding="ascii", errors="replace")
+        except OSError as err:
+            raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
+        want = _PEM_KEY if info.field_name == "private_key" else _PEM_CERTIFICATE
+        if not re.search(want, text):
+            raise ValueError(f"{path} holds no {want.replace('(RSA |EC )?', '')} in PEM form")
+        return path
 
 
 class Identity(_Frozen):
