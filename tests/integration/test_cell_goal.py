@@ -25,7 +25,7 @@ from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected
 from urdaemon.publish import signing
 from urdaemon.publish.keys import CellKeys
-from urdaemon.runtime import cell_goals
+from urdaemon.runtime.goals import put_signed
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -43,13 +43,12 @@ def _points(target: list[float], duration: float) -> list[dict[str, Any]]:
 async def _cell(monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[tuple[Daemon, Client, list[str]]]:
     """The mock cell, and every cell goal result the daemon publishes (its key, in order)."""
     published: list[str] = []
-    put = cell_goals.put_signed
 
     def counted(node: Any, key: str, payload: bytes, attachment: bytes) -> None:
         published.append(key)
-        put(node, key, payload, attachment)
+        put_signed(node, key, payload, attachment)
 
-    monkeypatch.setattr(cell_goals, "put_signed", counted)
+    monkeypatch.setattr("urdaemon.runtime.cell_goals.put_signed", counted)
     async with running_daemon(TWO_MOCKS) as (daemon, client):
         yield daemon, client, published
 
