@@ -23,7 +23,7 @@ from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected
-from urdaemon.publish import signing
+from urdaemon.publish import codec, signing
 from urdaemon.publish.keys import CellKeys
 from urdaemon.runtime.goals import put_signed
 
@@ -288,3 +288,24 @@ async def test_a_cell_goal_being_planned_at_shutdown_is_answered_once_and_starts
         {"v": 1, "accepted": False, "reason": "daemon shutting down"}
     ]
     assert all(rt.controller.statistics().goals_accepted == 0 for rt in daemon.runtimes)
+
+
+def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
+    """The request is split into its parts by counting brackets, at most ``_SCAN_TOKENS`` a step (a
+    2 MiB request parsed whole would hold the loop for tens of milliseconds); brackets inside texts
+    do not count, and each part is handed on as sent."""
+    alice = swing_trajectory(2500, HOME)
+    bob = {"points": _points(BOB, 1.0), "joint_names": ["a}]", 'b\\"{['] + [f"j{i}" for i in range(4)]}
+    text = json.dumps({"robots": {"alice": alice, "bob": bob}, "on_abort": "continue"}, indent=1).encode()
+    decoder = codec.CellGoalDecoder(text)
+    steps = 1
+    while decoder.advance():
+        steps += 1
+    split = decoder.result()
+    assert split.on_abort == "continue"
+    assert {name: json.loads(bytes(part)) for name, part in split.robots.items()} == {
+        "alice": alice,
+        "bob": bob,
+    }
+    brackets = 8 * 2500  # each point: an object and three lists
+    assert steps >= brackets // codec._SCAN_TOKENS, steps
