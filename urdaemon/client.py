@@ -11,10 +11,11 @@
 
 Commanding a robot needs its command lease (docs/security.md): the first goal, cancel or commanding
 service call of a ``RobotClient`` acquires it transparently (``LeaseHeld`` when another client holds
-it), and ``Client.close()`` releases it. Stream commands (``stream_positions``, ``stream_velocities``,
-``freedrive``) are plain publications that never wait: call ``await robot.ensure_lease()`` once before
-the first, as a ur_rtde program opens its control interface before ``servoJ``. ``stop`` never needs
-the lease.
+it), and ``Client.close()`` releases it. Once another client took it over, commands raise
+``LeaseHeld`` until the program calls ``ensure_lease()`` again. Stream commands
+(``stream_positions``, ``stream_velocities``, ``freedrive``) are plain publications that never wait:
+call ``await robot.ensure_lease()`` once before the first, as a ur_rtde program opens its control
+interface before ``servoJ``. ``stop`` never needs the lease.
 
 A goal's feedback and result are taken only when they carry the signature of the key the accepting
 reply gave this client: another session can publish on a goal's keys, but what it publishes is dropped
@@ -607,6 +608,11 @@ class Lease:
     Acquiring declares the liveliness token ``<cell>/<robot>/lease/<session id>`` first (the daemon
     grants only once it sees it) and keeps it while the lease is wanted; a refusal, a release or a
     lease that ended undeclares it.
+
+    A lease that ended without this client releasing it (taken over: seen on the robot's events, or
+    a command refused for the lease) is not acquired again behind the program's back: commands raise
+    ``LeaseHeld`` saying why until ``acquire(again=True)`` (``RobotClient.ensure_lease``). A forced
+    take-over would mean little if the client it stopped took the lease back with its next command.
     """
 
     def __init__(self, client: Client, keys: RobotKeys) -> None:
@@ -616,7 +622,13 @@ class Lease:
         """The daemon's grant while this client holds the lease, else None."""
         self.unchecked = False
         """The daemon serves no lease for this robot (one older than leases): commands go without."""
+        self.ended_reason: str | None = None
+        """Why this client's lease ended without its release (None: it did not)."""
+        self.ended = asyncio.Event()
+        """Set when the lease ends without this client's release; cleared when it acquires again."""
+        self._since: object = None
         self._alive: Any = None
+        self._events: Any = None
         self._lock = asyncio.Lock()
 
     @property
@@ -633,12 +645,14 @@ class Lease:
         """What goes with a command: the token's ASCII bytes (None without one)."""
         return None if self.token is None else self.token.encode()
 
-    async def acquire(self, *, force: bool = False, reason: str = "") -> dict[str, Any]:
+    async def acquire(self, *, force: bool = False, reason: str = "", again: bool = False) -> dict[str, Any]:
         """The daemon's grant (acquired unless held already, or taken over with ``force``); raises
-        ``LeaseHeld`` with the daemon's reason when refused."""
+        ``LeaseHeld`` with the daemon's reason when refused, or why the lease ended unless ``again``."""
         async with self._lock:
             if self.usable and not force:
                 return {"ok": True, "token": self.token}
+            if self.ended_reason is not None and not (again or force):
+                raise LeaseHeld(self.ended_reason)
             body: dict[str, Any] = {"action": "acquire", "session": self.session_id}
             body["holder"] = self.client.holder
             if force:
@@ -655,10 +669,42 @@ class Lease:
                 raise
             token = reply.get("token")
             if reply.get("ok") is True and isinstance(token, str) and _LEASE_TOKEN.fullmatch(token):
-                self.token = token
+                self._granted(token, reply.get("lease"))
                 return reply
             self._undeclare()
             raise LeaseHeld(str(reply.get("reason") or f"lease: not granted ({reply})"))
+
+    def _granted(self, token: str, lease: object) -> None:
+        self.token = token
+        self._since = lease.get("since") if isinstance(lease, dict) else None
+        self.ended_reason = None
+        self.ended.clear()
+        if self._events is None:  # a take-over is published there: streams stop at once, not silently
+            loop = asyncio.get_running_loop()
+
+            def on_event(sample: Any) -> None:
+                with contextlib.suppress(RuntimeError):
+                    loop.call_soon_threadsafe(self._on_event, sample.payload.to_bytes())
+
+            self._events = self.client.session.declare_subscriber(self.keys.events, on_event)
+            self.client._closers.append(self._events.undeclare)
+
+    def _on_event(self, payload: bytes) -> None:
+        """A ``taken_over`` lease event whose previous lease is this client's grant ends it."""
+        try:
+            event = json.loads(payload)
+        except ValueError:
+            return
+        if not isinstance(event, dict) or (event.get("kind"), event.get("action")) != ("lease", "taken_over"):
+            return
+        previous = event.get("previous")
+        if self.token is None or not isinstance(previous, dict):
+            return
+        if (previous.get("session"), previous.get("since")) == (self.session_id, self._since):
+            self.end(
+                f"lease: robot {self.keys.robot!r} was taken over by {event.get('holder')}: "
+                f"{event.get('reason')}; ensure_lease() acquires it again"
+            )
 
     async def release(self, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any] | None:
         """Give the lease back (stops whatever still moves the robot); the daemon's reply, or None
@@ -675,10 +721,12 @@ class Lease:
             finally:
                 self._undeclare()
 
-    def ended(self) -> None:
-        """The daemon refused a command for the lease: it is no longer this client's (taken over,
-        or the daemon restarted); the next command acquires again."""
+    def end(self, reason: str) -> None:
+        """The lease is no longer this client's, for ``reason`` (taken over, or a command refused for
+        it: released by whoever took it over, or a daemon that restarted)."""
         self.token = None
+        self.ended_reason = reason
+        self.ended.set()
         self._undeclare()
 
     async def show(self) -> dict[str, Any] | None:
@@ -748,9 +796,11 @@ class RobotClient:
         """Acquire the robot's command lease unless this client holds it; its token ("" when the
         daemon checks none). Raises ``LeaseHeld`` naming the holder when another client holds it.
 
-        Goals, cancels and commanding services call it themselves; call it once before streaming.
+        Goals, cancels and commanding services acquire by themselves, except after the lease was
+        taken from this client (they raise ``LeaseHeld`` saying so): this acquires it again. Call it
+        once before streaming.
         """
-        await self.lease.acquire()
+        await self.lease.acquire(again=True)
         return self.lease.token or ""
 
     async def release(self) -> None:
@@ -778,12 +828,14 @@ class RobotClient:
         reply = await self.client.request(key, body, timeout=timeout, attachment=lease.attachment())
         refusal = _lease_refusal(reply, answer)
         if refusal is not None:
-            lease.ended()
+            lease.end(refusal)
             raise LeaseHeld(refusal)
         return reply
 
     def _stream_attachment(self) -> bytes | None:
         lease = self.lease
+        if not lease.usable and lease.ended_reason is not None:
+            raise LeaseHeld(lease.ended_reason)
         if not lease.usable:
             raise UrDaemonError(
                 f"robot {self.name!r}: stream commands need this client's command lease; "
