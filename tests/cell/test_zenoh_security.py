@@ -283,3 +283,11 @@ def test_client_config_command(folder: Path) -> None:
     bad = run_captured(lambda: client_config_main(["--config", str(path), "--output", str(out)]))
     assert bad.code == 2
     assert "give the client's certificate" in bad.stderr
+
+
+def test_a_grant_naming_a_robot_the_cell_lacks_is_refused_naming_the_grant(folder: Path) -> None:
+    """A grant's robot must be one of the cell's: before this check a misspelt robot (``carol``) was
+    accepted and its grant silently matched nothing, so the operator could command no robot at all."""
+    access = ACCESS.replace("command: [alice]", "command: [alice, carol]")
+    message = error_of(folder, f"{SECURE}, {access}")
+    assert "zenoh.access.grants[1].command[1]: 'carol' is not a robot of this cell" in message

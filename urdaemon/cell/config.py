@@ -671,6 +671,10 @@ class Cell(_Frozen):
                 owner[port] = f"robot {robot.name!r} {role} port"
         self._one_robot_per_controller(where)
         self._zenoh_ports_free(owner)
+        access = self.zenoh.access
+        unknown = access.unknown_robots([r.name for r in self.robots]) if access is not None else None
+        if unknown is not None:
+            raise ValueError(unknown)
         mounted_on: dict[str, str] = {}
         for robot in self.robots:
             parent = robot.pose.parent
