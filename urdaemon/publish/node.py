@@ -42,6 +42,7 @@ __all__ = [
     "LivelinessWatch",
     "Matching",
     "ZenohNode",
+    "attachment_of",
     "busy_refusal",
     "declare_state_publisher",
     "serve_config",
@@ -71,7 +72,7 @@ class Guard(Protocol):
         """Why a message with this attachment is refused; None: it passes."""
 
 
-def _attachment(message: Any, limit: int = 64) -> bytes | None:
+def attachment_of(message: Any, limit: int = 64) -> bytes | None:
     """A query's or sample's attachment, or None; one longer than ``limit`` is never copied (it
     cannot be a token) and reads as an empty one."""
     attachment = message.attachment
@@ -298,7 +299,7 @@ class ZenohNode:
             if max_bytes is not None and size > max_bytes:
                 _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
                 return
-            refusal = None if guard is None else guard.refusal(_attachment(query))
+            refusal = None if guard is None else guard.refusal(attachment_of(query))
             if refusal is not None:
                 _refuse_query(query, refusal, error=False, answer=answer)
                 return
@@ -376,7 +377,7 @@ class ZenohNode:
                 reason = wildcard_refusal(put_on, key)
             elif size > max_bytes:
                 reason = size_refusal(key, size, max_bytes)
-            elif guard is not None and (refusal := guard.refusal(_attachment(sample))) is not None:
+            elif guard is not None and (refusal := guard.refusal(attachment_of(sample))) is not None:
                 reason = refusal
             else:
                 if latest.offer(sample.payload.to_bytes()):

@@ -18,7 +18,7 @@ from typing import Any, Protocol
 from urdaemon.cell.config import Cell
 from urdaemon.errors import MessageError
 from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.publish.node import LivelinessWatch, ZenohNode
+from urdaemon.publish.node import LivelinessWatch, ZenohNode, attachment_of
 from urdaemon.runtime.lease import LEASE_BIND_TIMEOUT_S, LeaseBook, LeaseOutcome, LeaseRequest, parse_request
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload, reply
 from urdaemon.runtime.status import StatusPublisher
@@ -82,8 +82,7 @@ class LeaseKeeper:
         if request.action == "show":
             reply(query, self.book.show())
         elif request.action == "release":
-            attachment = query.attachment
-            outcome = self.book.release(None if attachment is None else bytes(attachment.to_bytes()))
+            outcome = self.book.release(attachment_of(query))
             self._act(outcome)
             reply(query, outcome.reply)
         else:
