@@ -624,6 +624,8 @@ class Lease:
         """The daemon serves no lease for this robot (one older than leases): commands go without."""
         self.ended_reason: str | None = None
         """Why this client's lease ended without its release (None: it did not)."""
+        self.refusal: str | None = None
+        """The daemon's reason when this client last asked for the lease in vain (None: granted)."""
         self.ended = asyncio.Event()
         """Set when the lease ends without this client's release; cleared when it acquires again."""
         self._since: object = None
@@ -672,12 +674,13 @@ class Lease:
                 self._granted(token, reply.get("lease"))
                 return reply
             self._undeclare()
-            raise LeaseHeld(str(reply.get("reason") or f"lease: not granted ({reply})"))
+            self.refusal = str(reply.get("reason") or f"lease: not granted ({reply})")
+            raise LeaseHeld(self.refusal)
 
     def _granted(self, token: str, lease: object) -> None:
         self.token = token
         self._since = lease.get("since") if isinstance(lease, dict) else None
-        self.ended_reason = None
+        self.ended_reason = self.refusal = None
         self.ended.clear()
         if self._events is None:  # a take-over is published there: streams stop at once, not silently
             loop = asyncio.get_running_loop()
@@ -834,8 +837,9 @@ class RobotClient:
 
     def _stream_attachment(self) -> bytes | None:
         lease = self.lease
-        if not lease.usable and lease.ended_reason is not None:
-            raise LeaseHeld(lease.ended_reason)
+        known = lease.ended_reason or lease.refusal  # why it is not this client's, as last heard
+        if not lease.usable and known is not None:
+            raise LeaseHeld(known)
         if not lease.usable:
             raise UrDaemonError(
                 f"robot {self.name!r}: stream commands need this client's command lease; "
@@ -978,8 +982,10 @@ class RobotClient:
     def stream_positions(self, positions: Sequence[float], velocities: Sequence[float] | None = None) -> None:
         """Publish one streaming position command (repeat faster than the deadman timeout).
 
-        Needs the lease held (``await ensure_lease()`` first; ``UrDaemonError`` otherwise); a command
-        the daemon refuses is reported as a ``command_rejected`` event on the robot's events.
+        Needs the lease held (``await ensure_lease()`` first): otherwise raises ``LeaseHeld`` with the
+        reason this client last heard (who holds it, who took it over), or ``UrDaemonError`` saying to
+        acquire it. A command the daemon refuses is reported as a ``command_rejected`` event on the
+        robot's events.
         """
         body: dict[str, Any] = {"positions": list(positions)}
         if velocities is not None:

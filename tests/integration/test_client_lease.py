@@ -62,8 +62,11 @@ async def test_a_second_clients_commands_are_refused_naming_the_holder_and_stop_
                 await call
             assert caught.value.reason.startswith("lease: "), caught.value.reason
             assert FIRST in caught.value.reason, caught.value.reason
-        with pytest.raises(UrDaemonError, match="ensure_lease"):  # a stream never waits to acquire
+        with pytest.raises(LeaseHeld, match="held by first client"):  # as last refused: no waiting
             theirs.stream_velocities([0.1] * 6)
+        other = await second.robot("bob")  # never asked for bob's lease: a stream says what to do
+        with pytest.raises(UrDaemonError, match="ensure_lease"):
+            other.stream_positions(HOME)
         assert daemon.runtimes[0].controller.active_goal_id == goal.goal_id, "the first's goal runs on"
         assert (await theirs.cycle_stats())["ok"] is True  # reading counters needs no lease
         assert (await theirs.stop())["ok"] is True  # stop: anyone, always
