@@ -686,8 +686,10 @@ class Lease:
             loop = asyncio.get_running_loop()
 
             def on_event(sample: Any) -> None:
-                with contextlib.suppress(RuntimeError):
-                    loop.call_soon_threadsafe(self._on_event, sample.payload.to_bytes())
+                payload = sample.payload.to_bytes()
+                if b"taken_over" in payload:  # the loop parses only what may be a take-over
+                    with contextlib.suppress(RuntimeError):
+                        loop.call_soon_threadsafe(self._on_event, payload)
 
             self._events = self.client.session.declare_subscriber(self.keys.events, on_event)
             self.client._closers.append(self._events.undeclare)
