@@ -62,25 +62,54 @@ class RecordingNode:
         pass
 
 
+TOKEN = b"0123456789abcdef0123456789abcdef"
+"""The lease token ``HeldLease`` gives every command."""
+
+
 class RecordingSession:
     def __init__(self) -> None:
         self.puts: list[tuple[str, bytes]] = []
+        self.put_attachments: list[bytes | None] = []
 
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: bytes, *, attachment: bytes | None = None) -> None:
         self.puts.append((key, payload))
+        self.put_attachments.append(attachment)
+
+
+class HeldLease:
+    """A command lease the recording client already holds (its acquire asks nothing)."""
+
+    usable = True
+    ended_reason: str | None = None
+    refusal: str | None = None
+
+    async def acquire(self, **_: Any) -> dict[str, Any]:
+        return {"ok": True}
+
+    def attachment(self) -> bytes:
+        return TOKEN
+
+    def end(self, reason: str) -> None:
+        raise AssertionError(f"the recording client's lease never ends ({reason})")
 
 
 class RecordingClient:
-    """What ``RobotClient`` uses of ``Client``: records each request and answers ``ok``."""
+    """What ``RobotClient`` uses of ``Client``: records each request (and its attachment: the
+    lease's token on commanding services, none on the others) and answers ``ok``."""
 
     def __init__(self) -> None:
         self.session = RecordingSession()
         self.requests: list[tuple[str, dict[str, Any], float]] = []
+        self.attachments: list[bytes | None] = []
+
+    def lease(self, keys: RobotKeys) -> HeldLease:
+        return HeldLease()
 
     async def request(
-        self, key: str, body: dict[str, Any] | None = None, *, timeout: float
+        self, key: str, body: dict[str, Any] | None = None, *, timeout: float, attachment: bytes | None = None
     ) -> dict[str, Any]:
         self.requests.append((key, dict(body or {}), timeout))
+        self.attachments.append(attachment)
         return {"ok": True}
 
 
@@ -115,6 +144,7 @@ def test_the_freedrive_command_goes_where_the_runtime_listens() -> None:
     client = RecordingClient()
     RobotClient(client, runtime.keys).freedrive(True)  # type: ignore[arg-type]
     [(key, payload)] = client.session.puts
+    assert client.session.put_attachments == [TOKEN]
     assert key == runtime.keys.command_freedrive == "testcell/alice/command/freedrive"
     assert key in node.subscribers
     assert codec.decode_freedrive(payload) is True
@@ -153,6 +183,7 @@ async def test_each_named_client_call_sends_what_its_service_decodes(
     entry = services.spec(name)
     assert key == keys.service(name)
     assert timeout == entry.timeout
+    assert client.attachments == [TOKEN if entry.commanding else None]
     assert entry.decode(codec.encode(body)) == expected
 
 
