@@ -157,7 +157,7 @@ class Daemon:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
-        self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen)
+        self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell)
         restore_priority: Callable[[], None] | None = None
         try:
             if self.cell.realtime_priority:  # after Zenoh started its threads: they stay as they are

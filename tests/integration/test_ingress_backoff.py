@@ -60,7 +60,7 @@ class FlakyBackend(MockBackend):
 
 
 class _Node:
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: bytes, *, attachment: bytes | None = None) -> None:
         pass
 
 

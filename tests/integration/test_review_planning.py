@@ -78,7 +78,7 @@ class Node:
         self.puts: list[tuple[str, bytes]] = []
         self.handlers: dict[str, Callable[[Any], None]] = {}
 
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: bytes, *, attachment: bytes | None = None) -> None:
         self.puts.append((key, payload))
 
     def publisher(self, key: str, **_: Any) -> Publisher:

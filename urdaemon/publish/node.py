@@ -181,7 +181,7 @@ def zenoh_config(
     return conf
 
 
-def serve_config(options: ZenohOptions, listen: tuple[str, ...]) -> Any:
+def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | None = None) -> Any:
     """The daemon's session: the cell file's mode, endpoints, scouting and transport, without shared
     memory.
 
@@ -189,7 +189,8 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...]) -> Any:
     16 MiB pool, mapped (and resident) from the first such message on: for the daemon, the first
     client asking for the URDF. Its messages are small JSON, so the pool bought nothing and cost a
     fifth of the process's memory; peers that use shared memory still connect, over the network
-    transport (docs/performance.md, "The serve process").
+    transport (docs/performance.md, "The serve process"). ``cell``: the cell the access rules
+    name (transport_security.py); without it they name any cell.
     """
     conf = zenoh_config(
         options.mode,
@@ -199,7 +200,7 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...]) -> Any:
         low_latency=options.low_latency,
     )
     conf.insert_json5("transport/shared_memory/enabled", "false")
-    configure_daemon(conf, options)
+    configure_daemon(conf, options, cell)
     return conf
 
 
@@ -222,12 +223,17 @@ class ZenohNode:
     """One Zenoh session owned by the daemon; every declared entity is undeclared on ``close``."""
 
     def __init__(
-        self, options: ZenohOptions, loop: asyncio.AbstractEventLoop, *, listen: tuple[str, ...] | None = None
+        self,
+        options: ZenohOptions,
+        loop: asyncio.AbstractEventLoop,
+        *,
+        listen: tuple[str, ...] | None = None,
+        cell: str | None = None,
     ) -> None:
         self._loop = loop
         endpoints = options.listen if listen is None else listen
         try:
-            self.session: Any = zenoh.open(serve_config(options, endpoints))
+            self.session: Any = zenoh.open(serve_config(options, endpoints, cell))
         except zenoh.ZError as err:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
         self._entities: list[Any] = []
@@ -258,10 +264,13 @@ class ZenohNode:
         flag.active = flag.active or bool(publisher.matching_status.matching)
         return flag
 
-    def put(self, key: str, payload: bytes) -> None:
-        """Publish once on ``key`` (dropped rather than blocking when congested)."""
+    def put(self, key: str, payload: bytes, *, attachment: bytes | None = None) -> None:
+        """Publish once on ``key``, with ``attachment`` if given (a goal message's signature),
+        dropped rather than blocking when congested."""
         if not self._closed:
-            self.session.put(key, payload, congestion_control=zenoh.CongestionControl.DROP)
+            self.session.put(
+                key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.DROP
+            )
 
     def queryable(
         self,

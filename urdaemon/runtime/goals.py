@@ -35,7 +35,7 @@ from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import codec, signing
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 from urdaemon.runtime.gate import MotionGate
 from urdaemon.runtime.passthrough import Passthrough
@@ -54,13 +54,9 @@ ResultListener = Callable[[GoalResult, bytes], None]
 
 def put_signed(node: ZenohNode, key: str, payload: bytes, attachment: bytes) -> None:
     """Publish once on ``key`` with ``attachment`` (a goal message's signature), dropped rather than
-    blocking when congested, as ``ZenohNode.put`` publishes (which takes no attachment)."""
-    session = getattr(node, "session", None)
-    if session is None:  # a node without a Zenoh session of its own publishes as its put does
-        node.put(key, payload)
-        return
+    blocking when congested (``ZenohNode.put``)."""
     with contextlib.suppress(zenoh.ZError):  # the session closed: nobody is left to hear it
-        session.put(key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.DROP)
+        node.put(key, payload, attachment=attachment)
 
 
 @dataclass(slots=True)
@@ -105,10 +101,9 @@ class Goals:
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
 
-    def declare(self, guard: Any = None) -> None:
+    def declare(self, guard: Guard | None = None) -> None:
         """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and
-        cancel need the command lease holder's token (``guard``: a ``publish.node.Guard``), results are
-        open to all."""
+        cancel need the command lease holder's token (``guard``), results are open to all."""
         node, keys = self._node, self._keys
         node.queryable(
             keys.goal_trajectory,
