@@ -457,14 +457,22 @@ def _busy_ports(cell: Cell, source: str) -> list[str]:
     would retry a taken callback port forever."""
     import socket
 
+    from urdaemon.backends.ur.route import listen_plan
+    from urdaemon.cell.config import UrOptions
+    from urdaemon.errors import BackendError
+
     wanted: list[tuple[str, str, int]] = []
+    problems = []
     for i, robot in enumerate(cell.robots):
-        if not robot.listens:
+        if not robot.listens or robot.address is None:
             continue
-        host = (robot.ur.listen_address if robot.ur is not None else None) or "0.0.0.0"
+        try:  # where serve's servers would listen: the interface that reaches the robot, by default
+            host = listen_plan(robot.address, robot.ur or UrOptions()).address
+        except BackendError as err:  # serve would retry this until the network lets it through
+            problems.append(f"{source}: robots[{i}] ({robot.name}): {err}")
+            continue
         for role, port in robot.ports.as_dict().items():
             wanted.append((f"robots[{i}] ({robot.name}).ports.{role}", host, port))
-    problems = []
     for where, host, port in wanted:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import free_tcp_port, run_cli
+from tests.helpers import fake_address, free_tcp_port, run_cli
 from urdaemon.cell import parse_cell
 from urdaemon.errors import ConfigError
 
@@ -110,3 +110,29 @@ def test_check_refuses_a_callback_port_in_use_and_serve_names_the_static_problem
     assert serve.code == 2, serve
     assert "robots[1] (bob).address" in serve.stderr
     assert "Traceback" not in serve.stderr
+
+
+def test_check_binds_where_serve_would_listen_by_default(tmp_path: Path) -> None:
+    """With no ``listen_address`` the servers listen on the interface that reaches the robot (for a
+    robot on this machine: its own loopback address), so ``check`` must try that address. Before,
+    it tried 0.0.0.0: a port held on the robot's address was reported only by luck of the bind
+    rules, and one held on another loopback address was reported though ``serve`` would not clash."""
+    robot = fake_address()
+    ports = _ports()
+    config = tmp_path / "cell.yaml"
+    config.write_text(
+        "cell: c\nrobots:\n"
+        f"  - {{name: alice, model: ur5e, backend: ur, address: '{robot}', ports: {{reverse: {ports[0]}, "
+        f"script_sender: {ports[1]}, trajectory: {ports[2]}, script_command: {ports[3]}}}}}\n",
+        encoding="utf-8",
+    )
+    with socket.socket() as elsewhere:  # another address of the machine: no clash for serve
+        elsewhere.bind(("127.0.0.1", ports[1]))
+        elsewhere.listen()
+        with socket.socket() as holder:  # the robot's own address: serve would fail to listen
+            holder.bind((robot, ports[0]))
+            holder.listen()
+            run = run_cli("check", "--config", str(config))
+    assert run.code == 2, run
+    assert f"robots[0] (alice).ports.reverse: cannot listen on {robot}:{ports[0]}" in run.stderr
+    assert "ports.script_sender" not in run.stderr
