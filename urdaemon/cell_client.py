@@ -5,7 +5,7 @@
     goal = await send_cell_trajectory(client, "demo_cell", {"alice": points_a, "bob": points_b})
     result = await goal.result()  # {"status": "succeeded", "robots": {"alice": {...}, "bob": {...}}}
 
-Each robot's command lease is taken first (``RobotClient.ensure_lease``), and the tokens go with the
+Each robot's command lease is taken first (as a robot's own goal takes it), and the tokens go with the
 goal and with its cancel. The result is taken only when it carries the signature of the key the
 accepting reply gave (publish/signing.py): anything else published on the result's key is ignored
 and counted (``CellGoalHandle.ignored``).
@@ -58,7 +58,7 @@ class CellGoalHandle:
             try:
                 self._take(await self._sub.get_sample(wait), key)
             except UrTimeoutError:
-                for received in await self.client.query_replies(key, timeout=1.0):
+                for received in await self.client.query_replies(key, timeout=1.0, every_queryable=True):
                     self._take(received, key)
         self.client.unsubscribe(self._sub)
         return self._result
@@ -96,7 +96,8 @@ async def send_cell_trajectory(
     tokens: dict[str, str] = {}
     for name in parts:
         robot = await client.robot(name, cell=cell)
-        tokens[name] = await robot.ensure_lease()
+        await robot.lease.acquire()  # as a goal does: after a take-over it raises, never takes it back
+        tokens[name] = robot.lease.token or ""
     robots = {
         name: dict(part) if isinstance(part, Mapping) else {"points": list(part)}
         for name, part in parts.items()
