@@ -222,19 +222,37 @@ def sender(endpoint: str, scale: float) -> None:
     items = inputs(scale)
     session: Any = zenoh.open(zenoh_config("peer", [], [endpoint]))
     try:
+        # the sender holds alice's command lease, so its inputs are read as the holder's would be
+        # (a client without it is refused on Zenoh's thread before anything reads the payload)
+        token, _held = _lease(session)
         print("ready", flush=True)
         for line in sys.stdin:
             item = items[int(line)]
             if item.put:
-                session.put(item.key, item.payload)
+                session.put(item.key, item.payload, attachment=token)
                 time.sleep(PUT_SETTLE_S)
             else:
-                list(session.get(item.key, payload=item.payload or None, timeout=10.0))
+                list(session.get(item.key, payload=item.payload or None, attachment=token, timeout=10.0))
                 # an accepted goal must not run on
-                list(session.get("stalls/alice/goal/cancel", timeout=10.0))
+                list(session.get("stalls/alice/goal/cancel", attachment=token, timeout=10.0))
             print("done", flush=True)
     finally:
         session.close()
+
+
+def _lease(session: Any) -> tuple[bytes, Any]:
+    """Acquire alice's command lease as a client does (its liveliness token first); the token to
+    attach, and the liveliness token to keep while it is held."""
+    zid = str(session.zid())
+    held = session.liveliness().declare_token(f"stalls/alice/lease/{zid}")
+    body = json.dumps({"action": "acquire", "session": zid, "holder": "input_stalls benchmark"})
+    replies = [
+        r.ok.payload.to_bytes() for r in session.get("stalls/alice/lease", payload=body, timeout=10.0) if r.ok
+    ]
+    grant = json.loads(replies[0]) if replies else {}
+    if grant.get("ok") is not True:
+        raise RuntimeError(f"alice's command lease was not granted: {grant or 'no answer'}")
+    return str(grant["token"]).encode(), held
 
 
 async def measure(
