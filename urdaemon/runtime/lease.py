@@ -14,6 +14,7 @@ constant-time compare, and never sees a half-made change.
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 import re
 import secrets
@@ -25,6 +26,7 @@ from urdaemon.errors import MessageError
 from urdaemon.publish.codec import client_text, decode_message
 
 __all__ = [
+    "FINGERPRINT_CHARS",
     "HOLDER_MAX_CHARS",
     "LEASE_BIND_TIMEOUT_S",
     "TOKEN_BYTES",
@@ -33,6 +35,7 @@ __all__ = [
     "LeaseOutcome",
     "LeaseRequest",
     "LeaseView",
+    "fingerprint",
     "parse_request",
 ]
 
@@ -42,9 +45,17 @@ HOLDER_MAX_CHARS = 120
 """Longest holder text (it names the client for humans)."""
 TOKEN_BYTES = 16
 """A lease token is this many random bytes, as 32 lowercase hex characters."""
+FINGERPRINT_CHARS = 16
+"""A lease's fingerprint is this many hex characters of sha256 of its session id."""
 _SESSION = re.compile(r"[A-Za-z0-9_-]{1,64}")
 _ACTIONS = ("show", "acquire", "release")
 _FIELDS = {"v", "action", "session", "holder", "force", "reason"}
+
+
+def fingerprint(session: str) -> str:
+    """What the daemon shows of a lease's session id ``session`` (a secret only its holder knows):
+    the first 16 hex characters of its SHA-256, enough to tell leases apart, useless to acquire."""
+    return hashlib.sha256(session.encode("ascii")).hexdigest()[:FINGERPRINT_CHARS]
 
 
 @dataclass(frozen=True, slots=True)
