@@ -66,7 +66,7 @@ class CellGoalHandle:
     def _take(self, received: Received, key: str) -> None:
         if received.key != key or self._result is not None:
             return
-        if not signing.verify(self.result_key, received.payload, received.attachment):
+        if not signing.verify(self.result_key, received.key, received.payload, received.attachment):
             self.ignored += 1
             return
         data = json.loads(received.payload)

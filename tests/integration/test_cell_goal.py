@@ -92,7 +92,8 @@ async def test_both_parts_start_with_one_reply_and_the_cell_goal_succeeds_once(
         # a late query is answered with the same result, signed
         late = await client.query_replies(CellKeys(CELL).goal_result(goal.goal_id))
         assert len(late) == 1
-        assert signing.verify(goal.result_key, late[0].payload, late[0].attachment)
+        assert late[0].key == CellKeys(CELL).goal_result(goal.goal_id)
+        assert signing.verify(goal.result_key, late[0].key, late[0].payload, late[0].attachment)
         assert json.loads(late[0].payload)["status"] == "succeeded"
 
 

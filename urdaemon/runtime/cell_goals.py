@@ -268,11 +268,12 @@ class CellGoals:
             reason = f"robot {robot!r} ended {part_status.value}: {why}"
         body = {"goal_id": run.goal_id, "status": status, "robots": run.results, "reason": reason}
         message = codec.encode(body)
-        signature = signing.sign(run.key, message)
+        on = self._keys.goal_result(run.goal_id)  # signed with the key it goes out on
+        signature = signing.sign(run.key, on, message)
         self._results[run.goal_id] = (message, signature)
         while len(self._results) > KEPT_RESULTS:
             self._results.popitem(last=False)
-        put_signed(self._node, self._keys.goal_result(run.goal_id), message, signature)
+        put_signed(self._node, on, message, signature)
         (log.info if status == "succeeded" else log.warning)(
             "cell goal %s %s%s", run.goal_id, status, f": {reason}" if reason else ""
         )
@@ -280,10 +281,11 @@ class CellGoals:
     def on_result_query(self, query: Any) -> None:
         """Answer a query for a finished cell goal's result, signed (nothing while it runs)."""
         parts = str(query.key_expr).split("/")
-        kept = self._results.get(parts[-2] if len(parts) >= 2 else "")
-        if kept is not None:
+        goal_id = parts[-2] if len(parts) >= 2 else ""
+        kept = self._results.get(goal_id)
+        if kept is not None:  # on the key its signature covers
             with contextlib.suppress(Exception):  # the querier may have timed out and gone
-                query.reply(query.key_expr, kept[0], attachment=kept[1])
+                query.reply(self._keys.goal_result(goal_id), kept[0], attachment=kept[1])
         with contextlib.suppress(Exception):
             query.drop()
 

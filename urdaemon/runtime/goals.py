@@ -127,23 +127,20 @@ class Goals:
                 message = codec.encode_feedback(self._robot.name, event)
                 key = self._keys_of.get(event.goal_id)
                 if key is not None:  # at the feedback rate, never once per cycle
-                    put_signed(
-                        self._node,
-                        self._keys.goal_feedback(event.goal_id),
-                        message,
-                        signing.sign(key, message),
-                    )
+                    on = self._keys.goal_feedback(event.goal_id)
+                    put_signed(self._node, on, message, signing.sign(key, on, message))
             else:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
         message = codec.encode_result(self._robot.name, result)
         key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
-        signature = signing.sign(key, message)
+        on = self._keys.goal_result(result.goal_id)  # signed with the key it goes out on
+        signature = signing.sign(key, on, message)
         self._results[result.goal_id] = (message, signature)
         while len(self._results) > KEPT_RESULTS:
             self._results.popitem(last=False)
-        put_signed(self._node, self._keys.goal_result(result.goal_id), message, signature)
+        put_signed(self._node, on, message, signature)
         log = self._log.info if result.status.value == "succeeded" else self._log.warning
         log(
             "goal %s %s%s", result.goal_id, result.status.value, f": {result.reason}" if result.reason else ""
