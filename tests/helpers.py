@@ -26,6 +26,7 @@ __all__ = [
     "CliRun",
     "LeaseGrant",
     "acquire_lease",
+    "client_lease",
     "drain_in_background",
     "fake_address",
     "free_tcp_port",
@@ -365,11 +366,13 @@ async def rtde_sample(address: str, names: Sequence[str]) -> dict[str, Any]:
 class LeaseGrant:
     """A robot's command lease held by a raw Zenoh session: the attachment its commanding messages
     carry, and the liveliness token that binds the lease to the session (keep it; undeclare it to
-    let the lease go as a vanished client would)."""
+    let the lease go as a vanished client would), and the lease's secret session id."""
 
     token: bytes
     liveliness: Any
     reply: dict[str, Any]
+    session_id: str = ""
+    """The secret the lease is bound to (its liveliness token is ``<cell>/<robot>/lease/<id>``)."""
 
 
 async def zenoh_ask(
@@ -411,17 +414,32 @@ async def zenoh_ask(
 
 
 async def acquire_lease(
-    session: Any, cell: str, robot: str, *, holder: str = "tests", force: str | None = None
+    session: Any,
+    cell: str,
+    robot: str,
+    *,
+    holder: str = "tests",
+    force: str | None = None,
+    session_id: str | None = None,
 ) -> LeaseGrant:
-    """Acquire ``robot``'s command lease for ``session`` as a client does: declare the liveliness token
-    ``<cell>/<robot>/lease/<zid>``, then ask ``acquire`` (with ``force``: take it over, for that
-    reason); fails the test if it is not granted."""
-    zid = str(session.zid())
-    liveliness = session.liveliness().declare_token(f"{cell}/{robot}/lease/{zid}")
-    body: dict[str, Any] = {"action": "acquire", "session": zid, "holder": holder}
+    """Acquire ``robot``'s command lease for ``session`` as a client does: choose a secret session id
+    (or reuse ``session_id``), declare the liveliness token ``<cell>/<robot>/lease/<id>``, then ask
+    ``acquire`` (with ``force``: take it over, for that reason); fails the test if it is not
+    granted."""
+    secret = secrets.token_hex(16) if session_id is None else session_id
+    liveliness = session.liveliness().declare_token(f"{cell}/{robot}/lease/{secret}")
+    body: dict[str, Any] = {"action": "acquire", "session": secret, "holder": holder}
     if force is not None:
         body.update(force=True, reason=force)
     replies = await zenoh_ask(session, f"{cell}/{robot}/lease", body)
     assert len(replies) == 1, f"lease of {robot}: {replies}"
     assert replies[0].get("ok") is True, f"lease of {robot} not granted: {replies}"
-    return LeaseGrant(replies[0]["token"].encode(), liveliness, replies[0])
+    return LeaseGrant(replies[0]["token"].encode(), liveliness, replies[0], secret)
+
+
+async def client_lease(client: Any, robot: str) -> LeaseGrant:
+    """``robot``'s command lease as ``client`` (an ``urdaemon.client.Client``) holds it: its token,
+    for raw messages on the client's session beside the client's own calls (one lease, one holder:
+    a second lease on the same session would be another holder, with a secret of its own)."""
+    token = await (await client.robot(robot)).ensure_lease()
+    return LeaseGrant(token.encode(), None, {})

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from tests.helpers import LeaseGrant, acquire_lease
+from tests.helpers import LeaseGrant, client_lease
 from urdaemon.client import Client, RobotClient
 from urdaemon.daemon import Daemon
 
@@ -258,11 +258,8 @@ async def assert_still_serving(daemon: Daemon, client: Client, errors: list[dict
 
 
 async def leases(daemon: Daemon, client: Client) -> dict[str, LeaseGrant]:
-    """Every robot's command lease, held by the client's session."""
-    return {
-        rt.robot.name: await acquire_lease(client.session, daemon.cell.cell, rt.robot.name)
-        for rt in daemon.runtimes
-    }
+    """Every robot's command lease, held by the client."""
+    return {rt.robot.name: await client_lease(client, rt.robot.name) for rt in daemon.runtimes}
 
 
 async def test_every_queryable_answers_garbage_once_with_a_refusal_and_the_daemon_keeps_serving(
@@ -368,7 +365,7 @@ async def test_goals_beyond_the_planners_time_range_are_refused_with_a_reason(
 ) -> None:
     daemon, client = cell
     alice = daemon.runtimes[0].keys
-    lease = await acquire_lease(client.session, daemon.cell.cell, alice.robot)
+    lease = await client_lease(client, alice.robot)
     target = [0.2, *HOME[1:]]
     with loop_errors() as errors:
         for key, body in (

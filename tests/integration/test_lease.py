@@ -12,6 +12,7 @@ import contextlib
 import json
 import logging
 import re
+import secrets
 import signal
 import subprocess
 import sys
@@ -195,14 +196,14 @@ async def test_the_holders_session_closing_aborts_its_goal_and_frees_the_lease()
 
 HOLDER_SCRIPT = textwrap.dedent(
     """
-    import json, sys, time, zenoh
+    import json, secrets, sys, time, zenoh
     endpoint = sys.argv[1]
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(conf)
-    zid = str(session.zid())
+    zid = secrets.token_hex(16)
     token = session.liveliness().declare_token(f"testcell/alice/lease/{zid}")
 
     def ask(key, body, attachment=None):
@@ -259,7 +260,7 @@ async def test_a_take_over_needs_force_and_a_reason_and_is_logged_and_published(
             events = Inbox(second, "testcell/alice/events")
             old = await acquire_lease(first, "testcell", "alice", holder="stuck client")
             goal = await move(first, old)
-            zid = str(second.zid())
+            zid = secrets.token_hex(16)
             token = second.liveliness().declare_token(f"testcell/alice/lease/{zid}")
             ask: dict[str, Any] = {"action": "acquire", "session": zid, "holder": "rescuer"}
             (refused,) = await zenoh_ask(second, "testcell/alice/lease", ask)
@@ -317,18 +318,18 @@ async def test_acquire_without_a_liveliness_token_is_refused_naming_the_key(
 ) -> None:
     from urdaemon.runtime import lease_keeper  # here: the test runs (and fails) on code without it
 
-    monkeypatch.setattr(lease_keeper, "LEASE_BIND_TIMEOUT_S", 0.3)
+    monkeypatch.setattr(lease_keeper, "LEASE_BIND_TIMEOUT_S", 1.0)
     async with served() as (_, endpoint):
         session = open_session(endpoint)
         try:
-            zid = str(session.zid())
+            zid = secrets.token_hex(16)
             ask = {"action": "acquire", "session": zid, "holder": "tokenless"}
             (refused,) = await zenoh_ask(session, "testcell/alice/lease", ask)
             assert refused["ok"] is False
             assert f"testcell/alice/lease/{zid}" in refused["reason"]
             grant = await acquire_lease(session, "testcell", "alice")
-            again = await acquire_lease(session, "testcell", "alice")
-            assert again.token == grant.token, "acquiring again is idempotent"
+            again = await acquire_lease(session, "testcell", "alice", session_id=grant.session_id)
+            assert again.token == grant.token, "acquiring again with the same secret is idempotent"
             (released,) = await zenoh_ask(session, "testcell/alice/lease", {"action": "release"})
             assert released["ok"] is False, "release needs the token"
             (released,) = await zenoh_ask(
@@ -421,7 +422,7 @@ async def test_an_acquire_waiting_for_its_token_holds_up_no_other_request(
     async with served() as (_, endpoint):
         late, other = open_session(endpoint), open_session(endpoint)
         try:
-            zid = str(late.zid())
+            zid = secrets.token_hex(16)
             ask = {"action": "acquire", "session": zid, "holder": "late binder"}
             waiting = asyncio.create_task(zenoh_ask(late, "testcell/alice/lease", ask, timeout=90.0))
             bob = await acquire_lease(other, "testcell", "bob", holder="bob's client")

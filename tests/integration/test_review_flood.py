@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from tests.helpers import acquire_lease
+from tests.helpers import client_lease
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
@@ -92,7 +92,7 @@ async def test_a_burst_of_queries_reaches_the_handler_at_most_cap_at_a_time(
     assert len(garbage) < codec.SMALL_MESSAGE_BYTES
     replies = _Replies()
     key = "testcell/alice/goal/move"
-    lease = await acquire_lease(client.session, "testcell", "alice")  # the burst is the holder's own
+    lease = await client_lease(client, "alice")  # the burst is the holder's own
     for _ in range(BURST):
         client.session.get(
             key, handler=replies.on_reply, payload=garbage, attachment=lease.token, timeout=30.0
@@ -159,7 +159,7 @@ async def test_a_burst_of_stream_commands_is_acted_on_only_by_its_newest(
         json.dumps({"positions": HOME, "velocities": [0.0] * 5 + [i * 1e-9]}).encode() for i in range(count)
     ]
     before = latest.replaced_total
-    lease = await acquire_lease(client.session, "testcell", "alice")  # the burst is the holder's own
+    lease = await client_lease(client, "alice")  # the burst is the holder's own
     for payload in payloads:  # none dropped on the way: the test counts every one
         client.session.put(
             key, payload, congestion_control=zenoh.CongestionControl.BLOCK, attachment=lease.token

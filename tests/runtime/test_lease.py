@@ -9,10 +9,13 @@ import re
 import pytest
 
 from urdaemon.errors import MessageError
-from urdaemon.runtime.lease import LeaseBook, LeaseRequest, parse_request
+from urdaemon.runtime.lease import LeaseBook, LeaseRequest, fingerprint, parse_request
 
 KEY = "cell/alice/lease"
 NOW = 1_800_000_000.0
+S1 = "a" * 16 + "1"
+S2 = "b" * 16 + "2"
+"""Session ids: secrets of 16 to 64 characters."""
 
 
 def acquire(session: str, holder: str, *, force: bool = False, reason: str = "") -> LeaseRequest:
@@ -21,16 +24,21 @@ def acquire(session: str, holder: str, *, force: bool = False, reason: str = "")
 
 def test_a_grant_is_a_fresh_secret_token_and_acquiring_again_returns_the_same() -> None:
     book = LeaseBook("alice", KEY)
-    first = book.acquire(acquire("s1", "mover (pid 1)"), NOW)
+    first = book.acquire(acquire(S1, "mover (pid 1)"), NOW)
     token = first.reply["token"]
     assert re.fullmatch(r"[0-9a-f]{32}", token)
-    assert first.reply["lease"] == {"holder": "mover (pid 1)", "session": "s1", "since": NOW}
-    assert first.event == {"kind": "lease", "action": "acquired", "holder": "mover (pid 1)", "session": "s1"}
+    assert first.reply["lease"] == {"holder": "mover (pid 1)", "fingerprint": fingerprint(S1), "since": NOW}
+    assert first.event == {
+        "kind": "lease",
+        "action": "acquired",
+        "holder": "mover (pid 1)",
+        "fingerprint": fingerprint(S1),
+    }
     assert first.stop is None
-    again = book.acquire(acquire("s1", "mover (pid 1)"), NOW + 5)
+    again = book.acquire(acquire(S1, "mover (pid 1)"), NOW + 5)
     assert again.reply["token"] == token
     assert again.event is None  # nothing changed
-    other = LeaseBook("alice", KEY).acquire(acquire("s1", "x"), NOW)
+    other = LeaseBook("alice", KEY).acquire(acquire(S1, "x"), NOW)
     assert other.reply["token"] != token
 
 
@@ -41,7 +49,7 @@ def test_only_the_holders_token_passes_the_view_and_every_refusal_names_the_hold
         "lease: robot 'alice' needs its command lease for this (nobody holds it): "
         "acquire it at cell/alice/lease"
     )
-    token = book.acquire(acquire("s1", "mover"), NOW).reply["token"].encode()
+    token = book.acquire(acquire(S1, "mover"), NOW).reply["token"].encode()
     assert book.current.refusal(token) is None
     assert book.refusal(token) is None
     for wrong in (None, b"", token[:-1], b"0" * 32, token + b"0"):
@@ -53,15 +61,15 @@ def test_only_the_holders_token_passes_the_view_and_every_refusal_names_the_hold
 
 def test_another_session_is_refused_unless_it_forces_with_a_reason() -> None:
     book = LeaseBook("alice", KEY)
-    old = book.acquire(acquire("s1", "first"), NOW).reply["token"].encode()
-    refused = book.acquire(acquire("s2", "second"), NOW + 1)
+    old = book.acquire(acquire(S1, "first"), NOW).reply["token"].encode()
+    refused = book.acquire(acquire(S2, "second"), NOW + 1)
     assert refused.reply["ok"] is False
     assert "held by first" in refused.reply["reason"]
     assert "take it over with force and a reason" in refused.reply["reason"]
-    assert refused.reply["lease"]["session"] == "s1"
+    assert refused.reply["lease"]["fingerprint"] == fingerprint(S1)
     assert refused.stop is None
     assert refused.event is None
-    taken = book.acquire(acquire("s2", "second", force=True, reason="first is stuck"), NOW + 2)
+    taken = book.acquire(acquire(S2, "second", force=True, reason="first is stuck"), NOW + 2)
     assert taken.reply["ok"] is True
     assert taken.stop is not None
     assert "first is stuck" in taken.stop
@@ -71,8 +79,8 @@ def test_another_session_is_refused_unless_it_forces_with_a_reason() -> None:
         "kind": "lease",
         "action": "taken_over",
         "holder": "second",
-        "session": "s2",
-        "previous": {"holder": "first", "session": "s1", "since": NOW},
+        "fingerprint": fingerprint(S2),
+        "previous": {"holder": "first", "fingerprint": fingerprint(S1), "since": NOW},
         "reason": "first is stuck",
     }
     assert book.current.refusal(old) is not None
@@ -82,7 +90,7 @@ def test_another_session_is_refused_unless_it_forces_with_a_reason() -> None:
 def test_release_needs_the_holders_token_and_stops_the_robot() -> None:
     book = LeaseBook("alice", KEY)
     assert book.release(None).reply["ok"] is False  # nobody holds it
-    token = book.acquire(acquire("s1", "first"), NOW).reply["token"].encode()
+    token = book.acquire(acquire(S1, "first"), NOW).reply["token"].encode()
     for wrong in (None, b"f" * 32):
         outcome = book.release(wrong)
         assert outcome.reply["ok"] is False
@@ -99,32 +107,32 @@ def test_release_needs_the_holders_token_and_stops_the_robot() -> None:
 
 def test_the_holder_gone_ends_the_lease_with_a_reason_naming_it() -> None:
     book = LeaseBook("alice", KEY)
-    book.acquire(acquire("s1", "mover"), NOW)
-    assert book.gone("s2") is None  # not the holder
-    outcome = book.gone("s1")
+    book.acquire(acquire(S1, "mover"), NOW)
+    assert book.gone(S2) is None  # not the holder
+    outcome = book.gone(S1)
     assert outcome is not None
     assert outcome.stop == "lease holder mover is gone"
     assert outcome.event == {
         "kind": "lease",
         "action": "lost",
         "holder": "mover",
-        "session": "s1",
+        "fingerprint": fingerprint(S1),
         "reason": "lease holder mover is gone",
     }
     assert book.lease is None
-    assert book.gone("s1") is None
+    assert book.gone(S1) is None
 
 
 def test_unenforced_nothing_is_checked_and_nothing_is_stopped() -> None:
     book = LeaseBook("alice", KEY)
     book.set_enforced(False)
     assert book.current.refusal(None) is None
-    book.acquire(acquire("s1", "first"), NOW)
+    book.acquire(acquire(S1, "first"), NOW)
     assert book.current.refusal(b"nonsense") is None
-    passed = book.acquire(acquire("s2", "second"), NOW + 1)  # no force needed: nothing is checked
+    passed = book.acquire(acquire(S2, "second"), NOW + 1)  # no force needed: nothing is checked
     assert passed.reply["ok"] is True
     assert passed.stop is None
-    gone = book.gone("s2")
+    gone = book.gone(S2)
     assert gone is not None
     assert gone.stop is None
 
@@ -137,12 +145,13 @@ def test_unenforced_nothing_is_checked_and_nothing_is_stopped() -> None:
         ({"action": "acquire", "holder": "x"}, "'session'"),
         ({"action": "acquire", "session": "a/b", "holder": "x"}, "'session'"),
         ({"action": "acquire", "session": "s" * 65, "holder": "x"}, "'session'"),
-        ({"action": "acquire", "session": "s1", "holder": ""}, "'holder'"),
-        ({"action": "acquire", "session": "s1", "holder": "x" * 121}, "'holder'"),
-        ({"action": "acquire", "session": "s1", "holder": "a\nb"}, "'holder'"),
-        ({"action": "acquire", "session": "s1", "holder": "x", "force": True}, "'reason'"),
-        ({"action": "acquire", "session": "s1", "holder": "x", "force": True, "reason": " "}, "'reason'"),
-        ({"action": "acquire", "session": "s1", "holder": "x", "force": 1}, "'force'"),
+        ({"action": "acquire", "session": "s" * 15, "holder": "x"}, "'session'"),
+        ({"action": "acquire", "session": S1, "holder": ""}, "'holder'"),
+        ({"action": "acquire", "session": S1, "holder": "x" * 121}, "'holder'"),
+        ({"action": "acquire", "session": S1, "holder": "a\nb"}, "'holder'"),
+        ({"action": "acquire", "session": S1, "holder": "x", "force": True}, "'reason'"),
+        ({"action": "acquire", "session": S1, "holder": "x", "force": True, "reason": " "}, "'reason'"),
+        ({"action": "acquire", "session": S1, "holder": "x", "force": 1}, "'force'"),
         ({"action": "show", "extra": 1}, "extra"),
     ],
 )
@@ -155,7 +164,14 @@ def test_good_requests_parse() -> None:
     assert parse_request(b'{"action": "show"}') == LeaseRequest("show")
     request = parse_request(
         json.dumps(
-            {"v": 1, "action": "acquire", "session": "ab-9_Z", "holder": "me", "force": True, "reason": "r"}
+            {
+                "v": 1,
+                "action": "acquire",
+                "session": "ab-9_Z" * 3,
+                "holder": "me",
+                "force": True,
+                "reason": "r",
+            }
         ).encode()
     )
-    assert request == LeaseRequest("acquire", "ab-9_Z", "me", True, "r")
+    assert request == LeaseRequest("acquire", "ab-9_Z" * 3, "me", True, "r")

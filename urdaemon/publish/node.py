@@ -13,9 +13,12 @@ counters are the node's own, behind a small lock; no daemon state is touched off
 
 A commanding queryable or subscriber has a guard (the robot's command lease): a message whose
 attachment is not the lease holder's token is refused on Zenoh's thread too, after the wildcard and
-size checks, so a flood of them never displaces the holder's messages. The guard's check reads one
-immutable object (runtime/lease.py). Lease holders' liveliness tokens are watched with
-``liveliness_watch``: the set of tokens present is kept here, and the loop hears that it changed.
+size checks, so a flood of them never displaces the holder's messages, and again on the loop right
+before its handler runs (with the attachment it arrived with), so a message that passed while its
+sender held the lease does not act after the lease ended. The guard's check reads one immutable
+object (runtime/lease.py). Lease holders' liveliness tokens are watched with ``liveliness_watch``:
+only the keys the daemon asked about are kept (a holder's, an acquire's), every other token's
+sample is dropped on Zenoh's thread, and the loop hears that a watched key changed.
 """
 
 from __future__ import annotations
@@ -37,7 +40,6 @@ from urdaemon.transport_security import configure_daemon
 
 __all__ = [
     "MAX_IN_FLIGHT",
-    "MAX_WATCHED_TOKENS",
     "Guard",
     "LivelinessWatch",
     "Matching",
@@ -58,11 +60,6 @@ MAX_IN_FLIGHT = 4
 so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
 4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
 of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
-
-
-MAX_WATCHED_TOKENS = 4096
-"""Most liveliness tokens a watch keeps: beyond, a new token is not recorded (counted and logged);
-a token going away is always recorded."""
 
 
 class Guard(Protocol):
@@ -126,27 +123,29 @@ class _Latest:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._pending: bytes | None = None
+        self._pending: tuple[bytes, bytes | None] | None = None
         self._replaced = 0
         self.replaced_total = 0
         """Samples replaced by a newer one before the loop handled them, since the start."""
 
-    def offer(self, payload: bytes) -> bool:
-        """Keep ``payload`` as the newest (on Zenoh's thread); ``True`` if the loop must be told."""
+    def offer(self, payload: bytes, attachment: bytes | None = None) -> bool:
+        """Keep ``payload`` (and the ``attachment`` it came with) as the newest (on Zenoh's thread);
+        ``True`` if the loop must be told."""
         with self._lock:
             first = self._pending is None
             if not first:
                 self._replaced += 1
                 self.replaced_total += 1
-            self._pending = payload
+            self._pending = (payload, attachment)
             return first
 
-    def take(self) -> tuple[bytes | None, int]:
-        """The newest sample and how many it replaced since the last take (on the loop)."""
+    def take(self) -> tuple[tuple[bytes, bytes | None] | None, int]:
+        """The newest sample (payload, attachment) and how many it replaced since the last take (on
+        the loop)."""
         with self._lock:
-            payload, replaced = self._pending, self._replaced
+            pending, replaced = self._pending, self._replaced
             self._pending, self._replaced = None, 0
-            return payload, replaced
+            return pending, replaced
 
 
 def declare_state_publisher(session: Any, key: str) -> Any:
@@ -292,7 +291,8 @@ class ZenohNode:
         ``{answer: false, "reason": ...}``, and so is a query arriving while ``MAX_IN_FLIGHT`` of
         this key's queries wait for the loop ("busy: too many requests in flight on <key>"). With a
         ``guard``, a query it refuses (one without the lease holder's token) is answered
-        ``{answer: false, "reason": ...}`` there too.
+        ``{answer: false, "reason": ...}`` there too, and again on the loop right before the handler
+        (the lease may have ended while the query waited).
         """
 
         def on_query(query: Any) -> None:
@@ -308,15 +308,20 @@ class ZenohNode:
             if max_bytes is not None and size > max_bytes:
                 _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
                 return
-            refusal = None if guard is None else guard.refusal(attachment_of(query))
-            if refusal is not None:
-                _refuse_query(query, refusal, error=False, answer=answer)
-                return
+            if guard is None:
+                work = handler
+            else:
+                attachment = attachment_of(query)
+                refusal = guard.refusal(attachment)
+                if refusal is not None:
+                    _refuse_query(query, refusal, error=False, answer=answer)
+                    return
+                work = _rechecked(guard, attachment, handler, answer)
             if not flight.enter():
                 _refuse_query(query, busy_refusal(key), error=False, answer=answer)
                 flight.log_refusals(key)
                 return
-            self._to_loop_counted(flight, handler, query)
+            self._to_loop_counted(flight, work, query)
 
         flight = self._flight(key)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
@@ -357,7 +362,9 @@ class ZenohNode:
         Only a sample put on exactly ``key`` is handled: a put on a wildcard expression that covers
         it (``<cell>/*/command/joint_position``) never acts. Such a sample, or one larger than
         ``max_bytes``, or one the ``guard`` refuses (not the lease holder's), is not copied;
-        ``refused(key expression, reason)`` hears of it on the loop.
+        ``refused(key expression, reason)`` hears of it on the loop. The guard checks a sample's
+        attachment again on the loop before ``handler``: one sent while the lease was its sender's
+        does not act after the lease ended.
 
         Only the newest sample is handled: one that arrives while another still waits for the
         loop replaces it, and ``refused`` hears how many were replaced along with the newest.
@@ -366,13 +373,7 @@ class ZenohNode:
         """
         latest = _Latest()
         pending_refusals = _Refusals()
-
-        def handle_latest() -> None:
-            payload, replaced = latest.take()
-            if replaced and refused is not None:
-                refused(key, replaced_refusal(key, replaced))
-            if payload is not None:
-                handler(key, payload)
+        handle_latest = _latest_handler(key, latest, handler, refused, guard)
 
         def report_refusals() -> None:
             taken = pending_refusals.take()
@@ -386,12 +387,14 @@ class ZenohNode:
                 reason = wildcard_refusal(put_on, key)
             elif size > max_bytes:
                 reason = size_refusal(key, size, max_bytes)
-            elif guard is not None and (refusal := guard.refusal(attachment_of(sample))) is not None:
-                reason = refusal
             else:
-                if latest.offer(sample.payload.to_bytes()):
-                    self._to_loop(handle_latest)
-                return
+                attachment = None if guard is None else attachment_of(sample)
+                refusal = None if guard is None else guard.refusal(attachment)
+                if refusal is None:
+                    if latest.offer(sample.payload.to_bytes(), attachment):
+                        self._to_loop(handle_latest)
+                    return
+                reason = refusal
             if refused is not None and pending_refusals.offer(client_text(put_on, 80), reason):
                 self._to_loop(report_refusals)
 
@@ -402,12 +405,27 @@ class ZenohNode:
         """Declare a liveliness token held until ``close``."""
         self._entities.append(self.session.liveliness().declare_token(key))
 
-    def liveliness_watch(self, key: str, changed: Callable[[], None]) -> LivelinessWatch:
-        """Watch the liveliness tokens under ``key`` (those present already too); ``changed()`` runs
-        on the loop after tokens came or went, at most one call waiting for the loop at a time."""
-        watch = LivelinessWatch(lambda: self._to_loop(watch.handed))
+    def liveliness_watch(self, key: str, changed: Callable[[], None], timeout: float) -> LivelinessWatch:
+        """Watch the liveliness tokens under ``key`` that the daemon asks about (one subscriber for
+        all); ``changed()`` runs on the loop after a watched token came or went, at most one call
+        waiting for the loop at a time. ``timeout``: how long a ``probe`` waits for Zenoh's answer."""
+
+        def ask(token: str) -> None:
+            def on_reply(reply: Any) -> None:
+                found = reply.ok
+                if found is not None and str(found.key_expr) == token:
+                    watch.heard(token)
+
+            if self._closed:
+                return
+            try:  # answered on Zenoh's threads: the loop never waits for it
+                self.session.liveliness().get(token, zenoh.handlers.Callback(on_reply), timeout=timeout)
+            except zenoh.ZError as err:
+                log.warning("liveliness query of %s failed: %s", token, err)
+
+        watch = LivelinessWatch(lambda: self._to_loop(watch.handed), ask)
         watch.changed = changed
-        subscriber = self.session.liveliness().declare_subscriber(key, watch.on_sample, history=True)
+        subscriber = self.session.liveliness().declare_subscriber(key, watch.on_sample)
         self._entities.append(subscriber)
         return watch
 
@@ -448,44 +466,79 @@ class ZenohNode:
 
 
 class LivelinessWatch:
-    """The liveliness tokens present under a key expression, kept on Zenoh's thread (thread-safe).
+    """Whether the liveliness tokens of the keys the daemon asked about are present (thread-safe).
 
-    Bounded: at most ``MAX_WATCHED_TOKENS`` tokens are kept (a new one beyond is counted in
-    ``dropped`` and not kept; a token going away is always applied), and at most one "changed" call
-    waits for the loop, however many tokens come and go meanwhile.
+    Interest only: the daemon ``watch``es a key (a lease holder's, an acquire's) and ``unwatch``es it
+    when done; a sample of any other key is dropped on Zenoh's thread, never stored nor handed to
+    the loop, so the state kept is bounded by the keys asked about, whatever tokens others declare.
+    A watched key is present, gone, or not heard of yet (a token declared before the key was
+    watched: ``probe`` asks Zenoh for it). At most one "changed" call waits for the loop, however
+    many watched tokens come and go meanwhile.
     """
 
-    def __init__(self, notify: Callable[[], bool]) -> None:
+    def __init__(self, notify: Callable[[], bool], ask: Callable[[str], None] | None = None) -> None:
         self._lock = threading.Lock()
-        self._alive: set[str] = set()
+        self._wanted: dict[str, int] = {}
+        """Each watched key and how many of the daemon's parts watch it."""
+        self._present: dict[str, bool] = {}
+        """What was heard of each watched key (missing: nothing yet)."""
         self._notify = notify
+        self._ask = ask
         self._pending = False
         self.changed: Callable[[], None] = lambda: None
         """Runs on the loop after a change (set by the node)."""
-        self.dropped = 0
-        """New tokens not kept because ``MAX_WATCHED_TOKENS`` were."""
+        self.ignored = 0
+        """Samples of keys nobody watched, dropped (a count, nothing kept of them)."""
+
+    @property
+    def tracked(self) -> int:
+        """How many keys the watch keeps state for (only those asked about)."""
+        with self._lock:
+            return len(self._wanted)
+
+    def watch(self, key: str) -> None:
+        """Keep what is heard of ``key`` from now on (until as many ``unwatch`` calls)."""
+        with self._lock:
+            self._wanted[key] = self._wanted.get(key, 0) + 1
+
+    def unwatch(self, key: str) -> None:
+        """One part of the daemon no longer cares about ``key``; the last forgets it."""
+        with self._lock:
+            count = self._wanted.get(key, 0) - 1
+            if count > 0:
+                self._wanted[key] = count
+            else:
+                self._wanted.pop(key, None)
+                self._present.pop(key, None)
+
+    def probe(self, key: str) -> None:
+        """Ask Zenoh whether the token ``key`` (watched) is there already; the answer arrives off the
+        loop, as a sample would (``heard``)."""
+        if self._ask is not None:
+            self._ask(key)
 
     def alive(self, key: str) -> bool:
-        """Whether the token ``key`` is present."""
+        """Whether the watched token ``key`` is present."""
         with self._lock:
-            return key in self._alive
+            return self._present.get(key, False)
 
     def on_sample(self, sample: Any) -> None:
         """A token came (PUT) or went (DELETE): on Zenoh's thread."""
-        key = str(sample.key_expr)
+        self._record(str(sample.key_expr), sample.kind != zenoh.SampleKind.DELETE, overwrite=True)
+
+    def heard(self, key: str) -> None:
+        """A liveliness query found the token ``key`` (on Zenoh's thread). It counts only if no sample
+        of the key arrived since it was watched: a DELETE after the answer was made wins."""
+        self._record(key, True, overwrite=False)
+
+    def _record(self, key: str, present: bool, *, overwrite: bool) -> None:
         with self._lock:
-            if sample.kind == zenoh.SampleKind.DELETE:
-                self._alive.discard(key)
-            elif len(self._alive) < MAX_WATCHED_TOKENS:
-                self._alive.add(key)
-            else:
-                self.dropped += 1
-                dropped = self.dropped
-                if 10 ** (len(str(dropped)) - 1) == dropped:
-                    log.warning(
-                        "%d liveliness token(s) not watched: %d kept already", dropped, len(self._alive)
-                    )
+            if key not in self._wanted:
+                self.ignored += 1
                 return
+            if not overwrite and key in self._present:
+                return
+            self._present[key] = present
             notify, self._pending = not self._pending, True
         if notify and not self._notify():
             with self._lock:
@@ -551,6 +604,48 @@ class _Refusals:
             return None
         put_on, reason = newest
         return put_on, reason if count == 1 else f"{reason} (and {count - 1} more refused like it)"
+
+
+def _latest_handler(
+    key: str,
+    latest: _Latest,
+    handler: Callable[[str, bytes], None],
+    refused: Callable[[str, str], None] | None,
+    guard: Guard | None,
+) -> Callable[[], None]:
+    """What runs on the loop for a subscriber's pending sample: report the samples it replaced, check
+    the ``guard`` again (the lease may have ended since Zenoh's thread let it pass), then hand it on."""
+
+    def handle_latest() -> None:
+        pending, replaced = latest.take()
+        if replaced and refused is not None:
+            refused(key, replaced_refusal(key, replaced))
+        if pending is None:
+            return
+        payload, attachment = pending
+        refusal = None if guard is None else guard.refusal(attachment)
+        if refusal is None:
+            handler(key, payload)
+        elif refused is not None:
+            refused(key, refusal)
+
+    return handle_latest
+
+
+def _rechecked(
+    guard: Guard, attachment: bytes | None, handler: Callable[[Any], None], answer: str
+) -> Callable[[Any], None]:
+    """``handler``, run only if ``guard`` still lets ``attachment`` pass on the loop: the lease may
+    have ended (released, taken over, its holder gone) while the query waited for the loop."""
+
+    def handle(query: Any) -> None:
+        refusal = guard.refusal(attachment)
+        if refusal is None:
+            handler(query)
+        else:
+            _refuse_query(query, refusal, error=False, answer=answer)
+
+    return handle
 
 
 def _refuse_query(query: Any, reason: str, *, error: bool, answer: str) -> None:

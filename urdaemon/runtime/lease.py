@@ -3,8 +3,10 @@ passed in, no Zenoh).
 
 A client acquires the lease through the robot's lease queryable, bound to its Zenoh session by a
 liveliness token ``<cell>/<robot>/lease/<session>``; from then on only messages carrying its token as
-their attachment command the robot. The book decides each request (``acquire``, ``release``, the
-holder gone) and says what follows: the reply, the event, whether the robot must stop, what to log.
+their attachment command the robot. The session id is a secret the client chose: whoever names it
+gets the holder's token back, so the daemon never shows it, only its ``fingerprint``. The book
+decides each request (``acquire``, ``release``, the holder gone) and says what follows: the reply,
+the event, whether the robot must stop, what to log.
 It does not act: runtime/lease_keeper.py does.
 
 What Zenoh's threads read is one immutable :class:`LeaseView`, swapped whole on every change
@@ -47,7 +49,7 @@ TOKEN_BYTES = 16
 """A lease token is this many random bytes, as 32 lowercase hex characters."""
 FINGERPRINT_CHARS = 16
 """A lease's fingerprint is this many hex characters of sha256 of its session id."""
-_SESSION = re.compile(r"[A-Za-z0-9_-]{1,64}")
+_SESSION = re.compile(r"[A-Za-z0-9_-]{16,64}")
 _ACTIONS = ("show", "acquire", "release")
 _FIELDS = {"v", "action", "session", "holder", "force", "reason"}
 
@@ -60,7 +62,8 @@ def fingerprint(session: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class Lease:
-    """A granted lease: who holds it (``holder``, for humans), its session, since when, its token."""
+    """A granted lease: who holds it (``holder``, for humans), its session (secret), since when, its
+    token."""
 
     holder: str
     session: str
@@ -70,8 +73,8 @@ class Lease:
     """The secret the holder attaches to every commanding message (32 lowercase hex characters)."""
 
     def body(self) -> dict[str, Any]:
-        """What clients see of it (never the token)."""
-        return {"holder": self.holder, "session": self.session, "since": self.since}
+        """What clients see of it (never the token, never the session id: its fingerprint)."""
+        return {"holder": self.holder, "fingerprint": fingerprint(self.session), "since": self.since}
 
 
 def _iso(since: float) -> str:
@@ -138,7 +141,10 @@ def parse_request(payload: bytes | None) -> LeaseRequest:
         return LeaseRequest(action)
     session, holder = data.get("session"), data.get("holder")
     if not isinstance(session, str) or not _SESSION.fullmatch(session):
-        raise MessageError("lease: 'session' must be 1 to 64 characters of A-Z, a-z, 0-9, '_' and '-'")
+        raise MessageError(
+            "lease: 'session' must be 16 to 64 characters of A-Z, a-z, 0-9, '_' and '-' "
+            "(a secret chosen per lease)"
+        )
     if not isinstance(holder, str) or not 0 < len(holder) <= HOLDER_MAX_CHARS or not holder.isprintable():
         raise MessageError(f"lease: 'holder' must be 1 to {HOLDER_MAX_CHARS} printable characters")
     force = data.get("force", False)
@@ -257,4 +263,10 @@ class LeaseBook:
         self.current = self._view(lease)  # one store: a reader sees the old view or the new one
 
     def _event(self, action: str, lease: Lease, **extra: Any) -> dict[str, Any]:
-        return {"kind": "lease", "action": action, "holder": lease.holder, "session": lease.session, **extra}
+        return {
+            "kind": "lease",
+            "action": action,
+            "holder": lease.holder,
+            "fingerprint": fingerprint(lease.session),
+            **extra,
+        }

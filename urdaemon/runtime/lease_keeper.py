@@ -1,10 +1,13 @@
 """One robot's command lease served: its queryable, the wait for an acquirer's liveliness token, and
 what follows a lease's end (the robot stops, an event, a log line). The decisions are the book's
-(runtime/lease.py); the cell's one watch of the holders' tokens tells every robot's keeper
+(runtime/lease.py); the cell's one watch of lease tokens tells every robot's keeper
 (``watch_lease_holders``, called once by the daemon).
 
-An acquire whose token the daemon has not seen yet waits for it in a task of its own (at most
-``MAX_WAITING`` at once), so it never holds up the loop nor another request.
+The watch keeps only the keys a keeper asks about: the holder's token (its going ends the lease)
+and the tokens of acquires waiting (their coming grants). An acquire watches its key, asks Zenoh
+whether the token is there already (answered off the loop) and waits, in a task of its own (at
+most ``MAX_WAITING`` at once), for either answer or a sample; it never holds up the loop nor
+another request.
 """
 
 from __future__ import annotations
@@ -48,14 +51,22 @@ class LeaseKeeper:
         self._watch: LivelinessWatch | None = None
         self._waiting: dict[asyncio.Event, str] = {}
         """Each waiting acquire's event (set when its token appears) and its session."""
+        self._holder_key: str | None = None
+        """The holder's token key, watched while it holds the lease."""
 
     def declare(self, node: ZenohNode) -> None:
         """Declare the lease queryable (it never needs a lease itself)."""
         node.queryable(self._keys.lease, self.on_query)
 
+    @property
+    def watch(self) -> LivelinessWatch | None:
+        """The cell's watch of lease tokens (None until attached)."""
+        return self._watch
+
     def attach(self, watch: LivelinessWatch) -> None:
         """Read the holders' tokens from ``watch`` from now on."""
         self._watch = watch
+        self._follow_holder()
         self.tokens_changed()
 
     def tokens_changed(self) -> None:
@@ -71,6 +82,18 @@ class LeaseKeeper:
 
     def _alive(self, session: str) -> bool:
         return self._watch is not None and self._watch.alive(self._keys.lease_holder(session))
+
+    def _follow_holder(self) -> None:
+        """Watch the holder's token key (the new one before the old is let go: no gap)."""
+        lease, watch = self.book.lease, self._watch
+        key = None if lease is None else self._keys.lease_holder(lease.session)
+        if watch is None or key == self._holder_key:
+            return
+        if key is not None:
+            watch.watch(key)
+        if self._holder_key is not None:
+            watch.unwatch(self._holder_key)
+        self._holder_key = key
 
     def on_query(self, query: Any) -> None:
         """A lease request: show, acquire (perhaps after waiting for its token) or release."""
@@ -106,15 +129,24 @@ class LeaseKeeper:
             self._requests.spawn(work, query, {"ok": False, "reason": SHUTTING_DOWN})
 
     async def _wait_then_grant(self, query: Any, request: LeaseRequest) -> None:
+        key = self._keys.lease_holder(request.session)
         event = asyncio.Event()
         self._waiting[event] = request.session
+        watch = self._watch
+        if watch is not None:
+            watch.watch(key)  # before asking: a sample arriving meanwhile is kept
+            watch.probe(key)
         try:
-            await asyncio.wait_for(event.wait(), LEASE_BIND_TIMEOUT_S)
-        except TimeoutError:
-            pass
+            try:
+                await asyncio.wait_for(event.wait(), LEASE_BIND_TIMEOUT_S)
+            except TimeoutError:
+                pass
+            finally:
+                del self._waiting[event]
+            self._grant(query, request)  # a grant watches the key as the holder's before this lets go
         finally:
-            del self._waiting[event]
-        self._grant(query, request)
+            if watch is not None:
+                watch.unwatch(key)
 
     def _grant(self, query: Any, request: LeaseRequest) -> None:
         if not self._alive(request.session):
@@ -140,9 +172,10 @@ class LeaseKeeper:
             self._stop(outcome.stop)
         if outcome.warning is not None:
             self._log.warning("%s", outcome.warning)
+        self._follow_holder()
         if outcome.event is not None:
             lease = self.book.lease
-            self._status.lease = None if lease is None else {"holder": lease.holder, "since": lease.since}
+            self._status.lease = None if lease is None else lease.body()
             if outcome.warning is None:
                 self._log.info("lease %s: %s", outcome.event["action"], outcome.event["holder"])
             self._status.event(outcome.event)
@@ -168,7 +201,7 @@ def watch_lease_holders(node: ZenohNode, cell: Cell, runtimes: Iterable[_Runtime
             except Exception:  # one robot's failure must not keep the others' leases from ending
                 logging.getLogger(__name__).exception("lease holders' tokens: a keeper failed")
 
-    watch = node.liveliness_watch(CellKeys(cell.cell).lease_holders, changed)
+    watch = node.liveliness_watch(CellKeys(cell.cell).lease_holders, changed, LEASE_BIND_TIMEOUT_S)
     for keeper in keepers:
         keeper.attach(watch)
     return watch

@@ -50,7 +50,8 @@ class StatusPublisher:
         self.rejected_commands = 0
         """Streaming and freedrive commands rejected since start."""
         self.lease: dict[str, Any] | None = None
-        """Who holds the command lease (``holder``, ``since``), None: nobody (runtime/lease_keeper.py)."""
+        """Who holds the command lease (``holder``, ``fingerprint``, ``since``; never its session id),
+        None: nobody (runtime/lease_keeper.py)."""
 
     def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
         """Declare the status, IO and events publishers."""
