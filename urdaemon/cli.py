@@ -796,17 +796,19 @@ async def _lease(args: argparse.Namespace) -> int:
 
 
 def _lease_text(robot: str, lease: dict[str, Any] | None) -> str:
-    """One line about a lease: its holder, since when and its session, or that it is free."""
+    """One line about a lease: its holder, since when and its fingerprint (what the daemon shows of
+    the holder's secret session id), or that it is free."""
     if lease is None:
         return f"{robot}: free"
-    return f"{robot}: held by {lease.get('holder')} since {_since(lease)} (session {lease.get('session')})"
+    shown = f"{lease.get('holder')} since {_since(lease)} (fingerprint {lease.get('fingerprint')})"
+    return f"{robot}: held by {shown}"
 
 
 def _taken_from(lease: object) -> str:
     """Whom a take-over took the lease from (the lease it replaced, None when it was free)."""
     if not isinstance(lease, dict):
         return "(it was free)"
-    return f"from {lease.get('holder')} (held since {_since(lease)}, session {lease.get('session')})"
+    return f"from {lease.get('holder')} (held since {_since(lease)}, fingerprint {lease.get('fingerprint')})"
 
 
 def _since(lease: dict[str, Any]) -> str:

@@ -11,14 +11,16 @@
 
 Commanding a robot needs its command lease (docs/security.md): the first goal, cancel or commanding
 service call of a ``RobotClient`` acquires it transparently (``LeaseHeld`` when another client holds
-it), and ``Client.close()`` releases it. Once another client took it over, commands raise
-``LeaseHeld`` until the program calls ``ensure_lease()`` again. Stream commands
+it), and ``Client.close()`` releases it. Once the lease ended without this client's release (another
+client took it over, or it was lost), commands raise ``LeaseHeld`` until the program calls
+``ensure_lease()`` again; an event saying so ends it only once the daemon confirms it. Stream commands
 (``stream_positions``, ``stream_velocities``, ``freedrive``) are plain publications that never wait:
 call ``await robot.ensure_lease()`` once before the first, as a ur_rtde program opens its control
 interface before ``servoJ``. ``stop`` never needs the lease.
 
-A goal's feedback and result are taken only when they carry the signature of the key the accepting
-reply gave this client: another session can publish on a goal's keys, but what it publishes is dropped
+A goal's feedback and result are taken only when they carry the signature, under the key the accepting
+reply gave this client, of the message and of the key it arrived on: another session can publish on a
+goal's keys (or re-publish the daemon's signed feedback as a result), but what it publishes is dropped
 and counted (``GoalHandle.forged``).
 """
 
@@ -29,6 +31,7 @@ import contextlib
 import json
 import os
 import re
+import secrets
 import socket
 import sys
 from collections.abc import AsyncIterator, Callable, Sequence
@@ -52,10 +55,10 @@ from urdaemon.model import (
     ToolVoltageRequest,
 )
 from urdaemon.publish import codec, services, signing
-from urdaemon.publish.codec import SCHEMA_VERSION
+from urdaemon.publish.codec import SCHEMA_VERSION, client_text
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
-from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES
+from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
 
 __all__ = [
     "DEFAULT_ENDPOINT",
@@ -83,7 +86,10 @@ result before it fails (the token's deletion can overtake the result's publicati
 PEER_WAIT_S = 0.05
 RELEASE_ON_CLOSE_S = 2.0
 """How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""
+LEASE_SESSION_BYTES = 16
+"""A lease's secret session id is this many random bytes, as hex (a fresh one per lease)."""
 _LEASE_TOKEN = re.compile(rf"[0-9a-f]{{{2 * TOKEN_BYTES}}}")
+_RESULT_KEY = re.compile(rf"[0-9a-f]{{{2 * signing.KEY_BYTES}}}")
 
 _RUST_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+(:\d+)?\.?")
 
@@ -504,21 +510,27 @@ class GoalHandle:
         that signs nothing, whose messages are taken as they come)."""
         self.forged = 0
         """Messages on this goal's keys (or replies to its result query) that were not signed with
-        its key: published by some other session, and ignored."""
+        its key for the key they came on, or are no message of this goal: ignored."""
+        keys = robot.keys
+        self._kinds = {keys.goal_feedback(goal_id): "feedback", keys.goal_result(goal_id): "result"}
         self._feedback: asyncio.Queue[dict[str, Any]] = asyncio.Queue(self.MAX_QUEUED_FEEDBACK)
         self._result: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
 
-    def _receive(self, kind: str, payload: bytes, attachment: bytes | None) -> bool:
-        """Take one feedback or result message if it is this goal's and signed with its key
-        (forgeries are counted); whether it was taken."""
-        if self.result_key is not None and not signing.verify(self.result_key, payload, attachment):
-            self.forged += 1
-            return False
-        data = _result_message(payload, self.goal_id)
+    def _receive(self, key: str, payload: bytes, attachment: bytes | None) -> str | None:
+        """Take one message that arrived on ``key`` if that is this goal's feedback or result key,
+        it is signed with the goal's key for that key, and it is one of this goal's messages (a
+        result: with a ``status``); which it was (``"feedback"``, ``"result"``), None when not taken
+        (counted in ``forged`` when it was on this goal's keys)."""
+        kind = self._kinds.get(key)
+        if kind is None:
+            return None
+        signed = self.result_key is None or signing.verify(self.result_key, key, payload, attachment)
+        data = _goal_message(payload, self.goal_id, result=kind == "result") if signed else None
         if data is None:
-            return False
+            self.forged += 1
+            return None
         self._deliver(kind, data)
-        return True
+        return kind
 
     def _deliver(self, kind: str, data: dict[str, Any]) -> None:
         if kind == "result":
@@ -579,8 +591,8 @@ class GoalHandle:
             )
         except UrDaemonError:
             return
-        for reply in replies:
-            if self._receive("result", reply.payload, reply.attachment):
+        for reply in replies:  # a reply on another key than the result's is never the result
+            if self._receive(reply.key, reply.payload, reply.attachment) == "result":
                 self.robot._forget(self.goal_id)
                 return
 
@@ -590,29 +602,35 @@ def _three(values: Sequence[float]) -> tuple[float, float, float]:
     return tuple(values)  # type: ignore[return-value]
 
 
-def _result_message(payload: bytes, goal_id: str) -> dict[str, Any] | None:
-    """``payload`` decoded if it is a message of goal ``goal_id``, else None (garbage is ignored)."""
+def _goal_message(payload: bytes, goal_id: str, *, result: bool = False) -> dict[str, Any] | None:
+    """``payload`` decoded if it is a message of goal ``goal_id`` (a ``result``: with a ``status``),
+    else None (garbage is ignored)."""
     try:
         data = json.loads(payload)
     except ValueError:
         return None
-    if isinstance(data, dict) and data.get("goal_id") == goal_id:
-        return data
-    return None
+    if not isinstance(data, dict) or data.get("goal_id") != goal_id:
+        return None
+    if result and not isinstance(data.get("status"), str):
+        return None
+    return data
 
 
 class Lease:
     """A client's command lease on one robot (docs/security.md): the liveliness token that binds it
     to the client's session, and the token the daemon granted, attached to every command.
 
-    Acquiring declares the liveliness token ``<cell>/<robot>/lease/<session id>`` first (the daemon
-    grants only once it sees it) and keeps it while the lease is wanted; a refusal, a release or a
-    lease that ended undeclares it.
+    Each acquire that declares a token picks a fresh secret session id S (``secrets.token_hex(16)``):
+    the liveliness token is ``<cell>/<robot>/lease/<S>`` and the daemon binds the lease to it. The
+    daemon never shows S, only its fingerprint (``urdaemon.runtime.lease.fingerprint``), so nobody
+    can acquire in this client's name. A refusal, a release or a lease that ended undeclares the token.
 
-    A lease that ended without this client releasing it (taken over: seen on the robot's events, or
-    a command refused for the lease) is not acquired again behind the program's back: commands raise
-    ``LeaseHeld`` saying why until ``acquire(again=True)`` (``RobotClient.ensure_lease``). A forced
-    take-over would mean little if the client it stopped took the lease back with its next command.
+    A lease that ended without this client releasing it (taken over, lost, released: heard on the
+    robot's events and confirmed by asking the daemon, or a command refused for the lease) is not
+    acquired again behind the program's back: commands raise ``LeaseHeld`` saying why until
+    ``acquire(again=True)`` (``RobotClient.ensure_lease``). A forced take-over would mean little if
+    the client it stopped took the lease back with its next command. An event alone never ends it:
+    anyone can publish on the events key, so the client asks ``show`` first.
     """
 
     def __init__(self, client: Client, keys: RobotKeys) -> None:
@@ -628,15 +646,18 @@ class Lease:
         """The daemon's reason when this client last asked for the lease in vain (None: granted)."""
         self.ended = asyncio.Event()
         """Set when the lease ends without this client's release; cleared when it acquires again."""
-        self._since: object = None
+        self.fingerprint: str | None = None
+        """What the daemon shows of this client's lease (None while no liveliness token is declared)."""
+        self.checks = 0
+        """Lease events about this lease confirmed or denied by asking the daemon (``show``)."""
+        self.checking: asyncio.Task[None] | None = None
+        """The check under way, if any (one at a time: a flood of events asks once more at most)."""
+        self._session = ""
+        self._heard: dict[str, Any] | None = None
+        self._again = False
         self._alive: Any = None
         self._events: Any = None
         self._lock = asyncio.Lock()
-
-    @property
-    def session_id(self) -> str:
-        """The id in this client's liveliness token: its Zenoh session's."""
-        return str(self.client.session.zid())
 
     @property
     def usable(self) -> bool:
@@ -655,11 +676,11 @@ class Lease:
                 return {"ok": True, "token": self.token}
             if self.ended_reason is not None and not (again or force):
                 raise LeaseHeld(self.ended_reason)
-            body: dict[str, Any] = {"action": "acquire", "session": self.session_id}
+            self._declare()
+            body: dict[str, Any] = {"action": "acquire", "session": self._session}
             body["holder"] = self.client.holder
             if force:
                 body.update(force=True, reason=reason)
-            self._declare()
             try:
                 reply = await self.client.request(self.keys.lease, body)
             except NoSuchService:
@@ -671,23 +692,22 @@ class Lease:
                 raise
             token = reply.get("token")
             if reply.get("ok") is True and isinstance(token, str) and _LEASE_TOKEN.fullmatch(token):
-                self._granted(token, reply.get("lease"))
+                self._granted(token)
                 return reply
             self._undeclare()
             self.refusal = str(reply.get("reason") or f"lease: not granted ({reply})")
             raise LeaseHeld(self.refusal)
 
-    def _granted(self, token: str, lease: object) -> None:
+    def _granted(self, token: str) -> None:
         self.token = token
-        self._since = lease.get("since") if isinstance(lease, dict) else None
         self.ended_reason = self.refusal = None
         self.ended.clear()
-        if self._events is None:  # a take-over is published there: streams stop at once, not silently
+        if self._events is None:  # an end is published there: streams stop at once, not silently
             loop = asyncio.get_running_loop()
 
             def on_event(sample: Any) -> None:
                 payload = sample.payload.to_bytes()
-                if b"taken_over" in payload:  # the loop parses only what may be a take-over
+                if _may_end_a_lease(payload):  # the loop parses only what may end a lease
                     with contextlib.suppress(RuntimeError):
                         loop.call_soon_threadsafe(self._on_event, payload)
 
@@ -695,21 +715,41 @@ class Lease:
             self.client._closers.append(self._events.undeclare)
 
     def _on_event(self, payload: bytes) -> None:
-        """A ``taken_over`` lease event whose previous lease is this client's grant ends it."""
-        try:
-            event = json.loads(payload)
-        except ValueError:
+        """A lease event that says this client's lease ended (taken over, lost, released): ask the
+        daemon whether it did (whoever can publish on the events key can forge one)."""
+        event = _ending_event(payload)
+        if event is None or self.token is None or self.fingerprint is None:
             return
-        if not isinstance(event, dict) or (event.get("kind"), event.get("action")) != ("lease", "taken_over"):
+        if _ended_fingerprint(event) != self.fingerprint:
+            return  # another lease's end (an earlier one of this client's, or someone else's)
+        self._heard = event
+        if self.checking is not None and not self.checking.done():
+            self._again = True  # the check under way may have asked before this end happened
             return
-        previous = event.get("previous")
-        if self.token is None or not isinstance(previous, dict):
-            return
-        if (previous.get("session"), previous.get("since")) == (self.session_id, self._since):
-            self.end(
-                f"lease: robot {self.keys.robot!r} was taken over by {event.get('holder')}: "
-                f"{event.get('reason')}; ensure_lease() acquires it again"
-            )
+        self.checking = asyncio.get_running_loop().create_task(self._check())
+        self.client._tasks.append(self.checking)
+        self.checking.add_done_callback(self._checked)
+
+    def _checked(self, task: asyncio.Task[None]) -> None:
+        with contextlib.suppress(ValueError):
+            self.client._tasks.remove(task)
+
+    async def _check(self) -> None:
+        """Ask ``show`` (off Zenoh's thread; the loop keeps running) until no event came meanwhile;
+        end the lease when the daemon shows it free or another's. A failed ask ends nothing."""
+        again = True
+        while again and self.token is not None:
+            self._again = False
+            token, mine = self.token, self.fingerprint
+            try:
+                shown = await self.show()
+            except UrDaemonError:
+                return
+            self.checks += 1
+            if self.token == token and (shown is None or shown.get("fingerprint") != mine):
+                self.end(_ended_text(self.keys.robot, self._heard, shown))
+                return
+            again = self._again
 
     async def release(self, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any] | None:
         """Give the lease back (stops whatever still moves the robot); the daemon's reply, or None
@@ -727,15 +767,15 @@ class Lease:
                 self._undeclare()
 
     def end(self, reason: str) -> None:
-        """The lease is no longer this client's, for ``reason`` (taken over, or a command refused for
-        it: released by whoever took it over, or a daemon that restarted)."""
+        """The lease is no longer this client's, for ``reason`` (taken over, lost, or a command
+        refused for it: released by whoever took it over, or a daemon that restarted)."""
         self.token = None
         self.ended_reason = reason
         self.ended.set()
         self._undeclare()
 
     async def show(self) -> dict[str, Any] | None:
-        """The lease as the daemon shows it (``holder``, ``session``, ``since``), None when free."""
+        """The lease as the daemon shows it (``holder``, ``fingerprint``, ``since``), None when free."""
         reply = await self.client.request(self.keys.lease, {"action": "show"})
         if reply.get("ok") is not True:
             raise UrDaemonError(str(reply.get("reason") or f"lease: no answer to show ({reply})"))
@@ -744,17 +784,61 @@ class Lease:
 
     def _declare(self) -> None:
         if self._alive is None:
-            key = self.keys.lease_holder(self.session_id)
+            session = secrets.token_hex(LEASE_SESSION_BYTES)  # a secret per lease: never shown
+            key = self.keys.lease_holder(session)
             try:
                 self._alive = self.client.session.liveliness().declare_token(key)
             except zenoh.ZError as err:
                 raise UrDaemonError(f"cannot declare the lease token {key}: {zenoh_message(err)}") from err
+            self._session, self.fingerprint = session, fingerprint(session)
 
     def _undeclare(self) -> None:
         alive, self._alive = self._alive, None
         if alive is not None:
             with contextlib.suppress(Exception):
                 alive.undeclare()
+
+
+_ENDING_ACTIONS = ("taken_over", "lost", "released")
+
+
+def _may_end_a_lease(payload: bytes) -> bool:
+    """On Zenoh's thread: whether an event may be a lease's end (cheap; the loop parses it)."""
+    return b"lease" in payload and any(action.encode() in payload for action in _ENDING_ACTIONS)
+
+
+def _ending_event(payload: bytes) -> dict[str, Any] | None:
+    """``payload`` decoded if it is a lease event saying a lease ended, else None."""
+    try:
+        event = json.loads(payload)
+    except ValueError:
+        return None
+    if not isinstance(event, dict) or event.get("kind") != "lease":
+        return None
+    return event if event.get("action") in _ENDING_ACTIONS else None
+
+
+def _ended_fingerprint(event: dict[str, Any]) -> object:
+    """The fingerprint of the lease an ending event says ended (a take-over names it as previous)."""
+    if event.get("action") == "taken_over":
+        previous = event.get("previous")
+        return previous.get("fingerprint") if isinstance(previous, dict) else None
+    return event.get("fingerprint")
+
+
+def _ended_text(robot: str, heard: dict[str, Any] | None, shown: dict[str, Any] | None) -> str:
+    """Why a lease ended, as the daemon shows the robot's lease now (``shown``), in the words of the
+    event heard when it agrees with the daemon (a take-over by the holder shown, or a free lease)."""
+    heard = heard or {}
+    why = heard.get("reason")
+    again = "ensure_lease() acquires it again"
+    if shown is None:
+        cause = why if isinstance(why, str) and heard.get("action") == "lost" else "it is free now"
+        return f"lease: robot {robot!r} is no longer this client's ({client_text(cause, 200)}); {again}"
+    holder = client_text(str(shown.get("holder")), HOLDER_MAX_CHARS)
+    if heard.get("action") == "taken_over" and heard.get("fingerprint") == shown.get("fingerprint"):
+        return f"lease: robot {robot!r} was taken over by {holder}: {client_text(str(why), 200)}; {again}"
+    return f"lease: robot {robot!r} is held by {holder} now, no longer by this client; {again}"
 
 
 def _lease_refusal(reply: dict[str, Any], answer: str) -> str | None:
@@ -822,7 +906,9 @@ class RobotClient:
         return await self.lease.acquire(force=True, reason=reason)
 
     async def lease_info(self) -> dict[str, Any] | None:
-        """Who holds the lease (``holder``, ``session``, ``since`` as unix time), None when free."""
+        """Who holds the lease as the daemon shows it (``holder``, ``fingerprint``: sha256 of the
+        holder's secret session id, cut to 16 hex characters, ``since`` as unix time), None when free.
+        This client's own lease shows ``lease.fingerprint``."""
         return await self.lease.show()
 
     async def _command(self, key: str, body: dict[str, Any], answer: str, timeout: float) -> dict[str, Any]:
@@ -1050,18 +1136,29 @@ class RobotClient:
         reply = await self._command(key, body, "accepted", QUERY_TIMEOUT_S)
         if not reply.get("accepted"):
             raise GoalRejected(str(reply.get("reason", "rejected without a reason")))
-        result_key = reply.get("result_key")
         handle = GoalHandle(
-            self,
-            str(reply["goal_id"]),
-            float(reply.get("duration", 0.0)),
-            result_key if isinstance(result_key, str) else None,
+            self, str(reply["goal_id"]), float(reply.get("duration", 0.0)), self._result_key(reply)
         )
         self._goals[handle.goal_id] = handle
-        for kind, payload, attachment in self._early.pop(handle.goal_id, []):
-            if handle._receive(kind, payload, attachment) and kind == "result":
+        for msg_key, payload, attachment in self._early.pop(handle.goal_id, []):
+            if handle._receive(msg_key, payload, attachment) == "result":
                 self._forget(handle.goal_id)
         return handle
+
+    def _result_key(self, reply: dict[str, Any]) -> str | None:
+        """The goal's key from its accepting reply: 64 hex characters; None only from a daemon older
+        than leases (it signs nothing). A daemon with leases always gives one: without, the goal's
+        messages could not be told from forgeries, so that is an error naming ``result_key``."""
+        key = reply.get("result_key")
+        if isinstance(key, str) and _RESULT_KEY.fullmatch(key):
+            return key
+        if key is None and self.lease.unchecked:
+            return None
+        raise UrDaemonError(
+            f"robot {self.name!r}: the daemon accepted goal {client_text(str(reply.get('goal_id')), 80)} "
+            f"without a valid 'result_key' ({2 * signing.KEY_BYTES} hex characters): its result "
+            "cannot be told from a forgery"
+        )
 
     def _ensure_goal_subscription(self) -> None:
         if self._goal_sub is None:
@@ -1114,16 +1211,16 @@ class RobotClient:
             parts = key.split("/")
             if len(parts) < 2 or parts[-1] not in ("feedback", "result"):
                 continue
-            goal_id, kind = parts[-2], parts[-1]
+            goal_id = parts[-2]
             handle = self._goals.get(goal_id)
             if handle is not None:
                 # the handle keeps its result; the robot need not track it further
-                if handle._receive(kind, payload, attachment) and kind == "result":
+                if handle._receive(key, payload, attachment) == "result":
                     self._forget(goal_id)
-            elif _result_message(payload, goal_id) is not None:  # else someone else's garbage
+            elif _goal_message(payload, goal_id) is not None:  # else someone else's garbage
                 # before the accepting reply: checked once the reply gives the goal's key
                 early = self._early.setdefault(goal_id, [])
                 if len(early) < 100:
-                    early.append((kind, payload, attachment))
+                    early.append((key, payload, attachment))
                 if len(self._early) > 100:
                     self._early.pop(next(iter(self._early)))

@@ -9,16 +9,20 @@ exist.
 from __future__ import annotations
 
 import asyncio
+import json
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import pytest
+import zenoh
 
 from tests.helpers import run_cli_in_thread
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon.client import Client, GoalHandle, LeaseHeld, RobotClient
+from urdaemon.client import Client, GoalHandle, Lease, LeaseHeld, RobotClient
 from urdaemon.daemon import Daemon
-from urdaemon.errors import UrDaemonError
+from urdaemon.errors import UrDaemonError, UrTimeoutError
+from urdaemon.publish.node import zenoh_config
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -27,6 +31,11 @@ AWAY = [0.2, -1.4, 1.4, -1.5, -1.6, 0.1]
 FIRST = "first client (test)"
 SECOND = "second client (test)"
 CLI_S = 30.0
+WAIT_S = 20.0
+"""Bound of every wait for a message (a busy machine is slow, never this slow)."""
+ROUTED_TRIES = 100
+"""Publications of a forged event until the client is seen to receive and weigh it; each waits at
+most 0.1 s for the client's session to receive it."""
 
 
 @asynccontextmanager
@@ -146,6 +155,9 @@ async def test_cancel_from_another_process_is_refused_naming_the_holder() -> Non
 
 
 async def test_lease_command_shows_the_holder_and_takes_it_over() -> None:
+    """``urdaemon lease`` shows the holder's fingerprint, never its session id (contract 16b, decision
+    1). Reproduction on 94dec3a: it printed ``(session <zid>)``, the id anyone could acquire with to
+    get the holder's token."""
     async with two_clients() as (daemon, first, _):
         endpoint = daemon.listen_endpoints[0]
         free = await run_cli_in_thread("lease", "alice", "--connect", endpoint, timeout=CLI_S)
@@ -155,7 +167,10 @@ async def test_lease_command_shows_the_holder_and_takes_it_over() -> None:
         shown = await run_cli_in_thread("lease", "alice", "--connect", endpoint, timeout=CLI_S)
         assert shown.code == 0, shown
         assert f"alice: held by {FIRST} since " in shown.stdout, shown
-        assert f"(session {first.session.zid()})" in shown.stdout, shown
+        assert "(fingerprint " in shown.stdout, shown
+        assert "session" not in shown.stdout, shown
+        assert f"(fingerprint {mine.lease.fingerprint})" in shown.stdout, shown
+        assert mine.lease._session not in shown.stdout, "the secret session id is never shown"
         taken = await run_cli_in_thread(
             "lease", "alice", "--take-over", "stuck client", "--connect", endpoint, timeout=CLI_S
         )
@@ -195,3 +210,85 @@ async def test_close_releases_the_lease_and_the_release_stops_a_goal_still_runni
         result = await results.get_json(timeout=10.0)
         assert result["status"] == "aborted", result
         assert "released by first client (test)" in result["reason"], result
+
+
+@asynccontextmanager
+async def forger(endpoint: str) -> AsyncIterator[Any]:
+    """A bare Zenoh session (no urdaemon code) connected to the daemon in Zenoh's client mode."""
+    loop = asyncio.get_running_loop()
+    session = await loop.run_in_executor(None, zenoh.open, zenoh_config("client", [], [endpoint]))
+    try:
+        yield session
+    finally:
+        await loop.run_in_executor(None, session.close)
+
+
+async def _forge_until_weighed(client: Client, raw: Any, lease: Lease, key: str, payload: bytes) -> None:
+    """Publish ``payload`` on ``key`` from ``raw`` until ``client``'s session received it and the
+    lease has weighed it: its check of the event ran (or, in a client without checks, it ended)."""
+    watch = client.subscribe(key, 1000)
+    try:
+        for _ in range(ROUTED_TRIES):
+            raw.put(key, payload)
+            try:
+                while (await watch.get(timeout=0.1))[1] != payload:
+                    pass
+            except UrTimeoutError:
+                continue
+            checking = getattr(lease, "checking", None)
+            if checking is not None:
+                await asyncio.wait_for(checking, WAIT_S)
+            if lease.ended.is_set() or getattr(lease, "checks", 0) > 0:
+                return
+        raise AssertionError(f"the forged event on {key} was never weighed by the client")
+    finally:
+        client.unsubscribe(watch)
+
+
+async def test_a_forged_take_over_event_does_not_end_the_holders_lease() -> None:
+    """M4 (contract 16b, decision 5): the client ends its lease on a lease event only once ``show``
+    says it is no longer its own. Reproduction on 94dec3a: a raw session published on
+    ``testcell/alice/events`` a ``taken_over`` event naming the holder's lease (as ``show`` gives it)
+    as the previous one; the client dropped its lease at once (its next goal raised ``LeaseHeld``)
+    and undeclared its token, so the daemon freed the lease and stopped alice."""
+    async with two_clients() as (daemon, first, _), forger(daemon.listen_endpoints[0]) as raw:
+        mine = await first.robot("alice")
+        await mine.ensure_lease()
+        shown = await mine.lease_info()
+        assert shown is not None
+        event = {
+            "kind": "lease",
+            "action": "taken_over",
+            "holder": "nobody",
+            "fingerprint": "0" * 16,
+            "session": "forged",
+            "previous": shown,
+            "reason": "forged",
+        }
+        await _forge_until_weighed(first, raw, mine.lease, mine.keys.events, json.dumps(event).encode())
+        assert not mine.lease.ended.is_set(), mine.lease.ended_reason
+        assert mine.lease.token is not None
+        goal = await mine.move(AWAY, duration=1.0)
+        assert (await goal.result(timeout=30.0))["status"] == "succeeded"
+        after = await mine.lease_info()
+        assert after is not None
+        assert after["fingerprint"] == mine.lease.fingerprint, after
+        assert after["since"] == shown["since"], "the daemon never saw the lease end"
+        assert mine.lease.checks >= 1, "the forged event was never checked with the daemon"
+
+
+async def test_a_lost_lease_is_noticed_by_streams() -> None:
+    """Contract 16b, decision 5: streams notice a lease that ended by any of taken_over, lost and
+    released. Reproduction on 94dec3a: only a take-over was noticed; after the lease was lost (the
+    holder's liveliness token gone while its session stays, as when a network cut drops it) the
+    client kept publishing stream commands the daemon refused, raising nothing."""
+    async with two_clients() as (daemon, first, _):
+        mine = await first.robot("alice")
+        await mine.ensure_lease()
+        mine.stream_velocities([0.0] * 6)
+        mine.lease._undeclare()  # the token goes; the daemon ends the lease as lost and says so
+        await asyncio.wait_for(mine.lease.ended.wait(), WAIT_S)
+        with pytest.raises(LeaseHeld, match=r"no longer this client's \(lease holder first client"):
+            mine.stream_velocities([0.1] * 6)
+        assert await mine.lease_info() is None
+        assert daemon.runtimes[0].lease.book.lease is None

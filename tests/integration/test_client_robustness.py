@@ -101,7 +101,7 @@ async def test_messages_before_the_accepting_reply_are_checked_with_the_goals_ke
 
     def on_move(query: Any) -> None:
         server.put(result_key, forged)
-        server.put(result_key, real, attachment=signing.sign(key, real))
+        server.put(result_key, real, attachment=signing.sign(key, result_key, real))
         reply = {"accepted": True, "goal_id": "alice-1", "duration": 1.0, "result_key": key}
         query.reply(str(query.key_expr), json.dumps(reply).encode())
 

@@ -10,6 +10,7 @@ seconds before alice got there; a forged answer to the client's result query did
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -19,7 +20,7 @@ import pytest
 import zenoh
 
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon.client import Client, GoalHandle, RobotClient
+from urdaemon.client import Client, GoalHandle, Received, RobotClient
 from urdaemon.daemon import Daemon
 from urdaemon.errors import UrTimeoutError
 from urdaemon.publish.node import zenoh_config
@@ -29,6 +30,8 @@ pytestmark = pytest.mark.timeout(120)
 AWAY = [0.2, -1.4, 1.4, -1.5, -1.6, 0.1]
 DURATION_S = 3.0
 """The real goal's length: the forgeries go out at its start."""
+WAIT_S = 20.0
+"""Bound of every wait for a message (a busy machine is slow, never this slow)."""
 ROUTED_TRIES = 100
 """Publications of a forgery until the client's session is seen to receive it (routes are set up
 asynchronously); each waits at most 0.1 s for it."""
@@ -54,13 +57,16 @@ def _forged(goal: GoalHandle, **fields: Any) -> bytes:
     return json.dumps(message).encode()
 
 
-async def _publish_until_received(client: Client, forger: Any, key: str, payload: bytes) -> None:
-    """Publish ``payload`` on ``key`` from ``forger`` until ``client``'s session receives it: then the
-    client's goal subscription (same session, declared before) has received it too."""
+async def _publish_until_received(
+    client: Client, forger: Any, key: str, payload: bytes, attachment: bytes | None = None
+) -> None:
+    """Publish ``payload`` (with ``attachment``) on ``key`` from ``forger`` until ``client``'s session
+    receives it: then the client's goal subscription (same session, declared before) has received it
+    too."""
     watch = client.subscribe(key, 1000)
     try:
         for _ in range(ROUTED_TRIES):
-            forger.put(key, payload)
+            forger.put(key, payload, attachment=attachment)
             try:
                 while (await watch.get(timeout=0.1))[1] != payload:
                     pass
@@ -80,6 +86,39 @@ def _at_target(daemon: Daemon) -> bool:
 async def _started(client: Client) -> tuple[RobotClient, GoalHandle]:
     alice = await client.robot("alice")
     return alice, await alice.move(AWAY, duration=DURATION_S)
+
+
+async def _started_with_signed_feedback(
+    client: Client, forger: Any
+) -> tuple[RobotClient, GoalHandle, Received]:
+    """Start the goal with ``forger`` listening to alice's goal feedback (its route checked first,
+    so the first feedback reaches it); the goal and the first feedback as the daemon signed it."""
+    loop = asyncio.get_running_loop()
+    alice = await client.robot("alice")
+    heard: asyncio.Queue[Received] = asyncio.Queue()
+
+    def on_sample(sample: Any) -> None:
+        attachment = None if sample.attachment is None else sample.attachment.to_bytes()
+        item = Received(str(sample.key_expr), sample.payload.to_bytes(), attachment)
+        loop.call_soon_threadsafe(heard.put_nowait, item)
+
+    listening = forger.declare_subscriber(alice.keys.goal_feedback("*"), on_sample)
+    try:
+        probe = alice.keys.goal_feedback("probe")
+        for _ in range(ROUTED_TRIES):  # the client's probe reaches the forger: so will the daemon's
+            client.session.put(probe, b"{}")
+            with contextlib.suppress(TimeoutError):
+                if (await asyncio.wait_for(heard.get(), 0.1)).key == probe:
+                    break
+        else:
+            raise AssertionError("the forger's subscription was never routed")
+        goal = await alice.move(AWAY, duration=DURATION_S)
+        async with asyncio.timeout(WAIT_S):
+            while (feedback := await heard.get()).key != alice.keys.goal_feedback(goal.goal_id):
+                pass
+        return alice, goal, feedback
+    finally:
+        listening.undeclare()
 
 
 async def test_a_result_and_feedback_published_by_another_session_are_ignored_and_counted() -> None:
@@ -117,6 +156,46 @@ async def test_a_forged_answer_to_the_result_query_is_ignored_and_counted() -> N
             assert answered.is_set(), "the client never asked: the forgery was not put to the test"
             assert _at_target(daemon), "result() returned before alice got there: the forged answer"
             assert "forged" not in result, result
+            assert result["status"] == "succeeded", result
+            assert goal.forged >= 1, goal.forged
+        finally:
+            queryable.undeclare()
+
+
+async def test_the_daemons_signed_feedback_republished_as_the_result_is_ignored() -> None:
+    """H3 (contract 16b, decision 6): a signature covers the key the message is published on, and a
+    result must have this goal's id and a status. Reproduction on 94dec3a: a raw session took the
+    daemon's first signed feedback message of the goal and re-published it, with its attachment, on
+    ``<cell>/alice/goal/<id>/result``; the client's ``result()`` returned that feedback (no
+    ``status``) at once, while alice still moved."""
+    async with daemon_and_forger() as (daemon, client, forger):
+        alice, goal, feedback = await _started_with_signed_feedback(client, forger)
+        key = alice.keys.goal_result(goal.goal_id)
+        await _publish_until_received(client, forger, key, feedback.payload, feedback.attachment)
+        result = await goal.result(timeout=30.0)
+        assert _at_target(daemon), "result() returned before alice got there: the replayed feedback"
+        assert result["status"] == "succeeded", result
+        assert goal.forged >= 1, goal.forged
+
+
+async def test_the_daemons_signed_feedback_given_as_the_answer_to_the_result_query_is_ignored() -> None:
+    """H3, asked: a raw session answers the client's query for the result with the daemon's signed
+    feedback (payload and attachment). Reproduction on 94dec3a: ``result()`` returned the feedback."""
+    async with daemon_and_forger() as (daemon, client, forger):
+        alice, goal, feedback = await _started_with_signed_feedback(client, forger)
+        key = alice.keys.goal_result(goal.goal_id)
+        answered = asyncio.Event()
+        loop = asyncio.get_running_loop()
+
+        def answer(query: Any) -> None:
+            query.reply(key, feedback.payload, attachment=feedback.attachment)
+            loop.call_soon_threadsafe(answered.set)
+
+        queryable = forger.declare_queryable(key, answer)
+        try:
+            result = await goal.result(timeout=30.0)  # asks for the result every 0.5 s meanwhile
+            assert answered.is_set(), "the client never asked: the replay was not put to the test"
+            assert _at_target(daemon), "result() returned before alice got there: the replayed feedback"
             assert result["status"] == "succeeded", result
             assert goal.forged >= 1, goal.forged
         finally:
