@@ -751,6 +751,20 @@ class Lease:
                 return
             again = self._again
 
+    async def confirm_end(self, reason: str) -> None:
+        """A command was refused for the lease: end it for ``reason`` unless the daemon still shows
+        it as this client's (the refusal came from another session answering the command's query),
+        or when the daemon cannot be asked."""
+        token, mine = self.token, self.fingerprint
+        if token is None:
+            return
+        try:
+            shown = await self.show()
+        except UrDaemonError:
+            shown = None
+        if self.token == token and (shown is None or shown.get("fingerprint") != mine):
+            self.end(reason)
+
     async def release(self, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any] | None:
         """Give the lease back (stops whatever still moves the robot); the daemon's reply, or None
         when this client held none."""
@@ -919,7 +933,7 @@ class RobotClient:
         reply = await self.client.request(key, body, timeout=timeout, attachment=lease.attachment())
         refusal = _lease_refusal(reply, answer)
         if refusal is not None:
-            lease.end(refusal)
+            await lease.confirm_end(refusal)
             raise LeaseHeld(refusal)
         return reply
 

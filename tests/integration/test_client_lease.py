@@ -292,3 +292,20 @@ async def test_a_lost_lease_is_noticed_by_streams() -> None:
             mine.stream_velocities([0.1] * 6)
         assert await mine.lease_info() is None
         assert daemon.runtimes[0].lease.book.lease is None
+
+
+async def test_a_refusal_for_the_lease_ends_it_only_when_the_daemon_shows_it_is_not_ours() -> None:
+    """A command's answer refusing it for the lease could come from another session answering the
+    command's query: the client ends its lease only once ``show`` agrees (as for events, decision 5).
+    Before, any such answer ended the lease at once."""
+    async with two_clients() as (_, first, second):
+        mine, theirs = await first.robot("alice"), await second.robot("alice")
+        await mine.ensure_lease()
+        await mine.lease.confirm_end("lease: robot 'alice' is held by a forger")
+        assert not mine.lease.ended.is_set(), mine.lease.ended_reason
+        assert mine.lease.token is not None
+        await theirs.take_over("the operator needs alice")
+        await mine.lease.confirm_end("lease: robot 'alice' is held by second client (test)")
+        assert mine.lease.ended.is_set()  # by this check, or by the take-over event if it came first
+        with pytest.raises(LeaseHeld, match="second client"):
+            await mine.move(HOME, duration=1.0)
