@@ -7,9 +7,10 @@ ends with exactly one result, published and kept to answer late queries.
 
 Every goal gets a key of its own (publish/signing.py) when it starts: the accepting reply gives it
 to the client, and every feedback and result message of the goal (and every answer to a query for
-its result) carries the message's signature as its Zenoh attachment. The signature is made when a
-message is published, at the feedback rate (10 Hz by default) and once per result, never once per
-cycle; a kept result keeps its signature, not the key.
+its result) carries, as its Zenoh attachment, the signature of the message together with the key
+it is published on (so a feedback cannot pass for a result). The signature is made when a message
+is published, at the feedback rate (10 Hz by default) and once per result, never once per cycle; a
+kept result keeps its signature, not the key.
 """
 
 from __future__ import annotations
@@ -213,10 +214,14 @@ class Goals:
         self.publish_events()
         self._status.publish()
 
-    def _fail(self, query: Any, kind: str, err: Exception) -> None:
-        """Answer a goal that failed on a bug (call it from the except block: it logs the traceback)."""
-        self._log.exception("%s goal failed", kind)
-        reply(query, {"accepted": False, "reason": internal_error(err)})
+    def _refuse(self, query: Any, kind: str, err: Exception) -> None:
+        """Answer a goal that did not start: rejected (a bad message, a refusal: logged as a warning)
+        or failed on a bug (logged with its traceback: call this from the except block)."""
+        if isinstance(err, (MessageError, GoalRejected)):
+            self._reject(query, kind, err)
+        else:
+            self._log.exception("%s goal failed", kind)
+            reply(query, {"accepted": False, "reason": internal_error(err)})
 
     def _reject(self, query: Any, kind: str, err: UrDaemonError) -> None:
         reason = err.reason if isinstance(err, GoalRejected) else str(err)
@@ -255,11 +260,8 @@ class Goals:
             planned = await self.plan_trajectory(payload(query), generation, owned)
             self.check_startable(planned, generation)  # nothing ended motion while it was planned
             goal_id, duration = self.start_planned(planned)
-        except (MessageError, GoalRejected) as err:
-            self._reject(query, "trajectory", err)
-            return
-        except Exception as err:  # a bug must still answer the client, once
-            self._fail(query, "trajectory", err)
+        except Exception as err:  # refused, or a bug: either way the client is answered, once
+            self._refuse(query, "trajectory", err)
             return
         finally:  # cancelled (shutting down): the task's done-callback answers
             self._gate.planning = None
@@ -379,11 +381,8 @@ class Goals:
             tolerances = self._tolerances(goal.tolerances, names)
             goal_id, _ = self._new_goal()
             duration = self._accept_move(goal_id, goal, names, tolerances)
-        except (MessageError, GoalRejected) as err:
-            self._reject(query, "move", err)
-            return
-        except Exception as err:  # a bug must still answer the client, once
-            self._fail(query, "move", err)
+        except Exception as err:  # refused, or a bug: either way the client is answered, once
+            self._refuse(query, "move", err)
             return
         self._accept(query, "move", goal_id, duration)
 
