@@ -14,13 +14,15 @@ and counted (``CellGoalHandle.ignored``).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from urdaemon.client import QUERY_TIMEOUT_S, RESULT_POLL_S, Client, Received, Subscription
-from urdaemon.errors import GoalRejected, UrTimeoutError
+from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish import signing
+from urdaemon.publish.codec import client_text
 from urdaemon.publish.keys import CellKeys
 
 __all__ = ["CellGoalHandle", "send_cell_trajectory"]
@@ -38,7 +40,8 @@ class CellGoalHandle:
         self.goals: dict[str, str] = dict(reply.get("goals") or {})
         """Each robot's part: its goal id (an ordinary goal of that robot)."""
         self.duration = float(reply.get("duration", 0.0))
-        self.result_key = str(reply.get("result_key") or "")
+        self.result_key: str = reply["result_key"]
+        """The key the accepting reply gave (``signing.is_key``: checked by ``send_cell_trajectory``)."""
         self.ignored = 0
         """Messages on the result's key that did not carry its signature (not the daemon's)."""
         self._tokens = tokens
@@ -69,9 +72,14 @@ class CellGoalHandle:
         if not signing.verify(self.result_key, received.key, received.payload, received.attachment):
             self.ignored += 1
             return
-        data = json.loads(received.payload)
-        if isinstance(data, dict) and data.get("goal_id") == self.goal_id:
+        try:
+            data = json.loads(received.payload)
+        except (ValueError, RecursionError):
+            data = None
+        if isinstance(data, dict) and data.get("goal_id") == self.goal_id and "status" in data:
             self._result = data
+        else:  # signed, yet no result of this goal: never taken as one
+            self.ignored += 1
 
     async def cancel(self) -> dict[str, Any]:
         """Cancel every part (the reply says whether it was canceled, or why not)."""
@@ -117,4 +125,19 @@ async def send_cell_trajectory(
     if not reply.get("accepted"):
         client.unsubscribe(sub)
         raise GoalRejected(str(reply.get("reason", "rejected without a reason")))
+    if not signing.is_key(reply.get("result_key")):
+        client.unsubscribe(sub)
+        await _cancel_unfollowable(client, keys, reply, attachment)
+        raise UrDaemonError(
+            f"cell {cell!r}: the daemon accepted cell goal {client_text(str(reply.get('goal_id')), 80)} "
+            f"without a valid 'result_key' ({2 * signing.KEY_BYTES} hex characters): its result cannot "
+            "be told from a forgery, so it was canceled"
+        )
     return CellGoalHandle(client, keys, reply, attachment, sub)
+
+
+async def _cancel_unfollowable(client: Client, keys: CellKeys, reply: dict[str, Any], tokens: bytes) -> None:
+    """Cancel an accepted cell goal whose result could not be trusted (best effort: the caller
+    raises either way), so that no robot moves for a goal nobody can follow."""
+    with contextlib.suppress(UrDaemonError):
+        await client.request(keys.goal_cancel, {"goal_id": str(reply.get("goal_id"))}, attachment=tokens)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import types
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -22,9 +23,10 @@ from urdaemon.cell import parse_cell
 from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
-from urdaemon.errors import GoalRejected
+from urdaemon.errors import GoalRejected, UrDaemonError
 from urdaemon.publish import codec, signing
 from urdaemon.publish.keys import CellKeys
+from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.goals import put_signed
 
 pytestmark = pytest.mark.timeout(120)
@@ -108,8 +110,11 @@ async def test_one_part_refused_starts_none(monkeypatch: pytest.MonkeyPatch) -> 
             assert runtime.controller.statistics().goals_accepted == 0, runtime.robot.name
             assert runtime.controller.mode == "idle"
         assert list(daemon.runtimes[0].state.positions) == before, "alice did not move"
-        carol = await client.request(
-            CellKeys(CELL).goal_trajectory, {"robots": {"carol": {"points": _points(ALICE, 1.0)}}}
+        tokens = {name: await (await client.robot(name)).ensure_lease() for name in ("alice", "bob")}
+        carol = await client.request(  # with the leases the client holds, as send_cell_trajectory sends
+            CellKeys(CELL).goal_trajectory,
+            {"robots": {"carol": {"points": _points(ALICE, 1.0)}}},
+            attachment=json.dumps(tokens).encode(),
         )
         assert carol["accepted"] is False
         assert carol["reason"] == "carol: no robot 'carol' in cell 'testcell'; its robots: alice, bob"
@@ -196,6 +201,8 @@ async def test_a_forged_cell_result_is_never_returned(monkeypatch: pytest.Monkey
 async def test_bad_requests_are_refused_naming_what_is_wrong(monkeypatch: pytest.MonkeyPatch) -> None:
     async with _cell(monkeypatch) as (_, client, _published):
         key = CellKeys(CELL).goal_trajectory
+        # sent with a lease token, as a client sends them: what is wrong is the body
+        tokens = json.dumps({"alice": await (await client.robot("alice")).ensure_lease()}).encode()
         cases = {
             b"[]": "cell goal: not valid JSON: expected a JSON object",
             b'{"robots": {}}': "cell goal.robots: expected an object naming at least one",
@@ -203,7 +210,7 @@ async def test_bad_requests_are_refused_naming_what_is_wrong(monkeypatch: pytest
             b'{"robots": {"alice": {"points": []}}, "speed": 1}': "cell goal: unknown field(s) speed",
         }
         for body, reason in cases.items():
-            answer = json.loads((await _ask(client, key, body))[0])
+            answer = json.loads((await _ask(client, key, body, tokens))[0])
             assert answer["accepted"] is False
             assert answer["reason"].startswith(reason), (body, answer)
         cancel = json.loads((await _ask(client, CellKeys(CELL).goal_cancel, b"{}"))[0])
@@ -214,11 +221,64 @@ async def test_bad_requests_are_refused_naming_what_is_wrong(monkeypatch: pytest
         }
 
 
-async def _ask(client: Client, key: str, body: bytes) -> list[bytes]:
+async def _ask(client: Client, key: str, body: bytes, attachment: bytes | None = None) -> list[bytes]:
     def ask() -> list[bytes]:
-        return [r.ok.payload.to_bytes() for r in client.session.get(key, payload=body, timeout=10.0) if r.ok]
+        replies = client.session.get(key, payload=body, attachment=attachment, timeout=10.0)
+        return [r.ok.payload.to_bytes() for r in replies if r.ok]
 
     return await asyncio.get_running_loop().run_in_executor(None, ask)
+
+
+def _record_planner_marks(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
+    """Every value the cell goal planner's busy mark (``CellGoals._planning``) is set to, in order."""
+    marks: list[bool] = []
+
+    def mark(self: CellGoals, value: bool) -> None:
+        marks.append(value)
+        self.__dict__["_planning_recorded"] = value
+
+    def busy(self: CellGoals) -> bool:
+        return bool(self.__dict__["_planning_recorded"])
+
+    monkeypatch.setattr(CellGoals, "_planning", property(busy, mark), raising=False)
+    return marks
+
+
+async def test_a_session_without_leases_never_makes_the_cell_planner_busy(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Review 16, M3 (repro test_r_cellbusy): a session holding no lease sent 2 MiB cell goals back to
+    back; the tokens were checked only once the request was split, so the planner stayed busy and the
+    lease holder's cell goals were refused "busy" (5 of 5). Now a goal whose tokens could never let it
+    start is refused at once naming what is wrong with them, before the planner is marked busy."""
+    marks = _record_planner_marks(monkeypatch)
+    async with _cell(monkeypatch) as (daemon, client, _published):
+        await (await client.robot("alice")).ensure_lease()
+        stranger = await Client.connect(daemon.listen_endpoints[0])
+        try:
+            body = json.dumps({"robots": {"alice": swing_trajectory(2500, HOME)}}).encode()
+            assert len(body) > 100_000  # many turns of the loop to split and plan
+            none = "lease: a cell goal needs each of its robots' command lease tokens as its attachment"
+            wrong = {
+                None: none,
+                b"{}": none,
+                b'{"alice": "' + b"0" * 32 + b'"}': "alice: lease: robot 'alice' is held by ",
+                b'{"bob": "' + b"0" * 32 + b'"}': "bob: lease: robot 'bob' needs its command lease",
+                b'{"carol": "' + b"0" * 32 + b'"}': "carol: no robot 'carol' in cell 'testcell'",
+                b'["alice"]': "lease tokens: the attachment must be a JSON object",
+                b"x" * (codec.SMALL_MESSAGE_BYTES + 1): "lease tokens: attachment of 16385 bytes exceeds",
+            }
+            key = CellKeys(CELL).goal_trajectory
+            for attachment, reason in [item for item in wrong.items() for _ in range(3)]:  # back to back
+                answer = json.loads((await _ask(stranger, key, body, attachment))[0])
+                assert answer["accepted"] is False
+                assert answer["reason"].startswith(reason), (reason, answer)
+            assert True not in marks, marks  # never busy for them
+            goal = await send_cell_trajectory(client, CELL, {"alice": _points(ALICE, 30.0)})
+            assert marks.count(True) == 1  # the holder's goal was planned
+            assert (await goal.cancel())["canceled"] is True
+        finally:
+            await stranger.close()
 
 
 async def test_every_robot_needs_its_lease_token(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -310,3 +370,39 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
     }
     brackets = 8 * 2500  # each point: an object and three lists
     assert steps >= brackets // codec._SCAN_TOKENS, steps
+
+
+@pytest.mark.parametrize("bad_key", ["", "AB" * 32, "0" * 62, None])
+async def test_a_reply_without_a_valid_result_key_is_an_error_and_the_goal_is_canceled(
+    monkeypatch: pytest.MonkeyPatch, bad_key: str | None
+) -> None:
+    """Contract 16b, decision 6: the client took ``result_key`` as ``str(reply.get("result_key") or
+    "")``, so a reply without one gave an empty key, and an HMAC under an empty key is one anybody can
+    make. Now such a reply is an error naming ``result_key``, and the goal it accepted (which nobody
+    can follow) is canceled."""
+    fake = types.SimpleNamespace(new_key=lambda: bad_key, sign=lambda *_: b"0" * 64)
+    monkeypatch.setattr("urdaemon.runtime.cell_goals.signing", fake)
+    async with _cell(monkeypatch) as (daemon, client, _published):
+        with pytest.raises(UrDaemonError, match=r"without a valid 'result_key' \(64 hex characters\)"):
+            await _long_goal(client)
+        for runtime in daemon.runtimes:
+            assert runtime.controller.statistics().goals_accepted == 1, runtime.robot.name
+            assert runtime.controller.active_goal_id is None, runtime.robot.name  # canceled
+
+
+async def test_a_signed_message_that_is_no_result_is_not_taken(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Contract 16b, decision 6: the client took as the result any signed dict with the goal's id; a
+    result must carry a ``status`` too (signed with the goal's key for the result key: what only the
+    daemon or this client could make)."""
+    async with _cell(monkeypatch) as (_, client, _published):
+        goal = await _long_goal(client)
+        key = CellKeys(CELL).goal_result(goal.goal_id)
+        watch = client.subscribe(key)
+        for body in ({"goal_id": goal.goal_id, "robots": {}}, [goal.goal_id], "succeeded"):
+            payload = json.dumps(body).encode()
+            client.session.put(key, payload, attachment=signing.sign(goal.result_key, key, payload))
+            assert (await watch.get_sample(timeout=10.0)).payload == payload  # it reached this client
+        await goal.cancel()
+        result = await goal.result(timeout=20.0)
+        assert result["status"] == "canceled", result
+        assert goal.ignored == 3

@@ -11,13 +11,17 @@ goal's messages carry each robot's outcome).
 The cell goal hears each part's result. With ``on_abort: stop_all`` (the default) the first part to
 end other than succeeded stops the others (each ends ``aborted``, its reason naming the robot that
 failed and why); with ``continue`` the others run on. It ends with exactly one result, once every
-part has one, signed with its own key, published on ``<cell>/goal/<G>/result`` and kept for late
-queries; ``<cell>/goal/cancel`` cancels every part.
+part has one, signed with its own key (over the key it goes out on), published on
+``<cell>/goal/<G>/result`` and kept for late queries; ``<cell>/goal/cancel`` cancels every part.
 
 A goal or cancel carries, as its attachment, a JSON object of each robot's command lease token;
-each robot of the request must accept its token (checked when the request arrives and again just
-before the parts start). Passthrough parts are refused: the robot starts a passthrough trajectory
-when its own program reads it, which no daemon cycle can align with another robot's start.
+each robot of the request must accept its token. The tokens are checked before the goal's body is
+read or the planner marked busy (every robot they name must accept its own, and there must be some),
+so a session without a lease cannot keep the planner busy; once the request is split, every robot
+of it must have its token, and all are checked again just before the parts start.
+
+Passthrough parts are refused: the robot starts a passthrough trajectory when its own program reads
+it, which no daemon cycle can align with another robot's start.
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ from urdaemon.runtime.slicing import release, sliced, until_deadline
 if TYPE_CHECKING:
     from urdaemon.robot import RobotRuntime
 
-__all__ = ["PASSTHROUGH_REFUSED", "CellGoals", "lease_refusal"]
+__all__ = ["NO_TOKENS", "PASSTHROUGH_REFUSED", "CellGoals", "lease_refusal"]
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +61,11 @@ PASSTHROUGH_REFUSED = (
 )
 """Why a cell goal's passthrough part is refused."""
 CANCELED = "canceled by request"
+NO_TOKENS = (
+    "lease: a cell goal needs each of its robots' command lease tokens as its attachment, a JSON "
+    'object {"<robot>": "<token>", ...}; this one carries none'
+)
+"""Why a cell goal without lease tokens is refused (while the cell checks leases)."""
 
 
 def lease_refusal(runtime: RobotRuntime, token: bytes | None) -> str | None:
@@ -121,9 +130,10 @@ class CellGoals:
         try:
             if self._closing:
                 raise GoalRejected(SHUTTING_DOWN)
+            tokens = codec.decode_lease_tokens(_attachment(query))
+            self._check_tokens(tokens)  # before it may keep the planner busy (review 16, M3)
             if self._planning:
                 raise GoalRejected("busy: still planning another cell goal")
-            tokens = codec.decode_lease_tokens(_attachment(query))
         except (MessageError, GoalRejected) as err:
             _refuse(query, err)
             return
@@ -167,17 +177,29 @@ class CellGoals:
         with contextlib.suppress(asyncio.CancelledError):  # answered already: shutting down frees it
             await release(owned)
 
+    def _check_tokens(self, tokens: dict[str, bytes]) -> None:
+        """Refuse a cell goal whose lease tokens could never let it start, before its body is read:
+        every robot they name must be served here and accept its token, and with the lease checked
+        there must be at least one (every request names a robot, whose token it then lacks). So a
+        session holding no lease cannot keep the planner busy with requests that are refused anyway."""
+        if not tokens and any(lease_refusal(rt, None) is not None for rt in self._robots.values()):
+            raise GoalRejected(NO_TOKENS)
+        for name in tokens:
+            self._runtime(name)
+        self._check_leases(list(tokens), tokens)
+
+    def _runtime(self, name: str) -> RobotRuntime:
+        runtime = self._robots.get(name)
+        if runtime is None:
+            raise GoalRejected(
+                f"{codec.client_text(name)}: no robot {codec.client_text(name)!r} in cell "
+                f"{self._keys.cell!r}; its robots: {', '.join(sorted(self._robots))}"
+            )
+        return runtime
+
     def _parts(self, request: CellGoalMessage, tokens: dict[str, bytes]) -> list[tuple[str, RobotRuntime]]:
         """The robots of ``request``, each served here and commanded by its lease token, else refused."""
-        parts = []
-        for name in request.robots:
-            runtime = self._robots.get(name)
-            if runtime is None:
-                raise GoalRejected(
-                    f"{codec.client_text(name)}: no robot {codec.client_text(name)!r} in cell "
-                    f"{self._keys.cell!r}; its robots: {', '.join(sorted(self._robots))}"
-                )
-            parts.append((name, runtime))
+        parts = [(name, self._runtime(name)) for name in request.robots]
         self._check_leases([name for name, _ in parts], tokens)
         return parts
 
