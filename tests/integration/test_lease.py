@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -29,6 +30,7 @@ from tests.helpers import LeaseGrant, acquire_lease, free_tcp_port, wait_for_lin
 from tests.integration.conftest import ROOT, TWO_MOCKS
 from urdaemon.cell import parse_cell
 from urdaemon.daemon import Daemon
+from urdaemon.runtime.lease import fingerprint
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -441,3 +443,208 @@ async def test_an_acquire_waiting_for_its_token_holds_up_no_other_request(
         finally:
             late.close()
             other.close()
+
+
+def _shown_texts(*messages: dict[str, Any] | None) -> set[str]:
+    """Every text a session without the lease can read in shown leases (a lease dict, or a message
+    holding one under ``lease``/``previous``) that could name a token key: what an attacker could
+    name."""
+    texts: set[str] = set()
+    for message in messages:
+        for part in (message, (message or {}).get("lease"), (message or {}).get("previous")):
+            if isinstance(part, dict):
+                texts.update(v for v in part.values() if isinstance(v, str))
+    return {text for text in texts if re.fullmatch(r"[\w-]+", text)}
+
+
+async def test_naming_the_holders_shown_fingerprint_or_a_guess_gets_no_token() -> None:
+    """Review 16 H1 (tests/review test_r_hijack): the holder's session id was shown by ``show`` and
+    in events, and an acquire naming it (with a liveliness token on that key) got the holder's
+    token and moved the robot. Now every text ``show`` and the status show of the lease, and a
+    guess, each named with its own token and no force, is refused naming the holder and gets no
+    token; a second session's own acquire without force is refused; the holder still commands."""
+    async with served() as (_, endpoint):
+        holder, attacker = open_session(endpoint), open_session(endpoint)
+        try:
+            statuses = Inbox(attacker, "testcell/alice/status")
+            grant = await acquire_lease(holder, "testcell", "alice", holder="holder")
+            (shown,) = await zenoh_ask(attacker, "testcell/alice/lease", {"action": "show"})
+            status = await statuses.next(lambda m: m.get("lease") is not None)
+            named = _shown_texts(shown, status) | {secrets.token_hex(16)}
+            tokens = [attacker.liveliness().declare_token(f"testcell/alice/lease/{n}") for n in named]
+            for name in sorted(named):
+                ask = {"action": "acquire", "session": name, "holder": "attacker"}
+                (reply,) = await zenoh_ask(attacker, "testcell/alice/lease", ask)
+                assert reply["ok"] is False, (name, reply)
+                assert "token" not in reply, reply
+            for named_token in tokens:
+                named_token.undeclare()
+            assert grant.session_id not in json.dumps([shown, status]), "the secret is never shown"
+            assert fingerprint(grant.session_id) in named, "the lease is shown by its fingerprint"
+            own = secrets.token_hex(16)
+            token = attacker.liveliness().declare_token(f"testcell/alice/lease/{own}")
+            ask = {"action": "acquire", "session": own, "holder": "attacker"}
+            (refused,) = await zenoh_ask(attacker, "testcell/alice/lease", ask)
+            assert refused["ok"] is False
+            assert refused["reason"].startswith("lease: robot 'alice' is held by holder since"), refused
+            assert refused["lease"] == shown["lease"]
+            token.undeclare()
+            assert (await move(holder, grant))["accepted"] is True, "the holder still commands"
+        finally:
+            holder.close()
+            attacker.close()
+
+
+async def _seen_by_the_daemon(session: Any, key: str) -> None:
+    """Wait until the daemon's session knows the liveliness token ``key`` (its liveliness query,
+    routed by the daemon, answers it): a bounded number of queries, no sleeps."""
+    for _ in range(100):
+        replies = await asyncio.to_thread(lambda: list(session.liveliness().get(key, timeout=2.0)))
+        if any(r.ok is not None and str(r.ok.key_expr) == key for r in replies):
+            return
+    raise AssertionError(f"{key}: never seen")
+
+
+async def test_copies_of_every_key_a_stranger_can_learn_do_not_keep_a_gone_holders_lease() -> None:
+    """Review 16 H2 (tests/review test_r_dup): another session declaring a liveliness token on the
+    holder's key (learnt from ``show``) kept the lease, and the goal running, after the holder's
+    session closed. Now a second session declares tokens on every key it can learn (the shown lease's
+    texts, the ``acquired`` event's); the holder closes: its goal ends aborted naming it gone, the
+    lease is free (judged by the daemon's messages)."""
+    async with served() as (daemon, endpoint):
+        holder, other, watcher = open_session(endpoint), open_session(endpoint), open_session(endpoint)
+        try:
+            results = Inbox(watcher, "testcell/alice/goal/*/result")
+            events = Inbox(watcher, "testcell/alice/events")
+            await _seen_by_the_daemon(watcher, "testcell/alice/alive")  # the inboxes are routed by now
+            grant = await acquire_lease(holder, "testcell", "alice", holder="holder")
+            acquired = await events.next(is_lease_event("acquired"))
+            goal = await move(holder, grant)
+            assert goal["accepted"] is True, goal
+            (shown,) = await zenoh_ask(other, "testcell/alice/lease", {"action": "show"})
+            learnt = sorted(_shown_texts(shown, acquired))
+            keys = [f"testcell/alice/lease/{text}" for text in learnt]
+            copies = [other.liveliness().declare_token(key) for key in keys]
+            for key in keys:
+                await _seen_by_the_daemon(watcher, key)
+            holder.close()
+            result = await results.next(lambda r: r["goal_id"] == goal["goal_id"])
+            assert (result["status"], result["reason"]) == ("aborted", "lease holder holder is gone")
+            (after,) = await zenoh_ask(watcher, "testcell/alice/lease", {"action": "show"})
+            assert after["lease"] is None
+            assert runtime(daemon).controller.active_goal_id is None
+            assert len(copies) == len(keys) >= 1
+        finally:
+            other.close()
+            watcher.close()
+
+
+async def test_a_flood_of_tokens_keeps_no_state_and_every_acquire_is_still_granted() -> None:
+    """Review 16 M1 (tests/review test_r_flood): 4096 liveliness tokens under ``<cell>/*/lease/*``
+    filled the daemon's set of tokens and no acquire could be granted after. Now 5000 tokens (under
+    another robot's key and under alice's) keep nothing: the same session's next acquire (its token
+    reaches the daemon after the flood's) and another session's are granted, and the watch keeps
+    state for the two holders' keys only."""
+    async with served() as (daemon, endpoint):
+        attacker, client = open_session(endpoint), open_session(endpoint)
+        try:
+            flood = [
+                attacker.liveliness().declare_token(f"testcell/{'alice' if i % 2 else 'zz'}/lease/s{i:05d}")
+                for i in range(5000)
+            ]
+            bob = await acquire_lease(attacker, "testcell", "bob", holder="after the flood")
+            alice = await acquire_lease(client, "testcell", "alice", holder="legit")
+            assert bob.reply["ok"] is True
+            assert alice.reply["ok"] is True
+            watch = runtime(daemon).lease.watch
+            assert watch is not None
+            assert watch.tracked == 2, "only the holders' keys are kept"
+            assert len(flood) == 5000
+        finally:
+            attacker.close()
+            client.close()
+
+
+def _send(session: Any, key: str, body: dict[str, Any], attachment: bytes) -> asyncio.Future[dict[str, Any]]:
+    """Send a query now (no await: the loop does not run) and give its first reply as a future."""
+    loop = asyncio.get_running_loop()
+    answer: asyncio.Future[dict[str, Any]] = loop.create_future()
+
+    def settle(body: dict[str, Any]) -> None:
+        if not answer.done():
+            answer.set_result(body)
+
+    def on_reply(reply: Any) -> None:
+        body = json.loads(bytes(reply.ok.payload.to_bytes())) if reply.ok is not None else {"error": 1}
+        loop.call_soon_threadsafe(settle, body)
+
+    session.get(key, on_reply, payload=json.dumps(body).encode(), attachment=attachment, timeout=WAIT_S)
+    return answer
+
+
+class _FakeQuery:
+    """A release query as the lease keeper reads it (handed straight to it, on the loop)."""
+
+    def __init__(self, token: bytes) -> None:
+        self.key_expr = "testcell/alice/lease"
+        self.payload = zenoh.ZBytes(json.dumps({"action": "release"}).encode())
+        self.attachment = zenoh.ZBytes(token)
+        self.replies: list[dict[str, Any]] = []
+
+    def reply(self, _key: str, body: bytes) -> None:
+        self.replies.append(json.loads(body))
+
+    def drop(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("message", ["goal", "stream"])
+async def test_a_message_that_passed_the_check_before_the_lease_ended_is_refused_on_the_loop(
+    message: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Review 16 M2 (tests/review test_r_race): a goal that passed the lease check on Zenoh's thread
+    while its sender held the lease, and waited for the loop, was accepted after a take-over. Driven
+    in order: the holder's move goal (or joint_position put) passes the check (the test holds the
+    loop until it did), then the lease is released in the same loop turn; when the loop reaches the
+    message it is refused naming the lease (the goal's reply, or a ``command_rejected`` event), and
+    the robot never moves."""
+    async with served() as (daemon, endpoint):
+        holder, watcher = open_session(endpoint), open_session(endpoint)
+        try:
+            events = Inbox(watcher, "testcell/alice/events")
+            await _seen_by_the_daemon(watcher, "testcell/alice/alive")
+            grant = await acquire_lease(holder, "testcell", "alice", holder="old holder")
+            alice = runtime(daemon)
+            check = alice.lease.book.refusal
+            passed = threading.Event()
+
+            def spied(attachment: bytes | None) -> str | None:
+                refusal: str | None = check(attachment)
+                if refusal is None:
+                    passed.set()
+                return refusal
+
+            monkeypatch.setattr(alice.lease.book, "refusal", spied)
+            if message == "goal":
+                body = {"positions": TARGET, "duration": 1.0}
+                goal = _send(holder, "testcell/alice/goal/move", body, grant.token)
+            else:
+                stream = json.dumps({"positions": TARGET}).encode()
+                holder.put("testcell/alice/command/joint_position", stream, attachment=grant.token)
+            # the loop waits here until the message is past Zenoh's thread's check
+            assert passed.wait(WAIT_S), "the holder's message never reached the check"
+            release = _FakeQuery(grant.token)
+            alice.lease.on_query(release)
+            assert [r["ok"] for r in release.replies] == [True], release.replies
+            if message == "goal":
+                refused = await asyncio.wait_for(goal, WAIT_S)
+                assert refused["accepted"] is False, refused
+            else:
+                refused = await events.next(on_key("testcell/alice/command/joint_position"))
+                assert refused["kind"] == "command_rejected"
+            assert refused["reason"].startswith("lease: robot 'alice' needs its command lease"), refused
+            assert alice.controller.mode == "idle"
+            assert alice.state.positions == pytest.approx(HOME, abs=1e-9)
+        finally:
+            holder.close()
+            watcher.close()
