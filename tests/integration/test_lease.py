@@ -255,7 +255,7 @@ async def test_a_killed_holder_process_stops_the_robot_and_frees_the_lease(tmp_p
 async def test_a_take_over_needs_force_and_a_reason_and_is_logged_and_published(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="urdaemon.robot")
+    caplog.set_level(logging.INFO, logger="urdaemon.robot")
     async with served() as (daemon, endpoint):
         first, second = open_session(endpoint), open_session(endpoint)
         try:
@@ -282,6 +282,9 @@ async def test_a_take_over_needs_force_and_a_reason_and_is_logged_and_published(
             assert event["previous"]["holder"] == "stuck client"
             assert event["reason"] == "its operator went home"
             assert any("its operator went home" in r.getMessage() for r in caplog.records), caplog.text
+            for secret in (old.session_id, zid):  # logs name a lease by its fingerprint only
+                assert secret not in caplog.text
+            assert f"(lease {fingerprint(zid)})" in caplog.text
             assert runtime(daemon).controller.active_goal_id is None, "the take-over stopped the robot"
             refused_old = await move(first, old)
             assert refused_old["accepted"] is False

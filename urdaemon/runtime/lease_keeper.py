@@ -170,15 +170,17 @@ class LeaseKeeper:
         """Do what a decision says: stop first, then log and tell."""
         if outcome.stop is not None:
             self._stop(outcome.stop)
+        event = outcome.event
+        shown = "" if event is None else f" (lease {event['fingerprint']})"  # never the session id
         if outcome.warning is not None:
-            self._log.warning("%s", outcome.warning)
+            self._log.warning("%s%s", outcome.warning, shown)
         self._follow_holder()
-        if outcome.event is not None:
+        if event is not None:
             lease = self.book.lease
             self._status.lease = None if lease is None else lease.body()
             if outcome.warning is None:
-                self._log.info("lease %s: %s", outcome.event["action"], outcome.event["holder"])
-            self._status.event(outcome.event)
+                self._log.info("lease %s: %s%s", event["action"], event["holder"], shown)
+            self._status.event(event)
             self._status.publish()
 
 
