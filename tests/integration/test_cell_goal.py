@@ -263,6 +263,7 @@ async def test_a_session_without_leases_never_makes_the_cell_planner_busy(
                 None: none,
                 b"{}": none,
                 b'{"alice": "' + b"0" * 32 + b'"}': "alice: lease: robot 'alice' is held by ",
+                '{"alice": "\u00e9"}'.encode(): "alice: lease: robot 'alice' is held by ",
                 b'{"bob": "' + b"0" * 32 + b'"}': "bob: lease: robot 'bob' needs its command lease",
                 b'{"carol": "' + b"0" * 32 + b'"}': "carol: no robot 'carol' in cell 'testcell'",
                 b'["alice"]': "lease tokens: the attachment must be a JSON object",

@@ -855,4 +855,6 @@ def decode_lease_tokens(attachment: bytes | None, limit: int = SMALL_MESSAGE_BYT
         raise MessageError("lease tokens: the attachment is not a JSON object of robot tokens") from err
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):
         raise MessageError('lease tokens: the attachment must be a JSON object {"<robot>": "<token>", ...}')
-    return {name: token.encode() for name, token in data.items() if token.isascii()}
+    # a token that is not ASCII is no holder's token: kept (as one that matches none), so the robot
+    # it names is still checked and refused naming its lease
+    return {name: token.encode() if token.isascii() else b"" for name, token in data.items()}
