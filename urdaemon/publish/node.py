@@ -29,6 +29,7 @@ import json
 import logging
 import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Protocol
 
 import zenoh
@@ -238,6 +239,8 @@ class ZenohNode:
         self._entities: list[Any] = []
         self._closed = False
         self._flights: dict[str, _InFlight] = {}
+        self._asker: ThreadPoolExecutor | None = None
+        """Sends liveliness queries off the loop (``liveliness_watch``)."""
         self.latest: dict[str, _Latest] = {}
         """Each subscriber's pending sample, by key (``replaced_total``: samples replaced unhandled)."""
 
@@ -408,20 +411,18 @@ class ZenohNode:
     def liveliness_watch(self, key: str, changed: Callable[[], None], timeout: float) -> LivelinessWatch:
         """Watch the liveliness tokens under ``key`` that the daemon asks about (one subscriber for
         all); ``changed()`` runs on the loop after a watched token came or went, at most one call
-        waiting for the loop at a time. ``timeout``: how long a ``probe`` waits for Zenoh's answer."""
+        waiting for the loop at a time. ``timeout``: how long a ``probe`` waits for Zenoh's answer.
+
+        A probe is sent off the loop, by one thread of its own (started at the first probe), and
+        answered on Zenoh's threads: the loop neither sends it nor waits for it."""
 
         def ask(token: str) -> None:
-            def on_reply(reply: Any) -> None:
-                found = reply.ok
-                if found is not None and str(found.key_expr) == token:
-                    watch.heard(token)
-
             if self._closed:
                 return
-            try:  # answered on Zenoh's threads: the loop never waits for it
-                self.session.liveliness().get(token, zenoh.handlers.Callback(on_reply), timeout=timeout)
-            except zenoh.ZError as err:
-                log.warning("liveliness query of %s failed: %s", token, err)
+            if self._asker is None:
+                self._asker = ThreadPoolExecutor(1, thread_name_prefix="urdaemon-liveliness")
+            with contextlib.suppress(RuntimeError):  # shut down: the daemon is closing
+                self._asker.submit(self._ask_liveliness, token, watch.heard, timeout)
 
         watch = LivelinessWatch(lambda: self._to_loop(watch.handed), ask)
         watch.changed = changed
@@ -429,11 +430,29 @@ class ZenohNode:
         self._entities.append(subscriber)
         return watch
 
+    def _ask_liveliness(self, token: str, heard: Callable[[str], None], timeout: float) -> None:
+        """Ask Zenoh whether the liveliness token ``token`` is there (on the asker's thread);
+        ``heard(token)`` on Zenoh's thread if it is."""
+
+        def on_reply(reply: Any) -> None:
+            found = reply.ok
+            if found is not None and str(found.key_expr) == token:
+                heard(token)
+
+        if self._closed:
+            return
+        try:
+            self.session.liveliness().get(token, zenoh.handlers.Callback(on_reply), timeout=timeout)
+        except zenoh.ZError as err:
+            log.warning("liveliness query of %s failed: %s", token, err)
+
     def close(self) -> None:
         """Undeclare everything and close the session."""
         if self._closed:
             return
         self._closed = True
+        if self._asker is not None:
+            self._asker.shutdown(wait=False, cancel_futures=True)
         for entity in reversed(self._entities):
             try:
                 entity.undeclare()
