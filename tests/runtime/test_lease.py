@@ -3,6 +3,7 @@ gone, and the view Zenoh's threads check."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 
@@ -175,3 +176,29 @@ def test_good_requests_parse() -> None:
         ).encode()
     )
     assert request == LeaseRequest("acquire", "ab-9_Z" * 3, "me", True, "r")
+
+
+def test_the_book_shows_a_fingerprint_and_never_the_session_id() -> None:
+    """Review 16 H1: whoever names a lease's session id gets its token, so no reply, event, stop
+    reason or warning of the book shows it; they show ``fingerprint`` (16 hex characters of its
+    SHA-256)."""
+    assert fingerprint(S1) == hashlib.sha256(S1.encode()).hexdigest()[:16]
+    assert re.fullmatch(r"[0-9a-f]{16}", fingerprint(S2))
+    book = LeaseBook("alice", KEY)
+    outcomes = [
+        book.acquire(acquire(S1, "first"), NOW),
+        book.acquire(acquire(S2, "second"), NOW + 1),
+        book.acquire(acquire(S2, "second", force=True, reason="stuck"), NOW + 2),
+    ]
+    token = outcomes[-1].reply["token"].encode()
+    outcomes += [book.release(b"0" * 32), book.release(token), book.acquire(acquire(S1, "first"), NOW + 3)]
+    gone = book.gone(S1)
+    assert gone is not None
+    shown = json.dumps(
+        [[o.reply, o.event, o.stop, o.warning] for o in [*outcomes, gone]]
+        + [book.show(), book.current.refusal_text]
+    )
+    assert S1 not in shown
+    assert S2 not in shown
+    assert fingerprint(S1) in shown
+    assert fingerprint(S2) in shown
