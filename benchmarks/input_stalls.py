@@ -22,6 +22,7 @@ import argparse
 import asyncio
 import json
 import math
+import secrets
 import socket
 import sys
 import time
@@ -243,9 +244,9 @@ def sender(endpoint: str, scale: float) -> None:
 def _lease(session: Any) -> tuple[bytes, Any]:
     """Acquire alice's command lease as a client does (its liveliness token first); the token to
     attach, and the liveliness token to keep while it is held."""
-    zid = str(session.zid())
-    held = session.liveliness().declare_token(f"stalls/alice/lease/{zid}")
-    body = json.dumps({"action": "acquire", "session": zid, "holder": "input_stalls benchmark"})
+    secret = secrets.token_hex(16)  # the lease's session id: only its holder knows it
+    held = session.liveliness().declare_token(f"stalls/alice/lease/{secret}")
+    body = json.dumps({"action": "acquire", "session": secret, "holder": "input_stalls benchmark"})
     replies = [
         r.ok.payload.to_bytes() for r in session.get("stalls/alice/lease", payload=body, timeout=10.0) if r.ok
     ]
