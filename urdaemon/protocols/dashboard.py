@@ -61,6 +61,7 @@ from urdaemon.errors import LocalProtocolError, RemoteProtocolError
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols._codec import Codec
+from urdaemon.protocols.dashboard_refusal import REFUSAL_PREFIXES, is_refusal
 
 __all__ = [
     "DASHBOARD_BANNER", "DASHBOARD_PORT", "MAX_LINE_BYTES", "REFUSAL_PREFIXES", "ActionCommand", "AddToLog",
@@ -913,18 +914,6 @@ def operational_mode_text(mode: OperationalMode) -> str:
 def user_role_text(role: UserRole) -> str:
     """Reply to ``getUserRole``."""
     return role.value
-
-
-REFUSAL_PREFIXES: Final = ("could not understand", "failed to execute", "error")
-"""How a controller's answer starts, lower-cased, when it refuses a line: what the daemon reads as a
-refusal of a line the codec does not type (§3.2 does not enumerate failure texts; these are the
-ones it quotes, and ``error`` for the rest)."""
-
-
-def is_refusal(text: str) -> bool:
-    """Whether an answer to a line the codec does not type says it was refused (an empty one does)."""
-    lowered = text.strip().lower()
-    return not lowered or lowered.startswith(REFUSAL_PREFIXES)
 
 
 def unknown_command_text(line: str) -> str:

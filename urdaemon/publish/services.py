@@ -30,7 +30,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.protocols.dashboard import REFUSAL_PREFIXES
+from urdaemon.protocols.dashboard_refusal import REFUSAL_PREFIXES
 from urdaemon.publish import codec
 from urdaemon.publish.codec import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
 
