@@ -31,6 +31,8 @@ AWAY = [0.2, -1.4, 1.4, -1.5, -1.6, 0.1]
 FIRST = "first client (test)"
 SECOND = "second client (test)"
 CLI_S = 30.0
+SHORT_S = 0.6
+"""A move that must go through and end: its length is not the point (the mock needs 0.53 s for 0.2 rad)."""
 WAIT_S = 20.0
 """Bound of every wait for a message (a busy machine is slow, never this slow)."""
 ROUTED_TRIES = 100
@@ -95,10 +97,10 @@ async def test_after_the_holder_closes_the_second_client_commands() -> None:
                 mine = await first.robot("alice")
                 await mine.ensure_lease()
                 with pytest.raises(LeaseHeld, match="first client"):
-                    await theirs.move(AWAY, duration=1.0)
+                    await theirs.move(AWAY, duration=SHORT_S)
             # the first client closed: it released its lease
             assert await theirs.lease_info() is None
-            goal = await theirs.move(AWAY, duration=1.0)
+            goal = await theirs.move(AWAY, duration=SHORT_S)
             assert (await goal.result(timeout=30.0))["status"] == "succeeded"
             positions = daemon.runtimes[0].backend.state.positions
             assert list(positions) == pytest.approx(AWAY, abs=0.01)
@@ -127,7 +129,7 @@ async def test_take_over_passes_the_lease_and_the_first_clients_next_command_is_
         with pytest.raises(LeaseHeld) as caught:
             await mine.move(HOME, duration=2.0)
         assert SECOND in caught.value.reason, caught.value.reason
-        moved = await theirs.move(HOME, duration=1.0)
+        moved = await theirs.move(HOME, duration=SHORT_S)
         assert (await moved.result(timeout=30.0))["status"] == "succeeded"
         with pytest.raises(UrDaemonError, match="reason"):
             await mine.take_over("  ")
@@ -181,10 +183,10 @@ async def test_lease_command_shows_the_holder_and_takes_it_over() -> None:
         assert await mine.lease_info() is None, "the take-over was released when the command ended"
         for _ in range(2):  # the lease is free, but a client it was taken from does not just take it back
             with pytest.raises(LeaseHeld, match="lease: robot 'alice'"):
-                await mine.move(HOME, duration=1.0)
+                await mine.move(HOME, duration=SHORT_S)
         assert await mine.lease_info() is None
         await mine.ensure_lease()  # the program decides to command again
-        again = await mine.move(HOME, duration=1.0)
+        again = await mine.move(HOME, duration=SHORT_S)
         assert (await again.result(timeout=30.0))["status"] == "succeeded"
 
 
@@ -268,7 +270,7 @@ async def test_a_forged_take_over_event_does_not_end_the_holders_lease() -> None
         await _forge_until_weighed(first, raw, mine.lease, mine.keys.events, json.dumps(event).encode())
         assert not mine.lease.ended.is_set(), mine.lease.ended_reason
         assert mine.lease.token is not None
-        goal = await mine.move(AWAY, duration=1.0)
+        goal = await mine.move(AWAY, duration=SHORT_S)
         assert (await goal.result(timeout=30.0))["status"] == "succeeded"
         after = await mine.lease_info()
         assert after is not None
@@ -308,4 +310,4 @@ async def test_a_refusal_for_the_lease_ends_it_only_when_the_daemon_shows_it_is_
         await mine.lease.confirm_end("lease: robot 'alice' is held by second client (test)")
         assert mine.lease.ended.is_set()  # by this check, or by the take-over event if it came first
         with pytest.raises(LeaseHeld, match="second client"):
-            await mine.move(HOME, duration=1.0)
+            await mine.move(HOME, duration=SHORT_S)
