@@ -91,7 +91,7 @@ async def test_cli_commands_reach_a_mutual_tls_daemon_with_the_written_client_co
         assert written.code == 0, written
         secure = ("--connect", cell.endpoint, "--zenoh-config", cell.client_config)
         move = await run_cli_in_thread(
-            "move", "alice", "--joints", AWAY, "--duration", "1", *secure, timeout=CLI_S
+            "move", "alice", "--joints", AWAY, "--duration", "0.6", *secure, timeout=CLI_S
         )
         assert move.code == 0, move
         assert '"succeeded"' in move.stdout, move
