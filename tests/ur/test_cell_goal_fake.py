@@ -120,7 +120,7 @@ async def test_alice_and_bob_start_within_one_cycle_of_each_other() -> None:
         offset = _offset(cell)
         assert cell.started == {}, "neither arm moved before the goal"
         goal = await send_cell_trajectory(
-            cell.client, "urcell", {"alice": _points(ALICE, 1.5), "bob": _points(BOB, 1.5)}
+            cell.client, "urcell", {"alice": _points(ALICE, 0.8), "bob": _points(BOB, 0.8)}
         )
         await cell.fakes["alice"].until(lambda: len(cell.started) == 2, cycles=5000)
         assert _offset(cell) == offset, "the two arms stepped together throughout"
