@@ -115,16 +115,16 @@ async def test_dual_robot_cell_end_to_end(daemon: str) -> None:
         bob_task = asyncio.create_task(_collect(bob_states, done))
 
         alice_goal_points = [
-            {"positions": [0.4, -1.3, 1.2, -1.5, -1.5, 0.3], "time_from_start": 1.5},
-            {"positions": [0.8, -1.1, 0.9, -1.3, -1.4, 0.6], "time_from_start": 3.0},
-            {"positions": [0.5, -1.4, 1.3, -1.6, -1.5, 0.2], "time_from_start": 4.5},
+            {"positions": [0.4, -1.3, 1.2, -1.5, -1.5, 0.3], "time_from_start": 1.0},
+            {"positions": [0.8, -1.1, 0.9, -1.3, -1.4, 0.6], "time_from_start": 2.0},
+            {"positions": [0.5, -1.4, 1.3, -1.6, -1.5, 0.2], "time_from_start": 3.0},
         ]
         bob_target = [-0.6, -1.2, 1.1, -1.4, -1.6, 0.5]
         alice_goal, bob_goal = await asyncio.gather(
-            alice.send_trajectory(alice_goal_points), bob.move(bob_target, duration=3.0)
+            alice.send_trajectory(alice_goal_points), bob.move(bob_target, duration=2.0)
         )
-        assert alice_goal.duration == pytest.approx(4.5, abs=0.01)
-        assert bob_goal.duration == pytest.approx(3.0, abs=0.01)
+        assert alice_goal.duration == pytest.approx(3.0, abs=0.01)
+        assert bob_goal.duration == pytest.approx(2.0, abs=0.01)
 
         feedback = [f async for f in alice_goal.feedback()]
         assert feedback, "no feedback while alice's trajectory ran"
