@@ -200,9 +200,9 @@ def _two_robot_cell(alice: str, bob: str, series: str = "e") -> str:
 
 
 PASSTHROUGH_POINTS = [
-    {"positions": [0.2, -1.5, 1.5, -1.5, -1.6, 0.1], "time_from_start": 1.0},
-    {"positions": [0.4, -1.4, 1.4, -1.5, -1.6, 0.2], "time_from_start": 2.0},
-    {"positions": [0.3, -1.45, 1.45, -1.55, -1.6, 0.15], "time_from_start": 3.0},
+    {"positions": [0.2, -1.5, 1.5, -1.5, -1.6, 0.1], "time_from_start": 0.6},
+    {"positions": [0.4, -1.4, 1.4, -1.5, -1.6, 0.2], "time_from_start": 1.2},
+    {"positions": [0.3, -1.45, 1.45, -1.55, -1.6, 0.15], "time_from_start": 1.8},
 ]
 
 
@@ -225,10 +225,10 @@ async def test_alice_servos_a_trajectory_while_bob_runs_a_passthrough_trajectory
             await _until(client, alice.keys.status, lambda s: s["ready"])
             await _until(client, bob.keys.status, lambda s: s["ready"])
             alice_goal = await alice.send_trajectory(
-                [{"positions": [0.5, -1.3, 1.3, -1.5, -1.5, 0.3], "time_from_start": 2.0}]
+                [{"positions": [0.5, -1.3, 1.3, -1.5, -1.5, 0.3], "time_from_start": 1.2}]
             )
             bob_goal = await bob.send_trajectory(PASSTHROUGH_POINTS, passthrough=True)
-            assert bob_goal.duration == pytest.approx(3.0, abs=0.01)
+            assert bob_goal.duration == pytest.approx(1.8, abs=0.01)
             with pytest.raises(GoalRejected, match=r"passthrough goal .* runs on the robot"):
                 await bob.move(HOME, preempt=True)
             feedback = [f async for f in bob_goal.feedback()]
