@@ -71,14 +71,14 @@ async def test_both_parts_start_with_one_reply_and_the_cell_goal_succeeds_once(
 ) -> None:
     async with _cell(monkeypatch) as (daemon, client, published):
         goal = await send_cell_trajectory(
-            client, CELL, {"alice": _points(ALICE, 1.0), "bob": _points(BOB, 1.2)}
+            client, CELL, {"alice": _points(ALICE, 0.7), "bob": _points(BOB, 0.8)}
         )
         assert set(goal.goals) == {"alice", "bob"}
         # both run from the one reply on (the reply is sent in the turn both parts started)
         assert _part(daemon, "alice") == goal.goals["alice"]
         assert _part(daemon, "bob") == goal.goals["bob"]
         assert len(goal.result_key) == 2 * signing.KEY_BYTES
-        assert goal.duration == pytest.approx(1.2, abs=0.05)
+        assert goal.duration == pytest.approx(0.8, abs=0.05)
         assert goal.goals["alice"].startswith("alice-")
         assert goal.goals["bob"].startswith("bob-")
         result = await goal.result(timeout=20.0)
