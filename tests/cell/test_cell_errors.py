@@ -227,6 +227,13 @@ BAD_CELLS: dict[str, Bad] = {
     "pose-parent-bad-characters": Bad(
         one_robot(", pose: {parent: 'a b'}"), "robots[0] (alice).pose.parent", "pattern"
     ),
+    # --- tcp ---
+    "tcp-five-values": Bad(one_robot(", tcp: [0, 0, 0, 0, 0]"), "robots[0] (alice).tcp[5]", "too few"),
+    "tcp-nan": Bad(one_robot(", tcp: [0, 0, .nan, 0, 0, 0]"), "robots[0] (alice).tcp[2]", "finite"),
+    "tcp-too-far": Bad(one_robot(", tcp: [0, 0, 1.5, 0, 0, 0]"), "robots[0] (alice).tcp", "beyond"),
+    "tcp-rotation-beyond-pi": Bad(
+        one_robot(", tcp: [0, 0, 0, 3, 1, 0]"), "robots[0] (alice).tcp", "beyond pi"
+    ),
     # --- mock options ---
     "initial-positions-too-short": Bad(
         one_robot(", mock: {initial_positions: [0, 0, 0]}"), "robots[0] (alice)", "3 values for 6 joints"

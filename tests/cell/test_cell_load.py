@@ -116,11 +116,19 @@ def test_defaults_of_a_minimal_cell() -> None:
     assert alice.address is None
     assert alice.calibration is None
     assert alice.pose.xyz == (0.0, 0.0, 0.0)
+    assert alice.tcp == (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert alice.motion.stream_timeout == 0.2
     assert alice.motion.goal_tolerance == 0.01
     assert alice.mock is None
     assert alice.joint_limits == {}
     assert alice.ports.as_dict() == block(DEFAULT_PORT_BASE)
+
+
+def test_tcp_offset_loads_up_to_its_limits() -> None:
+    """A TCP at the edge of its range (1 m along an axis, a rotation of exactly pi) is accepted."""
+    text = "cell: c\nrobots: [{name: alice, model: ur5e, backend: mock, tcp: [0.1, -1, 1, 0, 0, %r]}]\n"
+    (alice,) = parse_cell(text % math.pi).robots
+    assert alice.tcp == (0.1, -1.0, 1.0, 0.0, 0.0, math.pi)
 
 
 def test_ur_models_lists_the_shipped_models() -> None:

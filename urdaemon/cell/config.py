@@ -99,6 +99,27 @@ def endpoint_port(endpoint: str) -> int | None:
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
+TCP_MAX_OFFSET_M = 1.0
+"""Largest TCP translation along each flange axis, in metres."""
+TCP_MAX_ROTATION_RAD = math.pi
+"""Largest TCP rotation (the rotation vector's length), in radians."""
+
+
+def check_tcp(pose: tuple[float, ...]) -> tuple[float, ...]:
+    """A TCP offset ``[x, y, z, rx, ry, rz]`` within range, or ValueError saying what is out of range."""
+    if len(pose) != 6:
+        raise ValueError(f"a TCP offset has 6 values [x, y, z, rx, ry, rz], not {len(pose)}")
+    if not all(math.isfinite(v) for v in pose):
+        raise ValueError("a TCP offset's values must be finite")
+    for axis, value in zip("xyz", pose[:3], strict=True):
+        if abs(value) > TCP_MAX_OFFSET_M:
+            raise ValueError(f"TCP {axis} = {value} m is beyond ±{TCP_MAX_OFFSET_M} m")
+    angle = math.hypot(*pose[3:])
+    if angle > TCP_MAX_ROTATION_RAD:
+        raise ValueError(f"TCP rotation {angle:.6g} rad is beyond pi (the rotation vector's length)")
+    return pose
+
+
 PortNumber = Annotated[int, Field(ge=1, le=65535, strict=True)]
 
 
@@ -521,6 +542,8 @@ class Robot(_Frozen):
     joint_limits: dict[str, JointLimitOverride] = Field(default_factory=dict)
     """Joint name without prefix → limit overrides."""
     pose: Pose = Pose()
+    tcp: tuple[Finite, Finite, Finite, Finite, Finite, Finite] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    """TCP offset in the tool0 (flange) frame: x, y, z (m) and a rotation vector (rad)."""
     description: CustomDescription | None = None
     motion: MotionOptions = MotionOptions()
     mock: MockOptions | None = None
@@ -541,6 +564,11 @@ class Robot(_Frozen):
     @classmethod
     def _calibration_exists(cls, value: str | None, info: ValidationInfo) -> str | None:
         return None if value is None else _resolve_file(value, info)
+
+    @field_validator("tcp")
+    @classmethod
+    def _tcp(cls, value: tuple[float, ...]) -> tuple[float, ...]:
+        return check_tcp(value)
 
     @field_validator("address")
     @classmethod
