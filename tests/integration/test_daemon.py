@@ -332,7 +332,7 @@ async def test_tcp_pose_is_computed_only_while_someone_subscribes(cell: tuple[Da
     alice = await client.robot("alice")
     assert not runtime._pose_wanted.active  # nobody has subscribed to tcp_pose yet
     pose = await _next_matching(client, alice.keys.tcp_pose, lambda data: True)
-    assert (pose["frame"], pose["child"]) == ("alice_base", "alice_tool0")
+    assert (pose["robot"], pose["frame"], pose["child"]) == ("alice", "alice_base", "alice_tool0")
     assert (len(pose["position"]), len(pose["orientation"])) == (3, 4)
 
 

@@ -762,6 +762,7 @@ def test_encode_pose_layout() -> None:
     data = json.loads(encoder.encode_pose(state, "alice_base", "alice_tool0", pose))
     assert data == {
         "v": 1,
+        "robot": "alice",
         "frame": "alice_base",
         "child": "alice_tool0",
         "controller_time": 12.004,

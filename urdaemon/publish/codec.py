@@ -606,7 +606,8 @@ class JointStateEncoder:
 
     def __init__(self, robot: str, joint_names: Sequence[str]) -> None:
         names = json.dumps(list(joint_names))
-        self._head = f'{{"v":{SCHEMA_VERSION},"robot":{json.dumps(robot)},"names":{names},'
+        self._robot = json.dumps(robot)
+        self._head = f'{{"v":{SCHEMA_VERSION},"robot":{self._robot},"names":{names},'
         floats = ",".join(["%r"] * len(joint_names))
         self._joints = _escape(self._head) + (
             f'"controller_time":%r,"host_time_ns":%d,"cycle":%d,"position":[{floats}],'
@@ -630,10 +631,14 @@ class JointStateEncoder:
         ).encode()
 
     def encode_pose(self, state: RobotState, frame: str, child: str, pose: Sequence[float]) -> bytes:
-        """The tcp_pose message: position and quaternion (x, y, z, w) of ``child`` in ``frame``."""
+        """The tcp_pose message: the robot, and the position and quaternion (x, y, z, w) of ``child``
+        in ``frame``."""
         known = self._poses.get((frame, child))
         if known is None:
-            head = f'{{"v":{SCHEMA_VERSION},"frame":{json.dumps(frame)},"child":{json.dumps(child)},'
+            head = (
+                f'{{"v":{SCHEMA_VERSION},"robot":{self._robot},"frame":{json.dumps(frame)},'
+                f'"child":{json.dumps(child)},'
+            )
             template = _escape(head) + (
                 '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
             )
