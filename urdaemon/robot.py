@@ -16,7 +16,7 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.cell.config import PublishOptions, Robot
 from urdaemon.control import MotionController
-from urdaemon.description.kinematics import DhKinematics
+from urdaemon.description.kinematics import DhKinematics, ToolOffset
 from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
@@ -90,7 +90,9 @@ class RobotRuntime:
         self._decimation = publish.joint_states_decimation
         self._encoder = codec.JointStateEncoder(robot.name, backend.state.joint_names)
         self._frame = f"{robot.prefix}base"
-        self._child = f"{robot.prefix}tool0"
+        self._tool = ToolOffset(robot.tcp) if any(robot.tcp) else None
+        """The cell file's TCP offset composed with every tcp_pose (None: the TCP is tool0)."""
+        self._child = f"{robot.prefix}tcp" if self._tool is not None else f"{robot.prefix}tool0"
         self._pub_joints: Any = None
         self._pub_pose: Any = None
         self._joints_wanted = Matching(False)
@@ -190,6 +192,8 @@ class RobotRuntime:
                 self._pub_joints.put(self._encoder.encode(state))
             if self._pose_wanted.active and self._kinematics is not None:
                 pose = self._kinematics.tool_pose(state.positions)
+                if self._tool is not None:
+                    pose = self._tool.apply(pose)
                 self._pub_pose.put(self._encoder.encode_pose(state, self._frame, self._child, pose))
         if self.controller.has_events:
             self.goals.publish_events()

@@ -11,7 +11,8 @@ import pytest
 
 from urdaemon.cell import ur_models
 from urdaemon.description import DhKinematics, KinematicTree, build_cell_urdf, load_ur_model, load_urdf
-from urdaemon.description.kinematics import quaternion_of
+from urdaemon.description.frames import frame_of_pose
+from urdaemon.description.kinematics import ToolOffset, quaternion_of
 
 from .support import DATA, REAL_UR10E, dh_fk, make_cell, quat_matrix, random_calibration
 
@@ -207,3 +208,19 @@ def test_axes_are_normalised_and_mimic_chains_followed() -> None:
         expected[:3, :3] = rz @ rx
         expected[:3, 3] = rz @ np.array([slide, 0.0, 0.0])
         _assert_pose(poses["c"], expected)
+
+
+def test_tool_offset_composes_the_tcp_with_the_flange_pose() -> None:
+    """The TCP pose is the tool0 frame times the TCP frame, checked with matrices on random joints."""
+    kinematics = DhKinematics(REAL_UR10E)
+    rng = np.random.default_rng(17)
+    for _ in range(50):
+        tcp = [*rng.uniform(-0.3, 0.3, 3), *rng.uniform(-1.5, 1.5, 3)]
+        q = rng.uniform(-math.pi, math.pi, 6)
+        flange = kinematics.tool_pose(list(q))
+        out = ToolOffset(tcp).apply(flange)
+        f = np.array(frame_of_pose(tcp))
+        r_tcp, t_tcp = f[:9].reshape(3, 3), f[9:]
+        r_flange = quat_matrix(*flange[3:])
+        assert np.allclose(out[:3], np.array(flange[:3]) + r_flange @ t_tcp, atol=1e-12)
+        assert np.allclose(quat_matrix(*out[3:]), r_flange @ r_tcp, atol=1e-12)

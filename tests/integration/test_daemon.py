@@ -383,3 +383,40 @@ async def test_a_daemon_listening_on_a_unix_socket_serves_a_client_there(tmp_pat
         assert len(state["position"]) == 6
         goal = await alice.move([0.1, *HOME[1:]], duration=2.0)
         assert (await goal.result(timeout=30))["status"] == "succeeded"
+
+
+TCP_CELL = """
+cell: tcpcell
+robots:
+  - name: alice
+    model: ur10e
+    backend: mock
+    tcp: [0.01, -0.02, 0.15, 0.1, -0.2, 0.3]
+    mock: {initial_positions: [0.3, -1.2, 1.4, -1.7, -1.5, 0.4]}
+"""
+
+
+async def test_tcp_pose_applies_the_cell_files_tcp_offset() -> None:
+    """tcp_pose is the flange pose composed with the cell file's ``tcp``, named ``<robot>_tcp`` (issue 17).
+
+    Checked against the IK module's forward kinematics with the same TCP (URScript ``get_forward_kin``).
+    """
+    from urdaemon.description import load_ur_model
+    from urdaemon.description.frames import frame_of_pose
+    from urdaemon.description.ik import UrKinematics
+
+    tcp = (0.01, -0.02, 0.15, 0.1, -0.2, 0.3)
+    q = (0.3, -1.2, 1.4, -1.7, -1.5, 0.4)
+    expected = frame_of_pose(UrKinematics(load_ur_model("ur10e")).forward(q, tcp))
+    async with running_daemon(TCP_CELL) as (_daemon, client):
+        alice = await client.robot("alice")
+        pose = await _next_matching(client, alice.keys.tcp_pose, lambda data: True)
+    assert (pose["robot"], pose["child"]) == ("alice", "alice_tcp")
+    assert pose["position"] == pytest.approx(expected[9:], abs=1e-9)
+    x, y, z, w = pose["orientation"]
+    rotation = (
+        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
+    assert rotation == pytest.approx(expected[:9], abs=1e-9)

@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from urdaemon.description.frames import compose
+from urdaemon.description.frames import compose, frame_of_pose
 from urdaemon.description.urmodels import DhParameters
 from urdaemon.errors import DescriptionError
 
@@ -118,6 +118,35 @@ class DhKinematics:
         r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = dh_chain(self._joints, q)
         qx, qy, qz, qw = quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22)
         return (px, py, pz, qx, qy, qz, qw)
+
+
+class ToolOffset:
+    """A TCP offset (x, y, z, rx, ry, rz in the tool0 frame) applied to tool0 poses, precomputed once."""
+
+    __slots__ = ("_q", "_t")
+
+    def __init__(self, tcp: Sequence[float]) -> None:
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = frame_of_pose(tcp)
+        self._t = (x, y, z)
+        self._q = quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22)
+
+    def apply(self, pose: Sequence[float]) -> tuple[float, ...]:
+        """(x, y, z, qx, qy, qz, qw) of the TCP for the tool0 pose ``pose`` (same layout)."""
+        px, py, pz, ax, ay, az, aw = pose
+        tx, ty, tz = self._t
+        bx, by, bz, bw = self._q
+        # t rotated by the quaternion a: t + 2 w (u x t) + 2 u x (u x t), u = (ax, ay, az)
+        cx, cy, cz = ay * tz - az * ty, az * tx - ax * tz, ax * ty - ay * tx
+        dx, dy, dz = ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx
+        return (
+            px + tx + 2.0 * (aw * cx + dx),
+            py + ty + 2.0 * (aw * cy + dy),
+            pz + tz + 2.0 * (aw * cz + dz),
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        )
 
 
 @dataclass(frozen=True, slots=True)
