@@ -19,39 +19,20 @@ from typing import Any
 import pytest
 
 from tests.helpers import fake_address, free_tcp_port
-from tests.ur.test_links_harness import HOME, JOINTS, UrRun, program_is_running
+from tests.ur.test_links_harness import HOME, JOINTS, UrRun, program_is_running, robot_config
 from urdaemon.backends.ur import route, servers
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.cell.config import UrOptions
-from urdaemon.cell.load import parse_cell
 from urdaemon.errors import BackendError, ConnectionLostError
 from urdaemon.fakeur.controller import FakeController
-
-
-def _robot(address: str, ur: str, *, headless: bool = True) -> Any:
-    """One ``ur`` robot at ``address`` with callback ports from the OS and ``ur`` as its options."""
-    ports = [free_tcp_port() for _ in range(4)]
-    text = f"""
-cell: bind
-robots:
-  - name: alice
-    model: ur10e
-    backend: ur
-    address: {address}
-    headless: {str(headless).lower()}
-    ports:
-      {{reverse: {ports[0]}, script_sender: {ports[1]}, trajectory: {ports[2]}, script_command: {ports[3]}}}
-    ur: {ur}
-"""
-    return parse_cell(text).robots[0]
 
 
 @contextlib.asynccontextmanager
 async def _running(address: str, ur: str, *, urcap_host: str | None = None) -> AsyncIterator[UrRun]:
     """A fake at ``address`` and a backend for it with options ``ur``, running; in URCap mode when
     ``urcap_host`` is given (the External Control URCap's Host IP)."""
-    robot = _robot(address, ur, headless=urcap_host is None)
+    robot = robot_config(address, headless=urcap_host is None, ur=ur)
     urcap = None if urcap_host is None else (urcap_host, robot.ports.script_sender)
     fake = FakeController("ur10e", address=address, initial_positions=HOME, powered=True, urcap=urcap)
     await fake.start()

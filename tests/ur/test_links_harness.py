@@ -26,9 +26,12 @@ HOME = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0)
 JOINTS = tuple(f"alice_joint_{i}" for i in range(6))
 
 
-def robot_config(address: str, *, headless: bool = True, startup: bool = True) -> Any:
-    """One ``ur`` robot of a cell file, callback ports from the OS, listening on 127.0.0.1."""
+def robot_config(address: str, *, headless: bool = True, startup: bool = True, ur: str | None = None) -> Any:
+    """One ``ur`` robot of a cell file, callback ports from the OS, listening on 127.0.0.1 (or with
+    ``ur`` as its whole ``ur:`` options, a YAML flow mapping)."""
     ports = [free_tcp_port() for _ in range(4)]
+    if ur is None:
+        ur = f"{{startup: {str(startup).lower()}, listen_address: 127.0.0.1}}"
     text = f"""
 cell: links
 robots:
@@ -39,7 +42,7 @@ robots:
     headless: {str(headless).lower()}
     ports:
       {{reverse: {ports[0]}, script_sender: {ports[1]}, trajectory: {ports[2]}, script_command: {ports[3]}}}
-    ur: {{startup: {str(startup).lower()}, listen_address: 127.0.0.1}}
+    ur: {ur}
 """
     return parse_cell(text).robots[0]
 
