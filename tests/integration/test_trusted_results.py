@@ -169,22 +169,9 @@ async def test_a_result_and_feedback_published_by_another_session_are_ignored_an
 async def test_a_forged_answer_to_the_result_query_is_ignored_and_counted() -> None:
     async with daemon_and_forger() as (daemon, client, forger):
         alice, goal = await _started(client)
-        key = alice.keys.goal_result(goal.goal_id)
-        forged = _forged(goal, status="succeeded", reason="")
-        answered = asyncio.Event()
-        loop = asyncio.get_running_loop()
-
-        def answer(query: Any) -> None:
-            query.reply(key, forged)
-            loop.call_soon_threadsafe(answered.set)
-
-        queryable = forger.declare_queryable(key, answer)
-        try:
-            result = await _canceled_after(alice, goal, answered)  # asks every 0.5 s meanwhile
-            _the_daemons_cancel(daemon, result)
-            assert goal.forged >= 1, goal.forged
-        finally:
-            queryable.undeclare()
+        await _forger_answers_the_result_query(
+            daemon, forger, alice, goal, _forged(goal, status="succeeded", reason="")
+        )
 
 
 async def test_the_daemons_signed_feedback_republished_as_the_result_is_ignored() -> None:
@@ -207,18 +194,29 @@ async def test_the_daemons_signed_feedback_given_as_the_answer_to_the_result_que
     feedback (payload and attachment). Reproduction on 94dec3a: ``result()`` returned the feedback."""
     async with daemon_and_forger() as (daemon, client, forger):
         alice, goal, feedback = await _started_with_signed_feedback(client, forger)
-        key = alice.keys.goal_result(goal.goal_id)
-        answered = asyncio.Event()
-        loop = asyncio.get_running_loop()
+        await _forger_answers_the_result_query(
+            daemon, forger, alice, goal, feedback.payload, feedback.attachment
+        )
 
-        def answer(query: Any) -> None:
-            query.reply(key, feedback.payload, attachment=feedback.attachment)
-            loop.call_soon_threadsafe(answered.set)
 
-        queryable = forger.declare_queryable(key, answer)
-        try:
-            result = await _canceled_after(alice, goal, answered)  # asks every 0.5 s meanwhile
-            _the_daemons_cancel(daemon, result)
-            assert goal.forged >= 1, goal.forged
-        finally:
-            queryable.undeclare()
+async def _forger_answers_the_result_query(
+    daemon: Any, forger: Any, alice: Any, goal: Any, payload: bytes, attachment: bytes | None = None
+) -> None:
+    """The forger answers every query for the goal's result with ``payload`` (and ``attachment``);
+    once it has answered one, the goal is canceled: the client must return the daemon's cancel, and
+    count the forgery."""
+    key = alice.keys.goal_result(goal.goal_id)
+    answered = asyncio.Event()
+    loop = asyncio.get_running_loop()
+
+    def answer(query: Any) -> None:
+        query.reply(key, payload, attachment=attachment)
+        loop.call_soon_threadsafe(answered.set)
+
+    queryable = forger.declare_queryable(key, answer)
+    try:
+        result = await _canceled_after(alice, goal, answered)  # asks every 0.5 s meanwhile
+        _the_daemons_cancel(daemon, result)
+        assert goal.forged >= 1, goal.forged
+    finally:
+        queryable.undeclare()
