@@ -30,37 +30,34 @@ Policies (documented contracts):
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Sequence
+from typing import cast
 
+from urdaemon.control.busy import (
+    STREAMS,
+    Mode,
+    check_at_rest,
+    check_can_start,
+    check_stream_command,
+)
 from urdaemon.control.goal_run import GoalRun
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
 from urdaemon.control.intake import GoalIntake, GoalTolerances
 from urdaemon.control.ledger import ControllerStatistics, GoalLedger
 from urdaemon.control.limits import apply_permutation
 from urdaemon.control.online import OnlineGenerator
+from urdaemon.control.planned import ReadyPlan, check_plan_start
 from urdaemon.control.scaling import planning_limits
 from urdaemon.control.setpoint import Setpoint, write_idle
 from urdaemon.control.stopping import StopRamp
 from urdaemon.control.streams import STREAM_EXPIRED, StreamFollower
 from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, TrajectoryPlanner, plan_move
-from urdaemon.errors import GoalRejected
 from urdaemon.model import JointCommand, JointLimits, RobotState
 
 __all__ = [
     "ControllerStatistics",
     "MotionController",
 ]
-
-
-class _Mode(enum.Enum):
-    IDLE = "idle"
-    GOAL = "goal"
-    STREAM_POSITION = "stream_position"
-    STREAM_VELOCITY = "stream_velocity"
-    STOPPING = "stopping"
-    EXTERNAL = "external"
-    """A goal the robot interpolates itself (passthrough): we hold still and wait for its result."""
 
 
 def _check_settings(
@@ -88,11 +85,6 @@ def _check_settings(
             raise ValueError(f"MotionController: {label} must be >= 0, got {value}")
 
 
-def _check_ready(state: RobotState) -> None:
-    if not state.ready_for_motion:
-        raise GoalRejected(f"robot not ready: {state.not_ready_reason()}")
-
-
 class MotionController:
     """Executes trajectory goals, point-to-point moves and joint streams for one robot."""
 
@@ -117,7 +109,7 @@ class MotionController:
         self.joint_names: tuple[str, ...] = limits.names
         defaults = GoalTolerances((path_tolerance,) * n, (goal_tolerance,) * n, goal_time_tolerance)
         self._intake = GoalIntake(limits, self.plan_limits, defaults)
-        self._mode = _Mode.IDLE
+        self._mode = Mode.IDLE
         self._goal: GoalRun | None = None
         self._setpoint = Setpoint(limits, self.plan_limits, period)
         online = OnlineGenerator(limits, period, self._setpoint)
@@ -142,7 +134,7 @@ class MotionController:
     @property
     def external_goal_id(self) -> str | None:
         """The id of the running passthrough goal, or None."""
-        return self._goal.goal_id if self._goal is not None and self._mode is _Mode.EXTERNAL else None
+        return self._goal.goal_id if self._goal is not None and self._mode is Mode.EXTERNAL else None
 
     @property
     def has_events(self) -> bool:
@@ -234,6 +226,39 @@ class MotionController:
         )
         return self._start_goal(goal_id, plan, resolved, seed, state)
 
+    def accept_planned(
+        self,
+        goal_id: str,
+        plan: ReadyPlan,
+        state: RobotState,
+        now: float,
+        *,
+        tolerances: Tolerances | None = None,
+    ) -> float:
+        """Start ``plan``, made for the pose the robot rests at (``goal_start``); returns its duration.
+
+        Refused (GoalRejected) when busy as ``accept_move`` is without preempting, unless the robot
+        rests (idle, or a stop holding still), or when a measured joint is more than
+        ``PLAN_START_TOLERANCE`` from the plan's start or the plan does not start at rest.
+        """
+        self._check_can_start(goal_id, state, now, False)
+        check_at_rest(self._mode, self._goal, self._setpoint.at_rest(), "a planned goal starts from rest")
+        start = check_plan_start(plan, state.positions, self.joint_names)
+        resolved = self._intake.tolerances(tolerances)
+        self._go_idle()  # a stop holding still lets go: the plan starts from rest, at its start
+        zeros = [0.0] * len(start)
+        seed = (start, zeros, zeros)
+        return self._start_goal(goal_id, cast(PlannedTrajectory, plan), resolved, seed, state)
+
+    def goal_start(self, state: RobotState) -> tuple[list[float], bool]:
+        """The joints a new goal starts from (the setpoint while we command motion, else the measured
+        pose), and whether the robot is at rest there (idle, or a stop holding still)."""
+        mode = self._mode
+        if mode is Mode.IDLE or mode is Mode.EXTERNAL:
+            return list(state.positions), mode is Mode.IDLE
+        at_rest = mode is Mode.STOPPING and self._setpoint.at_rest()
+        return list(self._setpoint.pos), at_rest
+
     def accept_external(
         self,
         goal_id: str,
@@ -249,22 +274,14 @@ class MotionController:
         ``finish_external`` (the robot's result), a cancel, a stop, or the robot becoming not ready.
         """
         self.release_hold()
-        if self._goal is not None:
-            raise GoalRejected(
-                f"busy: goal {self._goal.goal_id} is running; a passthrough trajectory starts from rest"
-            )
-        if self._mode is not _Mode.IDLE:
-            raise GoalRejected(
-                f"busy: the robot is {self._mode.value.replace('_', ' ')}; a passthrough trajectory starts "
-                "from rest"
-            )
+        check_at_rest(self._mode, self._goal, False, "a passthrough trajectory starts from rest")
         self._check_can_start(goal_id, state, now, False)
         self._intake.check_planner(planner)
         resolved = self._intake.tolerances(tolerances).without_path()
         plan = planner.finish(*self._goal_seed(state))  # from rest: idle
         self._setpoint.rest_at(state.positions)
         self._goal = self._ledger.open(goal_id, plan, resolved)
-        self._mode = _Mode.EXTERNAL
+        self._mode = Mode.EXTERNAL
         self._streams.forget()
         return plan.duration
 
@@ -274,7 +291,7 @@ class MotionController:
         A reported success with a joint outside the goal tolerance ends ABORTED, naming the joint.
         """
         goal = self._goal
-        if goal is None or goal.goal_id != goal_id or self._mode is not _Mode.EXTERNAL:
+        if goal is None or goal.goal_id != goal_id or self._mode is not Mode.EXTERNAL:
             return False
         status, reason = goal.robot_ended(status, reason, state.positions)
         self._finish_goal(status, reason, state.positions)
@@ -297,7 +314,7 @@ class MotionController:
         """Bring whatever runs to a jerk-limited stop; an executing goal ends ABORTED with ``reason`` now."""
         if self._goal is not None:
             self._end_goal_now(GoalStatus.ABORTED, reason)
-        elif self._mode is _Mode.STREAM_POSITION or self._mode is _Mode.STREAM_VELOCITY:
+        elif self._mode in STREAMS:
             self._enter_stopping()
         # Commands of a stopped stream must not keep it "active" for busy checks.
         self._streams.forget()
@@ -315,7 +332,7 @@ class MotionController:
     def _end_goal_now(self, status: GoalStatus, reason: str) -> None:
         """End the goal as asked: its result now, then a stop (the robot stops a passthrough itself)."""
         self._finish_goal(status, reason, self._meas)
-        if self._mode is _Mode.EXTERNAL:
+        if self._mode is Mode.EXTERNAL:
             self._go_idle()
         else:
             self._enter_stopping()
@@ -323,7 +340,7 @@ class MotionController:
     def release_hold(self) -> None:
         """Go idle now if all that runs is the hold of a succeeded goal's final point (freedrive and
         passthrough start from rest, and waiting for the robot to settle must not refuse them)."""
-        if self._mode is _Mode.STOPPING and self._stop.only_holding:
+        if self._mode is Mode.STOPPING and self._stop.only_holding:
             self._go_idle()
 
     # ------------------------------------------------------------------ streams
@@ -339,7 +356,7 @@ class MotionController:
         """Make ``positions`` (and ``velocities`` there, if given) the newest streaming target."""
         perm, start = self._stream_command(joint_names, state)
         self._streams.follow_positions(perm, positions, velocities, start, now)
-        self._mode = _Mode.STREAM_POSITION
+        self._mode = Mode.STREAM_POSITION
         self._ledger.stream_commands += 1
 
     def stream_velocities(
@@ -347,9 +364,9 @@ class MotionController:
     ) -> None:
         """Make ``velocities`` the newest streaming target velocity (limits are guarded every cycle)."""
         perm, start = self._stream_command(joint_names, state)
-        first = self._mode is not _Mode.STREAM_VELOCITY
+        first = self._mode is not Mode.STREAM_VELOCITY
         self._streams.follow_velocities(perm, velocities, start, first, now)
-        self._mode = _Mode.STREAM_VELOCITY
+        self._mode = Mode.STREAM_VELOCITY
         self._ledger.stream_commands += 1
 
     # ------------------------------------------------------------------ the cycle
@@ -361,7 +378,7 @@ class MotionController:
             self._ledger.release_some()
         self._meas[:] = state.positions
         mode = self._mode
-        if mode is _Mode.IDLE:
+        if mode is Mode.IDLE:
             write_idle(command, state.positions, self._setpoint.zeros)
             return
         if not state.ready_for_motion:
@@ -369,21 +386,21 @@ class MotionController:
                 self._finish_goal(GoalStatus.ABORTED, state.not_ready_reason(), state.positions)
             self._idle_now(state, command)
             return
-        if mode is _Mode.GOAL:
+        if mode is Mode.GOAL:
             goal = self._goal
             assert goal is not None
             ended = goal.tick(state, command, now)
             if ended is not None:
                 self._finish_goal(ended.status, ended.reason, state.positions)
                 self._end_motion(state, command, ramp=ended.ramp, hold=ended.status is GoalStatus.SUCCEEDED)
-        elif mode is _Mode.STOPPING:
+        elif mode is Mode.STOPPING:
             self._tick_stopping(state, command)
-        elif mode is _Mode.EXTERNAL:
+        elif mode is Mode.EXTERNAL:
             goal = self._goal
             assert goal is not None
             goal.follow_robot(state, command, now)
         else:
-            if mode is _Mode.STREAM_POSITION:
+            if mode is Mode.STREAM_POSITION:
                 stream_ended = self._streams.tick_positions(command, now)
             else:
                 stream_ended = self._streams.tick_velocities(command, now)
@@ -413,43 +430,18 @@ class MotionController:
     # ------------------------------------------------------------------ helpers
 
     def _check_can_start(self, goal_id: str, state: RobotState, now: float, preempt: bool) -> None:
-        _check_ready(state)
-        goal = self._goal
-        if goal is not None and self._mode is _Mode.EXTERNAL:
-            # the robot runs that trajectory itself: taking over mid-way would fight it
-            raise GoalRejected(f"busy: passthrough goal {goal.goal_id} runs on the robot; cancel it first")
-        if goal is not None:
-            if goal_id == goal.goal_id:
-                raise GoalRejected(f"goal {goal_id} is already executing")
-            if not preempt:
-                raise GoalRejected(f"busy: goal {goal.goal_id} is executing")
-        streams = self._streams
-        mode = self._mode
-        streaming = mode is _Mode.STREAM_POSITION or mode is _Mode.STREAM_VELOCITY
-        if not preempt and streaming and streams.active(now):
-            raise GoalRejected(
-                f"busy: a joint stream is active (last command {now - streams.last_command:.3g} s ago, "
-                f"timeout {streams.timeout:.3g} s)"
-            )
+        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, preempt)
 
     def _stream_command(
         self, joint_names: Sequence[str], state: RobotState
     ) -> tuple[tuple[int, ...], Sequence[float] | None]:
         """A stream command's joint order, and the measured pose to start at if idle (else None)."""
-        _check_ready(state)
-        if self._goal is not None:
-            raise GoalRejected(f"busy: goal {self._goal.goal_id} is executing")
-        return self._intake.permutation(joint_names), state.positions if self._mode is _Mode.IDLE else None
+        check_stream_command(self._goal, state)
+        return self._intake.permutation(joint_names), state.positions if self._mode is Mode.IDLE else None
 
     def _goal_seed(self, state: RobotState) -> tuple[list[float], list[float], list[float]]:
-        """Start state of a new goal in trajectory time units: the setpoint if moving, else measured."""
         mode = self._mode
-        if mode is _Mode.GOAL:
-            return self._setpoint.goal_state()
-        if mode is _Mode.IDLE:
-            n = len(self.joint_names)
-            return list(state.positions), [0.0] * n, [0.0] * n
-        return self._setpoint.in_trajectory_time(state.speed_scaling)
+        return self._setpoint.goal_seed(state, idle=mode is Mode.IDLE, in_goal=mode is Mode.GOAL)
 
     def _start_goal(
         self,
@@ -464,10 +456,10 @@ class MotionController:
             self._finish_goal(GoalStatus.PREEMPTED, f"preempted by goal {goal_id}", state.positions)
         mode = self._mode
         self._setpoint.start_goal(
-            seed, state.speed_scaling, at_rest=mode is _Mode.IDLE, after_goal=mode is _Mode.GOAL
+            seed, state.speed_scaling, at_rest=mode is Mode.IDLE, after_goal=mode is Mode.GOAL
         )
         self._goal = self._ledger.open(goal_id, plan, tolerances)
-        self._mode = _Mode.GOAL
+        self._mode = Mode.GOAL
         self._streams.forget()
         return plan.duration
 
@@ -481,13 +473,13 @@ class MotionController:
         """Switch to a jerk-limited stop from the current setpoint (a goal's is first made real-time);
         ``hold``: a succeeded goal's final point is then held until the robot settles on it."""
         mode = self._mode
-        if mode is _Mode.IDLE or mode is _Mode.STOPPING:
+        if mode is Mode.IDLE or mode is Mode.STOPPING:
             return
-        self._stop.start(hold=hold, after_goal=mode is _Mode.GOAL)
-        self._mode = _Mode.STOPPING
+        self._stop.start(hold=hold, after_goal=mode is Mode.GOAL)
+        self._mode = Mode.STOPPING
         self._streams.forget()
 
     def _go_idle(self) -> None:
         # Forgetting the setpoint is implicit: IDLE seeds every new motion from the measured state.
-        self._mode = _Mode.IDLE
+        self._mode = Mode.IDLE
         self._streams.forget()

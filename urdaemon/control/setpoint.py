@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from urdaemon.control.scaling import TimeScaling, clamp_scaling
 from urdaemon.errors import GoalRejected
-from urdaemon.model import CommandMode, JointCommand, JointLimits
+from urdaemon.model import CommandMode, JointCommand, JointLimits, RobotState
 
 __all__ = ["MIN_SEED_SCALING", "Setpoint", "write_idle", "write_setpoint"]
 
@@ -67,6 +67,22 @@ class Setpoint:
         self.pos[:] = positions
         self.vel[:] = self.zeros
         self.acc[:] = self.zeros
+
+    def at_rest(self) -> bool:
+        """Whether the commanded velocity and acceleration are zero (a stop has come to rest)."""
+        return not any(self.vel) and not any(self.acc)
+
+    def goal_seed(
+        self, state: RobotState, *, idle: bool, in_goal: bool
+    ) -> tuple[list[float], list[float], list[float]]:
+        """A new goal's start state in trajectory time: the measured pose at rest when ``idle``, the
+        running goal's sample ``in_goal``, else this real-time state at the robot's speed scaling."""
+        if in_goal:
+            return self.goal_state()
+        if idle:
+            n = len(self.pos)
+            return list(state.positions), [0.0] * n, [0.0] * n
+        return self.in_trajectory_time(state.speed_scaling)
 
     def goal_state(self) -> tuple[list[float], list[float], list[float]]:
         """A copy of the running goal's state, in trajectory time: where a goal preempting it starts."""
