@@ -123,6 +123,11 @@ class UrKinematics:
 
     __slots__ = ("_a2", "_a3", "_calibrated", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
 
+    dof: int = 6
+    """Six joints, shoulder_pan ... wrist_3 (``ArmKinematics``)."""
+    branches: bool = True
+    """Named configurations apply (``configuration_of``, ``nearest_in``)."""
+
     def __init__(self, model: UrModel, dh: DhParameters | None = None) -> None:
         nominal = model.dh
         structure_ok = (
@@ -223,6 +228,10 @@ class UrKinematics:
         """The 6x6 geometric Jacobian at ``q``: rows vx vy vz wx wy wz of the TCP in base, columns joints."""
         chain = self._chain(q, None if tcp is None else frame_of_pose(tcp))
         return np.array(_jacobian_rows(chain))
+
+    def jacobian_rows(self, q: Vector, tcp: Vector | None = None) -> list[list[float]]:
+        """The geometric Jacobian at ``q`` as 6 rows (vx vy vz wx wy wz of the TCP in base) of 6 floats."""
+        return _jacobian_rows(self._chain(q, None if tcp is None else frame_of_pose(tcp)))
 
     def joint_velocity(
         self,
