@@ -36,6 +36,7 @@ __all__ = [
     "SafetyMode",
     "SetIoRequest",
     "SetPayloadRequest",
+    "SetTcpRequest",
     "SpeedSliderRequest",
     "ToolVoltageRequest",
 ]
@@ -332,6 +333,13 @@ class SetPayloadRequest:
 
     mass: float
     cog: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class SetTcpRequest:
+    """``set_tcp``: the TCP offset in the tool0 (flange) frame, x, y, z (m) and a rotation vector (rad)."""
+
+    pose: tuple[float, float, float, float, float, float]
 
 
 @dataclass(frozen=True, slots=True)

@@ -186,8 +186,20 @@ def _command_rules(cell: str, robot: str) -> list[_Rule]:
     """Everything a commander of ``robot`` sends: goals, cancel, every service, the lease and its
     liveliness token, the command streams. ``*``: every robot, and cell goals."""
     keys = RobotKeys(cell, robot)
-    queries = (keys.goal_trajectory, keys.goal_move, keys.goal_cancel, keys.service("*"), keys.lease)
-    streams = (keys.command_joint_position, keys.command_joint_velocity, keys.command_freedrive)
+    queries = (
+        keys.goal_trajectory,
+        keys.goal_move,
+        keys.goal_linear,
+        keys.goal_cancel,
+        keys.service("*"),
+        keys.lease,
+    )
+    streams = (
+        keys.command_joint_position,
+        keys.command_joint_velocity,
+        keys.command_twist,
+        keys.command_freedrive,
+    )
     rules = [
         _Rule(f"command {robot}: queries", _GET, queries),
         _Rule(f"command {robot}: streams", _PUT, streams),

@@ -10,7 +10,7 @@ import ipaddress
 import math
 import re
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -31,12 +31,16 @@ from urdaemon.urscript import (
     SERVOJ_LOOKAHEAD_RANGE_S,
 )
 
+if TYPE_CHECKING:
+    from urdaemon.control.cartesian import CartesianLimits
+
 __all__ = [
     "ALL_ROBOTS",
     "DEFAULT_ENDPOINT",
     "DEFAULT_PORT_BASE",
     "DEFAULT_PORT_STRIDE",
     "AccessOptions",
+    "CartesianOptions",
     "Cell",
     "CustomDescription",
     "Grant",
@@ -399,8 +403,61 @@ class JointLimitOverride(_Frozen):
         return self
 
 
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+CARTESIAN_PAIRS = (
+    ("speed", "max_speed", "m/s"),
+    ("acceleration", "max_acceleration", "m/s²"),
+    ("jerk", "max_jerk", "m/s³"),
+    ("angular_speed", "max_angular_speed", "rad/s"),
+    ("angular_acceleration", "max_angular_acceleration", "rad/s²"),
+    ("angular_jerk", "max_angular_jerk", "rad/s³"),
+)
+"""Each Cartesian default, the cap it must stay within, and its unit."""
+
+
+class CartesianOptions(_Frozen):
+    """A robot's Cartesian motion limits (TCP point: m/s, m/s², m/s³; TCP frame: rad/s, rad/s², rad/s³).
+
+    ``max_*`` are caps: no linear goal or twist may ask for more. The others are what a linear goal
+    uses for a limit it leaves out, and what twist streaming smooths with (acceleration and jerk).
+    """
+
+    max_speed: Positive = 1.0
+    max_acceleration: Positive = 5.0
+    max_jerk: Positive = 50.0
+    max_angular_speed: Positive = 3.0
+    max_angular_acceleration: Positive = 15.0
+    max_angular_jerk: Positive = 150.0
+    speed: Positive = 0.25
+    acceleration: Positive = 1.2
+    jerk: Positive = 10.0
+    angular_speed: Positive = 1.0
+    angular_acceleration: Positive = 4.0
+    angular_jerk: Positive = 40.0
+
+    @model_validator(mode="after")
+    def _defaults_within_caps(self) -> CartesianOptions:
+        for name, cap, unit in CARTESIAN_PAIRS:
+            value, limit = getattr(self, name), getattr(self, cap)
+            if value > limit:
+                raise ValueError(f"{name} {value:g} {unit} is above {cap} {limit:g} {unit}")
+        return self
+
+    def defaults(self) -> CartesianLimits:
+        """The limits a linear goal uses where it names none (and twist smoothing's)."""
+        from urdaemon.control.cartesian import CartesianLimits
+
+        return CartesianLimits(*(getattr(self, name) for name, _, _ in CARTESIAN_PAIRS))
+
+    def caps(self) -> CartesianLimits:
+        """The largest limits a linear goal or a twist may ask for."""
+        from urdaemon.control.cartesian import CartesianLimits
+
+        return CartesianLimits(*(getattr(self, cap) for _, cap, _ in CARTESIAN_PAIRS))
+
+
 class MotionOptions(_Frozen):
-    """Defaults for goal tolerances and the streaming deadman."""
+    """Defaults for goal tolerances and the streaming deadman, and the Cartesian limits."""
 
     path_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.2
     """Largest allowed |desired − measured| per joint while a goal runs (rad)."""
@@ -411,6 +468,8 @@ class MotionOptions(_Frozen):
     stream_timeout: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = 0.2
     """Deadman: a stream with no new command for this long is brought to a smooth stop (s)."""
     feedback_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
+    cartesian: CartesianOptions = CartesianOptions()
+    """Caps and defaults of Cartesian motion (linear goals, twists)."""
 
 
 class UrOptions(_Frozen):

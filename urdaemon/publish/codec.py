@@ -13,7 +13,7 @@ import heapq
 import json
 import math
 import re
-from collections.abc import Generator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +30,9 @@ from urdaemon.model import (
     RobotState,
 )
 
+Pose6 = tuple[float, float, float, float, float, float]
+"""A pose: x, y, z (m) and a rotation vector (rad)."""
+
 __all__ = [
     "CELL_GOAL_POLICIES",
     "MAX_MESSAGE_BYTES",
@@ -38,10 +41,13 @@ __all__ = [
     "CellGoalDecoder",
     "CellGoalMessage",
     "JointStateEncoder",
+    "LinearGoalDecoder",
+    "LinearGoalMessage",
     "MoveGoalMessage",
     "StreamMessage",
     "ToleranceMessage",
     "TrajectoryGoalMessage",
+    "TwistMessage",
     "client_text",
     "decode_cancel",
     "decode_cell_cancel",
@@ -50,15 +56,18 @@ __all__ = [
     "decode_force_mode",
     "decode_freedrive",
     "decode_lease_tokens",
+    "decode_linear_goal",
     "decode_message",
     "decode_move_goal",
     "decode_set_io",
     "decode_set_payload",
+    "decode_set_tcp",
     "decode_speed_slider",
     "decode_stream_position",
     "decode_stream_velocity",
     "decode_tool_voltage",
     "decode_trajectory_goal",
+    "decode_twist",
     "encode",
     "encode_feedback",
     "encode_result",
@@ -87,6 +96,23 @@ MAX_COG_M = 1.0
 """Largest distance of the payload's centre of gravity from the tool flange along any axis (m)."""
 MAX_FORCE_MODE = {"wrench": 1000.0, "limits": 10.0, "task_frame": 10.0}
 """Bounds of force mode's vectors: wrench (N, Nm), limits (m/s, rad/s or m, rad), task frame (m, rad)."""
+POSE_FRAMES = ("base", "world")
+"""The frames a pose goal or a linear goal may name (docs/keys.md); ``base`` by default."""
+TWIST_FRAMES = ("base", "tool")
+"""The frames a twist may be given in; ``base`` by default."""
+CONFIGURATIONS = {"shoulder": ("left", "right"), "elbow": ("up", "down"), "wrist": ("up", "down")}
+"""A pose goal's ``configuration``: each joint group it may name and the values it may take."""
+LINEAR_LIMITS = ("speed", "acceleration", "jerk", "angular_speed", "angular_acceleration", "angular_jerk")
+"""A linear goal's own Cartesian limits, each optional (m/s, m/s², m/s³, rad/s, rad/s², rad/s³)."""
+MAX_LINEAR_POSES = 1_000
+"""Most poses of one linear goal."""
+LINEAR_MESSAGE_BYTES = 256 * 1024
+"""Largest linear goal: 1 000 poses and 999 blend radii of full-precision numbers are ~170 KB (its
+JSON is parsed at once, ~1 ms for the largest; its poses are checked in slices: LinearGoalDecoder)."""
+LINEAR_POSES_PER_LOOK = 16
+"""Poses of a linear goal checked between two looks at the clock (~3 µs each)."""
+MAX_POSE_M = 100.0
+"""Largest pose coordinate accepted (m): beyond any cell; the robot's reach is checked by IK."""
 CLIENT_TEXT_CHARS = 40
 """Longest piece of a client's text (a field name, a key) echoed in a reply or a log line."""
 
@@ -114,7 +140,8 @@ class TrajectoryGoalMessage:
 
 @dataclass(frozen=True, slots=True)
 class MoveGoalMessage:
-    """A decoded point-to-point move goal."""
+    """A decoded point-to-point move goal: to joint ``positions``, or to a TCP ``pose`` (then
+    ``positions`` is empty)."""
 
     joint_names: tuple[str, ...] | None
     positions: tuple[float, ...]
@@ -123,6 +150,33 @@ class MoveGoalMessage:
     acceleration_scale: float
     tolerances: ToleranceMessage
     preempt: bool
+    pose: Pose6 | None = None
+    """The TCP pose to reach (x, y, z m, rotation vector rad), in ``frame``; None: ``positions``."""
+    frame: str = "base"
+    configuration: tuple[tuple[str, str], ...] = ()
+    """The wanted configuration's (joint group, value) pairs (UR models), e.g. ``(("elbow", "up"),)``."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinearGoalMessage:
+    """A decoded linear goal: straight TCP lines from the current pose through each of ``poses``."""
+
+    poses: tuple[Pose6, ...]
+    frame: str
+    blend_radii: tuple[float, ...]
+    """One per corner (``len(poses) - 1``), m; zeros when left out."""
+    limits: tuple[tuple[str, float], ...]
+    """The Cartesian limits the goal names (field, value), each > 0; the rest are the cell's defaults."""
+    tolerances: ToleranceMessage
+
+
+@dataclass(frozen=True, slots=True)
+class TwistMessage:
+    """A decoded twist command: the TCP point's velocity (m/s) and angular velocity (rad/s)."""
+
+    linear: tuple[float, float, float]
+    angular: tuple[float, float, float]
+    frame: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -335,25 +389,40 @@ def trajectory_goal(data: dict[str, Any], points: tuple[TrajectoryPoint, ...]) -
     )
 
 
+MOVE_FIELDS = frozenset(
+    {
+        "joint_names",
+        "positions",
+        "pose",
+        "frame",
+        "configuration",
+        "duration",
+        "velocity_scale",
+        "acceleration_scale",
+        "tolerances",
+        "preempt",
+    }
+)
+"""The fields of a move goal (``pose``, ``frame``, ``configuration``: a pose goal's)."""
+
+
 def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
-    """Decode a move goal: positions, joint_names?, duration?, velocity_scale?, acceleration_scale?."""
+    """Decode a move goal: exactly one of positions (joints, joint_names?) or pose (the TCP, frame?,
+    configuration?), and duration?, velocity_scale?, acceleration_scale?, tolerances?, preempt?."""
     what = "move goal"
     data = decode_message(payload, what)
-    _allowed(
-        data,
-        what,
-        {
-            "joint_names",
-            "positions",
-            "duration",
-            "velocity_scale",
-            "acceleration_scale",
-            "tolerances",
-            "preempt",
-        },
-    )
-    if "positions" not in data:
+    _allowed(data, what, set(MOVE_FIELDS))
+    has_pose = data.get("pose") is not None
+    if has_pose and data.get("positions") is not None:
+        raise MessageError(f"{what}: give positions (joints) or pose (the TCP), not both")
+    if not has_pose and "positions" not in data:
         raise MessageError(f"{what}.positions: missing")
+    if not has_pose:
+        for key in ("frame", "configuration"):
+            if data.get(key) is not None:
+                raise MessageError(f"{what}.{key}: only a pose goal has a {key} (send pose, not positions)")
+    elif data.get("joint_names") is not None:
+        raise MessageError(f"{what}.joint_names: a pose goal names no joints")
     velocity_scale = _optional_number(data, "velocity_scale", what)
     acceleration_scale = _optional_number(data, "acceleration_scale", what)
     for key, scale in (("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)):
@@ -364,13 +433,178 @@ def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
         _within(duration, f"{what}.duration", 0.0, MAX_GOAL_TIME_S, open_low=True)
     return MoveGoalMessage(
         joint_names=_names(data.get("joint_names"), f"{what}.joint_names"),
-        positions=_numbers(data["positions"], f"{what}.positions"),
+        positions=() if has_pose else _numbers(data["positions"], f"{what}.positions"),
         duration=duration,
         velocity_scale=1.0 if velocity_scale is None else velocity_scale,
         acceleration_scale=1.0 if acceleration_scale is None else acceleration_scale,
         tolerances=_tolerances(data.get("tolerances"), what),
         preempt=_bool(data, "preempt", what),
+        pose=_pose(data["pose"], f"{what}.pose") if has_pose else None,
+        frame=_choice(data, "frame", what, POSE_FRAMES),
+        configuration=_configuration(data.get("configuration"), f"{what}.configuration"),
     )
+
+
+def _pose(value: Any, field: str) -> Pose6:
+    """A pose: six finite numbers, the position within ``MAX_POSE_M`` of the frame's origin."""
+    numbers = _numbers(value, field, max_len=6)
+    if len(numbers) != 6:
+        raise MessageError(f"{field}: expected six numbers [x, y, z, rx, ry, rz], got {len(numbers)}")
+    for i, v in enumerate(numbers):
+        if not math.isfinite(v):
+            raise MessageError(f"{field}[{i}]: expected a finite number, got {v}")
+    for i, v in enumerate(numbers[:3]):
+        _within(v, f"{field}[{i}] (m)", -MAX_POSE_M, MAX_POSE_M)
+    return (numbers[0], numbers[1], numbers[2], numbers[3], numbers[4], numbers[5])
+
+
+def _choice(data: dict[str, Any], key: str, what: str, allowed: tuple[str, ...]) -> str:
+    """``data[key]``, one of ``allowed`` (the first when left out or null)."""
+    value = data.get(key)
+    if value is None:
+        return allowed[0]
+    if value not in allowed:
+        raise MessageError(f"{what}.{key}: expected one of {', '.join(allowed)}, got {_shown(value)}")
+    return str(value)
+
+
+def _configuration(value: Any, field: str) -> tuple[tuple[str, str], ...]:
+    """A pose goal's configuration: any of shoulder left|right, elbow up|down, wrist up|down."""
+    if value is None:
+        return ()
+    if not isinstance(value, dict):
+        raise MessageError(f"{field}: expected an object with any of shoulder, elbow, wrist")
+    _allowed(value, field, set(CONFIGURATIONS))
+    chosen = []
+    for group, values in CONFIGURATIONS.items():
+        item = value.get(group)
+        if item is None:
+            continue
+        if item not in values:
+            raise MessageError(f"{field}.{group}: expected {' or '.join(values)}, got {_shown(item)}")
+        chosen.append((group, str(item)))
+    return tuple(chosen)
+
+
+def decode_linear_goal(payload: bytes | None) -> LinearGoalMessage:
+    """Decode a linear goal at once (the daemon uses ``LinearGoalDecoder``, in slices)."""
+    decoder = LinearGoalDecoder(payload)
+    while decoder.step(math.inf, lambda: 0.0):
+        pass
+    return decoder.result()
+
+
+class LinearGoalDecoder:
+    """Decodes a linear goal: poses (1..1000), frame?, blend_radii?, speed?, acceleration?, jerk?,
+    angular_speed?, angular_acceleration?, angular_jerk?, tolerances?.
+
+    The JSON is parsed at once (the largest goal, ~170 KB: ~1 ms); its poses are checked
+    ``LINEAR_POSES_PER_LOOK`` at a time by ``step(deadline, clock)`` (True while work is left), so
+    the checks of a thousand poses (~3 ms) run in slices between robot cycles (runtime/slicing.py).
+    """
+
+    def __init__(self, payload: bytes | None) -> None:
+        what = self._what = "linear goal"
+        data = decode_message(payload, what, max_bytes=LINEAR_MESSAGE_BYTES)
+        _allowed(data, what, {"poses", "frame", "blend_radii", "tolerances", *LINEAR_LIMITS})
+        raw = data.get("poses")
+        if not isinstance(raw, list) or not raw:
+            raise MessageError(f"{what}.poses: expected a list of one or more poses [x, y, z, rx, ry, rz]")
+        if len(raw) > MAX_LINEAR_POSES:
+            raise MessageError(f"{what}.poses: {len(raw)} poses; at most {MAX_LINEAR_POSES} are accepted")
+        self._data = data
+        self._raw: list[Any] = raw
+        self._poses: list[Pose6] = []
+        self._raw_radii: Any = None
+        self._radii: list[float] | None = None
+        self._result: LinearGoalMessage | None = None
+
+    def step(self, deadline: float, clock: Callable[[], float]) -> bool:
+        """Check poses, then blend radii, until ``clock()`` passes ``deadline`` (at least a few); True
+        while work is left. Raises ``MessageError``."""
+        while self._result is None:
+            if not self._next():
+                self._result = self._finish()
+            elif clock() > deadline:
+                return True
+        return False
+
+    def result(self) -> LinearGoalMessage:
+        """The decoded goal."""
+        if self._result is None:
+            raise RuntimeError("the linear goal is not decoded yet")
+        return self._result
+
+    def _next(self) -> bool:
+        """Check the next few poses or radii; False once all are checked."""
+        raw, poses, what = self._raw, self._poses, self._what
+        if len(poses) < len(raw):
+            for i in range(len(poses), min(len(raw), len(poses) + LINEAR_POSES_PER_LOOK)):
+                poses.append(_pose(raw[i], f"{what}.poses[{i}]"))
+            return True
+        field = f"{what}.blend_radii"
+        if self._radii is None:
+            given = self._data.get("blend_radii")
+            self._raw_radii = [0.0] * (len(raw) - 1) if given is None else given
+            self._radii = []
+            if not isinstance(self._raw_radii, list):
+                raise MessageError(f"{field}: expected a list of numbers, got {type(given).__name__}")
+            if len(self._raw_radii) != len(raw) - 1:
+                raise MessageError(
+                    f"{field}: {len(self._raw_radii)} radii for {len(raw)} poses; expected {len(raw) - 1} "
+                    "(one per corner)"
+                )
+        radii, given = self._radii, self._raw_radii
+        if len(radii) < len(given):
+            for i in range(len(radii), min(len(given), len(radii) + 6 * LINEAR_POSES_PER_LOOK)):
+                radius = _number(given[i], f"{field}[{i}]")
+                radii.append(_within(radius, f"{field}[{i}] (m)", 0.0, MAX_POSE_M))
+            return True
+        return False
+
+    def _finish(self) -> LinearGoalMessage:
+        data, what, poses = self._data, self._what, tuple(self._poses)
+        limits = []
+        for key in LINEAR_LIMITS:
+            value = _optional_number(data, key, what)
+            if value is not None:
+                if not (value > 0.0 and math.isfinite(value)):
+                    raise MessageError(f"{what}.{key}: must be a finite number > 0, got {value:g}")
+                limits.append((key, value))
+        return LinearGoalMessage(
+            poses=poses,
+            frame=_choice(data, "frame", what, POSE_FRAMES),
+            blend_radii=tuple(self._radii or ()),
+            limits=tuple(limits),
+            tolerances=_tolerances(data.get("tolerances"), what),
+        )
+
+
+def decode_twist(payload: bytes | None) -> TwistMessage:
+    """Decode a twist command: linear [3] (m/s), angular [3] (rad/s), frame? (base | tool)."""
+    what = "twist command"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"linear", "angular", "frame"})
+    vectors = []
+    for key in ("linear", "angular"):
+        if key not in data:
+            raise MessageError(f"{what}.{key}: missing")
+        values = _numbers(data[key], f"{what}.{key}", max_len=3)
+        if len(values) != 3 or not all(math.isfinite(v) for v in values):
+            raise MessageError(f"{what}.{key}: expected three finite numbers")
+        vectors.append((values[0], values[1], values[2]))
+    return TwistMessage(vectors[0], vectors[1], _choice(data, "frame", what, TWIST_FRAMES))
+
+
+def decode_set_tcp(payload: bytes | None) -> Pose6:
+    """Decode a set_tcp request: pose [x, y, z, rx, ry, rz] (m, rad), the TCP in the tool0 frame (its
+    ranges are checked by the service: cell/config.py ``check_tcp``)."""
+    what = "set_tcp"
+    data = decode_message(payload, what)
+    _allowed(data, what, {"pose"})
+    if "pose" not in data:
+        raise MessageError(f"{what}.pose: missing")
+    return _pose(data["pose"], f"{what}.pose")
 
 
 def decode_cancel(payload: bytes | None) -> str | None:

@@ -115,7 +115,7 @@ class RobotKeys:
 
     @property
     def tcp_pose(self) -> str:
-        """tool0 pose in the robot's base frame at the robot rate."""
+        """The TCP pose (tool0 with the robot's TCP offset) in the robot's base frame at the robot rate."""
         return f"{self.base}/tcp_pose"
 
     @property
@@ -154,6 +154,11 @@ class RobotKeys:
         return f"{self.base}/goal/move"
 
     @property
+    def goal_linear(self) -> str:
+        """Queryable: send a linear goal (straight TCP lines through a list of poses)."""
+        return f"{self.base}/goal/linear"
+
+    @property
     def goal_cancel(self) -> str:
         """Queryable: cancel a goal."""
         return f"{self.base}/goal/cancel"
@@ -180,6 +185,11 @@ class RobotKeys:
     def command_joint_velocity(self) -> str:
         """Streaming joint velocity commands (deadman)."""
         return f"{self.base}/command/joint_velocity"
+
+    @property
+    def command_twist(self) -> str:
+        """Streaming TCP twist commands (deadman)."""
+        return f"{self.base}/command/twist"
 
     @property
     def command_freedrive(self) -> str:
