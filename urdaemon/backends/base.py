@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import abc
 import logging
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -65,6 +66,9 @@ class Backend(abc.ABC):
         """Set by the runtime: called when the backend changes the state outside a cycle (lifecycle)."""
         self.on_notice: Callable[[str, str], None] | None = None
         """Set by the runtime: ``(kind, text)`` of what the robot or the backend wants users to know."""
+        self.tcp: tuple[float, ...] = (0.0,) * 6
+        """The TCP offset (x, y, z m, rx, ry, rz rad: the TCP in the tool flange frame) last set with
+        ``set_tcp``; the ``ur`` backend starts from the cell file's and keeps its controller's equal."""
 
     @property
     def catching_up(self) -> bool:
@@ -83,6 +87,11 @@ class Backend(abc.ABC):
     async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
         """Set the payload mass (kg) and centre of gravity (m, tool flange frame)."""
         raise BackendError(f"{self.kind} backend has no payload")
+
+    async def set_tcp(self, pose: Sequence[float]) -> None:
+        """Make ``pose`` the TCP offset (``tcp``). A backend whose robot has no controller of its own
+        (mock, servo) keeps it; ``ur`` also sets its controller's TCP."""
+        self.tcp = self.check_tcp(pose)
 
     async def set_speed_slider(self, fraction: float) -> None:
         """Set the speed slider (0..1)."""
@@ -183,6 +192,18 @@ class Backend(abc.ABC):
     def statistics(self) -> BackendStatistics:
         """Counters since start."""
         return BackendStatistics(self._cycles, self._missed, self._late, self._max_lateness, self._reconnects)
+
+    @staticmethod
+    def check_tcp(pose: Sequence[float]) -> tuple[float, ...]:
+        """``pose`` as six floats, or ``BackendError`` if it is not six finite numbers (the ranges are
+        the service's: cell/config.py ``check_tcp``)."""
+        try:
+            values = tuple(float(v) for v in pose)
+        except (TypeError, ValueError):
+            values = ()
+        if len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise BackendError(f"a TCP offset is six finite numbers [x, y, z, rx, ry, rz], got {pose!r}")
+        return values
 
     @staticmethod
     def check_io(kind: str, pin: int, value: float | bool, sizes: dict[str, int]) -> None:

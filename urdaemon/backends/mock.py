@@ -2,7 +2,8 @@
 
 Each cycle the previous command becomes the measured state (one cycle of lag, as on a real arm):
 positions are copied (POSITION) or integrated from velocities (VELOCITY). The mock reports a
-healthy running robot, acknowledges IO and payload commands and reflects them in its state.
+healthy running robot, acknowledges IO, payload and TCP commands and reflects them in its state
+(the TCP offset is kept in ``tcp``: the mock has no controller to send it to).
 """
 
 from __future__ import annotations

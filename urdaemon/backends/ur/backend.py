@@ -239,6 +239,10 @@ class UrBackend(Backend):
         """Set the payload through the script command socket (or a secondary program without one)."""
         self._services.set_payload(mass, cog)
 
+    async def set_tcp(self, pose: Sequence[float]) -> None:
+        """Make ``pose`` the TCP offset, the controller's too (``services.UrServices.set_tcp``)."""
+        self._services.set_tcp(self.check_tcp(pose))
+
     async def dashboard(self, line: str) -> tuple[bool, str]:
         """Send a dashboard command line; (success, the robot's reply)."""
         return await self._services.dashboard(line)
@@ -407,6 +411,8 @@ class UrBackend(Backend):
         if connected:
             if name == "reverse":
                 self._act(self._channel.program_connected())
+            elif name == "script_command":
+                self._services.send_tcp()  # the controller's TCP is the daemon's from the program's start
             program.link_up(time.monotonic())
             return
         if name == "reverse":

@@ -1,5 +1,6 @@
 """The UR backend's services over the robot's links: outputs and the speed slider as RTDE inputs,
-the payload, the force/torque sensor, the tool voltage, force mode and tool contact as script
+the payload, the TCP offset (kept, and sent again whenever the control program connects), the
+force/torque sensor, the tool voltage, force mode and tool contact as script
 commands, and dashboard command lines.
 
 Each refuses (``BackendError``, one line naming what is wrong) a value the robot cannot take, a
@@ -40,6 +41,7 @@ class UrServices:
         self.ur = ur
         self.tool_contact_armed = False
         """Tool contact was armed: its one result is still to come."""
+        ur.tcp = ur.check_tcp(ur.robot.tcp)  # the cell file's until set_tcp; sent as the program connects
 
     def check_commanding(self) -> None:
         """Refuse a read-only robot."""
@@ -99,6 +101,24 @@ class UrServices:
             raise BackendError("not connected to the robot")
         x, y, z = cog
         primary.send_script(prim.sec_program("setup", f"set_payload({mass!r}, [{x!r}, {y!r}, {z!r}])"))
+
+    def set_tcp(self, pose: tuple[float, ...]) -> None:
+        """Make ``pose`` the TCP offset: sent now (script command) if the control program is connected,
+        else when it connects (``send_tcp``); kept either way, so the controller's TCP is the daemon's."""
+        self.check_commanding()
+        if self.ur.servers.script_command.connected:
+            self.script_command(script_command.SetTcpOffset(pose), "the TCP offset")
+        self.ur.tcp = pose
+
+    def send_tcp(self) -> None:
+        """Send the kept TCP offset: the control program's script command link just came up (a program
+        started anew runs with the installation's TCP until told, e.g. a URCap's pendant program)."""
+        if self.ur.options.read_only:
+            return
+        try:
+            self.script_command(script_command.SetTcpOffset(self.ur.tcp), "the TCP offset")
+        except (BackendError, ConnectionLostError) as err:  # gone again at once: sent at its next connection
+            log.warning("[%s] the TCP offset was not sent to the new control program: %s", self.ur.name, err)
 
     def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (script command)."""
