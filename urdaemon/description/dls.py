@@ -18,7 +18,7 @@ import math
 from collections.abc import Sequence
 from operator import mul
 
-__all__ = ["damped_velocity", "singularity", "solve"]
+__all__ = ["cholesky_solve", "damped_velocity", "gram", "singularity", "solve"]
 
 _MAX_STEPS = 30
 _RELATIVE = 1e-5
@@ -34,30 +34,58 @@ def solve(a: Sequence[Sequence[float]], b: Sequence[float]) -> list[float]:
     n = len(b)
     m = [[*map(float, row), float(v)] for row, v in zip(a, b, strict=True)]
     for k in range(n):
-        pivot = max(range(k, n), key=lambda i: abs(m[i][k]))
+        pivot = k
+        largest = abs(m[k][k])
+        for i in range(k + 1, n):
+            if abs(m[i][k]) > largest:
+                pivot, largest = i, abs(m[i][k])
         if pivot != k:
             m[k], m[pivot] = m[pivot], m[k]
         row = m[k]
         head = row[k]
         if head == 0.0:
             raise ZeroDivisionError("singular matrix")
+        tail = row[k + 1 :]
         for i in range(k + 1, n):
             other = m[i]
             f = other[k] / head
             if f != 0.0:
-                for j in range(k + 1, n + 1):
-                    other[j] -= f * row[j]
+                other[k + 1 :] = [o - f * r for o, r in zip(other[k + 1 :], tail, strict=True)]
     x = [0.0] * n
     for k in range(n - 1, -1, -1):
         row = m[k]
-        s = row[n]
-        for j in range(k + 1, n):
-            s -= row[j] * x[j]
-        x[k] = s / row[k]
+        x[k] = (row[n] - sum(map(mul, row[k + 1 : n], x[k + 1 :]))) / row[k]
     return x
 
 
-def _gram(rows: Sequence[Sequence[float]]) -> list[list[float]]:
+def cholesky_solve(g: Sequence[Sequence[float]], b: Sequence[float], shift: float = 0.0) -> list[float]:
+    """x with (g + shift I) x = b, for a symmetric positive definite g + shift I (Cholesky; half LU's work).
+
+    Raises ZeroDivisionError when g + shift I is not positive definite."""
+    n = len(b)
+    lower = [[0.0] * n for _ in range(n)]
+    y = [0.0] * n
+    for i in range(n):
+        li, gi = lower[i], g[i]
+        # Entries of a row past the one being set are still 0, so whole-row dot products are exact.
+        for j in range(i):
+            lj = lower[j]
+            li[j] = (gi[j] - sum(map(mul, li, lj))) / lj[j]
+        d = gi[i] + shift - sum(map(mul, li, li))
+        if not d > 0.0:
+            raise ZeroDivisionError("not positive definite")
+        li[i] = head = math.sqrt(d)
+        y[i] = (b[i] - sum(map(mul, li, y))) / head
+    x = [0.0] * n
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= lower[k][i] * x[k]
+        x[i] = s / lower[i][i]
+    return x
+
+
+def gram(rows: Sequence[Sequence[float]]) -> list[list[float]]:
     """The smaller Gram matrix of J: J^T J (n x n) for n < 6 joints, else J J^T (6 x 6)."""
     vectors = list(zip(*rows, strict=True)) if len(rows[0]) < len(rows) else [tuple(r) for r in rows]
     size = len(vectors)
@@ -124,7 +152,7 @@ def _smallest_eigenvalue(g: list[list[float]]) -> float:
 
 def singularity(rows: Sequence[Sequence[float]]) -> float:
     """The smallest singular value of the 6 x n Jacobian ``rows`` (0.0 at an exact singularity)."""
-    return math.sqrt(_smallest_eigenvalue(_gram(rows)))
+    return math.sqrt(_smallest_eigenvalue(gram(rows)))
 
 
 def damped_velocity(
@@ -140,7 +168,7 @@ def damped_velocity(
     twist), with l^2 = (1 - (sigma_min / singular_value)^2) max_damping^2 below ``singular_value`` and 0
     above it (the exact inverse away from singularities): ``UrKinematics.joint_velocity``'s law."""
     n = len(rows[0])
-    g = _gram(rows)
+    g = gram(rows)
     sigma = math.sqrt(_smallest_eigenvalue(g))
     damping = 0.0
     if sigma < singular_value:
@@ -148,10 +176,8 @@ def damped_velocity(
     v = [float(t) for t in twist]
     if n == 6 and damping == 0.0:
         return tuple(solve(rows, v)), sigma
-    for i in range(len(g)):
-        g[i][i] += damping
     if n < 6:
         jt_v = [sum(rows[k][j] * v[k] for k in range(6)) for j in range(n)]
-        return tuple(solve(g, jt_v)), sigma
-    y = solve(g, v)
+        return tuple(cholesky_solve(g, jt_v, damping)), sigma
+    y = cholesky_solve(g, v, damping)
     return tuple(sum(rows[k][j] * y[k] for k in range(6)) for j in range(n)), sigma

@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from operator import mul
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias
 
-import numpy as np
-from numpy.typing import NDArray
-
+from urdaemon.description.dls import cholesky_solve, gram
 from urdaemon.description.frames import (
     Frame,
     Pose,
@@ -35,6 +34,10 @@ from urdaemon.description.frames import (
 from urdaemon.description.kinematics import dh_chain, dh_joints
 from urdaemon.description.urmodels import DhParameters, UrModel
 from urdaemon.errors import DescriptionError
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
 __all__ = [
     "ELBOW",
@@ -53,8 +56,14 @@ __all__ = [
 SHOULDER, WRIST, ELBOW = 4, 2, 1
 
 Joints = tuple[float, float, float, float, float, float]
-Vector = Sequence[float] | NDArray[np.float64]
-"""What the public methods accept for joints, poses and twists: any 6 numbers (list, tuple, array)."""
+if TYPE_CHECKING:
+    Vector: TypeAlias = Sequence[float] | NDArray[np.float64]
+else:
+    Vector = Sequence[float]
+"""What the public methods accept for joints, poses and twists: any 6 numbers (list, tuple, array).
+
+numpy is imported only by ``jacobian`` and ``joint_velocity`` (the fake's numpy results): the serve
+process uses the rest and must not load it."""
 
 _TAU = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
@@ -226,6 +235,8 @@ class UrKinematics:
 
     def jacobian(self, q: Vector, tcp: Vector | None = None) -> NDArray[np.float64]:
         """The 6x6 geometric Jacobian at ``q``: rows vx vy vz wx wy wz of the TCP in base, columns joints."""
+        import numpy as np
+
         chain = self._chain(q, None if tcp is None else frame_of_pose(tcp))
         return np.array(_jacobian_rows(chain))
 
@@ -247,6 +258,8 @@ class UrKinematics:
         Damped least squares: qd = sum sigma_i / (sigma_i^2 + l^2) v_i u_i^T twist over the singular
         values of the Jacobian, with l^2 = (1 - (sigma_min / singular_value)^2) * max_damping^2 when
         sigma_min < singular_value, else 0 (the exact inverse away from singularities)."""
+        import numpy as np
+
         jac = self.jacobian(q, tcp)
         u, sigma, vt = np.linalg.svd(jac)
         smallest = float(sigma[5])
@@ -383,15 +396,13 @@ class UrKinematics:
             total = position + orientation
             if position < _NEWTON_TOLERANCE and orientation < _NEWTON_TOLERANCE:
                 break
-            jac = np.array(_jacobian_rows(chain))
-            normal = jac @ jac.T
-            residual = np.array(error)
+            rows = _jacobian_rows(chain)
+            normal = gram(rows)
             damping = total * total + 1e-24
             while evaluations < _NEWTON_EVALUATIONS and damping < 1.0:
-                lhs = normal.copy()
-                lhs.flat[::7] += damping
-                step = jac.T @ np.linalg.solve(lhs, residual)
-                trial = [q[i] + float(step[i]) for i in range(6)]
+                y = cholesky_solve(normal, error, damping)
+                step = [sum(map(mul, column, y)) for column in zip(*rows, strict=True)]
+                trial = [q[i] + step[i] for i in range(6)]
                 evaluations += 1
                 trial_chain, trial_error, trial_position, trial_orientation = self._error(target, trial)
                 if trial_position + trial_orientation < total:
