@@ -332,6 +332,57 @@ def test_a_branch_flip_is_refused_naming_where() -> None:
     assert "rad in one cycle" in reason
 
 
+class _ShortArm(_FlippingArm):
+    """A UR5e whose IK finds nothing for x in 3 cm past ``flip_x``: a line leaving the reach."""
+
+    def nearest(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
+        outside = self._flip_x < pose[0] < self._flip_x + 0.03
+        return None if outside else self._kin.nearest(pose, qnear, tcp)
+
+
+def test_a_line_leaving_the_reach_is_refused_naming_where() -> None:
+    kin, _, limits = _arm("ur5e-nominal")
+    start_pose = kin.forward(Q0, TCP)
+    goal = _offset(start_pose, 0.2, 0.0, 0.0)
+    back = _offset(start_pose, 0.05, 0.0, 0.0)
+    # Both poses are in reach; the line between them runs out of it from x + 0.12 to x + 0.15.
+    arm = _ShortArm(kin, start_pose[0] + 0.12)
+    reason, _ = _refusal(plan_linear(arm, Q0, [back, goal], [0.0], TCP, CARTESIAN, limits, PERIOD))
+    assert reason.startswith("linear goal: segment 1 leaves the arm's reach at ")
+    assert "(x, y, z = " in reason
+
+
+def test_turning_in_place_keeps_the_tcp_point_and_the_angular_limits() -> None:
+    kin, dh, limits = _arm("ur5e-random-calibration")
+    start_pose = kin.forward(Q0, TCP)
+    goal = _offset(start_pose, 0.0, 0.0, 0.0, (0.0, 0.3, 0.6))
+    plan = _plan(kin, Q0, [goal], limits=limits)
+    frames = [_tcp_frame(dh, q) for q in _samples(plan)]
+    for f in frames:
+        assert np.linalg.norm(f[:3, 3] - np.array(start_pose[:3])) < 1e-6
+    _check_cartesian(frames, CARTESIAN)
+    # Timed by the angular limits alone: 0.67 rad at 1 rad/s takes more than 0.67 s.
+    assert plan.duration > math.hypot(0.3, 0.6) / CARTESIAN.angular_speed
+
+
+def test_a_goal_that_would_need_more_than_the_largest_slowdown_is_refused() -> None:
+    """Joints limited to 0.02 rad/s cannot follow 0.25 m/s: 10 times slower is not enough."""
+    kin, _, model = _arm("ur5e-nominal")
+    limits = JointLimits(
+        model.names,
+        model.min_position,
+        model.max_position,
+        (0.02,) * 6,
+        model.max_acceleration,
+        model.max_jerk,
+    )
+    goal = _offset(kin.forward(Q0, TCP), 0.2, 0.0, 0.0)
+    reason, _ = _refusal(plan_linear(kin, Q0, [goal], [], TCP, CARTESIAN, limits, PERIOD))
+    assert reason.startswith("linear goal: it would have to run ")
+    assert "times slower than asked (at most 10): on segment 0 at " in reason
+    assert "velocity would be " in reason
+
+
 class _CountingArm(_FlippingArm):
     """Counts the IK calls."""
 
@@ -346,7 +397,7 @@ class _CountingArm(_FlippingArm):
 
 def test_a_long_path_plans_in_bounded_steps() -> None:
     """A 2 m square with blended corners on a calibrated UR10e: each step does at most one IK, and
-    the steps are one per pose, one per segment and one per sample of each pass (at most four)."""
+    the steps are one per pose, one per segment and two per sample of each pass (at most four)."""
     kin, _, limits = _arm("ur10e-real-calibration")
     arm = _CountingArm(kin)
     q = (0.0, -1.2, 1.2, -1.57, -1.57, 0.0)
@@ -367,9 +418,10 @@ def test_a_long_path_plans_in_bounded_steps() -> None:
     plan = check.result()
     assert most == 1
     assert plan.duration > 8.0  # 2 m at 0.25 m/s
-    # IK calls: the 4 poses, then every sample but the first of each pass; steps: 4 + 4 + each
-    # pass's samples + the last call that ends the check.
-    passes = steps - 9 - (arm.calls - 4)
+    # IK calls: the 4 poses, then every sample but the first of each pass. Steps: the 4 poses, the 4
+    # segments, per pass its first sample and two for each other (the IK, the checks), and the last
+    # call that ends the check.
+    passes = steps - 9 - 2 * (arm.calls - 4)
     assert 1 <= passes <= 4
 
 

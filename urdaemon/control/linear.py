@@ -7,7 +7,7 @@ it in slices between the robot's cycles, like control/trajectory.py's ``Trajecto
    reach is refused before anything is sampled;
 2. the path (control/cartesian.py ``LinePath``): straight lines timed by jerk-limited profiles within
    the Cartesian limits, blended where asked;
-3. the samples, one a step: at every ``period`` (the robot's cycle) the path's pose is converted to
+3. the samples, one in two steps: at every ``period`` (the robot's cycle) the path's pose is converted to
    joints by ``kin.nearest`` seeded with the sample before (IK continuity). The first sample is
    ``start`` exactly, the last the IK of the last pose. Each sample is refused (GoalRejected, naming the
    segment, how far along it and the TCP position) when its IK fails, a joint leaves ``limits``, the
@@ -86,8 +86,9 @@ _RETIME_MARGIN = 1e-3
 class LinearCheck:
     """A linear goal planned in steps: ``step(count)`` until it returns False, then ``result()``.
 
-    Pure: no clock inside; each step is one sample (an IK, a Jacobian and its smallest singular value,
-    some ~100 µs) or one pose or segment of the path."""
+    Pure: no clock inside; a step is a pose's IK, a segment's profile, a sample's IK or a sample's
+    checks (its Jacobian, a bound of its smallest singular value, its finite differences): each some
+    30-100 µs."""
 
     __slots__ = ("_result", "_steps")
 
@@ -319,7 +320,7 @@ class _Sampler:
         self._ref_sigma = 0.0
 
     def run(self) -> Generator[None, None, None]:
-        """Sample the path, a sample a step; then the rest after the end (the differences at rest)."""
+        """Sample the path, a sample in two steps (its IK; its checks); then the differences into rest."""
         path = self.path
         last = self.count - 1
         end = frame_of_pose(path.end)
@@ -334,6 +335,7 @@ class _Sampler:
                 frame = end if n == last else path.frame_at(tau)
                 pose = path.end if n == last else pose_of_frame(frame)
                 q = self.kin.nearest(pose, self._q[-1], self.tcp)
+                yield  # the IK is the step's half; the checks the other
                 self._check_sample(q, frame, tau)
                 assert q is not None
                 self._accept(q, frame, tau)
