@@ -171,6 +171,11 @@ def test_the_tcp_follows_the_straight_line_and_ends_at_the_pose(key: str) -> Non
         # The orientation turns about the one axis of the shortest rotation from start to goal.
         w = np.array(rotation_vector(*(f[:3, :3] @ a[:3, :3].T).reshape(9)))
         assert np.linalg.norm(np.cross(w, turn)) < 1e-6 * np.linalg.norm(turn)
+    # Between two cycles (the speed slider slows trajectory time) the interpolation stays on the line.
+    pos, vel, acc = [0.0] * 6, [0.0] * 6, [0.0] * 6
+    for n in range(0, len(samples) - 1, 7):
+        plan.sample((n + 0.5) * PERIOD, pos, vel, acc)
+        assert _distance_to_line(_tcp_frame(dh, pos)[:3, 3], a[:3, 3], b[:3, 3]) < 1e-6
     end = _tcp_frame(dh, samples[-1])
     assert np.linalg.norm(end[:3, 3] - b[:3, 3]) < 1e-9
     assert np.linalg.norm(rotation_vector(*(end[:3, :3] @ b[:3, :3].T).reshape(9))) < 1e-9
