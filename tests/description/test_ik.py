@@ -17,6 +17,7 @@ import ur_analytic_ik
 from urdaemon.cell import ur_models
 from urdaemon.description import DhParameters, UrKinematics, load_ur_model
 from urdaemon.description.ik import ELBOW, WRIST, Vector, frame_of_pose, pose_of_frame
+from urdaemon.description.kinematics import dh_chain, dh_joints
 from urdaemon.errors import DescriptionError
 
 from .support import REAL_UR10E, dh_fk, quat_matrix, random_calibration
@@ -299,3 +300,89 @@ def test_a_non_ur_structure_is_refused() -> None:
     )
     with pytest.raises(DescriptionError, match="ur5e"):
         UrKinematics(bent)
+
+
+# ---- named configurations (issue 17) ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ur_models())
+def test_each_branch_has_its_own_configuration(name: str) -> None:
+    """The eight branches of a pose map to eight distinct configurations; shoulder follows the bit.
+
+    nearest_in asked for each branch's configuration returns that branch (calibrated arm too).
+    Reproduction: before issue 17 there was no configuration_of / nearest_in."""
+    from urdaemon.description.ik import SHOULDER, configuration_of
+
+    model = load_ur_model(name)
+    for dh in _calibrations(name)[:2]:
+        kinematics = UrKinematics(model, dh)
+        pose = kinematics.forward(GENERIC_Q, TCP)
+        found = kinematics.solutions(pose, TCP, GENERIC_Q)
+        assert len(found) == 8
+        names = [kinematics.configuration_of(s.q) for s in found]
+        assert len(set(names)) == 8
+        for solution, configuration in zip(found, names, strict=True):
+            assert (configuration.shoulder == "left") == bool(solution.branch & SHOULDER)
+            assert configuration_of(solution.q, dh) == configuration
+            picked = kinematics.nearest_in(pose, GENERIC_Q, TCP, configuration._asdict())
+            assert picked is not None
+            assert np.allclose(picked, solution.q, atol=1e-9)
+            for key, value in configuration._asdict().items():
+                one = kinematics.nearest_in(pose, GENERIC_Q, TCP, {key: value})
+                assert one is not None
+                assert getattr(kinematics.configuration_of(one), key) == value
+
+
+def _elbow_above(kinematics: UrKinematics, q: Vector) -> bool:
+    """Whether the elbow (joint 3) lies above the line from the shoulder (joint 2) to joint 4, in the
+    arm's vertical plane, from the chain's own joint positions."""
+    points: list[tuple[float, float, float]] = []
+    axes: list[tuple[float, float, float]] = []
+    dh_chain(dh_joints(load_ur_model("ur10e").dh), q, axes, points)
+    shoulder, elbow, wrist = np.array(points[1]), np.array(points[2]), np.array(points[3])
+    x1 = np.array([math.cos(q[0]), math.sin(q[0]), 0.0])
+    ex, ey = float((elbow - shoulder) @ x1), float(elbow[2] - shoulder[2])
+    wx, wy = float((wrist - shoulder) @ x1), float(wrist[2] - shoulder[2])
+    return ey > wy / wx * ex
+
+
+def test_configuration_names_by_the_joint_values() -> None:
+    """UR's home pose is shoulder right, elbow up, wrist down; elbow names match the geometry."""
+    from urdaemon.description.ik import Configuration, configuration_of
+
+    kinematics = UrKinematics(load_ur_model("ur10e"))
+    home = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+    assert configuration_of(home) == Configuration("right", "up", "down")
+    assert configuration_of((0.0, -1.2, 1.3, -1.0, 1.2 + 2 * math.pi, 0.0)).wrist == "up"
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        q = rng.uniform(-math.pi, math.pi, 6)
+        assert (kinematics.configuration_of(q).elbow == "up") == _elbow_above(kinematics, q)
+    # Reaching back over the base (wrist centre in front of joint 2 along x1): shoulder left.
+    assert configuration_of((0.0, -math.pi / 2, -math.pi / 2, -math.pi / 2, 1.0, 0.0)).shoulder == "left"
+
+
+def test_nearest_in_refuses_a_configuration_the_pose_lacks() -> None:
+    """A pose reachable only with the elbow stretched has no solution asked with an impossible key."""
+    kinematics = UrKinematics(load_ur_model("ur5e"))
+    pose = kinematics.forward(GENERIC_Q)
+    assert kinematics.nearest_in(pose, GENERIC_Q, None, {"elbow": "sideways"}) is None
+    assert kinematics.nearest_in(pose, GENERIC_Q, None, {}) == kinematics.nearest(pose, GENERIC_Q)
+
+
+def test_singularity_name_says_which_is_nearest() -> None:
+    """q5 = 0 is a wrist singularity, q3 = 0 an elbow one, the wrist centre over the base a shoulder one."""
+    from urdaemon.description.ik import singularity_name
+
+    kinematics = UrKinematics(load_ur_model("ur10e"))
+    assert kinematics.singularity_name((0.3, -1.2, 1.1, -0.4, 1e-4, 0.2)) == "wrist"
+    assert kinematics.singularity_name((0.3, -1.2, 1e-4, -0.4, 1.0, 0.2)) == "elbow"
+    # Wrist centre on joint 2's plane through the base axis: a2 c2 + a3 c23 + d5 s234 = 0.
+    dh = load_ur_model("ur10e").dh
+    q2, q3 = -1.17, -0.8
+    planar = dh.a[1] * math.cos(q2) + dh.a[2] * math.cos(q2 + q3)
+    q4 = math.asin(-planar / dh.d[4]) - (q2 + q3)
+    shoulder = (0.3, q2, q3, q4, 1.0, 0.2)
+    assert kinematics.singularity_name(shoulder) == "shoulder"
+    assert singularity_name(shoulder) == "shoulder"
+    assert float(np.linalg.svd(kinematics.jacobian(shoulder), compute_uv=False)[-1]) < 1e-3

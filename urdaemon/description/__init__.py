@@ -1,13 +1,20 @@
 """The robot-description layer: UR model data, calibration, the cell URDF, fast kinematics and IK.
 
-Importing the package loads no numpy: ``IkSolution`` and ``UrKinematics`` (``ik.py``, numpy) are
-imported on first use, so the serve process, which needs forward kinematics only, never loads them.
+Importing the package loads no numpy, nor does anything the serve process uses: forward and inverse
+kinematics, Jacobians and damped least squares are plain float math (``ik.py``, ``chain.py``,
+``dls.py``); only ``UrKinematics.jacobian`` and ``joint_velocity`` (the fake's) import numpy, inside.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
-
+from urdaemon.description.arm import (
+    ArmKinematics,
+    Configuration,
+    arm_kinematics,
+    base_in_world,
+    configuration_of,
+    singularity_name,
+)
 from urdaemon.description.build import build_cell_urdf, robot_joint_names, ur_params
 from urdaemon.description.calibration import (
     Calibration,
@@ -17,6 +24,8 @@ from urdaemon.description.calibration import (
     load_calibration,
     robot_dh,
 )
+from urdaemon.description.chain import ChainKinematics
+from urdaemon.description.ik import IkSolution, UrKinematics
 from urdaemon.description.kinematics import DhKinematics, KinematicTree, TreeJoint
 from urdaemon.description.urdf import joint_limits_for, load_urdf
 from urdaemon.description.urmodels import (
@@ -28,11 +37,11 @@ from urdaemon.description.urmodels import (
     load_ur_model_file,
 )
 
-if TYPE_CHECKING:
-    from urdaemon.description.ik import IkSolution, UrKinematics
-
 __all__ = [
+    "ArmKinematics",
     "Calibration",
+    "ChainKinematics",
+    "Configuration",
     "DhKinematics",
     "DhParameters",
     "IkSolution",
@@ -44,7 +53,10 @@ __all__ = [
     "UrJoint",
     "UrKinematics",
     "UrModel",
+    "arm_kinematics",
+    "base_in_world",
     "build_cell_urdf",
+    "configuration_of",
     "joint_limits_for",
     "joint_origins",
     "load_calibration",
@@ -53,14 +65,6 @@ __all__ = [
     "load_urdf",
     "robot_dh",
     "robot_joint_names",
+    "singularity_name",
     "ur_params",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """``IkSolution`` and ``UrKinematics``, imported from ``ik.py`` (numpy) when first asked for."""
-    if name in ("IkSolution", "UrKinematics"):
-        from urdaemon.description import ik
-
-        return getattr(ik, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

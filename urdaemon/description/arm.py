@@ -5,6 +5,8 @@ robot of the cell gets (``arm_kinematics``) and where its base frame sits in the
 ``ChainKinematics`` (chain.py: numeric, on the URDF chain) for custom robots. Poses are URScript's
 ``(x, y, z, rx, ry, rz)`` of the TCP in the robot's base frame; ``tcp`` is the flange -> TCP pose;
 joints are in the controller's joint order (docs/kinematics.md). No numpy: the serve process uses these.
+UR arms' named configurations (``Configuration``, ``configuration_of``, ``singularity_name``) live in
+ik.py and are re-exported here.
 """
 
 from __future__ import annotations
@@ -16,14 +18,21 @@ from urdaemon.description._transforms import xyz_rpy
 from urdaemon.description.calibration import robot_dh
 from urdaemon.description.chain import ChainKinematics
 from urdaemon.description.frames import Frame, Pose, compose
-from urdaemon.description.ik import UrKinematics
+from urdaemon.description.ik import Configuration, UrKinematics, configuration_of, singularity_name
 from urdaemon.description.kinematics import KinematicTree
 from urdaemon.description.urmodels import load_ur_model
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Robot
 
-__all__ = ["ArmKinematics", "arm_kinematics", "base_in_world"]
+__all__ = [
+    "ArmKinematics",
+    "Configuration",
+    "arm_kinematics",
+    "base_in_world",
+    "configuration_of",
+    "singularity_name",
+]
 
 _UR_BASE: Frame = (-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 """base_link -> base of a UR arm: turned pi about z (the controller's base frame)."""

@@ -43,14 +43,17 @@ __all__ = [
     "ELBOW",
     "SHOULDER",
     "WRIST",
+    "Configuration",
     "Frame",
     "IkSolution",
     "Joints",
     "Pose",
     "UrKinematics",
     "Vector",
+    "configuration_of",
     "frame_of_pose",
     "pose_of_frame",
+    "singularity_name",
 ]
 
 SHOULDER, WRIST, ELBOW = 4, 2, 1
@@ -113,6 +116,63 @@ def _branch_acos(value: float, negative: bool, slack: float) -> float | None:
     if angle is None:
         return None
     return -angle if negative else angle
+
+
+class Configuration(NamedTuple):
+    """A UR arm's named configuration (docs/kinematics.md): which of the eight IK branches it is on.
+
+    ``shoulder``: "right" when the wrist centre lies behind joint 2 in the arm's plane (the UR's usual
+    working side), "left" when in front. ``elbow``: "up" when the elbow lies above the line from the
+    shoulder to the wrist, "down" below. ``wrist``: "up" when sin q5 > 0, "down" otherwise."""
+
+    shoulder: str
+    elbow: str
+    wrist: str
+
+
+_TYPICAL_ARM = (-0.6127, -0.57155, 0.11655)
+"""(a2, a3, d5) judged with when no DH is given: the UR10e's nominal (every UR has a2, a3 < 0 < d5)."""
+
+
+def configuration_of(q: Vector, dh: DhParameters | None = None) -> Configuration:
+    """The named configuration of joints ``q`` on an arm with DH ``dh`` (default: UR10e proportions).
+
+    Elbow and wrist are exact on every UR model; the shoulder side needs the arm's a2, a3 and d5
+    only within a few degrees of the shoulder singularity (``UrKinematics.configuration_of`` is exact)."""
+    a2, a3, d5 = _TYPICAL_ARM if dh is None else (dh.a[1], dh.a[2], dh.d[4])
+    return _configuration(q, a2, a3, d5)
+
+
+def singularity_name(q: Vector, dh: DhParameters | None = None) -> str:
+    """Which singularity ``q`` is nearest: "wrist" (q5 = 0, pi), "elbow" (q3 = 0, pi) or "shoulder"
+    (the wrist centre on joint 1's axis plane), by |sin q5|, |sin q3| and the wrist centre's distance
+    from the shoulder plane over the arm's reach."""
+    a2, a3, d5 = _TYPICAL_ARM if dh is None else (dh.a[1], dh.a[2], dh.d[4])
+    return _singularity_name(q, a2, a3, d5)
+
+
+def _singularity_name(q: Vector, a2: float, a3: float, d5: float) -> str:
+    shoulder = abs(_wrist_centre_x(q, a2, a3, d5)) / (abs(a2) + abs(a3) + abs(d5))
+    measures = {"wrist": abs(math.sin(q[4])), "elbow": abs(math.sin(q[2])), "shoulder": shoulder}
+    return min(measures, key=lambda name: measures[name])
+
+
+def _wrist_centre_x(q: Vector, a2: float, a3: float, d5: float) -> float:
+    """The wrist centre (joint 6's origin) along joint 1's x axis in the arm's plane: its shoulder side."""
+    q2, q23 = float(q[1]), float(q[1]) + float(q[2])
+    return a2 * math.cos(q2) + a3 * math.cos(q23) + d5 * math.sin(q23 + float(q[3]))
+
+
+def _configuration(q: Vector, a2: float, a3: float, d5: float) -> Configuration:
+    q2, q3 = float(q[1]), float(q[2])
+    wrist_x = a2 * math.cos(q2) + a3 * math.cos(q2 + q3)
+    # The elbow is above the shoulder -> wrist line when (wrist x elbow) has the wrist's x sign.
+    above = -a2 * a3 * math.sin(q3) * wrist_x > 0.0
+    return Configuration(
+        "right" if _wrist_centre_x(q, a2, a3, d5) < 0.0 else "left",
+        "up" if above else "down",
+        "up" if math.sin(float(q[4])) > 0.0 else "down",
+    )
 
 
 class _Chain(NamedTuple):
@@ -220,6 +280,44 @@ class UrKinematics:
                 if distance < best_distance:
                     best, best_distance = q, distance
         return best
+
+    def nearest_in(
+        self,
+        pose: Vector,
+        qnear: Vector,
+        tcp: Vector | None = None,
+        wanted: dict[str, str] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Joints | None:
+        """The solution nearest ``qnear`` whose configuration matches every key of ``wanted``, or None.
+
+        ``wanted`` maps any of "shoulder", "elbow", "wrist" to a value of ``Configuration``; an
+        empty or missing one is ``nearest``."""
+        if not wanted:
+            return self.nearest(pose, qnear, tcp, max_position_error, max_orientation_error)
+        target = self._flange_target(pose, tcp)
+        best: Joints | None = None
+        best_distance = math.inf
+        for _, q0 in self._analytic(target, qnear):
+            if not self._matches(q0, wanted):
+                continue
+            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error)
+            if q is not None and self._matches(q, wanted) and _distance(q, qnear) < best_distance:
+                best, best_distance = q, _distance(q, qnear)
+        return best
+
+    def configuration_of(self, q: Vector) -> Configuration:
+        """The named configuration of ``q`` on this arm (its nominal a2, a3, d5)."""
+        return _configuration(q, self._a2, self._a3, self._d5)
+
+    def singularity_name(self, q: Vector) -> str:
+        """Which singularity ``q`` is nearest: "wrist", "elbow" or "shoulder" (on this arm's proportions)."""
+        return _singularity_name(q, self._a2, self._a3, self._d5)
+
+    def _matches(self, q: Vector, wanted: dict[str, str]) -> bool:
+        configuration = self.configuration_of(q)._asdict()
+        return all(configuration.get(key) == value for key, value in wanted.items())
 
     def has_solution(
         self,
