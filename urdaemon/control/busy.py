@@ -9,13 +9,22 @@ read the controller's mode, goal and stream follower and raise ``GoalRejected`` 
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 
 from urdaemon.control.goal_run import GoalRun
 from urdaemon.control.streams import StreamFollower
 from urdaemon.errors import GoalRejected
 from urdaemon.model import RobotState
 
-__all__ = ["STREAMS", "Mode", "check_at_rest", "check_can_start", "check_ready", "check_stream_command"]
+__all__ = [
+    "STREAMS",
+    "Mode",
+    "check_at_rest",
+    "check_can_start",
+    "check_ready",
+    "check_still",
+    "check_stream_command",
+]
 
 
 class Mode(enum.Enum):
@@ -78,8 +87,16 @@ def check_at_rest(mode: Mode, goal: GoalRun | None, at_rest: bool, what: str) ->
         raise GoalRejected(f"busy: the robot is {mode.value.replace('_', ' ')}; {what}")
 
 
-def check_stream_command(goal: GoalRun | None, state: RobotState) -> None:
-    """Refuse a stream command while the robot is not ready or a goal runs."""
+def check_still(mode: Mode, goal: GoalRun | None, at_rest: bool, reason: str) -> None:
+    """Refuse with ``reason`` unless nothing moves: idle, or a stop whose setpoint rests (``at_rest``)."""
+    if goal is not None or not (mode is Mode.IDLE or (mode is Mode.STOPPING and at_rest)):
+        raise GoalRejected(reason)
+
+
+def check_stream_command(mode: Mode, goal: GoalRun | None, state: RobotState) -> Sequence[float] | None:
+    """Refuse a stream command while the robot is not ready or a goal runs; the measured pose the
+    stream starts at when idle, else None (it continues from the setpoint)."""
     check_ready(state)
     if goal is not None:
         raise GoalRejected(f"busy: goal {goal.goal_id} is executing")
+    return state.positions if mode is Mode.IDLE else None

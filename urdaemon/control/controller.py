@@ -38,20 +38,23 @@ from urdaemon.control.busy import (
     Mode,
     check_at_rest,
     check_can_start,
+    check_still,
     check_stream_command,
 )
+from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.goal_run import GoalRun
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
 from urdaemon.control.intake import GoalIntake, GoalTolerances
 from urdaemon.control.ledger import ControllerStatistics, GoalLedger
-from urdaemon.control.limits import apply_permutation
 from urdaemon.control.online import OnlineGenerator
-from urdaemon.control.planned import ReadyPlan, check_plan_start
+from urdaemon.control.planned import ReadyPlan, plan_seed
 from urdaemon.control.scaling import planning_limits
 from urdaemon.control.setpoint import Setpoint, write_idle
 from urdaemon.control.stopping import StopRamp
 from urdaemon.control.streams import STREAM_EXPIRED, StreamFollower
-from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, TrajectoryPlanner, plan_move
+from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, TrajectoryPlanner
+from urdaemon.control.twist import TwistFollower
+from urdaemon.description.arm import ArmKinematics
 from urdaemon.model import JointCommand, JointLimits, RobotState
 
 __all__ = [
@@ -115,6 +118,7 @@ class MotionController:
         online = OnlineGenerator(limits, period, self._setpoint)
         self._streams = StreamFollower(limits, period, stream_timeout, online, self._setpoint)
         self._stop = StopRamp(period, online, self._setpoint)
+        self._twist = TwistFollower(limits, period, self._streams, self._setpoint)
         self._ledger = GoalLedger(
             self._setpoint, period=period, feedback_period=feedback_period, names=self.joint_names
         )
@@ -143,7 +147,8 @@ class MotionController:
 
     @property
     def mode(self) -> str:
-        """What runs: idle, goal, stream_position, stream_velocity, stopping or external (passthrough)."""
+        """What runs: idle, goal, stream_position, stream_velocity, stream_twist, stopping or external
+        (passthrough)."""
         return self._mode.value
 
     def statistics(self) -> ControllerStatistics:
@@ -188,7 +193,7 @@ class MotionController:
 
         ``planner`` (from ``prepare_trajectory`` for the same points) may carry an already planned tail.
         """
-        self._check_can_start(goal_id, state, now, preempt)
+        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, preempt)
         if planner is None:
             planner = self.prepare_trajectory(joint_names, points, state)
         self._intake.check_planner(planner)
@@ -212,18 +217,11 @@ class MotionController:
         preempt: bool = False,
     ) -> float:
         """Plan and start a point-to-point move; returns its planned duration, raises GoalRejected."""
-        self._check_can_start(goal_id, state, now, preempt)
-        target = apply_permutation(self._intake.permutation(joint_names), positions, "positions")
+        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, preempt)
         resolved = self._intake.tolerances(tolerances)
         seed = self._goal_seed(state)
-        plan = plan_move(
-            *seed,
-            target,
-            self.plan_limits,
-            duration=duration,
-            velocity_scale=velocity_scale,
-            acceleration_scale=acceleration_scale,
-        )
+        intake = self._intake
+        plan = intake.plan_move(joint_names, positions, seed, duration, velocity_scale, acceleration_scale)
         return self._start_goal(goal_id, plan, resolved, seed, state)
 
     def accept_planned(
@@ -236,28 +234,20 @@ class MotionController:
         tolerances: Tolerances | None = None,
     ) -> float:
         """Start ``plan``, made for the pose the robot rests at (``goal_start``); returns its duration.
-
-        Refused (GoalRejected) when busy as ``accept_move`` is without preempting, unless the robot
-        rests (idle, or a stop holding still), or when a measured joint is more than
-        ``PLAN_START_TOLERANCE`` from the plan's start or the plan does not start at rest.
-        """
-        self._check_can_start(goal_id, state, now, False)
+        Refused (GoalRejected) when busy as ``accept_move`` is without preempting, when the robot moves,
+        or when the plan does not start at rest within ``PLAN_START_TOLERANCE`` of the measured pose."""
+        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, False)
         check_at_rest(self._mode, self._goal, self._setpoint.at_rest(), "a planned goal starts from rest")
-        start = check_plan_start(plan, state.positions, self.joint_names)
+        seed = plan_seed(plan, state.positions, self.joint_names)
         resolved = self._intake.tolerances(tolerances)
         self._go_idle()  # a stop holding still lets go: the plan starts from rest, at its start
-        zeros = [0.0] * len(start)
-        seed = (start, zeros, zeros)
         return self._start_goal(goal_id, cast(PlannedTrajectory, plan), resolved, seed, state)
 
     def goal_start(self, state: RobotState) -> tuple[list[float], bool]:
         """The joints a new goal starts from (the setpoint while we command motion, else the measured
         pose), and whether the robot is at rest there (idle, or a stop holding still)."""
         mode = self._mode
-        if mode is Mode.IDLE or mode is Mode.EXTERNAL:
-            return list(state.positions), mode is Mode.IDLE
-        at_rest = mode is Mode.STOPPING and self._setpoint.at_rest()
-        return list(self._setpoint.pos), at_rest
+        return self._setpoint.goal_start(state, mode is Mode.IDLE, mode is Mode.STOPPING or mode is Mode.GOAL)
 
     def accept_external(
         self,
@@ -275,7 +265,7 @@ class MotionController:
         """
         self.release_hold()
         check_at_rest(self._mode, self._goal, False, "a passthrough trajectory starts from rest")
-        self._check_can_start(goal_id, state, now, False)
+        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, False)
         self._intake.check_planner(planner)
         resolved = self._intake.tolerances(tolerances).without_path()
         plan = planner.finish(*self._goal_seed(state))  # from rest: idle
@@ -300,7 +290,7 @@ class MotionController:
 
     def check_can_start(self, state: RobotState, now: float, preempt: bool) -> None:
         """Raise GoalRejected if a goal could not start now (not ready, busy); nothing changes."""
-        self._check_can_start("", state, now, preempt)
+        check_can_start(self._mode, self._goal, self._streams, "", state, now, preempt)
 
     def cancel(self, goal_id: str | None = None) -> bool:
         """Cancel the executing goal (or only ``goal_id``); False if no such goal. Result now, then a stop."""
@@ -354,7 +344,8 @@ class MotionController:
         now: float,
     ) -> None:
         """Make ``positions`` (and ``velocities`` there, if given) the newest streaming target."""
-        perm, start = self._stream_command(joint_names, state)
+        start = check_stream_command(self._mode, self._goal, state)
+        perm = self._intake.permutation(joint_names)
         self._streams.follow_positions(perm, positions, velocities, start, now)
         self._mode = Mode.STREAM_POSITION
         self._ledger.stream_commands += 1
@@ -363,11 +354,33 @@ class MotionController:
         self, joint_names: Sequence[str], velocities: Sequence[float], state: RobotState, now: float
     ) -> None:
         """Make ``velocities`` the newest streaming target velocity (limits are guarded every cycle)."""
-        perm, start = self._stream_command(joint_names, state)
-        first = self._mode is not Mode.STREAM_VELOCITY
-        self._streams.follow_velocities(perm, velocities, start, first, now)
+        start = check_stream_command(self._mode, self._goal, state)
+        perm = self._intake.permutation(joint_names)
+        self._streams.follow_velocities(perm, velocities, start, self._mode is not Mode.STREAM_VELOCITY, now)
         self._mode = Mode.STREAM_VELOCITY
         self._ledger.stream_commands += 1
+
+    def stream_twist(self, twist: Sequence[float], frame: str, state: RobotState, now: float) -> None:
+        """Make ``twist`` (vx, vy, vz, wx, wy, wz: m/s, rad/s) in ``frame`` ("base" or "tool") the newest
+        twist target; refused without ``set_arm``, above the caps, or when a joint stream's would be."""
+        start = check_stream_command(self._mode, self._goal, state)
+        self._twist.follow(twist, frame, start, self._mode is not Mode.STREAM_TWIST, now)
+        self._mode = Mode.STREAM_TWIST
+        self._ledger.stream_commands += 1
+
+    def set_arm(self, kin: ArmKinematics | None, twist: CartesianLimits) -> None:
+        """The arm's kinematics (None: no Cartesian commands); twist speeds capped, smoothed by ``twist``."""
+        self._twist.set_arm(kin, twist)
+
+    @property
+    def tcp(self) -> tuple[float, ...]:
+        """The TCP offset (flange -> TCP pose) every Cartesian command uses."""
+        return self._twist.tcp
+
+    def set_tcp(self, tcp: Sequence[float]) -> None:
+        """Make ``tcp`` the TCP offset; refused (GoalRejected) unless the robot rests."""
+        check_still(self._mode, self._goal, self._setpoint.at_rest(), "set_tcp: the robot is moving")
+        self._twist.set_tcp(tcp)
 
     # ------------------------------------------------------------------ the cycle
 
@@ -402,6 +415,8 @@ class MotionController:
         else:
             if mode is Mode.STREAM_POSITION:
                 stream_ended = self._streams.tick_positions(command, now)
+            elif mode is Mode.STREAM_TWIST:
+                stream_ended = self._twist.tick(command, now)
             else:
                 stream_ended = self._streams.tick_velocities(command, now)
             if stream_ended:
@@ -428,16 +443,6 @@ class MotionController:
         write_idle(command, state.positions, self._setpoint.zeros)
 
     # ------------------------------------------------------------------ helpers
-
-    def _check_can_start(self, goal_id: str, state: RobotState, now: float, preempt: bool) -> None:
-        check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, preempt)
-
-    def _stream_command(
-        self, joint_names: Sequence[str], state: RobotState
-    ) -> tuple[tuple[int, ...], Sequence[float] | None]:
-        """A stream command's joint order, and the measured pose to start at if idle (else None)."""
-        check_stream_command(self._goal, state)
-        return self._intake.permutation(joint_names), state.positions if self._mode is Mode.IDLE else None
 
     def _goal_seed(self, state: RobotState) -> tuple[list[float], list[float], list[float]]:
         mode = self._mode

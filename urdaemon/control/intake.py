@@ -1,10 +1,10 @@
 """A client's goal request put into the controller's terms, or refused with the reason, before it runs.
 
 Owns the controller's default tolerances and the cache of the joint orders clients send. Maps a
-request's values into the controller's joint order, checks a trajectory's points step by step (the
-acceleration reserve the time scaling keeps, then the planner's own checks) and completes the
-request's tolerances with the defaults. Changes nothing in the controller: the start state a
-trajectory is checked from comes in as a function, read when the check gets there.
+request's values into the controller's joint order (and plans a move to them), checks a trajectory's
+points step by step (the acceleration reserve the time scaling keeps, then the planner's own checks)
+and completes the request's tolerances with the defaults. Changes nothing in the controller: the start
+state a trajectory is checked from comes in as a function, read when the check gets there.
 """
 
 from __future__ import annotations
@@ -16,7 +16,13 @@ from dataclasses import dataclass, replace
 from urdaemon.control.goals import Tolerances, TrajectoryPoint
 from urdaemon.control.limits import apply_permutation, joint_permutation
 from urdaemon.control.scaling import SLIDER_ACCELERATION_RESERVE
-from urdaemon.control.trajectory import MAX_GOAL_TIME_S, TrajectoryPlanner, check_points
+from urdaemon.control.trajectory import (
+    MAX_GOAL_TIME_S,
+    PlannedTrajectory,
+    TrajectoryPlanner,
+    check_points,
+    plan_move,
+)
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
@@ -82,6 +88,26 @@ class GoalIntake:
             self._check_reserve(k, pt)
             yield
         return (yield from check_points(mapped, self.plan_limits, seed()))
+
+    def plan_move(
+        self,
+        joint_names: Sequence[str],
+        positions: Sequence[float],
+        seed: tuple[list[float], list[float], list[float]],
+        duration: float | None,
+        velocity_scale: float,
+        acceleration_scale: float,
+    ) -> PlannedTrajectory:
+        """A point-to-point move to ``positions`` (in ``joint_names`` order) from ``seed``."""
+        target = apply_permutation(self.permutation(joint_names), positions, "positions")
+        return plan_move(
+            *seed,
+            target,
+            self.plan_limits,
+            duration=duration,
+            velocity_scale=velocity_scale,
+            acceleration_scale=acceleration_scale,
+        )
 
     def check_planner(self, planner: TrajectoryPlanner) -> None:
         """Refuse a planner another controller prepared (it planned with other limits)."""

@@ -14,7 +14,7 @@ from typing import Protocol
 
 from urdaemon.errors import GoalRejected
 
-__all__ = ["PLAN_START_TOLERANCE", "ReadyPlan", "check_plan_start"]
+__all__ = ["PLAN_START_TOLERANCE", "ReadyPlan", "plan_seed"]
 
 PLAN_START_TOLERANCE = 1e-3
 """rad: how far a measured joint may be from a ready plan's start. The goal starts at the plan's start,
@@ -39,9 +39,11 @@ class ReadyPlan(Protocol):
     def release(self, count: int) -> bool: ...
 
 
-def check_plan_start(plan: ReadyPlan, measured: Sequence[float], names: Sequence[str]) -> list[float]:
-    """The plan's start joints; refused (GoalRejected, naming the joint) unless the plan starts at rest
-    within ``PLAN_START_TOLERANCE`` of ``measured``."""
+def plan_seed(
+    plan: ReadyPlan, measured: Sequence[float], names: Sequence[str]
+) -> tuple[list[float], list[float], list[float]]:
+    """The plan's start state (positions, zero velocity and acceleration); refused (GoalRejected, naming
+    the joint) unless the plan starts at rest within ``PLAN_START_TOLERANCE`` of ``measured``."""
     n = len(names)
     start = [0.0] * n
     vel = [0.0] * n
@@ -57,4 +59,4 @@ def check_plan_start(plan: ReadyPlan, measured: Sequence[float], names: Sequence
             f"the robot is not at the plan's start: {names[worst]} is {err:.4g} rad from it "
             f"(tolerance {PLAN_START_TOLERANCE:.4g} rad); plan again from where it is"
         )
-    return start
+    return start, [0.0] * n, [0.0] * n

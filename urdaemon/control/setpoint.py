@@ -84,6 +84,16 @@ class Setpoint:
             return list(state.positions), [0.0] * n, [0.0] * n
         return self.in_trajectory_time(state.speed_scaling)
 
+    def goal_start(self, state: RobotState, idle: bool, commanding: bool) -> tuple[list[float], bool]:
+        """Where a new goal starts: the measured pose, at rest, when ``idle``; this setpoint while
+        ``commanding`` (a goal or a stop), at rest if it is; the measured pose, moving, otherwise (a
+        passthrough runs on the robot)."""
+        if idle:
+            return list(state.positions), True
+        if commanding:
+            return list(self.pos), self.at_rest()
+        return list(state.positions), False
+
     def goal_state(self) -> tuple[list[float], list[float], list[float]]:
         """A copy of the running goal's state, in trajectory time: where a goal preempting it starts."""
         return list(self.pos), list(self.pvel), list(self.pacc)

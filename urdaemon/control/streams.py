@@ -15,6 +15,8 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from ruckig import Synchronization
+
 from urdaemon.control.limits import (
     BRAKE_DOWN,
     BRAKE_UP,
@@ -47,6 +49,7 @@ class StreamFollower:
     __slots__ = (
         "_acc",
         "_amax",
+        "_applied_sync",
         "_braking",
         "_effective",
         "_hi",
@@ -61,6 +64,7 @@ class StreamFollower:
         "_period",
         "_pos",
         "_safe_distance",
+        "_synchronized",
         "_target",
         "_target_velocity",
         "_update",
@@ -108,6 +112,10 @@ class StreamFollower:
         self._velocity = [0.0] * n
         self._effective = [0.0] * n
         self._latch = [0] * n
+        self._synchronized = False
+        self._applied_sync = False
+        """Whether ruckig synchronizes now (off while a synchronized stream brakes for a limit)."""
+        """Joints reach their velocity targets together (a twist's), not each as fast as it can."""
         self.last_command = -math.inf
         """When the last command of the running stream came (host seconds); -inf when none runs."""
 
@@ -118,6 +126,14 @@ class StreamFollower:
     def forget(self) -> None:
         """No stream runs: commands of a stopped stream must not keep it "active" for busy checks."""
         self.last_command = -math.inf
+        self._synchronize(False)
+
+    def _synchronize(self, on: bool) -> None:
+        """Make the joints reach their targets at the same time (``on``) or each on its own."""
+        if on != self._synchronized:
+            self._synchronized = on
+            self._applied_sync = on
+            self._inp.synchronization = Synchronization.Time if on else Synchronization.No
 
     # ------------------------------------------------------------------ commands
 
@@ -143,6 +159,7 @@ class StreamFollower:
             check_velocities_within(self._limits, given, "stream target")
             tvel = self._stoppable(target, list(given))
         self._start(start)
+        self._synchronize(False)
         self._target[:] = target
         self._target_velocity[:] = tvel
         self._online.toward_position(self._target, tvel)
@@ -177,15 +194,32 @@ class StreamFollower:
         target = apply_permutation(perm, velocities, "velocities")
         check_finite("velocities", target, self._names)
         check_velocities_within(self._limits, target, "stream target")
+        self.follow_computed(start, first, now)
+        self._velocity[:] = target
+
+    def follow_computed(
+        self, start: Sequence[float] | None, first: bool, now: float, *, synchronized: bool = False
+    ) -> None:
+        """A velocity stream whose target is set every cycle by ``want_velocities`` (a twist's joint
+        velocities); ``now``: when the client's command that keeps it running came (the deadman's
+        clock); ``synchronized``: the joints reach the target together, so their velocities keep the
+        target's proportions (a twist's direction) while they change. ``start`` and ``first`` as for
+        ``follow_velocities``."""
         self._start(start)
+        self._synchronize(synchronized)
         if first:
             self._online.toward_velocity(None)
             # Forces the first tick to push the effective target into ruckig.
-            self._effective[:] = [math.nan] * len(target)
-            self._latch[:] = [0] * len(target)
-        self._velocity[:] = target
+            n = len(self._velocity)
+            self._effective[:] = [math.nan] * n
+            self._latch[:] = [0] * n
+            self._velocity[:] = self._zeros
         self._inp.target_acceleration = self._zeros
         self.last_command = now
+
+    def want_velocities(self, velocities: Sequence[float]) -> None:
+        """The velocity stream's target from now on (checked by the caller: finite, within the limits)."""
+        self._velocity[:] = velocities
 
     def _start(self, start: Sequence[float] | None) -> None:
         if start is not None:
@@ -336,12 +370,31 @@ class StreamFollower:
             if w != eff[i]:
                 eff[i] = w
                 changed = True
+        if self._synchronized:
+            changed = self._brake_together(changed)
         if changed:
             self._inp.target_velocity = eff
         if self._online.step() is None:
             return STREAM_FAILED
         write_setpoint(command, pos, vel)
         return STREAM_FOLLOWED
+
+    def _brake_together(self, changed: bool) -> bool:
+        """A synchronized stream (a twist) brakes every joint while one brakes for a limit, so the TCP
+        stops on its way instead of wandering off it; each joint then stops as fast as it can (not
+        synchronized: stretched to the others' time, the braking joint's stop would end later than the
+        braking check assumes). Whether the effective target changed."""
+        braking = any(self._latch)
+        if braking:
+            eff = self._effective
+            for i in range(len(eff)):
+                if eff[i] != 0.0:
+                    eff[i] = 0.0
+                    changed = True
+        if braking == self._applied_sync:
+            self._applied_sync = not braking
+            self._inp.synchronization = Synchronization.No if braking else Synchronization.Time
+        return changed
 
     def _must_brake(self, i: int, direction: int) -> bool:
         """Whether joint ``i``, near a limit or too fast, must brake now to stop before the limit in
