@@ -277,7 +277,8 @@ def test_a_path_through_the_wrist_singularity_is_refused_naming_where() -> None:
     goal = kin.forward(qb, TCP)
     check = plan_linear(kin, qa, [goal], [], TCP, CARTESIAN, limits, PERIOD)
     reason, _ = _refusal(check)
-    assert reason.startswith("linear goal: segment 0 passes through a singularity at ")
+    assert reason.startswith("linear goal: segment 0 passes through a ")
+    assert " singularity at " in reason
     assert "% (x, y, z = " in reason
     assert "m in base)" in reason
 
@@ -386,6 +387,30 @@ def test_a_goal_that_would_need_more_than_the_largest_slowdown_is_refused() -> N
     assert reason.startswith("linear goal: it would have to run ")
     assert "times slower than asked (at most 10): on segment 0 at " in reason
     assert "velocity would be " in reason
+
+
+class _RenamingArm(_FlippingArm):
+    """A UR5e whose configuration reads elbow "down" past x = ``flip_x`` (joints continuous)."""
+
+    def nearest(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
+        return self._kin.nearest(pose, qnear, tcp)
+
+    def configuration_of(self, q: Any) -> tuple[str, str, str]:
+        past = self._kin.forward(q, TCP)[0] > self._flip_x
+        return ("right", "down" if past else "up", "down")
+
+
+def test_a_configuration_change_is_a_branch_flip() -> None:
+    kin, _, limits = _arm("ur5e-nominal")
+    start_pose = kin.forward(Q0, TCP)
+    arm = _RenamingArm(kin, start_pose[0] + 0.1)
+    goal = _offset(start_pose, 0.2, 0.0, 0.0)
+    reason, _ = _refusal(plan_linear(arm, Q0, [goal], [], TCP, CARTESIAN, limits, PERIOD))
+    assert reason.startswith("linear goal: segment 0 flips the arm's branch at ")
+    assert reason.endswith(
+        "its configuration would change from shoulder right, elbow up, wrist down to shoulder right, "
+        "elbow down, wrist down"
+    )
 
 
 class _CountingArm(_FlippingArm):

@@ -317,6 +317,7 @@ class _Sampler:
         self._frame: Frame = frame_of_pose(path.start)
         self._sigma = math.inf
         self._ref_rows: list[list[float]] | None = None
+        self._configuration = _configuration(kin, start)
         self._ref_sigma = 0.0
 
     def run(self) -> Generator[None, None, None]:
@@ -382,6 +383,15 @@ class _Sampler:
                 f"{self.limits.names[worst]} would jump {q[worst] - prev[worst]:.4g} rad in one cycle"
             )
         self._sigma = sigma
+        configuration = _configuration(self.kin, q)
+        if configuration != self._configuration:
+            if self._configuration is not None and configuration is not None:
+                segment, at = _where(self.path, tau, frame)
+                raise GoalRejected(
+                    f"linear goal: {segment} flips the arm's branch {at}: its configuration would change "
+                    f"from {_named(self._configuration)} to {_named(configuration)}"
+                )
+            self._configuration = configuration
 
     def _sigma_bound(self, rows: list[list[float]]) -> float:
         """A lower bound of the smallest singular value at ``rows``, exact where it matters.
@@ -479,6 +489,14 @@ class _Sampler:
                     )
 
 
+def _named(configuration: tuple[str, ...]) -> str:
+    """'shoulder right, elbow up, wrist down' for a UR configuration's values."""
+    return ", ".join(
+        f"{group} {value}"
+        for group, value in zip(("shoulder", "elbow", "wrist"), configuration, strict=False)
+    )
+
+
 def _cartesian_step(a: Frame, b: Frame) -> float:
     """The 6-vector norm of the step from frame ``a`` to ``b``: displacement (m) and rotation (rad)."""
     turn = rotation_vector(*compose(b, inverse(a))[:9])
@@ -493,5 +511,12 @@ def _cartesian_step(a: Frame, b: Frame) -> float:
 
 
 def _singularity_name(kin: ArmKinematics, q: Sequence[float]) -> str:
-    """'a wrist singularity' etc. for UR arms, else 'a singularity'."""
-    return "a singularity"
+    """'a wrist singularity' (elbow, shoulder) for arms with named configurations, else 'a singularity'."""
+    name_of = getattr(kin, "singularity_name", None) if kin.branches else None
+    return "a singularity" if name_of is None else f"a {name_of(q)} singularity"
+
+
+def _configuration(kin: ArmKinematics, q: Sequence[float]) -> tuple[str, ...] | None:
+    """The named configuration of ``q`` (UR arms), else None."""
+    configuration_of = getattr(kin, "configuration_of", None) if kin.branches else None
+    return None if configuration_of is None else tuple(configuration_of(q))
