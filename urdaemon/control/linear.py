@@ -174,16 +174,18 @@ def _plan(
             f"linear goal: it would take {path.duration:.6g} s, longer than the longest linear goal, "
             f"{MAX_LINEAR_TIME_S:.6g} s"
         )
-    slow = _grid_factor(path.duration, period, 1.0)
+    wanted = 1.0  # the slowdown asked for; the grid rounds the duration up to a whole cycle on top
+    slow = _grid_factor(path.duration, period, wanted)
     for _ in range(_MAX_PASSES):
         sampler = _Sampler(kin, path, q0, tcp, cartesian, limits, period, slow)
         yield from sampler.run()
         need = sampler.worst.need
         if need <= 1.0:
-            return sampler.writer.finish(slow)
+            return sampler.writer.finish(wanted)
         if slow * need > MAX_SLOWDOWN or path.duration * slow * need > MAX_LINEAR_TIME_S:
             raise GoalRejected(sampler.worst.reason(path, slow * need))
-        slow = _grid_factor(path.duration, period, slow * need * (1.0 + _RETIME_MARGIN))
+        wanted = slow * need * (1.0 + _RETIME_MARGIN)
+        slow = _grid_factor(path.duration, period, wanted)
     raise GoalRejected(sampler.worst.reason(path, slow))
 
 
