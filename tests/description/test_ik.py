@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -386,3 +388,18 @@ def test_singularity_name_says_which_is_nearest() -> None:
     assert kinematics.singularity_name(shoulder) == "shoulder"
     assert singularity_name(shoulder) == "shoulder"
     assert float(np.linalg.svd(kinematics.jacobian(shoulder), compute_uv=False)[-1]) < 1e-3
+
+
+def test_solving_loads_no_numpy() -> None:
+    """The serve process solves poses and takes Jacobians without loading numpy (docs/kinematics.md).
+
+    Reproduction: before issue 17 ik.py imported numpy at module level and solved with numpy."""
+    probe = (
+        "import sys\nfrom urdaemon.description import UrKinematics, load_ur_model\n"
+        "k = UrKinematics(load_ur_model('ur5e'))\nq = (-1.23, -1.67, 1.42, 1.45, 1.51, -0.11)\n"
+        "assert k.nearest(k.forward(q), q) is not None\nprint('numpy' in sys.modules)"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert done.stdout.strip() == "False"
