@@ -34,6 +34,8 @@ __all__ = ["ChainKinematics"]
 
 _EVALUATIONS = 60
 """Newton evaluations per start before it gives up."""
+_STALL_WINDOW = 10
+"""Newton gives up when the error has not halved over this many evaluations (no solution near)."""
 _RESTARTS = 8
 """Fixed seeds tried after ``qnear`` (a deterministic spread over the joint ranges)."""
 _TOLERANCE = 1e-12
@@ -163,10 +165,15 @@ class ChainKinematics:
         rows: list[list[float]] = [[0.0] * self.dof for _ in range(6)]
         error, position, orientation = _error(target, self._walk(q, rows))
         damping = 1e-3
-        for _ in range(_EVALUATIONS):
+        checkpoint = math.inf
+        for evaluation in range(_EVALUATIONS):
             if position < _TOLERANCE and orientation < _TOLERANCE:
                 break
             total = position + orientation
+            if evaluation % _STALL_WINDOW == 0:
+                if total > 0.5 * checkpoint:
+                    break  # not halving the error any more: stuck at the nearest reachable pose
+                checkpoint = total
             step = self._step(rows, error, damping * total * total + 1e-24)
             trial = self._clamped([a + b for a, b in zip(q, step, strict=True)])
             trial_rows: list[list[float]] = [[0.0] * self.dof for _ in range(6)]
