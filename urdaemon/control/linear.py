@@ -391,7 +391,7 @@ class _Sampler:
                 segment, at = _where(self.path, tau, frame)
                 raise GoalRejected(
                     f"linear goal: {segment} flips the arm's branch {at}: its configuration would change "
-                    f"from {_named(self._configuration)} to {_named(configuration)}"
+                    f"from {', '.join(self._configuration)} to {', '.join(configuration)}"
                 )
             self._configuration = configuration
 
@@ -518,7 +518,17 @@ def _singularity_name(kin: ArmKinematics, q: Sequence[float]) -> str:
     return "a singularity" if name_of is None else f"a {name_of(q)} singularity"
 
 
+_BRANCH_GROUPS = ("shoulder", "wrist")
+"""The named configuration's groups that change only where the IK's branches meet (the shoulder and
+wrist singularities, which the singular-value check refuses first). ``elbow`` (docs/kinematics.md:
+above or below the shoulder-wrist line) also changes where that line turns past the vertical, with
+the joints continuous and far from a singularity: comparing it would refuse sound paths."""
+
+
 def _configuration(kin: ArmKinematics, q: Sequence[float]) -> tuple[str, ...] | None:
-    """The named configuration of ``q`` (UR arms), else None."""
+    """The branch groups of ``q``'s named configuration (UR arms), else None."""
     configuration_of = getattr(kin, "configuration_of", None) if kin.branches else None
-    return None if configuration_of is None else tuple(configuration_of(q))
+    if configuration_of is None:
+        return None
+    named = configuration_of(q)
+    return tuple(f"{group} {getattr(named, group)}" for group in _BRANCH_GROUPS)
