@@ -236,6 +236,13 @@ def test_a_twist_needs_the_arm_and_a_ready_robot_with_no_goal() -> None:
         robot.controller.stream_twist([0.1, 0, 0, 0, 0, 0], "base", robot.state, robot.now)
     robot.controller.cancel()
     robot.run_until_idle(2000)
+    # Taking the arm away while a twist runs brakes it to rest, as the deadman does.
+    _twist(robot, [0.1, 0.0, 0.0, 0.0, 0.0, 0.0], 200)
+    robot.controller.set_arm(None, TWIST)
+    robot.step()
+    assert robot.controller.mode == "stopping"
+    robot.run_until_idle(1000)
+    check_command_limits(robot.commands, UR10E_LIMITS, PERIOD)
     robot.state.program_running = False
     with pytest.raises(GoalRejected, match="robot not ready"):
         robot.controller.stream_twist([0.1, 0, 0, 0, 0, 0], "base", robot.state, robot.now)

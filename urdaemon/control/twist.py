@@ -233,7 +233,8 @@ class TwistFollower:
         if now - streams.last_command > streams.timeout:
             return STREAM_EXPIRED
         kin = self._kin
-        assert kin is not None
+        if kin is None:
+            return STREAM_EXPIRED  # the arm was taken away (set_arm(None)): brake to rest as for the deadman
         q = self._pos
         tcp = self.tcp
         if self._set_target(kin, q, tcp) is None:
