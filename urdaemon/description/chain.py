@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from operator import mul
 from typing import NamedTuple
 
-from urdaemon.description.dls import cholesky_solve, gram
+from urdaemon.description.dls import cholesky_solve, damped_step6, gram
 from urdaemon.description.frames import (
     IDENTITY,
     Frame,
@@ -192,13 +192,14 @@ class ChainKinematics:
 
     def _step(self, rows: list[list[float]], error: Sequence[float], damping: float) -> list[float]:
         """The damped least-squares step J^T (J J^T + d)^-1 e (or its n < 6 form), at most _MAX_STEP."""
-        g = gram(rows)
         try:
-            if self.dof < 6:
+            if self.dof == 6:
+                step = damped_step6(rows, error, damping)
+            elif self.dof < 6:
                 jt_e = [sum(rows[k][j] * error[k] for k in range(6)) for j in range(self.dof)]
-                step = cholesky_solve(g, jt_e, damping)
+                step = cholesky_solve(gram(rows), jt_e, damping)
             else:
-                y = cholesky_solve(g, error, damping)
+                y = cholesky_solve(gram(rows), error, damping)
                 step = [sum(map(mul, column, y)) for column in zip(*rows, strict=True)]
         except ZeroDivisionError:  # damping too small for a rank-deficient Jacobian
             return [0.0] * self.dof

@@ -18,10 +18,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from operator import mul
 from typing import TYPE_CHECKING, NamedTuple, TypeAlias
 
-from urdaemon.description.dls import cholesky_solve, gram
+from urdaemon.description.dls import damped_step6
 from urdaemon.description.frames import (
     Frame,
     Pose,
@@ -495,11 +494,9 @@ class UrKinematics:
             if position < _NEWTON_TOLERANCE and orientation < _NEWTON_TOLERANCE:
                 break
             rows = _jacobian_rows(chain)
-            normal = gram(rows)
             damping = total * total + 1e-24
             while evaluations < _NEWTON_EVALUATIONS and damping < 1.0:
-                y = cholesky_solve(normal, error, damping)
-                step = [sum(map(mul, column, y)) for column in zip(*rows, strict=True)]
+                step = damped_step6(rows, error, damping)
                 trial = [q[i] + step[i] for i in range(6)]
                 evaluations += 1
                 trial_chain, trial_error, trial_position, trial_orientation = self._error(target, trial)
