@@ -18,6 +18,7 @@ import ur_analytic_ik
 
 from urdaemon.cell import ur_models
 from urdaemon.description import DhParameters, UrKinematics, load_ur_model
+from urdaemon.description.dls import singularity
 from urdaemon.description.ik import ELBOW, WRIST, Vector, frame_of_pose, pose_of_frame
 from urdaemon.description.kinematics import dh_chain, dh_joints
 from urdaemon.errors import DescriptionError
@@ -335,9 +336,10 @@ def test_each_branch_has_its_own_configuration(name: str) -> None:
                 assert getattr(kinematics.configuration_of(one), key) == value
 
 
-def _elbow_above(kinematics: UrKinematics, q: Vector) -> bool:
-    """Whether the elbow (joint 3) lies above the line from the shoulder (joint 2) to joint 4, in the
-    arm's vertical plane, from the chain's own joint positions."""
+def _elbow_geometry(q: Vector) -> tuple[bool, float, float]:
+    """From the UR10e chain's own joint positions, in the arm's vertical plane: whether the elbow
+    (joint 3) lies above the line from the shoulder (joint 2) to joint 4, and the x (along joint 1's
+    x axis) of joint 4 and of the wrist centre (joint 6's origin) relative to the shoulder."""
     points: list[tuple[float, float, float]] = []
     axes: list[tuple[float, float, float]] = []
     dh_chain(dh_joints(load_ur_model("ur10e").dh), q, axes, points)
@@ -345,7 +347,8 @@ def _elbow_above(kinematics: UrKinematics, q: Vector) -> bool:
     x1 = np.array([math.cos(q[0]), math.sin(q[0]), 0.0])
     ex, ey = float((elbow - shoulder) @ x1), float(elbow[2] - shoulder[2])
     wx, wy = float((wrist - shoulder) @ x1), float(wrist[2] - shoulder[2])
-    return ey > wy / wx * ex
+    centre = float((np.array(points[5]) - shoulder) @ x1)
+    return ey > wy / wx * ex, wx, centre
 
 
 def test_configuration_names_by_the_joint_values() -> None:
@@ -357,11 +360,34 @@ def test_configuration_names_by_the_joint_values() -> None:
     assert configuration_of(home) == Configuration("right", "up", "down")
     assert configuration_of((0.0, -1.2, 1.3, -1.0, 1.2 + 2 * math.pi, 0.0)).wrist == "up"
     rng = np.random.default_rng(11)
+    checked = 0
     for _ in range(200):
         q = rng.uniform(-math.pi, math.pi, 6)
-        assert (kinematics.configuration_of(q).elbow == "up") == _elbow_above(kinematics, q)
+        above, wrist_x, centre_x = _elbow_geometry(q)
+        assert (kinematics.configuration_of(q).shoulder == "right") == (centre_x < 0.0)
+        if wrist_x * centre_x > 0.0:  # joint 4 and the wrist centre on one side: "above" is the name
+            assert (kinematics.configuration_of(q).elbow == "up") == above
+            checked += 1
+    assert checked > 150
     # Reaching back over the base (wrist centre in front of joint 2 along x1): shoulder left.
     assert configuration_of((0.0, -math.pi / 2, -math.pi / 2, -math.pi / 2, 1.0, 0.0)).shoulder == "left"
+
+
+def test_configuration_holds_along_a_motion_clear_of_singularities() -> None:
+    """Joint 4 passing over the vertical above the shoulder (no singularity) keeps every name.
+
+    Reproduction: the first definition named the elbow by joint 4's side of the shoulder, so this
+    sound path flipped "up" to "down" midway (found by the linear planner's branch-flip check)."""
+    kinematics = UrKinematics(load_ur_model("ur10e"))
+    names = set()
+    sides = set()
+    for q2 in np.linspace(-1.95, -2.1, 16):
+        q = (0.3, float(q2), 1.0, -math.pi / 2 - float(q2) - 1.0, 1.0, 0.2)
+        assert singularity(kinematics.jacobian_rows(q)) > 0.03
+        names.add(kinematics.configuration_of(q))
+        sides.add(_elbow_geometry(q)[1] > 0.0)
+    assert sides == {True, False}
+    assert len(names) == 1
 
 
 def test_nearest_in_refuses_a_configuration_the_pose_lacks() -> None:

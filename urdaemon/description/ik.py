@@ -31,7 +31,7 @@ from urdaemon.description.frames import (
     rotation_vector,
 )
 from urdaemon.description.kinematics import dh_chain, dh_joints
-from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
 from urdaemon.errors import DescriptionError
 
 if TYPE_CHECKING:
@@ -121,24 +121,22 @@ class Configuration(NamedTuple):
     """A UR arm's named configuration (docs/kinematics.md): which of the eight IK branches it is on.
 
     ``shoulder``: "right" when the wrist centre lies behind joint 2 in the arm's plane (the UR's usual
-    working side), "left" when in front. ``elbow``: "up" when the elbow lies above the line from the
-    shoulder to the wrist, "down" below. ``wrist``: "up" when sin q5 > 0, "down" otherwise."""
+    working side), "left" when in front. ``elbow``: "up" when sin q3 > 0 with the shoulder right, or
+    sin q3 < 0 with it left (the elbow above the shoulder -> wrist line), else "down". ``wrist``: "up"
+    when sin q5 > 0, else "down". Each changes only at its singularity (the elbow's also at the
+    shoulder's), never along a continuous motion clear of them."""
 
     shoulder: str
     elbow: str
     wrist: str
 
 
-_TYPICAL_ARM = (-0.6127, -0.57155, 0.11655)
-"""(a2, a3, d5) judged with when no DH is given: the UR10e's nominal (every UR has a2, a3 < 0 < d5)."""
-
-
 def configuration_of(q: Vector, dh: DhParameters | None = None) -> Configuration:
     """The named configuration of joints ``q`` on an arm with DH ``dh`` (default: UR10e proportions).
 
-    Elbow and wrist are exact on every UR model; the shoulder side needs the arm's a2, a3 and d5
-    only within a few degrees of the shoulder singularity (``UrKinematics.configuration_of`` is exact)."""
-    a2, a3, d5 = _TYPICAL_ARM if dh is None else (dh.a[1], dh.a[2], dh.d[4])
+    The wrist is exact on every UR model; the shoulder side (and with it the elbow's name) needs the
+    arm's a2, a3 and d5 only near the shoulder singularity (``UrKinematics.configuration_of`` is exact)."""
+    a2, a3, d5 = _arm_proportions(dh)
     return _configuration(q, a2, a3, d5)
 
 
@@ -146,8 +144,14 @@ def singularity_name(q: Vector, dh: DhParameters | None = None) -> str:
     """Which singularity ``q`` is nearest: "wrist" (q5 = 0, pi), "elbow" (q3 = 0, pi) or "shoulder"
     (the wrist centre on joint 1's axis plane), by |sin q5|, |sin q3| and the wrist centre's distance
     from the shoulder plane over the arm's reach."""
-    a2, a3, d5 = _TYPICAL_ARM if dh is None else (dh.a[1], dh.a[2], dh.d[4])
+    a2, a3, d5 = _arm_proportions(dh)
     return _singularity_name(q, a2, a3, d5)
+
+
+def _arm_proportions(dh: DhParameters | None) -> tuple[float, float, float]:
+    """(a2, a3, d5) of ``dh``, or without one the UR10e's nominal (every UR has a2, a3 < 0 < d5)."""
+    real = load_ur_model("ur10e").dh if dh is None else dh
+    return real.a[1], real.a[2], real.d[4]
 
 
 def _singularity_name(q: Vector, a2: float, a3: float, d5: float) -> str:
@@ -163,13 +167,14 @@ def _wrist_centre_x(q: Vector, a2: float, a3: float, d5: float) -> float:
 
 
 def _configuration(q: Vector, a2: float, a3: float, d5: float) -> Configuration:
-    q2, q3 = float(q[1]), float(q[2])
-    wrist_x = a2 * math.cos(q2) + a3 * math.cos(q2 + q3)
-    # The elbow is above the shoulder -> wrist line when (wrist x elbow) has the wrist's x sign.
-    above = -a2 * a3 * math.sin(q3) * wrist_x > 0.0
+    right = _wrist_centre_x(q, a2, a3, d5) < 0.0
+    # With a2, a3 < 0 the elbow is above the shoulder -> wrist line when sin q3 has the sign of
+    # -(wrist's x); the wrist centre's side stands for the wrist's (they differ only at the shoulder
+    # singularity), so the name cannot change while the arm moves clear of every singularity.
+    bend = math.sin(float(q[2]))
     return Configuration(
-        "right" if _wrist_centre_x(q, a2, a3, d5) < 0.0 else "left",
-        "up" if above else "down",
+        "right" if right else "left",
+        "up" if (bend > 0.0 if right else bend < 0.0) else "down",
         "up" if math.sin(float(q[4])) > 0.0 else "down",
     )
 
