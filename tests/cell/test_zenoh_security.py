@@ -167,7 +167,8 @@ def _allowed(acl: dict[str, Any], subject: str, flow: str, message: str) -> set[
 
 
 def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
-    """ "command alice" is alice's goals, cancel, services, streams, lease and lease token; "read alice"
+    """ "command alice" is alice's goals (issue 17: linear goals and twists too), cancel, services, streams,
+    lease and lease token; "read alice"
     is her state, events, goal messages and results; nobody may publish a goal result or feedback
     (a forged result cannot enter through the daemon's links), and stop is everyone's."""
     cell = load_cell(cell_file(folder, GOOD))
@@ -177,6 +178,7 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
     queries = _allowed(acl, "operator", "ingress", "query")
     assert {
         "sec/alice/goal/move",
+        "sec/alice/goal/linear",
         "sec/alice/goal/trajectory",
         "sec/alice/goal/cancel",
         "sec/alice/service/*",
@@ -187,6 +189,7 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
     assert _allowed(acl, "operator", "ingress", "put") == {
         "sec/alice/command/joint_position",
         "sec/alice/command/joint_velocity",
+        "sec/alice/command/twist",
         "sec/alice/command/freedrive",
     }
     assert _allowed(acl, "operator", "ingress", "liveliness_token") == {"sec/alice/lease/*"}
