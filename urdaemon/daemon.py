@@ -14,6 +14,7 @@ from urdaemon.backends.mock import MockBackend
 from urdaemon.backends.servo import ServoBackend
 from urdaemon.cell.config import Cell, Robot
 from urdaemon.control import MotionController
+from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.description import (
     DhKinematics,
     KinematicTree,
@@ -21,6 +22,7 @@ from urdaemon.description import (
     joint_limits_for,
     robot_dh,
 )
+from urdaemon.description.arm import arm_kinematics
 from urdaemon.description.calibration import load_calibration
 from urdaemon.description.urdf_facts import read_urdf_facts
 from urdaemon.description.urmodels import load_ur_model
@@ -36,7 +38,7 @@ from urdaemon.runtime.lease_keeper import watch_lease_holders
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
-__all__ = ["CellDescription", "Daemon", "describe_cell"]
+__all__ = ["CellDescription", "Daemon", "describe_cell", "twist_limits"]
 
 log = logging.getLogger(__name__)
 
@@ -138,6 +140,20 @@ def _expected_hash(robot: Robot) -> str:
     return model.kinematics_hash
 
 
+def twist_limits(robot: Robot) -> CartesianLimits:
+    """What twist streaming smooths and caps with: the cell's caps of speed, its defaults of
+    acceleration and jerk (cell file ``motion.cartesian``)."""
+    options = robot.motion.cartesian
+    return CartesianLimits(
+        speed=options.max_speed,
+        acceleration=options.acceleration,
+        jerk=options.jerk,
+        angular_speed=options.max_angular_speed,
+        angular_acceleration=options.angular_acceleration,
+        angular_jerk=options.angular_jerk,
+    )
+
+
 class Daemon:
     """Serves one cell over Zenoh until ``stop`` is set."""
 
@@ -209,9 +225,20 @@ class Daemon:
                 stream_timeout=motion.stream_timeout,
                 feedback_period=1.0 / motion.feedback_rate_hz,
             )
+            bounds = (limits.min_position, limits.max_position)
+            arm = arm_kinematics(robot, self.description.tree, limits.names, bounds)
+            controller.set_arm(arm, twist_limits(robot))
+            controller.set_tcp(robot.tcp)  # the cell file's; set_tcp changes it
             kinematics = DhKinematics(robot_dh(robot)) if robot.is_ur else None
             runtime = RobotRuntime(
-                self.cell.cell, robot, backend, controller, node, self.cell.publish, kinematics=kinematics
+                self.cell.cell,
+                robot,
+                backend,
+                controller,
+                node,
+                self.cell.publish,
+                kinematics=kinematics,
+                arm=arm,
             )
             runtime.declare()
             self.runtimes.append(runtime)

@@ -11,17 +11,21 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
 from urdaemon.cell.config import PublishOptions, Robot
 from urdaemon.control import MotionController
-from urdaemon.description.kinematics import DhKinematics, ToolOffset
+from urdaemon.description.arm import ArmKinematics
+from urdaemon.description.frames import frame_of_pose
+from urdaemon.description.kinematics import DhKinematics, ToolOffset, quaternion_of
 from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
@@ -45,6 +49,53 @@ class _RobotLog(logging.LoggerAdapter[logging.Logger]):
         return f"[{self.extra['robot'] if self.extra else '?'}] {msg}", kwargs
 
 
+class TcpPoses:
+    """tcp_pose's pose and frames: the TCP in the robot's base frame, with its current TCP offset.
+
+    A UR robot's tool0 comes from its DH (``DhKinematics``, cheapest), a custom robot's from its arm
+    kinematics (``ArmKinematics.forward``); the offset is the cell file's ``tcp`` until ``set_tcp``.
+    """
+
+    __slots__ = ("_arm", "_kinematics", "_tcp", "_tcp_child", "_tool", "_tool_link", "child", "frame")
+
+    def __init__(self, robot: Robot, kinematics: DhKinematics | None, arm: ArmKinematics | None) -> None:
+        self._kinematics = kinematics
+        self._arm = arm if kinematics is None else None
+        custom = robot.description
+        self.frame = f"{robot.prefix}base" if custom is None else f"{robot.prefix}{custom.base_link}"
+        """The frame of tcp_pose: UR ``<robot>_base``, custom robots their base link."""
+        self._tool_link = f"{robot.prefix}tool0" if custom is None else f"{robot.prefix}{custom.tool_link}"
+        self._tcp_child = f"{robot.prefix}tcp"
+        self._tcp: tuple[float, ...] = ()
+        self._tool: ToolOffset | None = None
+        """The TCP offset composed with a UR robot's tool0 pose (None: the TCP is tool0)."""
+        self.child = self._tool_link
+        self.use(robot.tcp)
+
+    @property
+    def available(self) -> bool:
+        """Whether the robot has kinematics to publish tcp_pose with."""
+        return self._kinematics is not None or self._arm is not None
+
+    def use(self, tcp: Sequence[float]) -> None:
+        """Compose tcp_pose with the TCP offset ``tcp`` from now on: child ``<robot>_tcp``, or the
+        tool link for a zero offset."""
+        self._tcp = tuple(tcp)
+        self._tool = ToolOffset(tcp) if any(tcp) else None
+        self.child = self._tcp_child if self._tool is not None else self._tool_link
+
+    def pose(self, positions: Sequence[float]) -> tuple[float, ...]:
+        """(x, y, z, qx, qy, qz, qw) of the TCP in ``frame``."""
+        if self._kinematics is not None:
+            pose = self._kinematics.tool_pose(positions)
+            return pose if self._tool is None else self._tool.apply(pose)
+        assert self._arm is not None, "no tcp_pose without kinematics (available)"
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = frame_of_pose(
+            self._arm.forward(positions, self._tcp)
+        )
+        return (x, y, z, *quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22))
+
+
 class RobotRuntime:
     """Serves one robot until cancelled; restarts its backend after failures without touching others."""
 
@@ -58,6 +109,7 @@ class RobotRuntime:
         publish: PublishOptions,
         *,
         kinematics: DhKinematics | None = None,
+        arm: ArmKinematics | None = None,
     ) -> None:
         self.robot = robot
         self.backend = backend
@@ -75,7 +127,14 @@ class RobotRuntime:
             robot, backend, controller, (self.gate, self.status), self.goals.joint_names, self.log
         )
         self.services = ServiceRunner(
-            backend, controller, (self.gate, self.requests, self.status, self.goals), self.log
+            backend,
+            controller,
+            (self.gate, self.requests, self.status, self.goals),
+            self.log,
+            on_tcp=self._use_tcp,
+        )
+        self.cartesian = Cartesian(
+            robot, backend, controller, self.goals, (self.gate, self.requests), arm, self.log
         )
         self.lease = LeaseKeeper(
             self.keys,
@@ -86,13 +145,9 @@ class RobotRuntime:
         )
         self.service_names: frozenset[str] = frozenset()
         """The services this robot answers (once declared)."""
-        self._kinematics = kinematics
+        self.tcp_poses = TcpPoses(robot, kinematics, arm)
         self._decimation = publish.joint_states_decimation
         self._encoder = codec.JointStateEncoder(robot.name, backend.state.joint_names)
-        self._frame = f"{robot.prefix}base"
-        self._tool = ToolOffset(robot.tcp) if any(robot.tcp) else None
-        """The cell file's TCP offset composed with every tcp_pose (None: the TCP is tool0)."""
-        self._child = f"{robot.prefix}tcp" if self._tool is not None else f"{robot.prefix}tool0"
         self._pub_joints: Any = None
         self._pub_pose: Any = None
         self._joints_wanted = Matching(False)
@@ -105,7 +160,8 @@ class RobotRuntime:
         node, keys = self.node, self.keys
         self._pub_joints = node.publisher(keys.joint_states, realtime=True)
         self._joints_wanted = node.matching(self._pub_joints)
-        self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if self._kinematics else None
+        posed = self.tcp_poses.available
+        self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if posed else None
         self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)
         self.status.declare(node, keys)
         # every queryable and subscriber acts on its exact key only and refuses oversized messages
@@ -113,6 +169,7 @@ class RobotRuntime:
         # (publish/node.py)
         guard = self.lease.book
         self.goals.declare(guard)
+        self.cartesian.declare(node, keys, guard)
         self.service_names = self.services.declare(node, keys, guard)
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self.status.publish
@@ -190,14 +247,17 @@ class RobotRuntime:
             # nothing is computed or encoded for a stream nobody subscribes to
             if self._joints_wanted.active:
                 self._pub_joints.put(self._encoder.encode(state))
-            if self._pose_wanted.active and self._kinematics is not None:
-                pose = self._kinematics.tool_pose(state.positions)
-                if self._tool is not None:
-                    pose = self._tool.apply(pose)
-                self._pub_pose.put(self._encoder.encode_pose(state, self._frame, self._child, pose))
+            if self._pose_wanted.active:
+                poses = self.tcp_poses
+                pose = poses.pose(state.positions)
+                self._pub_pose.put(self._encoder.encode_pose(state, poses.frame, poses.child, pose))
         if self.controller.has_events:
             self.goals.publish_events()
         self.status.publish_if_changed()
+
+    def _use_tcp(self, tcp: Sequence[float]) -> None:
+        """set_tcp took ``tcp``: tcp_pose follows."""
+        self.tcp_poses.use(tcp)
 
     # ---- what the robot tells ------------------------------------------------------------------------
 

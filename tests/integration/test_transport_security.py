@@ -245,7 +245,8 @@ async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs
     """Reproduction (issue 16): any session could command any robot. With access control the viewer
     (granted ``read: [alice]``) receives alice's joint states, but its move goal, trajectory goal,
     cancel and service queries get no reply at all and its stream puts (a valid target and a
-    malformed one) never arrive: after a round trip on the same link (cycle_stats, which it may ask)
+    malformed one) never arrive (issue 17: nor its linear goal, set_tcp, or twist puts): after a
+    round trip on the same link (cycle_stats, which it may ask)
     the daemon has counted no rejected command and alice has not moved. The operator's identical
     malformed put is rejected and its move goal accepted (positive control). ``command_lease:
     false`` so the operator's commands do not depend on the lease (tested on its own below)."""
@@ -260,7 +261,9 @@ async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs
                 ("goal/move", {"positions": target}),
                 ("goal/trajectory", {"points": [{"positions": target, "time_from_start": 2.0}]}),
                 ("goal/cancel", {}),
+                ("goal/linear", {"poses": [[0.3, 0.1, 0.4, 3.1, 0.0, 0.0]]}),  # issue 17's goal
                 ("service/set_speed_slider", {"fraction": 0.1}),
+                ("service/set_tcp", {"pose": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]}),
                 ("service/dashboard", {"command": "power off"}),
             ):
                 replies = await zenoh_ask(viewer, f"{CELL}/alice/{key}", body, timeout=WAIT_S)
@@ -268,6 +271,10 @@ async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs
             viewer.put(f"{CELL}/alice/command/joint_position", json.dumps({"positions": target}))
             viewer.put(f"{CELL}/alice/command/joint_velocity", json.dumps({"velocities": [0.1] * 6}))
             viewer.put(f"{CELL}/alice/command/joint_position", b"not json")
+            viewer.put(
+                f"{CELL}/alice/command/twist", json.dumps({"linear": [0.05, 0, 0], "angular": [0, 0, 0]})
+            )
+            viewer.put(f"{CELL}/alice/command/twist", b"not json")
             stats = await zenoh_ask(viewer, f"{CELL}/alice/service/cycle_stats", {})
             assert [r.get("ok") for r in stats] == [True], stats
             assert runtime.status.rejected_commands == 0

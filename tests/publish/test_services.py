@@ -27,6 +27,7 @@ from urdaemon.model import (
     ForceModeRequest,
     SetIoRequest,
     SetPayloadRequest,
+    SetTcpRequest,
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
@@ -160,6 +161,7 @@ CALLS: list[tuple[str, str, tuple[Any, ...], object]] = [
     ("dashboard", "dashboard", ("power on",), DashboardRequest("power on")),
     ("set_tool_voltage", "set_tool_voltage", (24,), ToolVoltageRequest(24)),
     ("start_force_mode", "start_force_mode", FORCE, ForceModeRequest(*FORCE)),
+    ("set_tcp", "set_tcp", ((0.0, 0.0, 0.1, 0.0, 0.0, 0.2),), SetTcpRequest((0.0, 0.0, 0.1, 0.0, 0.0, 0.2))),
     ("cycle_stats", "cycle_stats", (), CycleStatsRequest(False)),
     ("startup", "startup", (), None),
     ("resend_program", "resend_program", (), None),
@@ -258,6 +260,7 @@ REQUESTS: dict[str, dict[str, Any] | None] = {
         "limits": [0.1] * 6,
     },
     "cycle_stats": {"reset": False},
+    "set_tcp": {"pose": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]},
 }
 """A valid request of every service with arguments (the others get none)."""
 MOCK_REFUSALS = {

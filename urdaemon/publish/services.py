@@ -16,6 +16,8 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
+from urdaemon.cell.config import TCP_MAX_OFFSET_M, check_tcp
+from urdaemon.errors import MessageError
 from urdaemon.model import (
     FORCE_MODE_DAMPING,
     FORCE_MODE_GAIN_SCALING,
@@ -27,6 +29,7 @@ from urdaemon.model import (
     ForceModeRequest,
     SetIoRequest,
     SetPayloadRequest,
+    SetTcpRequest,
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
@@ -71,6 +74,10 @@ class ServiceHost(Protocol):
 
     async def end_tool_contact(self) -> None:
         """End tool-contact detection; motion starts anew from where the robot rests."""
+
+    async def set_tcp(self, pose: tuple[float, ...]) -> None:
+        """Make ``pose`` the robot's TCP offset: the controller's (refused unless idle), the
+        backend's, and tcp_pose's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,6 +200,21 @@ def _payloadless(
     )
 
 
+async def _set_tcp(host: ServiceHost, request: SetTcpRequest) -> Reply:
+    await host.set_tcp(request.pose)
+    return None
+
+
+def _decode_set_tcp(payload: bytes | None) -> SetTcpRequest:
+    """The set_tcp request, its offset within the cell file's ranges (cell/config.py ``check_tcp``)."""
+    pose = codec.decode_set_tcp(payload)
+    try:
+        check_tcp(pose)
+    except ValueError as err:
+        raise MessageError(f"set_tcp.pose: {err}") from err
+    return SetTcpRequest(pose)
+
+
 def _force_mode(payload: bytes | None) -> ForceModeRequest:
     return ForceModeRequest(**codec.decode_force_mode(payload))
 
@@ -277,6 +299,24 @@ SERVICES: tuple[ServiceSpec, ...] = (
         reply_doc=(
             "end the control program's loop; in URCap mode the pendant program continues; the daemon "
             "does not send the program again until `resend_program` or `startup`"
+        ),
+    ),
+    ServiceSpec(
+        "set_tcp",
+        "set the TCP offset (tool0 -> TCP) used by tcp_pose and every Cartesian command",
+        SetTcpRequest,
+        _decode_set_tcp,
+        _set_tcp,
+        needs="set_tcp",
+        request_doc=(
+            f"`pose` [x, y, z, rx, ry, rz]: the TCP in the tool0 (flange) frame (m, each within "
+            f"±{TCP_MAX_OFFSET_M:g}; a rotation vector of at most pi rad)"
+        ),
+        reply_doc=(
+            "refused unless the robot is idle (`set_tcp: the robot is moving`); applies to `tcp_pose` "
+            "(child `<robot>_tcp`, or `<robot>_tool0` for a zero offset), every later pose, linear goal "
+            "and twist, and on `ur` the controller's TCP (sent again whenever the control program "
+            "reconnects); starts as the cell file's `tcp`"
         ),
     ),
     _payloadless(

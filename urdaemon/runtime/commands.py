@@ -1,4 +1,4 @@
-"""One robot's streaming commands: joint position and velocity streams, and freedrive.
+"""One robot's streaming commands: joint position and velocity streams, TCP twists, and freedrive.
 
 Commands are puts, not queries: nothing answers them. A rejected one is counted in the status and
 reported as a ``command_rejected`` event (the first ten, then every hundredth also in the log).
@@ -7,6 +7,7 @@ reported as a ``command_rejected`` event (the first ten, then every hundredth al
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -49,6 +50,7 @@ class Commands:
         for key, handler in (
             (keys.command_joint_position, self.on_stream_position),
             (keys.command_joint_velocity, self.on_stream_velocity),
+            (keys.command_twist, self.on_twist),
             (keys.command_freedrive, self.on_freedrive),
         ):
             node.subscriber(key, handler, refused=self.on_refused, guard=guard)
@@ -89,6 +91,29 @@ class Commands:
         assert message.velocities is not None
         self._controller.stream_velocities(
             self._joint_names(message.joint_names), message.velocities, self._backend.state, time.monotonic()
+        )
+
+    def on_twist(self, key: str, payload: bytes) -> None:
+        """A TCP twist command: the controller follows it (smoothed, slowed near singularities and
+        joint limits) until the deadman times out."""
+        self._follow(key, payload, self._twist)
+
+    def _twist(self, payload: bytes) -> None:
+        message = codec.decode_twist(payload)
+        self._gate.check_accepting()
+        caps = self._robot.motion.cartesian
+        for field, vector, cap, name, unit in (
+            ("linear", message.linear, caps.max_speed, "max_speed", "m/s"),
+            ("angular", message.angular, caps.max_angular_speed, "max_angular_speed", "rad/s"),
+        ):
+            size = math.hypot(*vector)
+            if size > cap:
+                raise GoalRejected(
+                    f"twist command.{field}: |{field}| = {size:.4g} {unit} is above the cap {name} {cap:g} "
+                    f"{unit} (the cell file's motion.cartesian)"
+                )
+        self._controller.stream_twist(
+            (*message.linear, *message.angular), message.frame, self._backend.state, time.monotonic()
         )
 
     def on_refused(self, key: str, reason: str) -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import itertools
 import logging
 import secrets
@@ -31,8 +32,10 @@ import zenoh
 from urdaemon.backends.base import Backend
 from urdaemon.cell.config import Robot
 from urdaemon.control import GoalFeedback, GoalResult, MotionController, Tolerances
+from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
+from urdaemon.model import RobotState
 from urdaemon.publish import codec, signing
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
@@ -44,10 +47,13 @@ from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, pa
 from urdaemon.runtime.slicing import check_sliced, decode_sliced, plan_tail, release
 from urdaemon.runtime.status import StatusPublisher
 
-__all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "ResultListener", "put_signed"]
+__all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "PoseTarget", "ResultListener", "put_signed"]
 
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries (each with its signature)."""
+
+PoseTarget = Callable[[codec.MoveGoalMessage, RobotState], tuple[float, ...]]
+"""A pose move goal's joint target in the controller's joint order (raises ``GoalRejected``)."""
 
 ResultListener = Callable[[GoalResult, bytes], None]
 """Told a goal's result (and its message as published) once it is published: a cell goal's part."""
@@ -101,6 +107,8 @@ class Goals:
         """Who is told a goal's result when it is published, by goal id (told once, then forgotten)."""
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
+        self.pose_target: PoseTarget | None = None
+        """A pose move goal's joint target (IK: runtime/cartesian.py); None: no arm kinematics."""
 
     def declare(self, guard: Guard | None = None) -> None:
         """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and
@@ -178,7 +186,8 @@ class Goals:
         prefix = self._robot.prefix
         return tuple(n if n in known or f"{prefix}{n}" not in known else f"{prefix}{n}" for n in names)
 
-    def _tolerances(self, message: ToleranceMessage, names: tuple[str, ...]) -> Tolerances | None:
+    def tolerances(self, message: ToleranceMessage, names: tuple[str, ...]) -> Tolerances | None:
+        """A goal's tolerances in the controller's joint order (None: the robot's defaults)."""
         if message.path is None and message.goal is None and message.goal_time is None:
             return None
         own = self._controller.joint_names
@@ -202,9 +211,13 @@ class Goals:
             goal_time=message.goal_time,
         )
 
-    def _accept(self, query: Any, kind: str, goal_id: str, duration: float) -> None:
+    def accept(
+        self, query: Any, kind: str, goal_id: str, duration: float, extra: dict[str, Any] | None = None
+    ) -> None:
+        """Answer a goal that started (``extra``: what its reply adds), then log and publish it."""
         key = self._keys_of.get(goal_id)
-        reply(query, {"accepted": True, "goal_id": goal_id, "duration": duration, "result_key": key})
+        body = {"accepted": True, "goal_id": goal_id, "duration": duration, "result_key": key}
+        reply(query, body if extra is None else {**body, **extra})
         self.started(kind, goal_id, duration)
 
     def started(self, kind: str, goal_id: str, duration: float) -> None:
@@ -214,7 +227,7 @@ class Goals:
         self.publish_events()
         self._status.publish()
 
-    def _refuse(self, query: Any, kind: str, err: Exception) -> None:
+    def refuse(self, query: Any, kind: str, err: Exception) -> None:
         """Answer a goal that did not start: rejected (a bad message, a refusal: logged as a warning)
         or failed on a bug (logged with its traceback: call this from the except block)."""
         if isinstance(err, (MessageError, GoalRejected)):
@@ -261,11 +274,11 @@ class Goals:
             self.check_startable(planned, generation)  # nothing ended motion while it was planned
             goal_id, duration = self.start_planned(planned)
         except Exception as err:  # refused, or a bug: either way the client is answered, once
-            self._refuse(query, "trajectory", err)
+            self.refuse(query, "trajectory", err)
             return
         finally:  # cancelled (shutting down): the task's done-callback answers
             self._gate.planning = None
-        self._accept(
+        self.accept(
             query, "passthrough trajectory" if planned.passthrough else "trajectory", goal_id, duration
         )
 
@@ -287,7 +300,7 @@ class Goals:
         if goal.passthrough and no_passthrough is not None:
             raise GoalRejected(no_passthrough)
         names = self.joint_names(goal.joint_names)
-        tolerances = self._tolerances(goal.tolerances, names)
+        tolerances = self.tolerances(goal.tolerances, names)
         gate.check_still_wanted(generation)
         if goal.passthrough:
             self.passthrough.check_available()
@@ -371,20 +384,39 @@ class Goals:
     # ---- move goals and cancel -------------------------------------------------------------------
 
     def on_move_goal(self, query: Any) -> None:
-        """A point-to-point move goal: decided at once."""
+        """A point-to-point move goal, to joint positions or (through IK: ``pose_target``) to a TCP
+        pose: decided at once. A pose goal's reply adds the joint ``positions`` it chose."""
+        extra: dict[str, Any] | None = None
         try:
             if self._gate.closing:
                 raise GoalRejected(SHUTTING_DOWN)
             goal = codec.decode_move_goal(payload(query))
             self._gate.check_free_to_move()
+            if goal.pose is not None:
+                if self.pose_target is None:
+                    raise GoalRejected(f"move goal.pose: robot {self._robot.name} has no arm kinematics")
+                goal = dataclasses.replace(goal, positions=self.pose_target(goal, self._backend.state))
+                extra = {"positions": list(goal.positions)}
             names = self.joint_names(goal.joint_names)
-            tolerances = self._tolerances(goal.tolerances, names)
+            tolerances = self.tolerances(goal.tolerances, names)
             goal_id, _ = self._new_goal()
             duration = self._accept_move(goal_id, goal, names, tolerances)
         except Exception as err:  # refused, or a bug: either way the client is answered, once
-            self._refuse(query, "move", err)
+            self.refuse(query, "move", err)
             return
-        self._accept(query, "move", goal_id, duration)
+        self.accept(query, "move" if extra is None else "pose move", goal_id, duration, extra)
+
+    def start_ready(self, plan: ReadyPlan, tolerances: Tolerances | None) -> tuple[str, float]:
+        """Start a plan made for the pose the robot rests at (a linear goal's); its id and duration."""
+        goal_id, _ = self._new_goal()
+        try:
+            state = self._backend.state
+            return goal_id, self._controller.accept_planned(
+                goal_id, plan, state, time.monotonic(), tolerances=tolerances
+            )
+        except BaseException:
+            self._keys_of.pop(goal_id, None)  # never started: no result will use it
+            raise
 
     def _accept_move(
         self, goal_id: str, goal: codec.MoveGoalMessage, names: tuple[str, ...], tolerances: Tolerances | None

@@ -15,7 +15,7 @@ from typing import Any
 
 from urdaemon.backends.base import Backend
 from urdaemon.control import MotionController
-from urdaemon.errors import BackendError, MessageError
+from urdaemon.errors import BackendError, GoalRejected, MessageError
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.publish.services import SERVICES, STOP, ServiceSpec, names
@@ -36,7 +36,10 @@ class ServiceRunner:
         controller: MotionController,
         parts: tuple[MotionGate, Requests, StatusPublisher, Goals],
         log: logging.LoggerAdapter[logging.Logger],
+        on_tcp: Callable[[tuple[float, ...]], None] | None = None,
     ) -> None:
+        self._on_tcp = on_tcp
+        """Told a new TCP offset once the controller and the backend took it (tcp_pose's composition)."""
         self._backend = backend
         self._controller = controller
         self._gate, self._requests, self._status, self._goals = parts
@@ -102,9 +105,10 @@ class ServiceRunner:
         assert spec.handle is not None, "stop is answered by on_stop"
         try:
             extra = await spec.handle(self, spec.decode(data))
-        except (MessageError, BackendError) as err:
+        except (MessageError, BackendError, GoalRejected) as err:
             self._log.warning("%s refused: %s", spec.name, err)
-            reply(query, {"ok": False, "reason": str(err)})
+            reason = err.reason if isinstance(err, GoalRejected) else str(err)
+            reply(query, {"ok": False, "reason": reason})
         except Exception as err:  # a backend bug must still answer the client
             self._log.exception("%s failed", spec.name)
             reply(query, {"ok": False, "reason": internal_error(err)})
@@ -129,3 +133,23 @@ class ServiceRunner:
         if self._gate.in_contact:
             self._gate.in_contact = False
             self._controller.abort(TOOL_CONTACT_REASON)
+
+    async def set_tcp(self, pose: tuple[float, ...]) -> None:
+        """Make ``pose`` the TCP offset: refused while anything moves or a goal is being planned (a plan
+        is made for the TCP it started with); the controller's first (it refuses unless idle), then the
+        backend's (the controller's is put back if the backend fails), then tcp_pose's."""
+        if self._gate.planning is not None:
+            raise GoalRejected(f"set_tcp: goal {self._gate.planning} is being planned; the robot is busy")
+        controller = self._controller
+        before = controller.tcp
+        try:
+            controller.set_tcp(pose)
+        except GoalRejected as err:
+            raise GoalRejected(f"set_tcp: the robot is moving ({err.reason})") from err
+        try:
+            await self._backend.set_tcp(pose)
+        except BaseException:
+            controller.set_tcp(before)
+            raise
+        if self._on_tcp is not None:
+            self._on_tcp(pose)

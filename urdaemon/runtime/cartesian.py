@@ -1,0 +1,220 @@
+"""One robot's Cartesian goals: the joint target of a pose move goal, and linear goals.
+
+A pose move goal (``goal/move`` with ``pose``) is brought into the robot's base frame, solved by IK
+on the robot's arm kinematics (the solution nearest the joints the goal starts from, of the named
+configuration if any), and then runs exactly as a joint move goal (runtime/goals.py).
+
+A linear goal (``goal/linear``) starts from rest only. It is decoded and its limits checked against
+the cell's caps at once, then planned (control/linear.py: straight TCP lines, every cycle's joints
+checked) in slices between robot cycles under the gate like a trajectory goal: a second goal while it
+is planned is refused ``busy``, whatever ends motion meanwhile (stop, cancel, freedrive, ...) refuses
+it, and it starts only if the robot still rests where it was planned from. Its reply, feedback,
+result and signing are every goal's (runtime/goals.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from urdaemon.backends.base import Backend
+from urdaemon.cell.config import CARTESIAN_PAIRS, Robot
+from urdaemon.control import MotionController
+from urdaemon.control.cartesian import CartesianLimits
+from urdaemon.control.planned import ReadyPlan
+from urdaemon.description.arm import ArmKinematics, base_in_world
+from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
+from urdaemon.errors import GoalRejected
+from urdaemon.model import RobotState
+from urdaemon.publish import codec
+from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.node import Guard, ZenohNode
+from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
+from urdaemon.runtime.goals import Goals
+from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload
+from urdaemon.runtime.slicing import CHECK_STEPS, sliced
+
+__all__ = ["Cartesian", "shown_pose"]
+
+
+def shown_pose(pose: Sequence[float]) -> str:
+    """A pose as a refusal shows it: ``[x, y, z, rx, ry, rz]``, four decimals."""
+    return "[" + ", ".join(f"{v:.4f}" for v in pose) + "]"
+
+
+class Cartesian:
+    """Solves one robot's pose move goals and plans and starts its linear goals."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        backend: Backend,
+        controller: MotionController,
+        goals: Goals,
+        parts: tuple[MotionGate, Requests],
+        kinematics: ArmKinematics | None,
+        log: logging.LoggerAdapter[logging.Logger],
+    ) -> None:
+        self._robot = robot
+        self._backend = backend
+        self._controller = controller
+        self._goals = goals
+        self._gate, self._requests = parts
+        self._kin = kinematics
+        self._log = log
+        world = base_in_world(robot)
+        self._from_world: Frame | None = None if world is None else inverse(world)
+        """base -> world, to bring a world pose into base (None: the robot is not mounted on world)."""
+        goals.pose_target = self.pose_target
+
+    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> None:
+        """Declare the linear goal's queryable (its exact key only; the command lease holder's token)."""
+        node.queryable(
+            keys.goal_linear,
+            self.on_linear_goal,
+            max_bytes=codec.LINEAR_MESSAGE_BYTES,
+            answer="accepted",
+            guard=guard,
+        )
+
+    # ---- frames --------------------------------------------------------------------------------
+
+    def _arm(self, what: str) -> ArmKinematics:
+        if self._kin is None:
+            raise GoalRejected(f"{what}: robot {self._robot.name} has no arm kinematics")
+        return self._kin
+
+    def in_base(self, pose: Sequence[float], frame: str, what: str) -> tuple[float, ...]:
+        """``pose`` (in ``frame``: base or world) in the robot's base frame."""
+        if frame == "base":
+            return tuple(pose)
+        if self._from_world is None:
+            raise GoalRejected(
+                f"{what}: frame 'world': {self._robot.name} is mounted on {self._robot.pose.parent}; "
+                "its base moves with it, use frame 'base'"
+            )
+        return pose_of_frame(compose(self._from_world, frame_of_pose(pose)))
+
+    # ---- pose move goals -----------------------------------------------------------------------
+
+    def pose_target(self, goal: codec.MoveGoalMessage, state: RobotState) -> tuple[float, ...]:
+        """The joints of a pose move goal: IK nearest the joints the goal starts from (of its named
+        configuration, if any); refused naming the pose when there is none."""
+        what = "move goal"
+        kin = self._arm(what)
+        assert goal.pose is not None
+        pose = self.in_base(goal.pose, goal.frame, what)
+        start, _ = self._controller.goal_start(state)
+        tcp = self._controller.tcp
+        if not goal.configuration:
+            found = kin.nearest(pose, start, tcp)
+        elif not kin.branches:
+            raise GoalRejected(
+                f"{what}.configuration: robot {self._robot.name} has no named configurations (UR models only)"
+            )
+        else:
+            found = kin.nearest_in(pose, start, tcp, dict(goal.configuration))  # type: ignore[attr-defined]
+        if found is not None:
+            return tuple(found)
+        shown = shown_pose(goal.pose)
+        if goal.configuration and kin.nearest(pose, start, tcp) is not None:
+            named = ", ".join(f"{group}={value}" for group, value in goal.configuration)
+            raise GoalRejected(f"{what}: pose {shown} has no solution with configuration {named}")
+        raise GoalRejected(f"{what}: pose {shown} is out of reach")
+
+    # ---- linear goals --------------------------------------------------------------------------
+
+    def limits(self, goal: codec.LinearGoalMessage) -> CartesianLimits:
+        """The goal's Cartesian limits: those it names (each at most the cell's cap), the cell's
+        defaults for the rest."""
+        options = self._robot.motion.cartesian
+        named = dict(goal.limits)
+        values = []
+        for name, cap, unit in CARTESIAN_PAIRS:
+            value = named.get(name)
+            if value is None:
+                value = getattr(options, name)
+            elif value > getattr(options, cap):
+                raise GoalRejected(
+                    f"linear goal.{name}: {value:g} {unit} is above the cap {cap} {getattr(options, cap):g} "
+                    f"{unit} (the cell file's motion.cartesian)"
+                )
+            values.append(value)
+        return CartesianLimits(*values)
+
+    def on_linear_goal(self, query: Any) -> None:
+        """A linear goal: refused at once while another goal is planned, else planned in a task."""
+        gate = self._gate
+        if gate.closing:
+            self._goals.refuse(query, "linear", GoalRejected(SHUTTING_DOWN))
+            return
+        if gate.planning is not None:  # refused before reading a byte of it
+            self._goals.refuse(
+                query, "linear", GoalRejected(f"busy: still planning trajectory {gate.planning}")
+            )
+            return
+        gate.planning = "being decoded"
+        # what ended motion before this query counts as before it: recorded now, not when it starts
+        work = self._linear_goal(query, gate.generation)
+        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+
+    async def _linear_goal(self, query: Any, generation: int) -> None:
+        try:
+            decoder = codec.LinearGoalDecoder(payload(query))
+            await sliced(lambda deadline: decoder.step(deadline, time.perf_counter))
+            goal = decoder.result()
+            plan = await self._plan(goal, generation)
+            self._gate.check_still_wanted(generation)  # nothing ended motion while it was planned
+            tolerances = self._goals.tolerances(goal.tolerances, self._controller.joint_names)
+            goal_id, duration = self._goals.start_ready(plan, tolerances)
+        except Exception as err:  # refused, or a bug: either way the client is answered, once
+            self._goals.refuse(query, "linear", err)
+            return
+        finally:  # cancelled (shutting down): the task's done-callback answers
+            self._gate.planning = None
+        self._goals.accept(query, "linear", goal_id, duration)
+
+    async def _plan(self, goal: codec.LinearGoalMessage, generation: int) -> ReadyPlan:
+        """Check and plan a linear goal from where the robot rests, in slices between robot cycles."""
+        what = "linear goal"
+        kin = self._arm(what)
+        limits = self.limits(goal)
+        poses = [self.in_base(pose, goal.frame, what) for pose in goal.poses]
+        gate, controller = self._gate, self._controller
+        gate.check_still_wanted(generation)
+        state = self._backend.state
+        controller.check_can_start(state, time.monotonic(), False)
+        start, at_rest = controller.goal_start(state)
+        if not at_rest:
+            raise GoalRejected(f"{what}: the robot is moving; a linear goal starts from rest")
+        gate.planning = f"linear goal of {len(poses)} pose{'s' if len(poses) != 1 else ''}"
+        from urdaemon.control.linear import plan_linear  # loaded by the first linear goal: footprint
+
+        check = plan_linear(
+            kin,
+            start,
+            poses,
+            goal.blend_radii,
+            controller.tcp,
+            limits,
+            controller.plan_limits,
+            self._backend.period,
+        )
+
+        def step(deadline: float) -> bool:
+            if gate.generation != generation or gate.closing:  # stop, cancel, freedrive: no more work
+                raise GoalRejected(SHUTTING_DOWN if gate.closing else STOPPED_WHILE_PLANNING)
+            while check.step(CHECK_STEPS):
+                if time.perf_counter() > deadline:
+                    return True
+            return False
+
+        try:
+            await sliced(step)
+            return check.result()
+        finally:
+            with contextlib.suppress(Exception):
+                check.close()
