@@ -211,3 +211,25 @@ def test_bad_chains_are_refused(tmp_path: Path) -> None:
         ChainKinematics(tree, "arm_base_link", "arm_tool0", [n for n in names if n != "arm_reach"])
     with pytest.raises(DescriptionError, match="moves 'arm_slider'"):
         ChainKinematics(tree, "arm_slider", "arm_column", names)
+
+
+def test_joints_off_the_chain_keep_qnear(tmp_path: Path) -> None:
+    """A chain ending at the slider leaves the wrist joints out: zero columns, qnear's values kept,
+    also when the answer comes from a restart seed."""
+    cell, full = _custom(tmp_path, SIX)
+    description = describe_cell(cell)
+    limits = description.limits["arm"]
+    bounds = (limits.min_position, limits.max_position)
+    kin = ChainKinematics(description.tree, "arm_base_link", "arm_slider", limits.names, bounds)
+    q = [0.4, 0.3, 0.2, 0.0, 0.0, 0.0]
+    rows = np.array(kin.jacobian_rows(q))
+    assert np.all(rows[:, 3:] == 0.0)
+    assert np.any(rows[:, :3] != 0.0)
+    pose = kin.forward(q)
+    # The second qnear does not converge: the answer comes from a restart seed.
+    for qnear in ([0.45, 0.25, 0.25, 1.0, -1.0, 2.0], [-2.9, 1.9, 0.0, 1.0, -1.0, 2.0]):
+        found = kin.nearest(pose, qnear)
+        assert found is not None
+        assert np.allclose(found[:3], q[:3], atol=1e-9)
+        assert list(found[3:]) == qnear[3:]
+    assert full.dof == kin.dof

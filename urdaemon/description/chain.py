@@ -58,11 +58,6 @@ class _Step(NamedTuple):
     offset: float
 
 
-class _Pose(NamedTuple):
-    frame: Frame
-    rows: list[list[float]]
-
-
 class ChainKinematics:
     """Forward and inverse kinematics and the Jacobian of the URDF chain ``base`` -> ``tool``.
 
@@ -70,7 +65,7 @@ class ChainKinematics:
     joint is unbounded (continuous) and a prismatic one too. A joint of ``joint_names`` not on the
     chain gives a zero Jacobian column and keeps ``qnear``'s value."""
 
-    __slots__ = ("_base", "_lower", "_revolute", "_steps", "_upper", "dof")
+    __slots__ = ("_base", "_lower", "_moving", "_revolute", "_steps", "_upper", "dof")
 
     branches: bool = False
     """No named configurations: the solution is the one reached from ``qnear``."""
@@ -96,10 +91,12 @@ class ChainKinematics:
         self._base = inverse(fixed_up)
         self._steps = tuple(_step(joint, columns, base, tool) for joint in down)
         revolute = [False] * self.dof
+        moving = [False] * self.dof
         for step in self._steps:
-            if step.kind == "revolute":
-                revolute[step.column] = True
-        self._revolute = tuple(revolute)
+            if step.kind != "fixed":
+                moving[step.column] = True
+                revolute[step.column] = step.kind == "revolute"
+        self._revolute, self._moving = tuple(revolute), tuple(moving)
         lower = [-math.inf] * self.dof if bounds is None else [float(v) for v in bounds[0]]
         upper = [math.inf] * self.dof if bounds is None else [float(v) for v in bounds[1]]
         if len(lower) != self.dof or len(upper) != self.dof:
@@ -226,9 +223,12 @@ class ChainKinematics:
         return [min(hi, max(lo, v)) for v, lo, hi in zip(q, self._lower, self._upper, strict=True)]
 
     def _wrapped(self, q: list[float], near: Sequence[float]) -> list[float]:
-        """Each revolute joint turned by whole turns nearest ``near`` while inside its limits."""
+        """Each revolute joint turned by whole turns nearest ``near`` while inside its limits; a joint
+        off the chain at ``near``'s value (a restart's seed moved it)."""
         out = list(q)
         for i, revolute in enumerate(self._revolute):
+            if not self._moving[i]:
+                out[i] = min(self._upper[i], max(self._lower[i], float(near[i])))
             if not revolute:
                 continue
             shifted = out[i] + _TAU * round((near[i] - out[i]) / _TAU)
@@ -357,6 +357,11 @@ def _path(tree: KinematicTree, base: str, tool: str) -> tuple[list[TreeJoint], l
 def _step(joint: TreeJoint, columns: dict[str, int], base: str, tool: str) -> _Step:
     if joint.type == "fixed":
         return _Step(joint.origin, "fixed", (0.0, 0.0, 1.0), 0, 0.0, 0.0)
+    if joint.type not in ("revolute", "continuous", "prismatic"):
+        raise DescriptionError(
+            f"chain {base!r} -> {tool!r}: joint {joint.name!r} is {joint.type!r}; "
+            "a chain takes revolute, continuous, prismatic and fixed joints"
+        )
     kind = "prismatic" if joint.type == "prismatic" else "revolute"
     source, multiplier, offset = joint.name, 1.0, 0.0
     if joint.mimic is not None:
