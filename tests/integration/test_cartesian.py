@@ -12,6 +12,7 @@ no service 'set_tcp'"), so every test here fails.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 from collections import Counter
@@ -515,3 +516,37 @@ def _frame_of(xyzq: Sequence[float]) -> Frame:
         2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
         xyzq[0], xyzq[1], xyzq[2],
     )  # fmt: skip
+
+
+async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuses_it(
+    served: Served, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A slow linear goal (0.2 m at 1 cm/s: 20 s, 10 000 cycles to check) is planned one step per turn
+    of the loop (``PLANNING_SLICE_S`` 0); while it is, another goal is refused as busy, and a cancel
+    refuses it (the cancel's reply names it) before it ever moves the robot."""
+    from urdaemon.runtime import slicing
+
+    await _home(served)
+    monkeypatch.setattr(slicing, "PLANNING_SLICE_S", 0.0)
+    gate = served.daemon.runtimes[0].gate
+    before = served.positions
+    end = _shifted(served.kin.forward(before), dz=0.2)
+    planning = asyncio.create_task(served.ask("goal/linear", {"poses": [end], "speed": 0.01}))
+    for _ in range(100_000):  # bounded: the goal reaches the planner within a few turns of the loop
+        if gate.planning is not None and gate.planning.startswith("linear goal"):
+            break
+        await asyncio.sleep(0)
+    assert gate.planning == "linear goal of 1 pose", gate.planning
+    busy = await served.ask("goal/linear", {"poses": [end]})
+    assert busy == {
+        "v": 1,
+        "accepted": False,
+        "reason": "busy: still planning trajectory linear goal of 1 pose",
+    }
+    canceled = await served.ask("goal/cancel", {})
+    assert canceled["canceled"] is True, canceled
+    assert canceled["planned"] == "the trajectory goal being planned (linear goal of 1 pose) is refused"
+    reply = await planning
+    assert reply["accepted"] is False
+    assert reply["reason"].startswith("stopped while it was being planned"), reply
+    assert served.positions == before
