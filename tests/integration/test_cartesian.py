@@ -521,31 +521,52 @@ def _frame_of(xyzq: Sequence[float]) -> Frame:
 async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuses_it(
     served: Served, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A slow linear goal (0.2 m at 1 cm/s: 20 s, 10 000 cycles to check) is planned one step per turn
-    of the loop (``PLANNING_SLICE_S`` 0); while it is, another goal is refused as busy, and a cancel
-    refuses it (the cancel's reply names it) before it ever moves the robot."""
-    from urdaemon.runtime import slicing
+    """A linear goal's planning is held before its first slice (runtime/cartesian.py's ``sliced``,
+    its second use: the first decodes it); while it waits, another goal is refused as busy, set_tcp
+    too (the plan is made for the TCP it started with), and a cancel refuses it (the cancel's reply
+    names it); let go, it is refused before it ever moves the robot."""
+    from urdaemon.runtime import cartesian, slicing
 
     await _home(served)
-    monkeypatch.setattr(slicing, "PLANNING_SLICE_S", 0.0)
+    real = slicing.sliced
+    uses = 0
+    go = asyncio.Event()
+
+    async def held(step: Any) -> None:
+        nonlocal uses
+        uses += 1
+        if uses == 2:
+            await go.wait()
+        await real(step)
+
+    monkeypatch.setattr(cartesian, "sliced", held)
     gate = served.daemon.runtimes[0].gate
     before = served.positions
-    end = _shifted(served.kin.forward(before), dz=0.2)
-    planning = asyncio.create_task(served.ask("goal/linear", {"poses": [end], "speed": 0.01}))
-    for _ in range(100_000):  # bounded: the goal reaches the planner within a few turns of the loop
-        if gate.planning is not None and gate.planning.startswith("linear goal"):
-            break
-        await asyncio.sleep(0)
-    assert gate.planning == "linear goal of 1 pose", gate.planning
-    busy = await served.ask("goal/linear", {"poses": [end]})
-    assert busy == {
-        "v": 1,
-        "accepted": False,
-        "reason": "busy: still planning trajectory linear goal of 1 pose",
-    }
-    canceled = await served.ask("goal/cancel", {})
-    assert canceled["canceled"] is True, canceled
-    assert canceled["planned"] == "the trajectory goal being planned (linear goal of 1 pose) is refused"
+    end = _shifted(served.kin.forward(before), dz=0.1)
+    planning = asyncio.create_task(served.ask("goal/linear", {"poses": [end]}))
+    try:
+        for _ in range(100_000):  # bounded: the goal reaches the planner within a few turns of the loop
+            if uses == 2:
+                break
+            await asyncio.sleep(0)
+        assert gate.planning == "linear goal of 1 pose", gate.planning
+        busy = await served.ask("goal/linear", {"poses": [end]})
+        assert busy == {
+            "v": 1,
+            "accepted": False,
+            "reason": "busy: still planning trajectory linear goal of 1 pose",
+        }
+        tcp = await served.ask("service/set_tcp", {"pose": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]})
+        assert tcp == {
+            "v": 1,
+            "ok": False,
+            "reason": "set_tcp: the robot is busy: a goal is being planned (linear goal of 1 pose)",
+        }
+        canceled = await served.ask("goal/cancel", {})
+        assert canceled["canceled"] is True, canceled
+        assert canceled["planned"] == "the trajectory goal being planned (linear goal of 1 pose) is refused"
+    finally:
+        go.set()
     reply = await planning
     assert reply["accepted"] is False
     assert reply["reason"].startswith("stopped while it was being planned"), reply

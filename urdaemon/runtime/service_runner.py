@@ -139,17 +139,17 @@ class ServiceRunner:
         is made for the TCP it started with); the controller's first (it refuses unless idle), then the
         backend's (the controller's is put back if the backend fails), then tcp_pose's."""
         if self._gate.planning is not None:
-            raise GoalRejected(f"set_tcp: goal {self._gate.planning} is being planned; the robot is busy")
+            raise GoalRejected(f"set_tcp: the robot is busy: a goal is being planned ({self._gate.planning})")
         controller = self._controller
         before = controller.tcp
-        try:
-            controller.set_tcp(pose)
-        except GoalRejected as err:
-            raise GoalRejected(f"set_tcp: the robot is moving ({err.reason})") from err
+        controller.set_tcp(pose)  # "set_tcp: the robot is moving" unless it rests
         try:
             await self._backend.set_tcp(pose)
         except BaseException:
-            controller.set_tcp(before)
+            try:
+                controller.set_tcp(before)
+            except GoalRejected:  # a goal started meanwhile, with the new TCP: the backend's stays old
+                self._log.warning("set_tcp failed on the backend while a goal started with the new TCP")
             raise
         if self._on_tcp is not None:
             self._on_tcp(pose)
