@@ -515,14 +515,15 @@ def _cartesian_step(a: Frame, b: Frame) -> float:
 def _singularity_name(kin: ArmKinematics, q: Sequence[float]) -> str:
     """'a wrist singularity' (elbow, shoulder) for arms with named configurations, else 'a singularity'."""
     name_of = getattr(kin, "singularity_name", None) if kin.branches else None
-    return "a singularity" if name_of is None else f"a {name_of(q)} singularity"
+    if name_of is None:
+        return "a singularity"
+    name = str(name_of(q))
+    return f"{'an' if name[:1] in 'aeiou' else 'a'} {name} singularity"
 
 
-_BRANCH_GROUPS = ("shoulder", "wrist")
-"""The named configuration's groups that change only where the IK's branches meet (the shoulder and
-wrist singularities, which the singular-value check refuses first). ``elbow`` (docs/kinematics.md:
-above or below the shoulder-wrist line) also changes where that line turns past the vertical, with
-the joints continuous and far from a singularity: comparing it would refuse sound paths."""
+_BRANCH_GROUPS = ("shoulder", "elbow", "wrist")
+"""The named configuration's groups (docs/kinematics.md): each changes only where two IK branches meet,
+at a singularity, which the singular-value check refuses first unless it falls between two samples."""
 
 
 def _configuration(kin: ArmKinematics, q: Sequence[float]) -> tuple[str, ...] | None:
