@@ -1,12 +1,14 @@
-"""The ``urdaemon`` command: serve, check, urdf, echo, move, cancel, stop, service, dashboard, lease.
+"""The ``urdaemon`` command: serve, check, urdf, echo, move, teleop, cancel, stop, service, dashboard,
+lease.
 
-Client commands that command a robot (``move``, ``cancel``, ``service``, ``dashboard``) acquire its
-command lease first and release it when they exit; ``stop`` never needs it; ``lease`` shows or takes
-it over. Each connects with ``--connect`` and, for TLS, ``--zenoh-config``.
+Client commands that command a robot (``move``, ``teleop``, ``cancel``, ``service``, ``dashboard``)
+acquire its command lease first and release it when they exit; ``stop`` never needs it; ``lease``
+shows or takes it over. Each connects with ``--connect`` and, for TLS, ``--zenoh-config``.
 
 Exit codes: 0 success; 1 a command failed (goal aborted, no answer, refused: also for the lease, with
-the daemon's reason naming the holder); 2 bad input (config, arguments); 130 ``move`` interrupted by
-Ctrl-C (its goal canceled first).
+the daemon's reason naming the holder); 2 bad input (config, arguments; ``teleop`` without a
+terminal); 130 ``move`` interrupted by Ctrl-C (its goal canceled first; ``teleop`` quits on Ctrl-C
+with 0, the robot stopping).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import math
 import signal
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from urdaemon import __version__
@@ -27,6 +30,7 @@ from urdaemon import __version__
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell
     from urdaemon.client import Client, RobotClient
+    from urdaemon.teleop_keys import TeleopKeys
 
 from urdaemon.errors import ConfigError, DescriptionError, GoalRejected, UrDaemonError
 
@@ -236,20 +240,9 @@ def _fields(request: type) -> str:
 
 
 def _add_goal_tools(sub: Any) -> None:
-    """``move`` and ``cancel``: a robot's goals."""
-    move = sub.add_parser("move", help="move a robot to joint positions and wait for the result")
-    move.add_argument("robot")
-    move.add_argument(
-        "--joints", required=True, help="comma-separated joint positions (rad), controller order"
-    )
-    move.add_argument(
-        "--duration", type=_seconds_arg(False), default=None, help="seconds (default: time-optimal)"
-    )
-    move.add_argument(
-        "--cell", default=None, help="cell name (default: found from the robot's liveliness token)"
-    )
-    move.add_argument("--velocity-scale", type=float, default=1.0, help="within (0, 1], default 1")
-    _connect_arg(move)
+    """``move``, ``teleop``, ``cancel``, ``stop`` and ``lease``: a robot's goals and commands."""
+    _add_move(sub)
+    _add_teleop(sub)
 
     cancel = sub.add_parser("cancel", help="cancel a robot's goal (default: the active one)")
     cancel.add_argument("robot")
@@ -275,6 +268,70 @@ def _add_goal_tools(sub: Any) -> None:
     )
     lease.add_argument("--cell", default=None)
     _connect_arg(lease)
+
+
+def _add_move(sub: Any) -> None:
+    """``move``: to joint positions or a TCP pose (a straight line with ``--linear``)."""
+    move = sub.add_parser(
+        "move", help="move a robot to joint positions or a TCP pose and wait for the result"
+    )
+    move.add_argument("robot")
+    target = move.add_mutually_exclusive_group(required=True)
+    target.add_argument("--joints", help="comma-separated joint positions (rad), controller order")
+    target.add_argument(
+        "--pose",
+        action="append",
+        metavar="X,Y,Z,RX,RY,RZ",
+        help="TCP pose: metres and a rotation vector (rad), in --frame; with --linear repeat it for "
+        "a path through several poses",
+    )
+    move.add_argument(
+        "--linear", action="store_true", help="with --pose: a straight TCP line (from rest), not a joint move"
+    )
+    move.add_argument(
+        "--frame",
+        choices=("base", "world"),
+        default="base",
+        help="the frame of --pose: the robot's base (default, as tcp_pose) or the cell's world",
+    )
+    move.add_argument(
+        "--speed", type=float, default=None, help="with --linear: TCP speed in m/s (default: the cell's)"
+    )
+    move.add_argument(
+        "--duration", type=_seconds_arg(False), default=None, help="seconds (default: time-optimal)"
+    )
+    move.add_argument(
+        "--cell", default=None, help="cell name (default: found from the robot's liveliness token)"
+    )
+    move.add_argument("--velocity-scale", type=float, default=1.0, help="within (0, 1], default 1")
+    _connect_arg(move)
+
+
+def _add_teleop(sub: Any) -> None:
+    """``teleop``: jog a robot's TCP from the keyboard."""
+    from urdaemon import teleop_keys
+
+    keys = "\n".join(f"  {part}" for part in teleop_keys.HELP.split("   "))
+    teleop = sub.add_parser(
+        "teleop",
+        help="jog a robot's TCP from the keyboard (twist commands)",
+        description=f"Jog a robot's TCP from the keyboard.\n\n{keys}\n\nA key moves the TCP while it "
+        f"is held (the terminal's auto-repeat); {teleop_keys.RELEASE_S:g} s without a key: zero twist.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    teleop.add_argument("robot")
+    teleop.add_argument(
+        "--speed",
+        type=float,
+        default=teleop_keys.DEFAULT_SPEED,
+        help=f"TCP speed in m/s at start (default {teleop_keys.DEFAULT_SPEED:g}; "
+        f"{teleop_keys.MIN_SPEED:g}..{teleop_keys.MAX_SPEED:g}; i/k change it)",
+    )
+    teleop.add_argument(
+        "--frame", choices=teleop_keys.FRAMES, default="base", help="twist frame at start (b toggles it)"
+    )
+    teleop.add_argument("--cell", default=None)
+    _connect_arg(teleop)
 
 
 def _add_calibration(sub: Any) -> None:
@@ -338,6 +395,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             return asyncio.run(_echo(args))
         if args.command == "move":
             return asyncio.run(_move(args))
+        if args.command == "teleop":
+            return asyncio.run(_teleop(args))
         if args.command == "cancel":
             return asyncio.run(_cancel(args))
         if args.command == "stop":
@@ -359,12 +418,13 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _join_option_values(argv: list[str]) -> list[str]:
-    """``--joints -0.5,1`` → ``--joints=-0.5,1``: argparse would read a leading '-' as an option."""
+    """``--joints -0.5,1`` → ``--joints=-0.5,1`` (``--pose`` too): argparse would read a leading '-'
+    as an option."""
     out: list[str] = []
     i = 0
     while i < len(argv):
-        if argv[i] == "--joints" and i + 1 < len(argv):
-            out.append(f"--joints={argv[i + 1]}")
+        if argv[i] in ("--joints", "--pose") and i + 1 < len(argv):
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
         else:
             out.append(argv[i])
@@ -722,21 +782,73 @@ async def _cancel(args: argparse.Namespace) -> int:
     return EXIT_OK if reply.get("canceled") else EXIT_FAILED
 
 
-def _move_problem(args: argparse.Namespace) -> tuple[list[float], str | None]:
-    try:
-        joints = [float(v) for v in args.joints.split(",")]
-    except ValueError:
-        return [], f"--joints must be comma-separated numbers, got {args.joints!r}"
-    if not all(math.isfinite(v) for v in joints):
-        return [], "--joints must be finite numbers"
+GoalSender = Callable[["RobotClient"], Awaitable[Any]]
+"""What ``move`` sends: the goal for the robot, as a call of its client."""
+
+
+def _move_problem(args: argparse.Namespace) -> tuple[GoalSender | None, str | None]:
+    """The goal ``move``'s arguments ask for, or why they cannot be used."""
     if not (math.isfinite(args.velocity_scale) and 0 < args.velocity_scale <= 1):
-        return [], f"--velocity-scale must be within (0, 1], got {args.velocity_scale}"
-    return joints, _bad_target(args)
+        return None, f"--velocity-scale must be within (0, 1], got {args.velocity_scale}"
+    if args.joints is not None:
+        if args.linear:
+            return None, "--linear moves to --pose values, not --joints"
+        joints, problem = _numbers(args.joints, "--joints", None)
+        send: GoalSender = partial(_send_move, joints, args)
+        return (None, problem) if problem else (send, _bad_target(args))
+    poses = []
+    for text in args.pose:
+        pose, problem = _numbers(text, "--pose", 6)
+        if problem is not None:
+            return None, problem
+        poses.append(pose)
+    if not args.linear:
+        return _pose_goal(poses, args)
+    if args.duration is not None or args.velocity_scale != 1.0:
+        return None, "--duration and --velocity-scale are for joint moves; --linear takes --speed (m/s)"
+    if args.speed is not None and not (math.isfinite(args.speed) and args.speed > 0):
+        return None, f"--speed must be a number of m/s > 0, got {args.speed}"
+    return partial(_send_linear, poses, args), _bad_target(args)
+
+
+def _pose_goal(poses: list[list[float]], args: argparse.Namespace) -> tuple[GoalSender | None, str | None]:
+    if len(poses) > 1:
+        return None, "several --pose make a path: add --linear (a joint move goes to one pose)"
+    if args.speed is not None:
+        return None, "--speed (m/s) is for --linear; a pose move takes --duration or --velocity-scale"
+    return partial(_send_pose, poses[0], args), _bad_target(args)
+
+
+def _numbers(text: str, option: str, count: int | None) -> tuple[list[float], str | None]:
+    """``text``'s comma-separated finite numbers (``count`` of them when given), or why not."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        return [], f"{option} must be comma-separated numbers, got {text!r}"
+    if not all(math.isfinite(v) for v in values):
+        return [], f"{option} must be finite numbers"
+    if count is not None and len(values) != count:
+        return [], f"{option} needs {count} numbers (x,y,z in m, rx,ry,rz in rad), got {len(values)}"
+    return values, None
+
+
+async def _send_move(joints: list[float], args: argparse.Namespace, robot: RobotClient) -> Any:
+    return await robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)
+
+
+async def _send_pose(pose: list[float], args: argparse.Namespace, robot: RobotClient) -> Any:
+    return await robot.move_pose(
+        pose, frame=args.frame, duration=args.duration, velocity_scale=args.velocity_scale
+    )
+
+
+async def _send_linear(poses: list[list[float]], args: argparse.Namespace, robot: RobotClient) -> Any:
+    return await robot.move_linear(poses, frame=args.frame, speed=args.speed)
 
 
 async def _move(args: argparse.Namespace) -> int:
-    joints, problem = _move_problem(args)
-    if problem is not None:
+    send, problem = _move_problem(args)
+    if problem is not None or send is None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
@@ -748,9 +860,7 @@ async def _move(args: argparse.Namespace) -> int:
             robot = await client.robot(args.robot, cell=args.cell)
             # sent as a task of its own, so that Ctrl-C while the accept reply is on its way does not
             # lose the reply: the goal it names is canceled (_cancel_when_answered)
-            sending = asyncio.ensure_future(
-                robot.move(joints, duration=args.duration, velocity_scale=args.velocity_scale)
-            )
+            sending = asyncio.ensure_future(send(robot))
             try:
                 goal = await asyncio.shield(sending)
             except asyncio.CancelledError:
@@ -767,6 +877,43 @@ async def _move(args: argparse.Namespace) -> int:
         except asyncio.CancelledError:  # Ctrl-C: asyncio cancels this task; the robot must stop too
             bar.end()
             return await _cancel_on_interrupt(goal)
+
+
+async def _teleop(args: argparse.Namespace) -> int:
+    """``urdaemon teleop ROBOT``: keys to twists in a raw terminal until a quit key (teleop.py)."""
+    from urdaemon import teleop_keys
+
+    problem = _bad_target(args)
+    if problem is None and not (
+        math.isfinite(args.speed) and teleop_keys.MIN_SPEED <= args.speed <= teleop_keys.MAX_SPEED
+    ):
+        problem = f"--speed must be within {teleop_keys.MIN_SPEED:g}..{teleop_keys.MAX_SPEED:g} m/s"
+    if problem is None and not sys.stdin.isatty():
+        problem = "teleop reads keys from a terminal, and stdin is not one"
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        async with await _connect(args) as client:
+            robot = await client.robot(args.robot, cell=args.cell)
+            await robot.ensure_lease()  # twists are streams: they need the lease held first
+            return await _teleop_in_terminal(robot, teleop_keys.TeleopKeys(args.speed, args.frame))
+    except GoalRejected as err:
+        print(f"rejected: {err.reason}", file=sys.stderr)
+        return EXIT_FAILED
+    except UrDaemonError as err:
+        return _fail(err)
+
+
+async def _teleop_in_terminal(robot: RobotClient, keys: TeleopKeys) -> int:
+    """The keys' help, then teleop with the terminal raw (put back however it ends)."""
+    from urdaemon.teleop import TeleopShell, raw_terminal
+    from urdaemon.teleop_keys import HELP
+
+    print(f"teleop {robot.name}: {HELP}", file=sys.stderr)
+    fd = sys.stdin.fileno()
+    with raw_terminal(fd):
+        return await TeleopShell(robot, keys, fd, sys.stdout).run()
 
 
 async def _lease(args: argparse.Namespace) -> int:

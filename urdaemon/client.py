@@ -36,7 +36,7 @@ import socket
 import sys
 from collections.abc import AsyncIterator, Callable, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import zenoh
 
@@ -872,7 +872,115 @@ def _commanding(service: str) -> bool:
     return entry.commanding
 
 
-class RobotClient:
+class _CartesianCommands:
+    """A robot's Cartesian commands (issue 17): pose and linear goals, twists, the TCP offset.
+
+    Poses are (x, y, z, rx, ry, rz): metres and a rotation vector (rad), of the TCP (the robot's
+    current TCP offset applied), in the robot's base frame (``frame="base"``, the frame of
+    ``tcp_pose``) or the cell's world frame (``frame="world"``, for a robot mounted on ``world``).
+    A part of ``RobotClient``: it sends through the robot's goal and lease machinery.
+    """
+
+    keys: RobotKeys
+    client: Client
+
+    if TYPE_CHECKING:  # RobotClient's
+
+        async def _send_goal(self, key: str, body: dict[str, Any]) -> GoalHandle: ...
+
+        async def _command(
+            self, key: str, body: dict[str, Any], answer: str, timeout: float
+        ) -> dict[str, Any]: ...
+
+        def _stream_attachment(self) -> bytes | None: ...
+
+    async def move_pose(
+        self,
+        pose: Sequence[float],
+        *,
+        frame: str = "base",
+        configuration: dict[str, str] | None = None,
+        duration: float | None = None,
+        velocity_scale: float = 1.0,
+        acceleration_scale: float = 1.0,
+        tolerances: dict[str, Any] | None = None,
+        preempt: bool = False,
+    ) -> GoalHandle:
+        """Move the TCP to ``pose`` with the jerk-limited joint motion of ``move``: the daemon picks
+        the inverse kinematics solution nearest the joints the goal starts from, matching
+        ``configuration`` (UR models: any of ``shoulder`` "left"/"right", ``elbow`` "up"/"down",
+        ``wrist`` "up"/"down"). Raises ``GoalRejected`` with the daemon's reason (out of reach, no
+        solution in that configuration, a joint limit...)."""
+        body: dict[str, Any] = {"pose": list(pose), "frame": frame}
+        body.update(velocity_scale=velocity_scale, acceleration_scale=acceleration_scale, preempt=preempt)
+        _put_given(body, configuration=configuration, duration=duration, tolerances=tolerances)
+        return await self._send_goal(self.keys.goal_move, body)
+
+    async def move_linear(
+        self,
+        poses: Sequence[float] | Sequence[Sequence[float]],
+        *,
+        frame: str = "base",
+        blend_radii: Sequence[float] | None = None,
+        speed: float | None = None,
+        acceleration: float | None = None,
+        jerk: float | None = None,
+        angular_speed: float | None = None,
+        angular_acceleration: float | None = None,
+        angular_jerk: float | None = None,
+    ) -> GoalHandle:
+        """Move the TCP on straight lines from where it is through ``poses`` (one pose, or a list),
+        from rest; ``blend_radii`` (m, one per pose but the last) round the corners. Limits in m/s,
+        m/s², m/s³ and rad/s, rad/s², rad/s³ (left out: the cell's defaults; at most its caps). The
+        daemon checks the whole path before motion: ``GoalRejected`` says what and where (a pose out
+        of reach, a singularity, a joint limit at some % of a segment)."""
+        body: dict[str, Any] = {"poses": _pose_list(poses), "frame": frame}
+        _put_given(
+            body,
+            blend_radii=None if blend_radii is None else list(blend_radii),
+            speed=speed,
+            acceleration=acceleration,
+            jerk=jerk,
+            angular_speed=angular_speed,
+            angular_acceleration=angular_acceleration,
+            angular_jerk=angular_jerk,
+        )
+        return await self._send_goal(self.keys.goal_linear, body)
+
+    def twist(self, linear: Sequence[float], angular: Sequence[float], *, frame: str = "base") -> None:
+        """Publish one twist command: the TCP point's velocity (m/s) and the angular velocity (rad/s),
+        in the base frame or the TCP's own (``frame="tool"``). Repeat it faster than the robot's stream
+        timeout, as with joint streams: when twists stop coming the robot stops; a zero twist
+        decelerates it. Needs the lease held, as ``stream_positions``; the daemon's refusals (over its
+        speed caps, no kinematics) are ``command_rejected`` events on the robot's events."""
+        body = {"linear": list(linear), "angular": list(angular), "frame": frame}
+        attachment = self._stream_attachment()
+        self.client.session.put(self.keys.command_twist, _encode(body), attachment=attachment)
+
+    async def set_tcp(self, pose: Sequence[float], *, timeout: float = QUERY_TIMEOUT_S) -> None:
+        """Set the TCP offset (x, y, z, rx, ry, rz of the TCP in the flange frame): applied to
+        ``tcp_pose``, every later Cartesian command and, on a UR robot, the controller's TCP.
+        Raises ``GoalRejected`` with the daemon's reason (the robot moves, a value out of range),
+        ``LeaseHeld`` when another client holds the lease."""
+        reply = await self._command(self.keys.service("set_tcp"), {"pose": list(pose)}, "ok", timeout)
+        if reply.get("ok") is not True:
+            raise GoalRejected(str(reply.get("reason") or f"set_tcp: refused ({reply})"))
+
+
+def _put_given(body: dict[str, Any], **fields: object) -> None:
+    """Add each field that is not None to ``body`` (left out: the daemon's default)."""
+    body.update({name: value for name, value in fields.items() if value is not None})
+
+
+def _pose_list(poses: Sequence[float] | Sequence[Sequence[float]]) -> list[Any]:
+    """``poses`` as a list of poses: one pose (six numbers) becomes a list of one."""
+    items = list(poses)
+    if items and all(isinstance(v, int | float) for v in items):
+        return [items]
+    return [list(p) if isinstance(p, Sequence) else p for p in items]
+
+
+class RobotClient(_CartesianCommands):
     """Commands and state of one robot."""
 
     def __init__(self, client: Client, keys: RobotKeys) -> None:
