@@ -22,7 +22,7 @@ terminal sent into keys; ``status_line`` is the one live line the teleop shell r
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple, TypeGuard
 
 __all__ = [
@@ -202,7 +202,7 @@ def rotation_vector(quaternion: Sequence[float]) -> tuple[float, float, float]:
     return (x * scale, y * scale, z * scale)
 
 
-def status_line(robot: str, pose: dict[str, object] | None, keys: TeleopKeys, now: float) -> str:
+def status_line(robot: str, pose: Mapping[str, object] | None, keys: TeleopKeys, now: float) -> str:
     """The live line: the TCP pose from the last ``tcp_pose`` message (None: none yet), the speed,
     the frame and what moves."""
     shown = "waiting for tcp_pose"
