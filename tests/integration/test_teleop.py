@@ -87,19 +87,26 @@ class Tmux:
 
 @asynccontextmanager
 async def teleop_in_tmux(endpoint: str) -> AsyncIterator[Tmux]:
-    """``urdaemon teleop alice`` in a tmux terminal; afterwards the shell prints its exit code and
-    whether the terminal is back in canonical mode with echo (``stty``), and waits."""
+    """``urdaemon teleop alice`` in a tmux terminal; afterwards the shell prints, in one line, its
+    exit code and whether the terminal is back in canonical mode with echo (``stty``), and waits."""
     teleop = f"{shlex.quote(sys.executable)} -m urdaemon teleop alice --connect {endpoint} --speed 0.1"
-    script = (
-        f'{teleop}; echo "teleop exited $?"; '
-        "stty -a | tr ' ;' '\\n\\n' | grep -x -e icanon -e -icanon -e echo -e -echo; sleep 120"
-    )
+    modes = "stty -a | tr ' ;' '\\n\\n' | grep -x -e icanon -e -icanon -e echo -e -echo | tr '\\n' ' '"
+    script = f'{teleop}; code=$?; modes=$({modes}); echo "teleop exited $code, modes: $modes."; sleep 120'
+
     tmux = Tmux(f"sh -c {shlex.quote(script)}")
     try:
         await tmux.start()
         yield tmux
     finally:
         tmux.kill()
+
+
+def _exit_line(screen: str) -> str | None:
+    """The shell's line after teleop ended (exit code, terminal modes), once it is complete."""
+    for line in screen.splitlines():
+        if line.startswith("teleop exited") and line.rstrip().endswith("."):
+            return line.rstrip()
+    return None
 
 
 async def _until(states: Subscription, check: Callable[[], object], what: str) -> None:
@@ -164,14 +171,10 @@ async def test_teleop_in_a_terminal_moves_on_w_and_stops_when_the_keys_stop() ->
             await tmux.keys("x")
 
             async def exited() -> bool:
-                return "teleop exited" in await tmux.screen()
+                return _exit_line(await tmux.screen()) is not None
 
             await _until(states, exited, "teleop's exit after x")
-            screen = await tmux.screen()
-            assert "teleop exited 0" in screen, screen
-            lines = screen.split()
-            assert "icanon" in lines, f"the terminal is canonical again: {screen}"
-            assert "echo" in lines, f"the terminal echoes again: {screen}"
+            assert _exit_line(await tmux.screen()) == "teleop exited 0, modes: icanon echo ."
         assert await alice.lease_info() is None, "teleop released alice's lease when it quit"
 
 
@@ -196,12 +199,10 @@ async def test_ctrl_c_quits_teleop_and_puts_the_terminal_back() -> None:
             await tmux.keys("C-c")
 
             async def exited() -> bool:
-                return "teleop exited" in await tmux.screen()
+                return _exit_line(await tmux.screen()) is not None
 
             await _until(states, exited, "teleop's exit after Ctrl-C")
-            screen = await tmux.screen()
-            assert "teleop exited 0" in screen, screen
-            assert "icanon" in screen.split(), screen
+            assert _exit_line(await tmux.screen()) == "teleop exited 0, modes: icanon echo ."
 
 
 async def test_teleop_without_a_terminal_is_refused() -> None:
