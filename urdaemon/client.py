@@ -29,12 +29,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import numbers
 import os
 import re
 import secrets
 import socket
 import sys
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -975,9 +976,9 @@ def _put_given(body: dict[str, Any], **fields: object) -> None:
 def _pose_list(poses: Sequence[float] | Sequence[Sequence[float]]) -> list[Any]:
     """``poses`` as a list of poses: one pose (six numbers) becomes a list of one."""
     items = list(poses)
-    if items and all(isinstance(v, int | float) for v in items):
+    if items and all(isinstance(v, numbers.Real) for v in items):
         return [items]
-    return [list(p) if isinstance(p, Sequence) else p for p in items]
+    return [list(p) if isinstance(p, Iterable) and not isinstance(p, str) else p for p in items]
 
 
 class RobotClient(_CartesianCommands):

@@ -128,7 +128,7 @@ async def test_pose_and_linear_goals_send_the_documented_messages(
     await alice.move_linear(pose)
     await alice.move_linear([pose, [0.4, -0.1, 0.5, 3.1, 0.1, 0.0]], blend_radii=[0.01], speed=0.1)
     await alice.move_linear([pose], frame="world", acceleration=0.5, jerk=5.0, angular_speed=0.5)
-    await alice.move_linear([pose], angular_acceleration=2.0, angular_jerk=20.0)
+    await alice.move_linear((tuple(pose),), angular_acceleration=2.0, angular_jerk=20.0)  # any sequences
     move, linear = "wirecell/alice/goal/move", "wirecell/alice/goal/linear"
     common = {"v": 1, "pose": pose}
     scales = {"velocity_scale": 1.0, "acceleration_scale": 1.0}
