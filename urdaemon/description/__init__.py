@@ -3,6 +3,8 @@
 Importing the package loads no numpy, nor does anything the serve process uses: forward and inverse
 kinematics, Jacobians and damped least squares are plain float math (``ik.py``, ``chain.py``,
 ``dls.py``); only ``UrKinematics.jacobian`` and ``joint_velocity`` (the fake's) import numpy, inside.
+``ChainKinematics`` (``chain.py``, custom robots' numeric IK) is imported when first asked for: a
+cell of UR models never loads it (the serve footprint, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -24,7 +26,6 @@ from urdaemon.description.calibration import (
     load_calibration,
     robot_dh,
 )
-from urdaemon.description.chain import ChainKinematics
 from urdaemon.description.ik import IkSolution, UrKinematics
 from urdaemon.description.kinematics import DhKinematics, KinematicTree, TreeJoint
 from urdaemon.description.urdf import joint_limits_for, load_urdf
@@ -68,3 +69,12 @@ __all__ = [
     "singularity_name",
     "ur_params",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """``ChainKinematics``, imported from ``chain.py`` when first asked for."""
+    if name == "ChainKinematics":
+        from urdaemon.description.chain import ChainKinematics
+
+        return ChainKinematics
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Protocol
 
 from urdaemon.description._transforms import xyz_rpy
 from urdaemon.description.calibration import robot_dh
-from urdaemon.description.chain import ChainKinematics
 from urdaemon.description.frames import Frame, Pose, compose
 from urdaemon.description.ik import Configuration, UrKinematics, configuration_of, singularity_name
 from urdaemon.description.kinematics import KinematicTree
@@ -83,6 +82,8 @@ def arm_kinematics(
     assert robot.description is not None  # the cell schema guarantees it for model 'custom'
     base = robot.prefix + robot.description.base_link
     tool = robot.prefix + robot.description.tool_link
+    from urdaemon.description.chain import ChainKinematics  # custom robots only: the footprint
+
     return ChainKinematics(tree, base, tool, joint_names, bounds)
 
 

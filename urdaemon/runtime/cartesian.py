@@ -24,6 +24,7 @@ from urdaemon.backends.base import Backend
 from urdaemon.cell.config import CARTESIAN_PAIRS, Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
+from urdaemon.control.linear import plan_linear
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.description.arm import ArmKinematics, base_in_world
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
@@ -35,7 +36,7 @@ from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload
-from urdaemon.runtime.slicing import CHECK_STEPS, sliced
+from urdaemon.runtime.slicing import sliced
 
 __all__ = ["Cartesian", "shown_pose"]
 
@@ -191,8 +192,6 @@ class Cartesian:
         if not at_rest:
             raise GoalRejected(f"{what}: the robot is moving; a linear goal starts from rest")
         gate.planning = f"linear goal of {len(poses)} pose{'s' if len(poses) != 1 else ''}"
-        from urdaemon.control.linear import plan_linear  # loaded by the first linear goal: footprint
-
         check = plan_linear(
             kin,
             start,
@@ -207,7 +206,7 @@ class Cartesian:
         def step(deadline: float) -> bool:
             if gate.generation != generation or gate.closing:  # stop, cancel, freedrive: no more work
                 raise GoalRejected(SHUTTING_DOWN if gate.closing else STOPPED_WHILE_PLANNING)
-            while check.step(CHECK_STEPS):
+            while check.step(1):  # one sample's IK or checks: 35-200 µs
                 if time.perf_counter() > deadline:
                     return True
             return False
