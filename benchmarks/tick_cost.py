@@ -1,11 +1,12 @@
-"""CPU cost of the motion controller's ``tick`` alone, per mode: a goal, a position and a velocity stream.
+"""CPU cost of the motion controller's ``tick`` alone, per mode: a goal, a position, velocity, twist stream.
 
     python benchmarks/tick_cost.py [runs]
 
 A UR10e-sized controller ticks 10 000 cycles in each case against a robot that lands on every
 commanded position one cycle later; a stream gets a new command every cycle, as a client at the
 robot's rate sends it, but only the ``tick`` calls are timed. Prints µs per tick, the minimum over
-``runs`` runs (default 7): the least disturbed by other work on the machine.
+``runs`` runs (default 7): the least disturbed by other work on the machine. The twist cases run on
+a UR10e's kinematics with a TCP offset, the twist in the base or the tool frame.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ import time
 from collections.abc import Callable
 
 from urdaemon.control import MotionController, TrajectoryPoint
+from urdaemon.control.cartesian import CartesianLimits
+from urdaemon.description.ik import UrKinematics
+from urdaemon.description.urmodels import load_ur_model
 from urdaemon.model import UR_JOINTS, CommandMode, JointCommand, JointLimits, Lifecycle, RobotState
 
 CYCLES = 10_000
@@ -30,6 +34,8 @@ LIMITS = JointLimits(
     max_jerk=(50.0,) * 6,
 )
 HOME = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0)
+TCP = (0.0, 0.0, 0.15, 0.0, 0.0, 0.0)
+TWIST_LIMITS = CartesianLimits(1.0, 1.2, 10.0, 3.0, 4.0, 40.0)
 
 Command = Callable[[MotionController, RobotState, int, float], None]
 
@@ -57,9 +63,19 @@ def _into_a_limit(controller: MotionController, state: RobotState, k: int, now: 
     controller.stream_velocities(UR_JOINTS, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], state, now)
 
 
+def _twist(frame: str) -> Command:
+    def command(controller: MotionController, state: RobotState, k: int, now: float) -> None:
+        speed = 0.05 * math.cos(2.0 * math.pi * 0.2 * now)
+        controller.stream_twist((speed, 0.5 * speed, 0.0, 0.0, 0.0, speed), frame, state, now)
+
+    return command
+
+
 def run_once(command: Command, mode: str) -> float:
     """µs per tick over CYCLES ticks of a fresh controller driven by ``command``, in ``mode`` throughout."""
     controller = MotionController(LIMITS, period=PERIOD)
+    controller.set_arm(UrKinematics(load_ur_model("ur10e")), TWIST_LIMITS)
+    controller.set_tcp(TCP)
     state = RobotState.zeros(UR_JOINTS)
     state.lifecycle = Lifecycle.RUNNING
     state.program_running = True
@@ -93,6 +109,8 @@ def main() -> None:
         ("position stream", _position_stream, "stream_position"),
         ("velocity stream", _velocity_stream, "stream_velocity"),
         ("velocity stream at a limit", _into_a_limit, "stream_velocity"),
+        ("twist stream, base frame", _twist("base"), "stream_twist"),
+        ("twist stream, tool frame", _twist("tool"), "stream_twist"),
     ]
     print(f"machine: {platform.machine()} {platform.processor()}, Python {platform.python_version()}")
     print(f"{'tick while':<28} {'min µs':>8} {'median µs':>10}  ({runs} runs of {CYCLES} ticks)")
