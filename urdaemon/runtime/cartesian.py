@@ -211,9 +211,11 @@ class Cartesian:
                     return True
             return False
 
+        gate.from_rest = True  # nothing else may move the robot until this goal is answered
         try:
             await sliced(step)
             return check.result()
         finally:
+            gate.from_rest = False
             with contextlib.suppress(Exception):
                 check.close()

@@ -32,15 +32,29 @@ class MotionGate:
         """The robot reported a tool contact and rests where it touched until ``end_tool_contact``."""
         self.planning: str | None = None
         """What trajectory goal is being decoded or planned (for replies), None when none is."""
+        self.from_rest = False
+        """The goal being planned starts where the robot rests now (a linear goal's plan is the joints of
+        every cycle from there): until it is answered nothing else may move the robot."""
         self.generation = 0
         """Counts what ends motion (stop, cancel, hand_back_control, freedrive on): a trajectory being
         planned is accepted only if it is still the same as when its planning began."""
 
     def check_accepting(self) -> None:
-        """Refuse a streaming command while shutting down, in freedrive or resting after a contact."""
+        """Refuse a streaming command while shutting down, in freedrive, resting after a contact, or
+        while a goal is planned from where the robot rests."""
         if self.closing:
             raise GoalRejected(SHUTTING_DOWN)
         self.check_free_to_move()
+        self.check_not_planning_from_rest()
+
+    def check_not_planning_from_rest(self) -> None:
+        """Refuse motion while a goal is planned from where the robot rests (``from_rest``): moved
+        meanwhile, the robot would no longer be where that plan starts."""
+        if self.from_rest:
+            raise GoalRejected(
+                f"busy: a linear goal is being planned from where the robot rests ({self.planning}); "
+                "wait for its answer or cancel it"
+            )
 
     def check_free_to_move(self) -> None:
         """Refuse motion while freedrive is on or the robot rests where its tool touched something."""

@@ -316,6 +316,7 @@ class Goals:
         """Refuse (``GoalRejected``) a planned goal that could not start now: shutting down, something
         ended motion since ``generation``, not ready, busy."""
         self._gate.check_still_wanted(generation)
+        self._gate.check_not_planning_from_rest()  # a cell goal's part while a linear goal is planned
         if planned.passthrough:
             self.passthrough.check_available()
         self._controller.check_can_start(self._backend.state, time.monotonic(), planned.preempt)
@@ -392,6 +393,7 @@ class Goals:
                 raise GoalRejected(SHUTTING_DOWN)
             goal = codec.decode_move_goal(payload(query))
             self._gate.check_free_to_move()
+            self._gate.check_not_planning_from_rest()
             if goal.pose is not None:
                 if self.pose_target is None:
                     raise GoalRejected(f"move goal.pose: robot {self._robot.name} has no arm kinematics")
