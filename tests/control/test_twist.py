@@ -71,6 +71,28 @@ def _unit(v: Sequence[float]) -> list[float]:
     return [x / n for x in v]
 
 
+def _braking_starts(robot: SimRobot) -> float:
+    """Step the robot (no more messages) until the deadman brakes: the time of the first tick whose
+    command ramps down (mode stopping, a deadman stop counted; the fastest joint's commanded speed
+    lower 50 cycles later)."""
+    before = robot.controller.statistics().deadman_stops
+    for _ in range(2000):
+        tick = robot.now
+        robot.step()
+        if robot.controller.mode != "stream_twist":
+            break
+    else:
+        raise AssertionError("the deadman never braked")
+    assert robot.controller.mode == "stopping"
+    assert robot.controller.statistics().deadman_stops == before + 1
+    first = len(robot.commands) - 1
+    for _ in range(50):
+        robot.step()
+    speeds = [max(abs(v) for v in c[2]) for c in robot.commands[first - 1 :]]
+    assert speeds[-1] < 0.9 * speeds[0], "slower 0.1 s into the ramp"
+    return tick
+
+
 def test_a_base_twist_moves_the_tcp_along_it_and_the_deadman_stops_it() -> None:
     robot = _robot(stream_timeout=0.2)
     start = tuple(KIN.forward(Q0))
@@ -84,10 +106,11 @@ def test_a_base_twist_moves_the_tcp_along_it_and_the_deadman_stops_it() -> None:
     assert _speeds(robot)[-1] == pytest.approx(0.1, rel=0.01)
     # The messages stop: after the stream timeout the deadman stops it with a jerk-limited ramp.
     last = robot.now - PERIOD
+    braking = _braking_starts(robot)
+    assert 0.2 - PERIOD < braking - last <= 0.2 + PERIOD, "braking starts within the deadman + 1 cycle"
     ticks = robot.run_until_idle(1000)
     assert robot.controller.statistics().deadman_stops == 1
-    assert ticks > round(0.2 / PERIOD) + 5, "ran on until the timeout, then ramped down"
-    assert robot.now - last > 0.2
+    assert ticks > 5, "then ramped down"
     assert robot.commands[-1][0] is CommandMode.IDLE
     check_command_limits(robot.commands, UR10E_LIMITS, PERIOD)
     _check_jerk(robot)
