@@ -268,7 +268,21 @@ def test_a_pose_out_of_reach_is_refused_before_sampling() -> None:
     far = (2.5, 0.0, 0.3, 0.0, 3.14, 0.0)
     reason, steps = _refusal(plan_linear(kin, Q0, [near, far], [0.0], TCP, CARTESIAN, limits, PERIOD))
     assert reason == "linear goal: pose 1 is out of reach (no joint solution within the limits)"
-    assert steps == 1  # pose 0 checked, pose 1 refused: nothing sampled
+    # pose 0 checked (its IK's chunks and one step), pose 1's IK's chunks, refused: nothing sampled
+    q_near, near_chunks = _chunks(kin.nearest_steps(near, Q0, TCP))
+    _, far_chunks = _chunks(kin.nearest_steps(far, q_near, TCP))
+    assert steps == near_chunks + 1 + far_chunks
+
+
+def _chunks(steps: Any) -> tuple[Any, int]:
+    """What an IK generator returns and how many times it yields (its chunks but the last)."""
+    count = 0
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value, count
+        count += 1
 
 
 def test_a_path_through_the_wrist_singularity_is_refused_naming_where() -> None:
@@ -314,6 +328,11 @@ class _FlippingArm:
 
     def jacobian_rows(self, q: Any, tcp: Any = None) -> list[list[float]]:
         return self._kin.jacobian_rows(q, tcp)
+
+    def nearest_steps(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
+        """``nearest`` in one chunk (what the subclasses' ``nearest`` answers)."""
+        return self.nearest(pose, qnear, tcp)
+        yield  # a generator: run by the check's steps as a real arm's chunks are
 
     def nearest(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
         q = self._kin.nearest(pose, qnear, tcp)

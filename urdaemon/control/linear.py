@@ -3,12 +3,12 @@
 ``plan_linear`` returns a ``LinearCheck`` that plans in small steps (no clock inside: the runtime runs
 it in slices between the robot's cycles, like control/trajectory.py's ``TrajectoryCheck``):
 
-1. the arguments, then each pose's reach (``kin.nearest`` seeded with the pose before it): a pose out of
-   reach is refused before anything is sampled;
+1. the arguments, then each pose's reach (``kin.nearest_steps`` seeded with the pose before it): a pose
+   out of reach is refused before anything is sampled;
 2. the path (control/cartesian.py ``LinePath``): straight lines timed by jerk-limited profiles within
    the Cartesian limits, blended where asked;
 3. the samples, one in two steps: at every ``period`` (the robot's cycle) the path's pose is converted to
-   joints by ``kin.nearest`` seeded with the sample before (IK continuity). The first sample is
+   joints by ``kin.nearest_steps`` seeded with the sample before (IK continuity). The first sample is
    ``start`` exactly, the last the IK of the last pose. Each sample is refused (GoalRejected, naming the
    segment, how far along it and the TCP position) when its IK fails, a joint leaves ``limits``, the
    arm comes within ``SINGULARITY_LIMIT`` of a singularity, or the arm flips branch (a joint step far
@@ -19,6 +19,10 @@ it in slices between the robot's cycles, like control/trajectory.py's ``Trajecto
    by the smallest factor ``k`` that fits them all (speed / k, acceleration / k^2, jerk / k^3) and
    sampled again. A linear goal near a singularity or a joint's speed limit so runs slower than asked:
    the plan says by how much (``SampledTrajectory.slowed_by``); more than ``MAX_SLOWDOWN`` is refused.
+
+Every IK runs through ``kin.nearest_steps``, whose chunks (one Newton evaluation each) are steps of
+the check: however far out of reach a pose is (a custom robot's numeric IK then tries nine starts),
+no step holds the event loop for more than one evaluation.
 
 Segment ``k`` is the line that ends at pose ``k`` (0-based, as the goal lists them); positions in
 reasons are the TCP's in the robot's base frame.
@@ -86,9 +90,9 @@ _RETIME_MARGIN = 1e-3
 class LinearCheck:
     """A linear goal planned in steps: ``step(count)`` until it returns False, then ``result()``.
 
-    Pure: no clock inside; a step is a pose's IK, a segment's profile, a sample's IK or a sample's
-    checks (its Jacobian, a bound of its smallest singular value, its finite differences): each some
-    30-200 µs (a calibrated arm's IK costs the most)."""
+    Pure: no clock inside; a step is one chunk of an IK (one Newton evaluation), a segment's
+    profile or a sample's checks (its Jacobian, a bound of its smallest singular value, its finite
+    differences): each some 10-60 µs."""
 
     __slots__ = ("_result", "_steps")
 
@@ -162,7 +166,7 @@ def _plan(
     q0 = tuple(float(v) for v in start)
     seed: Sequence[float] = q0
     for k, pose in enumerate(goal):
-        q = kin.nearest(pose, seed, tcp)
+        q = yield from kin.nearest_steps(pose, seed, tcp)
         if q is None:
             raise GoalRejected(f"linear goal: pose {k} is out of reach (no joint solution within the limits)")
         seed = q
@@ -323,7 +327,8 @@ class _Sampler:
         self._ref_sigma = 0.0
 
     def run(self) -> Generator[None, None, None]:
-        """Sample the path, a sample in two steps (its IK; its checks); then the differences into rest."""
+        """Sample the path, a sample in steps (its IK's chunks; its checks); then the differences into
+        rest."""
         path = self.path
         last = self.count - 1
         end = frame_of_pose(path.end)
@@ -337,8 +342,8 @@ class _Sampler:
             else:
                 frame = end if n == last else path.frame_at(tau)
                 pose = path.end if n == last else pose_of_frame(frame)
-                q = self.kin.nearest(pose, self._q[-1], self.tcp)
-                yield  # the IK is the step's half; the checks the other
+                q = yield from self.kin.nearest_steps(pose, self._q[-1], self.tcp)
+                yield  # the IK's last chunk ends a step; the checks are the next
                 self._check_sample(q, frame, tau)
                 assert q is not None
                 self._accept(q, frame, tau)

@@ -11,7 +11,7 @@ ik.py and are re-exported here.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 from urdaemon.description._transforms import xyz_rpy
@@ -60,6 +60,19 @@ class ArmKinematics(Protocol):
         """The joints reaching ``pose`` nearest ``qnear`` within the joint limits, or None."""
         ...
 
+    def nearest_steps(
+        self,
+        pose: Sequence[float],
+        qnear: Sequence[float],
+        tcp: Sequence[float] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Generator[None, None, tuple[float, ...] | None]:
+        """``nearest`` in bounded chunks: a generator that yields between them (each one Newton
+        evaluation, well under the event loop's 0.25 ms slice) and returns what ``nearest`` returns.
+        ``ik.run_steps`` runs one to the end."""
+        ...
+
     def jacobian_rows(self, q: Sequence[float], tcp: Sequence[float] | None = None) -> list[list[float]]:
         """6 rows (vx vy vz wx wy wz of the TCP, base frame) x dof columns, plain floats."""
         ...
@@ -73,12 +86,13 @@ def arm_kinematics(
 ) -> ArmKinematics:
     """The kinematics Cartesian motion uses for ``robot``, in its base frame and ``joint_names`` order.
 
-    UR models: ``UrKinematics`` on the model and the robot's calibrated DH (``tree`` unused; its
-    joint limits are the model's). Custom robots: ``ChainKinematics`` on the URDF chain
-    ``<prefix><base_link>`` -> ``<prefix><tool_link>`` of ``tree`` (the cell's), bounded by
-    ``bounds`` (lower and upper positions per joint; without them the joints are unbounded)."""
+    ``bounds`` (lower and upper positions per joint: the cell's joint limits) bound every answer.
+    UR models: ``UrKinematics`` on the model and the robot's calibrated DH (``tree`` unused; without
+    ``bounds`` its joint limits are the model's). Custom robots: ``ChainKinematics`` on the URDF chain
+    ``<prefix><base_link>`` -> ``<prefix><tool_link>`` of ``tree`` (the cell's; without ``bounds``
+    the joints are unbounded)."""
     if robot.is_ur:
-        return UrKinematics(load_ur_model(robot.model), robot_dh(robot))
+        return UrKinematics(load_ur_model(robot.model), robot_dh(robot), bounds)
     assert robot.description is not None  # the cell schema guarantees it for model 'custom'
     base = robot.prefix + robot.description.base_link
     tool = robot.prefix + robot.description.tool_link

@@ -7,12 +7,17 @@ limits, with a few restarts from fixed seeds when that does not converge. No bra
 is the one Newton's steps reach from ``qnear`` (or from the restart nearest it). Plain floats, no
 numpy (it runs in the serve process). Conventions as ik.py's: poses (x, y, z, rx, ry, rz) of the TCP
 in the ``base`` link's frame, ``tcp`` the tool link -> TCP pose, q in ``joint_names`` order.
+
+``nearest_steps`` is ``nearest`` in bounded chunks (a generator yielding after each Newton
+evaluation: one damped step and one walk of the chain with its Jacobian, ~20-60 µs); ``nearest``
+runs it to the end. An unreachable pose costs up to nine starts of up to 60 evaluations (2-4 ms):
+the event loop takes it a chunk at a time between robot cycles.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from operator import mul
 from typing import NamedTuple
 
@@ -27,6 +32,7 @@ from urdaemon.description.frames import (
     pose_of_frame,
     rotation_vector,
 )
+from urdaemon.description.ik import run_steps
 from urdaemon.description.kinematics import KinematicTree, TreeJoint
 from urdaemon.errors import DescriptionError
 
@@ -135,17 +141,31 @@ class ChainKinematics:
         When the steps from ``qnear`` do not converge to the tolerances, each fixed seed is tried and
         the converged solution nearest ``qnear`` wins. None when none converges (out of reach, or
         off the manifold of an arm with fewer than six joints)."""
+        return run_steps(self.nearest_steps(pose, qnear, tcp, max_position_error, max_orientation_error))
+
+    def nearest_steps(
+        self,
+        pose: Sequence[float],
+        qnear: Sequence[float],
+        tcp: Sequence[float] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Generator[None, None, tuple[float, ...] | None]:
+        """``nearest`` in bounded chunks: yields after each Newton evaluation; returns what ``nearest``
+        returns."""
         target = frame_of_pose(pose)
         if tcp is not None:
             target = compose(target, inverse(frame_of_pose(tcp)))
         near = [float(v) for v in qnear]
-        found = self._converge(target, self._clamped(near), max_position_error, max_orientation_error)
+        found = yield from self._converge(
+            target, self._clamped(near), max_position_error, max_orientation_error
+        )
         if found is not None:
             return tuple(self._wrapped(found, near))
         best: list[float] | None = None
         best_distance = math.inf
         for seed in self._seeds(near):
-            q = self._converge(target, seed, max_position_error, max_orientation_error)
+            q = yield from self._converge(target, seed, max_position_error, max_orientation_error)
             if q is not None:
                 q = self._wrapped(q, near)
                 distance = math.dist(q, near)
@@ -157,10 +177,12 @@ class ChainKinematics:
 
     def _converge(
         self, target: Frame, q: list[float], max_position: float, max_orientation: float
-    ) -> list[float] | None:
-        """Levenberg-Marquardt from ``q`` inside the limits; the joints if within the tolerances."""
+    ) -> Generator[None, None, list[float] | None]:
+        """Levenberg-Marquardt from ``q`` inside the limits; the joints if within the tolerances.
+        Yields after each evaluation of the chain."""
         rows: list[list[float]] = [[0.0] * self.dof for _ in range(6)]
         error, position, orientation = _error(target, self._walk(q, rows))
+        yield
         damping = 1e-3
         checkpoint = math.inf
         for evaluation in range(_EVALUATIONS):
@@ -175,6 +197,7 @@ class ChainKinematics:
             trial = self._clamped([a + b for a, b in zip(q, step, strict=True)])
             trial_rows: list[list[float]] = [[0.0] * self.dof for _ in range(6)]
             trial_error, trial_position, trial_orientation = _error(target, self._walk(trial, trial_rows))
+            yield
             if trial_position + trial_orientation < total:
                 q, rows, error = trial, trial_rows, trial_error
                 position, orientation = trial_position, trial_orientation

@@ -12,13 +12,18 @@ flange being tool0 (the DH tool frame); joint values are in rad, shoulder_pan ..
 Branches: bit 2 ``SHOULDER`` (q1 = phi + pi/2 - acos(d4/r) instead of + acos), bit 1 ``WRIST`` (q5 <= 0),
 bit 0 ``ELBOW`` (q3 <= 0). At a singular pose two branches coincide; a joint the pose leaves free
 (q6 with the wrist straight, q5 = 0 or pi) takes the seed's value. docs/kinematics.md has the details.
+
+In slices: ``nearest_steps`` (and ``nearest_in_steps``) are generators that yield after each bounded
+chunk of work (one Newton evaluation: the calibrated chain, its error and one damped step, ~10-30 µs)
+and return what ``nearest`` returns; ``nearest`` runs one to the end (``run_steps``). The event loop
+drives them between robot cycles (runtime/cartesian.py, control/linear.py).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, NamedTuple, TypeAlias
+from collections.abc import Generator, Sequence
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias, TypeVar
 
 from urdaemon.description.dls import damped_step6
 from urdaemon.description.frames import (
@@ -52,6 +57,7 @@ __all__ = [
     "configuration_of",
     "frame_of_pose",
     "pose_of_frame",
+    "run_steps",
     "singularity_name",
 ]
 
@@ -90,6 +96,20 @@ _WARM_START = 0.1
 """When qnear is this near (rad, joint distance) a branch's nominal solution, Newton starts from qnear."""
 _NEARER_MARGIN = 0.05
 """Nominal branches this much (rad, joint distance) farther than the best refined one are refined too."""
+
+
+_T = TypeVar("_T")
+Steps: TypeAlias = Generator[None, None, _T]
+"""Work in bounded chunks: a generator that yields between them and returns the answer."""
+
+
+def run_steps(steps: Generator[None, None, _T]) -> _T:
+    """Run ``steps`` (``nearest_steps`` and the like) to the end at once; what it returns."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
 
 
 class IkSolution(NamedTuple):
@@ -191,8 +211,10 @@ class UrKinematics:
     """Forward and inverse kinematics and the Jacobian of one UR arm with its calibration.
 
     ``model`` gives the nominal DH (the closed-form stage) and the joint limits; ``dh`` is the arm's
-    calibrated DH (default: the nominal one). Every method takes ``tcp``, the flange -> TCP pose
-    (default: none, i.e. poses are of the flange, tool0)."""
+    calibrated DH (default: the nominal one); ``bounds`` (lower, upper per joint), when given, replace
+    the model's joint limits (a cell's narrower ``joint_limits``): each joint's 2pi shift is chosen
+    within them and a solution outside them is dropped, so another branch may answer. Every method
+    takes ``tcp``, the flange -> TCP pose (default: none, i.e. poses are of the flange, tool0)."""
 
     __slots__ = ("_a2", "_a3", "_calibrated", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
 
@@ -201,7 +223,12 @@ class UrKinematics:
     branches: bool = True
     """Named configurations apply (``configuration_of``, ``nearest_in``)."""
 
-    def __init__(self, model: UrModel, dh: DhParameters | None = None) -> None:
+    def __init__(
+        self,
+        model: UrModel,
+        dh: DhParameters | None = None,
+        bounds: tuple[Sequence[float], Sequence[float]] | None = None,
+    ) -> None:
         nominal = model.dh
         structure_ok = (
             all(abs(t) < 1e-12 for t in nominal.theta)
@@ -223,6 +250,11 @@ class UrKinematics:
         self._joints = dh_joints(real)
         self._lower = tuple(-math.inf if j.min_position is None else j.min_position for j in model.joints)
         self._upper = tuple(math.inf if j.max_position is None else j.max_position for j in model.joints)
+        if bounds is not None:
+            lower, upper = tuple(float(v) for v in bounds[0]), tuple(float(v) for v in bounds[1])
+            if len(lower) != 6 or len(upper) != 6:
+                raise DescriptionError(f"model {model.model!r}: bounds for {len(lower)} joints, not 6")
+            self._lower, self._upper = lower, upper
 
     # ---- public API ----------------------------------------------------------------------------
 
@@ -249,7 +281,7 @@ class UrKinematics:
         target = self._flange_target(pose, tcp)
         found: list[IkSolution] = []
         for branch, q0 in self._analytic(target, seed):
-            q = self._solve_branch(target, q0, seed, max_position_error, max_orientation_error)
+            q = run_steps(self._solve_branch(target, q0, seed, max_position_error, max_orientation_error))
             if q is not None:
                 found.append(IkSolution(branch, q))
         return found
@@ -265,11 +297,24 @@ class UrKinematics:
         """The solution nearest ``qnear`` (Euclidean in joint space), or None if the pose has none.
 
         URScript ``get_inverse_kin(x, qnear, maxPositionError, maxOrientationError, tcp)``."""
+        return run_steps(self.nearest_steps(pose, qnear, tcp, max_position_error, max_orientation_error))
+
+    def nearest_steps(
+        self,
+        pose: Vector,
+        qnear: Vector,
+        tcp: Vector | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Steps[Joints | None]:
+        """``nearest`` in bounded chunks: yields after the closed form and after each Newton evaluation
+        (~10-30 µs each); returns exactly what ``nearest`` returns."""
         target = self._flange_target(pose, tcp)
         ranked = sorted(
             (_distance(_shift_near(q0, qnear), qnear), branch, q0)
             for branch, q0 in self._analytic(target, qnear)
         )
+        yield
         best: Joints | None = None
         best_distance = math.inf
         for nominal_distance, _, q0 in ranked:
@@ -278,7 +323,9 @@ class UrKinematics:
             # qnear this close to the branch is the better start (a servo target, a small step).
             warm = self._calibrated and nominal_distance < _WARM_START
             start = [float(v) for v in qnear] if warm else None
-            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error, start)
+            q = yield from self._solve_branch(
+                target, q0, qnear, max_position_error, max_orientation_error, start
+            )
             if q is not None:
                 distance = _distance(q, qnear)
                 if distance < best_distance:
@@ -298,15 +345,33 @@ class UrKinematics:
 
         ``wanted`` maps any of "shoulder", "elbow", "wrist" to a value of ``Configuration``; an
         empty or missing one is ``nearest``."""
+        return run_steps(
+            self.nearest_in_steps(pose, qnear, tcp, wanted, max_position_error, max_orientation_error)
+        )
+
+    def nearest_in_steps(
+        self,
+        pose: Vector,
+        qnear: Vector,
+        tcp: Vector | None = None,
+        wanted: dict[str, str] | None = None,
+        max_position_error: float = 1e-10,
+        max_orientation_error: float = 1e-10,
+    ) -> Steps[Joints | None]:
+        """``nearest_in`` in bounded chunks, as ``nearest_steps``."""
         if not wanted:
-            return self.nearest(pose, qnear, tcp, max_position_error, max_orientation_error)
+            return (
+                yield from self.nearest_steps(pose, qnear, tcp, max_position_error, max_orientation_error)
+            )
         target = self._flange_target(pose, tcp)
         best: Joints | None = None
         best_distance = math.inf
-        for _, q0 in self._analytic(target, qnear):
+        branches = self._analytic(target, qnear)
+        yield
+        for _, q0 in branches:
             if not self._matches(q0, wanted):
                 continue
-            q = self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error)
+            q = yield from self._solve_branch(target, q0, qnear, max_position_error, max_orientation_error)
             if q is not None and self._matches(q, wanted) and _distance(q, qnear) < best_distance:
                 best, best_distance = q, _distance(q, qnear)
         return best
@@ -386,20 +451,20 @@ class UrKinematics:
         max_position: float,
         max_orientation: float,
         start: list[float] | None = None,
-    ) -> Joints | None:
+    ) -> Steps[Joints | None]:
         """Refine a nominal branch on the calibrated arm (from ``start`` if given); check errors, limits."""
-        q, position_error, orientation_error = self._refine(target, q0 if start is None else start)
+        q, position_error, orientation_error = yield from self._refine(target, q0 if start is None else start)
         if start is not None and not (
             position_error <= max_position and orientation_error <= max_orientation
         ):
-            q, position_error, orientation_error = self._refine(target, q0)
+            q, position_error, orientation_error = yield from self._refine(target, q0)
         if self._calibrated and not (position_error <= max_position and orientation_error <= max_orientation):
-            q, position_error, orientation_error = self._continuation(target, q0)
+            q, position_error, orientation_error = yield from self._continuation(target, q0)
             if not (position_error <= max_position and orientation_error <= max_orientation):
                 return None
         return self._within_limits(_shift_near(q, seed))
 
-    def _continuation(self, target: Frame, q: list[float]) -> tuple[list[float], float, float]:
+    def _continuation(self, target: Frame, q: list[float]) -> Steps[tuple[list[float], float, float]]:
         """Follow the branch from where ``q`` puts the calibrated arm to ``target`` in small steps.
 
         The fallback when Newton's steps from the nominal branch do not converge: near a singularity
@@ -415,10 +480,10 @@ class UrKinematics:
             s = k / _CONTINUATION_STEPS
             turned = compose(frame_of_pose((0.0, 0.0, 0.0, s * rx, s * ry, s * rz)), rotation)
             waypoint: Frame = (*turned[:9], sx + s * dx, sy + s * dy, sz + s * dz)
-            q, position, orientation = self._refine(waypoint, q)
+            q, position, orientation = yield from self._refine(waypoint, q)
             if position + orientation > _WAYPOINT_TOLERANCE:
                 return q, math.inf, math.inf  # the branch does not reach this far: give up early
-        return self._refine(target, q)
+        return (yield from self._refine(target, q))
 
     def _analytic(self, f: Frame, seed: Vector) -> list[tuple[int, list[float]]]:
         """The closed-form solutions on the nominal DH, as (branch, joints); unreachable branches left out."""
@@ -485,13 +550,15 @@ class UrKinematics:
             q2 = reach - math.atan2(a3 * math.sin(q3), a2 + a3 * math.cos(q3))
             found.append((branch | bit, [q1, q2, q3, angle234 - q2 - q3, q5, q6]))
 
-    def _refine(self, target: Frame, q: list[float]) -> tuple[list[float], float, float]:
+    def _refine(self, target: Frame, q: list[float]) -> Steps[tuple[list[float], float, float]]:
         """Levenberg-Marquardt steps on the calibrated arm from ``q`` (a nominal branch).
 
         The damping starts at the squared error (so Newton's quadratic convergence near the solution)
         and grows tenfold after a step that does not lower the error. Returns the joints and their
-        position and orientation errors (m, rad)."""
+        position and orientation errors (m, rad). Yields after each evaluation but the first (a chunk:
+        one damped step and one evaluation of the chain)."""
         chain, error, position, orientation = self._error(target, q)
+        yield
         evaluations = 1
         slow = 0
         while evaluations < _NEWTON_EVALUATIONS:
@@ -505,6 +572,7 @@ class UrKinematics:
                 trial = [q[i] + step[i] for i in range(6)]
                 evaluations += 1
                 trial_chain, trial_error, trial_position, trial_orientation = self._error(target, trial)
+                yield
                 if trial_position + trial_orientation < total:
                     q, chain, error = trial, trial_chain, trial_error
                     position, orientation = trial_position, trial_orientation
