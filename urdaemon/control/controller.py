@@ -233,10 +233,9 @@ class MotionController:
         *,
         tolerances: Tolerances | None = None,
     ) -> float:
-        """Start ``plan``, made for the pose the robot rests at (``goal_start``); returns its duration.
-        Refused (GoalRejected) when busy as ``accept_move`` is without preempting, when the robot moves,
-        or when the plan does not start at rest within ``PLAN_START_TOLERANCE`` of where a new goal
-        starts now (``goal_start``: the measured pose when idle, the held point during a stop's hold)."""
+        """Start ``plan``, made where the robot rests (``goal_start``); returns its duration. Refused
+        (GoalRejected) when busy as ``accept_move`` is without preempting, when the robot moves, or when
+        the plan does not start at rest within ``PLAN_START_TOLERANCE`` of where a new goal starts now."""
         check_can_start(self._mode, self._goal, self._streams, goal_id, state, now, False)
         check_at_rest(self._mode, self._goal, self._setpoint.at_rest(), "a planned goal starts from rest")
         seed = plan_seed(plan, self.goal_start(state)[0], self.joint_names)
