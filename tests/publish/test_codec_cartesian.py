@@ -7,6 +7,7 @@ unknown field and ``decode_linear_goal``, ``decode_twist`` and ``decode_set_tcp`
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import pytest
@@ -94,10 +95,54 @@ def test_linear_goal_defaults() -> None:
 
 
 def test_the_largest_linear_goal_fits() -> None:
-    pose = [0.123456789012345678] * 6
-    payload = dumps({"poses": [pose] * MAX_LINEAR_POSES})
+    """Every pose and radius a full-precision negative number, every field: within the 16 KiB."""
+    pose = [
+        -0.12345678901234568,
+        -0.12345678901234568,
+        -0.12345678901234568,
+        -1.2345678901234568,
+        1.2345678901234568,
+        -1.2345678901234568,
+    ]
+    limits = dict.fromkeys(codec.LINEAR_LIMITS, 0.12345678901234568)
+    message = {
+        "poses": [pose] * MAX_LINEAR_POSES,
+        "blend_radii": [0.012345678901234568] * (MAX_LINEAR_POSES - 1),
+        "frame": "world",
+        "tolerances": {"path": 0.12345678901234568, "goal": 0.12345678901234568},
+        **limits,
+    }
+    payload = dumps(message)
     assert len(payload) <= LINEAR_MESSAGE_BYTES
     assert len(decode_linear_goal(payload).poses) == MAX_LINEAR_POSES
+
+
+def test_a_linear_goal_is_at_most_the_nodes_ordinary_message_size() -> None:
+    """Its JSON is parsed in one call, like every other non-trajectory message (was 256 KiB: 5-9 ms
+    of loop in one call)."""
+    assert LINEAR_MESSAGE_BYTES == codec.SMALL_MESSAGE_BYTES == 16 * 1024
+    assert MAX_LINEAR_POSES == 100
+
+
+def test_a_too_large_linear_goal_is_refused_before_it_is_parsed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Counted, not timed: json.loads is never called for a message over the limit (the review's 17 KB
+    goal of empty poses was parsed whole before its pose count was refused)."""
+    calls = 0
+    real = codec.json.loads
+
+    def counted(data: Any) -> Any:
+        nonlocal calls
+        calls += 1
+        return real(data)
+
+    monkeypatch.setattr(codec.json, "loads", counted)
+    body = b'{"poses": [' + b"[]," * (codec.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
+    reason = refused(codec.LinearGoalDecoder, body)
+    assert reason == f"linear goal: message of {len(body)} bytes exceeds the limit of 16384 bytes"
+    assert calls == 0
+    small = dumps({"poses": [POSE]})
+    codec.LinearGoalDecoder(small)
+    assert calls == 1
 
 
 def test_twist_decodes() -> None:
@@ -314,7 +359,7 @@ def test_too_many_poses_are_refused() -> None:
     payload = dumps({"poses": [[0] * 6] * (MAX_LINEAR_POSES + 1)})
     assert (
         refused(decode_linear_goal, payload)
-        == f"linear goal.poses: {MAX_LINEAR_POSES + 1} poses; at most 1000 are accepted"
+        == f"linear goal.poses: {MAX_LINEAR_POSES + 1} poses; at most 100 are accepted"
     )
 
 
@@ -352,3 +397,37 @@ def test_any_json_object_gives_a_value_or_message_error(message: dict[str, Any],
     except MessageError as err:
         error = err
     assert error is None or str(error)
+
+
+ROTATION = (
+    "(rotation vector, rad): length {} is over 2 pi (6.28319); give the axis times the angle in radians"
+)
+
+
+@pytest.mark.parametrize(
+    ("decode", "message", "expected"),
+    [
+        (
+            decode_move_goal,
+            {"pose": [0.4, 0, 0.3, 1e300, 0, 0]},
+            "move goal.pose[3:6] " + ROTATION.format("1e+300"),
+        ),
+        (decode_move_goal, {"pose": [0.4, 0, 0.3, 0, 180, 0]}, "move goal.pose[3:6] " + ROTATION.format(180)),
+        (
+            decode_linear_goal,
+            {"poses": [POSE, [0.4, 0, 0.3, 4, 4, 4]]},
+            "linear goal.poses[1][3:6] " + ROTATION.format("6.9282"),
+        ),
+    ],
+)
+def test_a_rotation_vector_longer_than_two_pi_is_refused_naming_the_field(
+    decode: Any, message: object, expected: str
+) -> None:
+    """Degrees typed as radians (180) or garbage (1e300) was accepted as an orientation."""
+    assert refused(decode, dumps(message)) == expected
+
+
+def test_rotation_vectors_up_to_two_pi_are_accepted() -> None:
+    full = [0.4, 0.0, 0.3, 0.0, 0.0, 2.0 * math.pi]
+    assert decode_move_goal(dumps({"pose": full})).pose == tuple(full)
+    assert decode_linear_goal(dumps({"poses": [POSE, full]})).poses[1] == tuple(full)

@@ -104,15 +104,22 @@ CONFIGURATIONS = {"shoulder": ("left", "right"), "elbow": ("up", "down"), "wrist
 """A pose goal's ``configuration``: each joint group it may name and the values it may take."""
 LINEAR_LIMITS = ("speed", "acceleration", "jerk", "angular_speed", "angular_acceleration", "angular_jerk")
 """A linear goal's own Cartesian limits, each optional (m/s, m/s², m/s³, rad/s, rad/s², rad/s³)."""
-MAX_LINEAR_POSES = 1_000
-"""Most poses of one linear goal."""
-LINEAR_MESSAGE_BYTES = 256 * 1024
-"""Largest linear goal: 1 000 poses and 999 blend radii of full-precision numbers are ~170 KB (its
-JSON is parsed at once, ~1 ms for the largest; its poses are checked in slices: LinearGoalDecoder)."""
+MAX_LINEAR_POSES = 100
+"""Most poses of one linear goal: as many as fit, with every blend radius and field, in the node's
+ordinary message size (``LINEAR_MESSAGE_BYTES``); a longer path is sent as several goals."""
+LINEAR_MESSAGE_BYTES = SMALL_MESSAGE_BYTES
+"""Largest linear goal: the node's ordinary 16 KiB, so its JSON is parsed in one call like every other
+non-trajectory message (~0.3 ms at most; 256 KiB held the loop 5-9 ms). 100 poses and 99 blend radii
+of full-precision numbers with every field are ~15.6 KB as compact JSON; its poses are checked in
+slices (``LinearGoalDecoder``)."""
 LINEAR_POSES_PER_LOOK = 16
 """Poses of a linear goal checked between two looks at the clock (~3 µs each)."""
 MAX_POSE_M = 100.0
 """Largest pose coordinate accepted (m): beyond any cell; the robot's reach is checked by IK."""
+MAX_ROTATION_VECTOR = 2.0 * math.pi
+"""Longest rotation vector accepted in a pose (rad): every orientation has one no longer than pi, and
+2 pi leaves room for an equivalent one; longer is a mistake (degrees typed as radians, a garbage
+number), refused naming the field."""
 CLIENT_TEXT_CHARS = 40
 """Longest piece of a client's text (a field name, a key) echoed in a reply or a log line."""
 
@@ -446,7 +453,8 @@ def decode_move_goal(payload: bytes | None) -> MoveGoalMessage:
 
 
 def _pose(value: Any, field: str) -> Pose6:
-    """A pose: six finite numbers, the position within ``MAX_POSE_M`` of the frame's origin."""
+    """A pose: six finite numbers, the position within ``MAX_POSE_M`` of the frame's origin, the rotation
+    vector at most ``MAX_ROTATION_VECTOR`` long."""
     numbers = _numbers(value, field, max_len=6)
     if len(numbers) != 6:
         raise MessageError(f"{field}: expected six numbers [x, y, z, rx, ry, rz], got {len(numbers)}")
@@ -455,6 +463,12 @@ def _pose(value: Any, field: str) -> Pose6:
             raise MessageError(f"{field}[{i}]: expected a finite number, got {v}")
     for i, v in enumerate(numbers[:3]):
         _within(v, f"{field}[{i}] (m)", -MAX_POSE_M, MAX_POSE_M)
+    angle = math.hypot(numbers[3], numbers[4], numbers[5])
+    if angle > MAX_ROTATION_VECTOR:
+        raise MessageError(
+            f"{field}[3:6] (rotation vector, rad): length {angle:.6g} is over 2 pi "
+            f"({MAX_ROTATION_VECTOR:.6g}); give the axis times the angle in radians"
+        )
     return (numbers[0], numbers[1], numbers[2], numbers[3], numbers[4], numbers[5])
 
 
@@ -495,12 +509,13 @@ def decode_linear_goal(payload: bytes | None) -> LinearGoalMessage:
 
 
 class LinearGoalDecoder:
-    """Decodes a linear goal: poses (1..1000), frame?, blend_radii?, speed?, acceleration?, jerk?,
+    """Decodes a linear goal: poses (1..100), frame?, blend_radii?, speed?, acceleration?, jerk?,
     angular_speed?, angular_acceleration?, angular_jerk?, tolerances?.
 
-    The JSON is parsed at once (the largest goal, ~170 KB: ~1 ms); its poses are checked
+    The JSON is parsed at once (at most ``LINEAR_MESSAGE_BYTES``, refused by size before parsing:
+    ~0.3 ms); its poses are checked
     ``LINEAR_POSES_PER_LOOK`` at a time by ``step(deadline, clock)`` (True while work is left), so
-    the checks of a thousand poses (~3 ms) run in slices between robot cycles (runtime/slicing.py).
+    the checks of a hundred poses (~0.3 ms) run in slices between robot cycles (runtime/slicing.py).
     """
 
     def __init__(self, payload: bytes | None) -> None:
