@@ -14,8 +14,8 @@ from urdaemon.backends import MockBackend
 from urdaemon.control import GoalStatus, MotionController, Tolerances, TrajectoryPoint
 from urdaemon.control.trajectory import (
     RUCKIG_RESULTS,
-    _calculate,
     _new_input,
+    calculate,
     ruckig_failure_reason,
     ruckig_result_reason,
 )
@@ -42,7 +42,7 @@ def test_a_trajectory_beyond_ruckigs_time_range_is_refused_with_a_reason() -> No
     inp.current_position = [0.0] * 6
     inp.target_position = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     with pytest.raises(GoalRejected) as info:
-        _calculate(Ruckig(6), inp, "move")
+        calculate(Ruckig(6), inp, "move")
     reason = info.value.reason
     assert "not a valid" not in reason
     assert reason == (

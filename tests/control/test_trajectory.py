@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from ruckig import InputParameter, Ruckig, RuckigError, Trajectory
 
 from urdaemon.control import TrajectoryPoint, plan_move, plan_trajectory
-from urdaemon.control.trajectory import PlannedTrajectory, _calculate, position_extrema
+from urdaemon.control.trajectory import PlannedTrajectory, calculate, position_extrema
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
@@ -215,7 +215,7 @@ def test_ruckig_refusal_becomes_goal_rejected() -> None:
     inp.max_acceleration = [5.0]
     inp.max_jerk = [50.0]
     with pytest.raises(GoalRejected, match=r"^point 7: .*target velocity") as info:
-        _calculate(Ruckig(1), inp, "point 7")
+        calculate(Ruckig(1), inp, "point 7")
     assert isinstance(info.value.__cause__, RuckigError)
 
 

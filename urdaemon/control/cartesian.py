@@ -25,16 +25,10 @@ from collections.abc import Generator, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from ruckig import InputParameter, Result, Ruckig, Trajectory
+from ruckig import InputParameter, Ruckig
 
-from urdaemon.control.trajectory import (
-    RUCKIG_ERRORS,
-    ruckig_failure_reason,
-    ruckig_result_reason,
-    run_robustly,
-)
+from urdaemon.control.trajectory import calculate
 from urdaemon.description.frames import Frame, Pose, compose, frame_of_pose, inverse, rotation_vector
-from urdaemon.errors import GoalRejected
 
 __all__ = ["SAME_POSE", "CartesianLimits", "LinePath", "LineSegment", "build_path"]
 
@@ -199,15 +193,7 @@ def _profile(length: float, angle: float, limits: CartesianLimits, what: str) ->
     inp.max_velocity = [min(b[0] for b in bounds)]
     inp.max_acceleration = [min(b[1] for b in bounds)]
     inp.max_jerk = [min(b[2] for b in bounds)]
-    traj = Trajectory(1)
-    otg = Ruckig(1)
-    try:
-        result = run_robustly(lambda: otg.calculate(inp, traj), inp)
-    except RUCKIG_ERRORS as exc:
-        raise GoalRejected(f"{what}: ruckig could not plan it: {ruckig_failure_reason(exc)}") from exc
-    if result not in (Result.Working, Result.Finished):
-        raise GoalRejected(f"{what}: ruckig could not plan it: {ruckig_result_reason(int(result))}")
-    return traj
+    return calculate(Ruckig(1), inp, what)
 
 
 def _line(index: int, start: Frame, pose: Pose, limits: CartesianLimits, begin: float) -> LineSegment | None:

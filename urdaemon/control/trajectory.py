@@ -33,6 +33,7 @@ __all__ = [
     "PlannedTrajectory",
     "TrajectoryCheck",
     "TrajectoryPlanner",
+    "calculate",
     "check_points",
     "plan_move",
     "plan_trajectory",
@@ -230,7 +231,7 @@ def ruckig_failure_reason(exc: BaseException) -> str:
     return f"its input is invalid: {first} (-100)"
 
 
-def _calculate(otg: Any, inp: Any, what: str) -> Any:
+def calculate(otg: Any, inp: Any, what: str) -> Any:
     """Run the offline solver; ruckig's own refusals become GoalRejected naming ``what``."""
     traj = Trajectory(inp.degrees_of_freedom)
     try:
@@ -608,10 +609,10 @@ class TrajectoryPlanner:
         inp.target_velocity = list(self._velocities[k])
         inp.target_acceleration = list(self._accelerations[k])
         inp.minimum_duration = max(requested, 0.0)
-        traj = _calculate(self._otg, inp, what)
+        traj = calculate(self._otg, inp, what)
         if traj.duration > requested + TIMING_SLACK:
             inp.minimum_duration = None
-            fastest = _calculate(self._otg, inp, what).duration
+            fastest = calculate(self._otg, inp, what).duration
             if fastest > requested:
                 raise GoalRejected(
                     f"{what}: reaching it needs at least {_fmt(fastest)} s but time_from_start allows "
@@ -681,10 +682,10 @@ def plan_move(
     inp.target_position = list(target)
     if duration is not None:
         inp.minimum_duration = duration
-    traj = _calculate(otg, inp, "move")
+    traj = calculate(otg, inp, "move")
     if duration is not None and traj.duration > duration + TIMING_SLACK:
         inp.minimum_duration = None
-        fastest = _calculate(otg, inp, "move").duration
+        fastest = calculate(otg, inp, "move").duration
         if fastest > duration:
             raise GoalRejected(f"move needs at least {_fmt(fastest)} s but duration is {_fmt(duration)} s")
         raise GoalRejected(
