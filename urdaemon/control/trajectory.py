@@ -23,6 +23,7 @@ from urdaemon.control.limits import (
     check_scale,
     check_velocities_within,
 )
+from urdaemon.control.stepped import StepCheck
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
@@ -444,53 +445,15 @@ def _run(steps: Generator[None, None, _T]) -> _T:
             return stop.value  # type: ignore[no-any-return]
 
 
-class TrajectoryCheck:
-    """A check run in steps: ``step(count)`` until it returns False, then ``result()``.
+class TrajectoryCheck(StepCheck["TrajectoryPlanner"]):
+    """A trajectory's check run in steps (control/stepped.py): ``step(count)`` until it returns False,
+    then ``result()``, the planner of the checked points.
 
     Pure: no clock inside. The caller decides how many steps fit between two turns of its loop, as
     with ``TrajectoryPlanner.plan_next``.
     """
 
-    __slots__ = ("_result", "_steps")
-
-    def __init__(self, steps: Generator[None, None, TrajectoryPlanner]) -> None:
-        self._steps: Generator[None, None, TrajectoryPlanner] | None = steps
-        self._result: TrajectoryPlanner | None = None
-
-    def step(self, count: int = 1) -> bool:
-        """Run up to ``count`` steps; True while more remain. Raises GoalRejected (then it is done)."""
-        steps = self._steps
-        if steps is None:
-            return False
-        try:
-            for _ in range(count):
-                next(steps)
-        except StopIteration as stop:
-            self._result = stop.value
-            self._steps = None
-            return False
-        except BaseException:
-            self._steps = None
-            raise
-        return True
-
-    def run(self) -> TrajectoryPlanner:
-        """Run every step left at once; the result."""
-        while self.step(1024):
-            pass
-        return self.result()
-
-    def result(self) -> TrajectoryPlanner:
-        """The planner of the checked points."""
-        if self._result is None:
-            raise RuntimeError("the check has not finished")
-        return self._result
-
-    def close(self) -> None:
-        """Abandon an unfinished check."""
-        if self._steps is not None:
-            self._steps.close()
-            self._steps = None
+    __slots__ = ()
 
 
 class TrajectoryPlanner:
