@@ -36,9 +36,9 @@ robots:
 
 
 class _Goals:
-    """What Cartesian sets on the robot's goals: the pose target."""
+    """What Cartesian sets on the robot's goals: the pose goal handler."""
 
-    pose_target = None
+    pose_goal = None
 
 
 def _parts() -> tuple[Cartesian, MotionController, Backend, MotionGate]:

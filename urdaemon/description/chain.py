@@ -30,9 +30,9 @@ from urdaemon.description.frames import (
     frame_of_pose,
     inverse,
     pose_of_frame,
-    rotation_vector,
 )
 from urdaemon.description.ik import run_steps
+from urdaemon.description.ik import twist_error as _error
 from urdaemon.description.kinematics import KinematicTree, TreeJoint
 from urdaemon.errors import DescriptionError
 
@@ -320,27 +320,6 @@ def _move_point(rows: list[list[float]], flange: Frame, tcp: Frame) -> None:
         rows[0][j] += wy * dz - wz * dy
         rows[1][j] += wz * dx - wx * dz
         rows[2][j] += wx * dy - wy * dx
-
-
-def _error(target: Frame, frame: Frame) -> tuple[tuple[float, ...], float, float]:
-    """The twist from ``frame`` to ``target`` (position difference, rotation vector in base) and its sizes."""
-    t, r = target, frame
-    ex, ey, ez = t[9] - r[9], t[10] - r[10], t[11] - r[11]
-    # target * frame^T: the rotation taking the current tool to the target, in base.
-    wx, wy, wz = rotation_vector(
-        t[0] * r[0] + t[1] * r[1] + t[2] * r[2],
-        t[0] * r[3] + t[1] * r[4] + t[2] * r[5],
-        t[0] * r[6] + t[1] * r[7] + t[2] * r[8],
-        t[3] * r[0] + t[4] * r[1] + t[5] * r[2],
-        t[3] * r[3] + t[4] * r[4] + t[5] * r[5],
-        t[3] * r[6] + t[4] * r[7] + t[5] * r[8],
-        t[6] * r[0] + t[7] * r[1] + t[8] * r[2],
-        t[6] * r[3] + t[7] * r[4] + t[8] * r[5],
-        t[6] * r[6] + t[7] * r[7] + t[8] * r[8],
-    )
-    position = math.sqrt(ex * ex + ey * ey + ez * ez)
-    orientation = math.sqrt(wx * wx + wy * wy + wz * wz)
-    return (ex, ey, ez, wx, wy, wz), position, orientation
 
 
 def _axis_rotation(x: float, y: float, z: float, angle: float) -> Frame:

@@ -588,25 +588,8 @@ class UrKinematics:
 
     def _error(self, target: Frame, q: list[float]) -> tuple[_Chain, tuple[float, ...], float, float]:
         """The chain at ``q`` and the twist from it to ``target`` (position, rotation vector in base)."""
-        t00, t01, t02, t10, t11, t12, t20, t21, t22, tx, ty, tz = target
         chain = self._chain(q, None)
-        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = chain.frame
-        ex, ey, ez = tx - px, ty - py, tz - pz
-        # The rotation that takes the current tool to the target, in base: target * current^T.
-        wx, wy, wz = rotation_vector(
-            t00 * r00 + t01 * r01 + t02 * r02,
-            t00 * r10 + t01 * r11 + t02 * r12,
-            t00 * r20 + t01 * r21 + t02 * r22,
-            t10 * r00 + t11 * r01 + t12 * r02,
-            t10 * r10 + t11 * r11 + t12 * r12,
-            t10 * r20 + t11 * r21 + t12 * r22,
-            t20 * r00 + t21 * r01 + t22 * r02,
-            t20 * r10 + t21 * r11 + t22 * r12,
-            t20 * r20 + t21 * r21 + t22 * r22,
-        )
-        position = math.sqrt(ex * ex + ey * ey + ez * ez)
-        orientation = math.sqrt(wx * wx + wy * wy + wz * wz)
-        return chain, (ex, ey, ez, wx, wy, wz), position, orientation
+        return (chain, *twist_error(target, chain.frame))
 
     # ---- the calibrated chain ------------------------------------------------------------------
 
@@ -623,17 +606,7 @@ class UrKinematics:
 
     def _within_limits(self, q: Joints) -> Joints | None:
         """``q`` (shifted near the seed), each joint turned by whole turns just into its limits; or None."""
-        out = list(q)
-        for i, (lower, upper) in enumerate(zip(self._lower, self._upper, strict=True)):
-            value = out[i]
-            if value > upper:
-                value -= _TAU * math.ceil((value - upper) / _TAU)
-            elif value < lower:
-                value += _TAU * math.ceil((lower - value) / _TAU)
-            if not lower <= value <= upper:
-                return None
-            out[i] = value
-        return (out[0], out[1], out[2], out[3], out[4], out[5])
+        return _within(q, self._lower, self._upper)
 
 
 def _jacobian_rows(chain: _Chain) -> list[list[float]]:
@@ -660,3 +633,40 @@ def _shift_near(q: Vector, seed: Vector) -> Joints:
 
 def _distance(q: Vector, seed: Vector) -> float:
     return math.sqrt(sum((a - b) * (a - b) for a, b in zip(q, seed, strict=True)))
+
+
+def _within(q: Joints, lowers: Sequence[float], uppers: Sequence[float]) -> Joints | None:
+    """``q``, each joint turned by whole turns just into [lower, upper]; None if one cannot be."""
+    out = list(q)
+    for i, (lower, upper) in enumerate(zip(lowers, uppers, strict=True)):
+        value = out[i]
+        if value > upper:
+            value -= _TAU * math.ceil((value - upper) / _TAU)
+        elif value < lower:
+            value += _TAU * math.ceil((lower - value) / _TAU)
+        if not lower <= value <= upper:
+            return None
+        out[i] = value
+    return (out[0], out[1], out[2], out[3], out[4], out[5])
+
+
+def twist_error(target: Frame, frame: Frame) -> tuple[tuple[float, ...], float, float]:
+    """The twist from ``frame`` to ``target`` (position difference, rotation vector in base) and its
+    sizes (m, rad): the error Newton's steps drive to zero (here and in chain.py)."""
+    t, r = target, frame
+    ex, ey, ez = t[9] - r[9], t[10] - r[10], t[11] - r[11]
+    # target * frame^T: the rotation taking the current tool to the target, in base.
+    wx, wy, wz = rotation_vector(
+        t[0] * r[0] + t[1] * r[1] + t[2] * r[2],
+        t[0] * r[3] + t[1] * r[4] + t[2] * r[5],
+        t[0] * r[6] + t[1] * r[7] + t[2] * r[8],
+        t[3] * r[0] + t[4] * r[1] + t[5] * r[2],
+        t[3] * r[3] + t[4] * r[4] + t[5] * r[5],
+        t[3] * r[6] + t[4] * r[7] + t[5] * r[8],
+        t[6] * r[0] + t[7] * r[1] + t[8] * r[2],
+        t[6] * r[3] + t[7] * r[4] + t[8] * r[5],
+        t[6] * r[6] + t[7] * r[7] + t[8] * r[8],
+    )
+    position = math.sqrt(ex * ex + ey * ey + ez * ez)
+    orientation = math.sqrt(wx * wx + wy * wy + wz * wz)
+    return (ex, ey, ez, wx, wy, wz), position, orientation

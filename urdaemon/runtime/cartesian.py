@@ -1,14 +1,19 @@
 """One robot's Cartesian goals: the joint target of a pose move goal, and linear goals.
 
-A pose move goal (``goal/move`` with ``pose``) is brought into the robot's base frame, solved by IK
-on the robot's arm kinematics (the solution nearest the joints the goal starts from, of the named
-configuration if any), and then runs exactly as a joint move goal (runtime/goals.py).
+A pose move goal (``goal/move`` with ``pose``) is brought into the robot's base frame and solved by
+IK on the robot's arm kinematics (the solution nearest the joints the goal starts from when it
+arrives, of the named configuration if any) before it is answered: in slices between robot cycles
+(the IK's ``nearest_steps`` chunks, ``sliced``), as a task under the gate (``gate.planning``: a second
+goal meanwhile is refused ``busy``; stop, cancel, freedrive refuse it). It then starts exactly as a
+joint move goal (runtime/goals.py ``start_move``), from the setpoint as every joint move does, so it
+needs no ``gate.from_rest``; its one reply adds the joint ``positions`` chosen.
 
 A linear goal (``goal/linear``) starts from rest only. It is decoded and its limits checked against
 the cell's caps at once, then planned (control/linear.py: straight TCP lines, every cycle's joints
 checked) in slices between robot cycles under the gate like a trajectory goal: a second goal while it
 is planned is refused ``busy``, whatever ends motion meanwhile (stop, cancel, freedrive, ...) refuses
-it, and it starts only if the robot still rests where it was planned from. Its reply, feedback,
+it, and nothing else may move the robot until it is answered (``gate.from_rest``: its plan is every
+cycle's joints from where the robot rests), so it starts where it was planned from. Its reply, feedback,
 result and signing are every goal's (runtime/goals.py).
 """
 
@@ -17,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -29,7 +34,6 @@ from urdaemon.control.planned import ReadyPlan
 from urdaemon.description.arm import ArmKinematics, base_in_world
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
 from urdaemon.errors import GoalRejected
-from urdaemon.model import RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Guard, ZenohNode
@@ -47,7 +51,7 @@ def shown_pose(pose: Sequence[float]) -> str:
 
 
 class Cartesian:
-    """Solves one robot's pose move goals and plans and starts its linear goals."""
+    """Solves and starts one robot's pose move goals, and plans and starts its linear goals."""
 
     def __init__(
         self,
@@ -69,7 +73,7 @@ class Cartesian:
         world = base_in_world(robot)
         self._from_world: Frame | None = None if world is None else inverse(world)
         """base -> world, to bring a world pose into base (None: the robot is not mounted on world)."""
-        goals.pose_target = self.pose_target
+        goals.pose_goal = self.on_pose_goal
 
     def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> None:
         """Declare the linear goal's queryable (its exact key only; the command lease holder's token)."""
@@ -101,30 +105,85 @@ class Cartesian:
 
     # ---- pose move goals -----------------------------------------------------------------------
 
-    def pose_target(self, goal: codec.MoveGoalMessage, state: RobotState) -> tuple[float, ...]:
-        """The joints of a pose move goal: IK nearest the joints the goal starts from (of its named
-        configuration, if any); refused naming the pose when there is none."""
+    def on_pose_goal(self, query: Any, goal: codec.MoveGoalMessage) -> None:
+        """A pose move goal (decoded, free to move): refused at once while another goal is planned,
+        else solved in slices in a task that answers it once."""
+        gate = self._gate
+        if gate.planning is not None:
+            self._goals.refuse(
+                query, "move", GoalRejected(f"busy: still planning trajectory {gate.planning}")
+            )
+            return
+        gate.planning = "pose move goal"
+        # what ended motion before this query counts as before it: recorded now, not when it starts
+        work = self._pose_goal(query, goal, gate.generation)
+        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+
+    async def _pose_goal(self, query: Any, goal: codec.MoveGoalMessage, generation: int) -> None:
+        try:
+            positions = await self.pose_target(goal, generation)
+            self._gate.check_still_wanted(generation)  # nothing ended motion while it was solved
+            goal_id, duration = self._goals.start_move(goal, positions)
+        except Exception as err:  # refused, or a bug: either way the client is answered, once
+            self._goals.refuse(query, "move", err)
+            return
+        finally:  # cancelled (shutting down): the task's done-callback answers
+            self._gate.planning = None
+        self._goals.accept(query, "pose move", goal_id, duration, {"positions": list(positions)})
+
+    async def pose_target(self, goal: codec.MoveGoalMessage, generation: int) -> tuple[float, ...]:
+        """The joints of a pose move goal, solved in slices: IK nearest the joints the goal starts
+        from (of its named configuration, if any); refused naming the pose when there is none, and
+        when something ends motion (``generation``) while it is solved."""
         what = "move goal"
         kin = self._arm(what)
         assert goal.pose is not None
         pose = self.in_base(goal.pose, goal.frame, what)
-        start, _ = self._controller.goal_start(state)
+        start, _ = self._controller.goal_start(self._backend.state)
         tcp = self._controller.tcp
-        if not goal.configuration:
-            found = kin.nearest(pose, start, tcp)
+        wanted = dict(goal.configuration) if goal.configuration else None
+        if wanted is None:
+            found = await self._solved(kin.nearest_steps(pose, start, tcp), generation)
         elif not kin.branches:
             raise GoalRejected(
                 f"{what}.configuration: robot {self._robot.name} has no named configurations (UR models only)"
             )
         else:
-            found = kin.nearest_in(pose, start, tcp, dict(goal.configuration))  # type: ignore[attr-defined]
+            steps = kin.nearest_in_steps(pose, start, tcp, wanted)  # type: ignore[attr-defined]
+            found = await self._solved(steps, generation)
         if found is not None:
             return tuple(found)
         shown = shown_pose(goal.pose)
-        if goal.configuration and kin.nearest(pose, start, tcp) is not None:
+        if wanted and await self._solved(kin.nearest_steps(pose, start, tcp), generation) is not None:
             named = ", ".join(f"{group}={value}" for group, value in goal.configuration)
             raise GoalRejected(f"{what}: pose {shown} has no solution with configuration {named}")
         raise GoalRejected(f"{what}: pose {shown} is out of reach")
+
+    async def _solved(
+        self, steps: Generator[None, None, Sequence[float] | None], generation: int
+    ) -> Sequence[float] | None:
+        """Run an IK's chunks (``nearest_steps``) in slices between robot cycles; what it returns.
+        Refused (``GoalRejected``) at the next slice once something ends motion or the daemon closes."""
+        gate = self._gate
+        answer: list[Sequence[float] | None] = []
+
+        def step(deadline: float) -> bool:
+            if gate.generation != generation or gate.closing:  # stop, cancel, freedrive: no more work
+                raise GoalRejected(SHUTTING_DOWN if gate.closing else STOPPED_WHILE_PLANNING)
+            try:
+                while True:
+                    next(steps)  # one chunk: a Newton evaluation, 10-60 µs
+                    if time.perf_counter() > deadline:
+                        return True
+            except StopIteration as stop:
+                answer.append(stop.value)
+                return False
+
+        try:
+            await sliced(step)
+        finally:
+            steps.close()
+        return answer[0]
 
     # ---- linear goals --------------------------------------------------------------------------
 

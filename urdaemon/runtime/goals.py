@@ -35,7 +35,6 @@ from urdaemon.control import GoalFeedback, GoalResult, MotionController, Toleran
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.model import RobotState
 from urdaemon.publish import codec, signing
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
@@ -47,13 +46,14 @@ from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, pa
 from urdaemon.runtime.slicing import check_sliced, decode_sliced, plan_tail, release
 from urdaemon.runtime.status import StatusPublisher
 
-__all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "PoseTarget", "ResultListener", "put_signed"]
+__all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "PoseGoal", "ResultListener", "put_signed"]
 
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries (each with its signature)."""
 
-PoseTarget = Callable[[codec.MoveGoalMessage, RobotState], tuple[float, ...]]
-"""A pose move goal's joint target in the controller's joint order (raises ``GoalRejected``)."""
+PoseGoal = Callable[[Any, codec.MoveGoalMessage], None]
+"""Takes a decoded pose move goal and its query: solves its IK in slices, then starts it as a joint
+move goal (``start_move``) or refuses it, answering the query once (runtime/cartesian.py)."""
 
 ResultListener = Callable[[GoalResult, bytes], None]
 """Told a goal's result (and its message as published) once it is published: a cell goal's part."""
@@ -107,8 +107,8 @@ class Goals:
         """Who is told a goal's result when it is published, by goal id (told once, then forgotten)."""
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
-        self.pose_target: PoseTarget | None = None
-        """A pose move goal's joint target (IK: runtime/cartesian.py); None: no arm kinematics."""
+        self.pose_goal: PoseGoal | None = None
+        """Handles pose move goals (IK in slices: runtime/cartesian.py); None: no arm kinematics."""
 
     def declare(self, guard: Guard | None = None) -> None:
         """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and
@@ -385,9 +385,8 @@ class Goals:
     # ---- move goals and cancel -------------------------------------------------------------------
 
     def on_move_goal(self, query: Any) -> None:
-        """A point-to-point move goal, to joint positions or (through IK: ``pose_target``) to a TCP
-        pose: decided at once. A pose goal's reply adds the joint ``positions`` it chose."""
-        extra: dict[str, Any] | None = None
+        """A point-to-point move goal to joint positions, decided at once; one to a TCP pose is
+        handed to ``pose_goal`` (its IK is solved in slices, then ``start_move`` starts it)."""
         try:
             if self._gate.closing:
                 raise GoalRejected(SHUTTING_DOWN)
@@ -395,18 +394,27 @@ class Goals:
             self._gate.check_free_to_move()
             self._gate.check_not_planning_from_rest()
             if goal.pose is not None:
-                if self.pose_target is None:
+                if self.pose_goal is None:
                     raise GoalRejected(f"move goal.pose: robot {self._robot.name} has no arm kinematics")
-                goal = dataclasses.replace(goal, positions=self.pose_target(goal, self._backend.state))
-                extra = {"positions": list(goal.positions)}
-            names = self.joint_names(goal.joint_names)
-            tolerances = self.tolerances(goal.tolerances, names)
-            goal_id, _ = self._new_goal()
-            duration = self._accept_move(goal_id, goal, names, tolerances)
+                self.pose_goal(query, goal)
+                return
+            goal_id, duration = self.start_move(goal)
         except Exception as err:  # refused, or a bug: either way the client is answered, once
             self.refuse(query, "move", err)
             return
-        self.accept(query, "move" if extra is None else "pose move", goal_id, duration, extra)
+        self.accept(query, "move", goal_id, duration)
+
+    def start_move(
+        self, goal: codec.MoveGoalMessage, positions: Sequence[float] | None = None
+    ) -> tuple[str, float]:
+        """Start a move goal now, to its ``positions`` (a pose goal's: the IK's ``positions``); its id
+        and duration. Raises ``GoalRejected``."""
+        if positions is not None:
+            goal = dataclasses.replace(goal, positions=tuple(positions))
+        names = self.joint_names(goal.joint_names)
+        tolerances = self.tolerances(goal.tolerances, names)
+        goal_id, _ = self._new_goal()
+        return goal_id, self._accept_move(goal_id, goal, names, tolerances)
 
     def start_ready(self, plan: ReadyPlan, tolerances: Tolerances | None) -> tuple[str, float]:
         """Start a plan made for the pose the robot rests at (a linear goal's); its id and duration."""
