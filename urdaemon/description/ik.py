@@ -307,8 +307,7 @@ class UrKinematics:
         max_position_error: float = 1e-10,
         max_orientation_error: float = 1e-10,
     ) -> Steps[Joints | None]:
-        """``nearest`` in bounded chunks: yields after the closed form and after each Newton evaluation
-        (~10-30 µs each); returns exactly what ``nearest`` returns."""
+        """``nearest`` in chunks (one Newton evaluation each, ~10-30 µs); returns what it returns."""
         target = self._flange_target(pose, tcp)
         ranked = sorted(
             (_distance(_shift_near(q0, qnear), qnear), branch, q0)
@@ -471,6 +470,7 @@ class UrKinematics:
         the calibrated branch can lie far (in joints) from the nominal one. A waypoint the branch does
         not reach ends the attempt (so an unreachable pose costs a few steps per branch)."""
         start = self._chain(q, None).frame
+        yield
         sx, sy, sz = start[9], start[10], start[11]
         dx, dy, dz = target[9] - sx, target[10] - sy, target[11] - sz
         # The rotation from the start's orientation to the target's, in base, as a rotation vector.
