@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -19,6 +20,7 @@ import pytest
 
 from tests.control.sim import SimRobot
 from tests.description.support import REAL_UR10E, dh_fk, random_calibration
+from tests.description.test_chain import SIX, _custom
 from urdaemon.control import GoalStatus
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.linear import (
@@ -30,7 +32,9 @@ from urdaemon.control.linear import (
 )
 from urdaemon.control.sampled import SampledTrajectory
 from urdaemon.control.scaling import planning_limits
+from urdaemon.daemon import describe_cell
 from urdaemon.description import DhParameters, UrKinematics, load_ur_model
+from urdaemon.description.chain import ChainKinematics
 from urdaemon.description.frames import compose, frame_of_pose, rotation_vector
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS, JointLimits
@@ -331,8 +335,8 @@ class _FlippingArm:
 
     def nearest_steps(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
         """``nearest`` in one chunk (what the subclasses' ``nearest`` answers)."""
+        yield from ()  # a generator of one chunk, run by the check's steps as a real arm's chunks are
         return self.nearest(pose, qnear, tcp)
-        yield  # a generator: run by the check's steps as a real arm's chunks are
 
     def nearest(self, pose: Any, qnear: Any, tcp: Any = None, *args: Any) -> Any:
         q = self._kin.nearest(pose, qnear, tcp)
@@ -545,3 +549,36 @@ def test_malformed_arguments_are_refused(poses: Any, blends: Any, reason: str) -
     got, steps = _refusal(plan_linear(kin, Q0, poses, blends, TCP, CARTESIAN, limits, PERIOD))
     assert got == reason
     assert steps == 0
+
+
+def test_a_custom_robots_pose_out_of_reach_is_checked_one_evaluation_per_step(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A custom robot's numeric IK tries nine starts for a pose out of reach (2-4 ms at once); the
+    check takes it one chain evaluation per step, so the runtime's 0.25 ms slice can split it.
+    Reproduction: before nearest_steps the whole IK was one step (hundreds of evaluations)."""
+    _, kin = _custom(tmp_path, SIX)
+    limits = describe_cell(_custom(tmp_path, SIX)[0]).limits["arm"]
+    walks = [0]
+    walk = ChainKinematics._walk
+
+    def counted(self: ChainKinematics, q: Any, rows: Any) -> Any:
+        walks[0] += 1
+        return walk(self, q, rows)
+
+    monkeypatch.setattr(ChainKinematics, "_walk", counted)
+    q0 = [0.1] * kin.dof
+    for poses in ([(5.0, 0.0, 0.0, 0.0, 0.0, 0.0)], [kin.forward(q0), (5.0, 0.0, 0.0, 0.0, 0.0, 0.0)]):
+        check = plan_linear(kin, q0, poses, [0.0] * (len(poses) - 1), (0.0,) * 6, CARTESIAN, limits, PERIOD)
+        most, steps, reason = 0, 0, ""
+        while not reason and steps < 100_000:
+            before = walks[0]
+            try:
+                assert check.step(1), "the check finished without refusing"
+            except GoalRejected as exc:
+                reason = str(exc)
+            most = max(most, walks[0] - before)
+            steps += 1
+        assert reason.startswith(f"linear goal: pose {len(poses) - 1} is out of reach")
+        assert most <= 1
+        assert steps >= 50

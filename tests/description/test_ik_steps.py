@@ -148,8 +148,8 @@ def test_a_ur_arm_bounded_by_the_cells_joint_limits_picks_the_other_branch(tmp_p
     cell = make_cell(tmp_path, {"name": "arm", "model": "ur5e", "pose": {"xyz": [0.0, 0.0, 0.0]}})
     robot = cell.robots[0]
     model = load_ur_model("ur5e")
-    lower = [j.min_position for j in model.joints]
-    upper = [j.max_position for j in model.joints]
+    lower = [-math.inf if j.min_position is None else j.min_position for j in model.joints]
+    upper = [math.inf if j.max_position is None else j.max_position for j in model.joints]
     upper[2] = 0.0  # elbow_joint: the cell's joint_limits
     names = [j.name for j in model.joints]
     q = (0.3, -1.2, 1.6, -1.9, -1.2, 0.4)
@@ -168,8 +168,8 @@ def test_ur_bounds_choose_the_turn_within_them() -> None:
     """A joint with a range wider than a turn takes the 2pi shift nearest qnear that lies in the
     bounds; one that has none in them drops the solution."""
     model = load_ur_model("ur5e")
-    lower = [j.min_position for j in model.joints]
-    upper = [j.max_position for j in model.joints]
+    lower = [-math.inf if j.min_position is None else j.min_position for j in model.joints]
+    upper = [math.inf if j.max_position is None else j.max_position for j in model.joints]
     q = (0.3, -1.2, 1.6, -1.9, -1.2, 0.4)
     pose = UrKinematics(model).forward(q)
     lower[5], upper[5] = 5.0, 7.0  # wrist_3: 0.4 + 2pi is the turn within

@@ -1,12 +1,15 @@
 """runtime/cartesian.py without Zenoh: the mock robot stepped by hand, the controller ticked by hand.
 
-Reproduction: before issue 17 runtime/cartesian.py did not exist (ImportError), so every test fails.
+Reproduction: before issue 17 runtime/cartesian.py did not exist (ImportError), so every test fails;
+before pose goals were solved in slices, Cartesian had no pose goal handler (the pose goal tests fail).
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import cast
 
 import pytest
 
@@ -32,20 +35,39 @@ robots:
     pose: {parent: world, xyz: [0.5, 0.0, 0.0]}
     mock: {initial_positions: [0.3, -1.8, 1.6, -1.4, -1.5708, 0.2]}
     motion: {cartesian: {max_speed: 0.5, speed: 0.1}}
+  - name: carol
+    model: custom
+    backend: mock
+    pose: {xyz: [-1.0, 0.0, 0.0]}
+    description: {xacro: servo_arm/servo_arm.urdf.xacro, macro: servo_arm}
+    mock: {initial_positions: [0.3, 0.4, -0.5, 0.2]}
 """
 
 
 class _Goals:
-    """What Cartesian sets on the robot's goals: the pose goal handler."""
+    """What Cartesian uses of the robot's goals: the pose goal handler, start_move and the answers."""
 
-    pose_goal = None
+    def __init__(self) -> None:
+        self.pose_goal: Callable[[object, codec.MoveGoalMessage], None] | None = None
+        self.answers: list[tuple[str, object]] = []
+        self.started: list[tuple[float, ...]] = []
+
+    def start_move(self, goal: codec.MoveGoalMessage, positions: Sequence[float]) -> tuple[str, float]:
+        self.started.append(tuple(positions))
+        return "g1", 1.0
+
+    def refuse(self, query: object, kind: str, err: Exception) -> None:
+        self.answers.append(("refused", err.reason if isinstance(err, GoalRejected) else repr(err)))
+
+    def accept(self, query: object, kind: str, goal_id: str, duration: float, extra: object = None) -> None:
+        self.answers.append(("accepted", extra))
 
 
-def _parts() -> tuple[Cartesian, MotionController, Backend, MotionGate]:
+def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, MotionGate]:
     cell = parse_cell(CELL, base_dir=ROOT / "configs")
-    robot = cell.robot("alice")
+    robot = cell.robot(name)
     description = describe_cell(cell)
-    limits = description.limits["alice"]
+    limits = description.limits[name]
     backend = make_backend(robot, limits, None, cell.cell)
     state = backend.state
     state.lifecycle, state.robot_mode, state.safety_mode = (
@@ -124,3 +146,104 @@ async def test_a_plan_interrupted_between_slices_stops_at_once(monkeypatch: pyte
         await cartesian._plan(_linear(pose), gate.generation)
     assert refused.value.reason == STOPPED_WHILE_PLANNING
     assert slices == []
+
+
+def _move(pose: Sequence[float], **fields: object) -> codec.MoveGoalMessage:
+    return codec.decode_move_goal(codec.encode({"pose": list(pose), **fields}))
+
+
+class _Slices:
+    """``sliced`` with a slice that has always run out of time: each runs one chunk of work."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.hold: asyncio.Event | None = None
+
+    async def __call__(self, step: Callable[[float], bool]) -> None:
+        while True:
+            if self.hold is not None:
+                await self.hold.wait()
+            self.count += 1
+            if not step(-1.0):
+                return
+            await asyncio.sleep(0)
+
+
+async def _answered(cartesian: Cartesian, goal: codec.MoveGoalMessage) -> list[tuple[str, object]]:
+    goals = _fake(cartesian)
+    assert goals.pose_goal is not None
+    goals.pose_goal(object(), goal)
+    await asyncio.gather(*cartesian._requests.tasks)
+    return goals.answers
+
+
+def _planning(gate: MotionGate) -> str | None:
+    """What the gate says is being planned (read afresh)."""
+    return gate.planning
+
+
+def _fake(cartesian: Cartesian) -> _Goals:
+    """The fake goals ``_parts`` gave ``cartesian``."""
+    return cast(_Goals, cartesian._goals)
+
+
+@pytest.mark.parametrize("name", ["alice", "carol"])
+async def test_a_pose_goal_out_of_reach_is_solved_in_slices_and_refused_naming_it(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The IK of a pose out of reach (a custom robot's nine numeric starts: 2-4 ms at once) runs one
+    Newton evaluation per slice, between robot cycles; the refusal is the one it always was.
+    Reproduction: before, the IK ran at once inside ``goal/move``'s handler (no ``pose_goal``)."""
+    from urdaemon.runtime import cartesian as module
+
+    slices = _Slices()
+    monkeypatch.setattr(module, "sliced", slices)
+    cartesian, _, _, gate = _parts(name)
+    answers = await _answered(cartesian, _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert answers == [
+        ("refused", "move goal: pose [5.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000] is out of reach")
+    ]
+    assert slices.count >= (50 if name == "carol" else 2)
+    assert gate.planning is None
+
+
+async def test_a_pose_goal_is_answered_with_the_joints_nearest_ik_gives(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from urdaemon.runtime import cartesian as module
+
+    monkeypatch.setattr(module, "sliced", _Slices())
+    cartesian, controller, backend, _ = _parts("carol")
+    kin = cartesian._arm("test")
+    start = list(backend.state.positions)
+    target = [v + 0.1 for v in start]
+    pose = kin.forward(target, controller.tcp)
+    answers = await _answered(cartesian, _move(pose))
+    expected = kin.nearest(pose, start, controller.tcp)
+    assert expected is not None
+    assert answers == [("accepted", {"positions": list(expected)})]
+    assert _fake(cartesian).started == [tuple(expected)]
+
+
+async def test_a_pose_goal_being_solved_makes_goals_busy_and_a_stop_refuses_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from urdaemon.runtime import cartesian as module
+
+    slices = _Slices()
+    slices.hold = asyncio.Event()
+    monkeypatch.setattr(module, "sliced", slices)
+    cartesian, _, _, gate = _parts("carol")
+    goals = _fake(cartesian)
+    assert goals.pose_goal is not None
+    goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert gate.planning == "pose move goal"
+    goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert goals.answers == [("refused", "busy: still planning trajectory pose move goal")]
+    gate.interrupt_planning()  # as a stop or a cancel does
+    slices.hold.set()
+    await asyncio.gather(*cartesian._requests.tasks)
+    assert goals.answers[1:] == [("refused", STOPPED_WHILE_PLANNING)]
+    assert slices.count == 1  # refused at its first slice, before any IK work
+    assert _planning(gate) is None
+    assert goals.started == []
