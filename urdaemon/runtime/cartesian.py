@@ -265,7 +265,7 @@ class Cartesian:
         def step(deadline: float) -> bool:
             if gate.generation != generation or gate.closing:  # stop, cancel, freedrive: no more work
                 raise GoalRejected(SHUTTING_DOWN if gate.closing else STOPPED_WHILE_PLANNING)
-            while check.step(1):  # one sample's IK or checks: 35-200 µs
+            while check.step(1):  # one chunk of an IK (a Newton evaluation) or one sample's checks
                 if time.perf_counter() > deadline:
                     return True
             return False
