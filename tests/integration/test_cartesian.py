@@ -236,8 +236,11 @@ async def test_the_configuration_picks_the_branch(served: Served) -> None:
         assert reply["accepted"] is True, reply
         assert configuration_of(reply["positions"]).elbow == elbow
         assert served.kin.forward(reply["positions"]) == pytest.approx(target, abs=1e-9)
-        assert (await served.ask("goal/cancel", {"goal_id": reply["goal_id"]}))["canceled"] is True
-        assert (await served.result(reply["goal_id"]))["status"] == "canceled"
+        canceled = await served.ask("goal/cancel", {"goal_id": reply["goal_id"]})
+        result = await served.result(reply["goal_id"])
+        # the elbow-up goal moves back only as far as the elbow-down one got before its cancel: it
+        # may end before its own cancel arrives (a race seen 1 in 10 runs, before and after issue 17)
+        assert (canceled["canceled"], result["status"]) in ((True, "canceled"), (False, "succeeded"))
 
 
 async def test_an_unreachable_pose_is_refused_naming_it_before_motion(served: Served) -> None:
