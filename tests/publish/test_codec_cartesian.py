@@ -128,14 +128,14 @@ def test_a_too_large_linear_goal_is_refused_before_it_is_parsed(monkeypatch: pyt
     """Counted, not timed: json.loads is never called for a message over the limit (the review's 17 KB
     goal of empty poses was parsed whole before its pose count was refused)."""
     calls = 0
-    real = codec.json.loads
+    real = json.loads
 
     def counted(data: Any) -> Any:
         nonlocal calls
         calls += 1
         return real(data)
 
-    monkeypatch.setattr(codec.json, "loads", counted)
+    monkeypatch.setattr(json, "loads", counted)  # the module codec parses with
     body = b'{"poses": [' + b"[]," * (codec.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
     reason = refused(codec.LinearGoalDecoder, body)
     assert reason == f"linear goal: message of {len(body)} bytes exceeds the limit of 16384 bytes"
