@@ -35,6 +35,7 @@ from collections.abc import Generator, Sequence
 
 from urdaemon.control.cartesian import CartesianLimits, LinePath, build_path
 from urdaemon.control.sampled import SampledTrajectory, SampleWriter
+from urdaemon.control.stepped import StepCheck
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.dls import singularity
 from urdaemon.description.frames import (
@@ -87,53 +88,15 @@ _RETIME_MARGIN = 1e-3
 """A retimed path is slowed this much more than the differences asked, so one pass usually fits."""
 
 
-class LinearCheck:
-    """A linear goal planned in steps: ``step(count)`` until it returns False, then ``result()``.
+class LinearCheck(StepCheck[SampledTrajectory]):
+    """A linear goal planned in steps (control/stepped.py): ``step(count)`` until it returns False,
+    then ``result()``, the sampled plan.
 
     Pure: no clock inside; a step is one chunk of an IK (one Newton evaluation), a segment's
     profile or a sample's checks (its Jacobian, a bound of its smallest singular value, its finite
     differences): each some 10-60 µs."""
 
-    __slots__ = ("_result", "_steps")
-
-    def __init__(self, steps: Generator[None, None, SampledTrajectory]) -> None:
-        self._steps: Generator[None, None, SampledTrajectory] | None = steps
-        self._result: SampledTrajectory | None = None
-
-    def step(self, count: int = 1) -> bool:
-        """Run up to ``count`` steps; True while more remain. Raises GoalRejected (then it is done)."""
-        steps = self._steps
-        if steps is None:
-            return False
-        try:
-            for _ in range(count):
-                next(steps)
-        except StopIteration as stop:
-            self._result = stop.value
-            self._steps = None
-            return False
-        except BaseException:
-            self._steps = None
-            raise
-        return True
-
-    def run(self) -> SampledTrajectory:
-        """Run every step left at once; the plan."""
-        while self.step(1024):
-            pass
-        return self.result()
-
-    def result(self) -> SampledTrajectory:
-        """The sampled plan."""
-        if self._result is None:
-            raise RuntimeError("the check has not finished")
-        return self._result
-
-    def close(self) -> None:
-        """Abandon an unfinished check."""
-        if self._steps is not None:
-            self._steps.close()
-            self._steps = None
+    __slots__ = ()
 
 
 def plan_linear(

@@ -26,6 +26,7 @@ from urdaemon.description.frames import (
     IDENTITY,
     Frame,
     Pose,
+    axis_rotation,
     compose,
     frame_of_pose,
     inverse,
@@ -278,7 +279,7 @@ class ChainKinematics:
             if rows is not None:
                 axes.append((step.column, step.multiplier, step.kind, wx, wy, wz, r[9], r[10], r[11]))
             if step.kind == "revolute":
-                frame = compose(frame, _axis_rotation(ax, ay, az, value))
+                frame = compose(frame, axis_rotation(ax, ay, az, value))
             else:
                 frame = (*frame[:9], frame[9] + wx * value, frame[10] + wy * value, frame[11] + wz * value)
         if rows is not None:
@@ -320,18 +321,6 @@ def _move_point(rows: list[list[float]], flange: Frame, tcp: Frame) -> None:
         rows[0][j] += wy * dz - wz * dy
         rows[1][j] += wz * dx - wx * dz
         rows[2][j] += wx * dy - wy * dx
-
-
-def _axis_rotation(x: float, y: float, z: float, angle: float) -> Frame:
-    """Rotation by ``angle`` about the unit axis (x, y, z) (Rodrigues)."""
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return (
-        t * x * x + c, t * x * y - s * z, t * x * z + s * y,
-        t * x * y + s * z, t * y * y + c, t * y * z - s * x,
-        t * x * z - s * y, t * y * z + s * x, t * z * z + c,
-        0.0, 0.0, 0.0,
-    )  # fmt: skip
 
 
 def _path(tree: KinematicTree, base: str, tool: str) -> tuple[list[TreeJoint], list[TreeJoint]]:

@@ -14,6 +14,7 @@ __all__ = [
     "IDENTITY",
     "Frame",
     "Pose",
+    "axis_rotation",
     "compose",
     "frame_of_pose",
     "inverse",
@@ -107,6 +108,19 @@ def inverse(f: Frame) -> Frame:
     return (
         r00, r10, r20, r01, r11, r21, r02, r12, r22,
         -(r00 * x + r10 * y + r20 * z), -(r01 * x + r11 * y + r21 * z), -(r02 * x + r12 * y + r22 * z),
+    )  # fmt: skip
+
+
+def axis_rotation(x: float, y: float, z: float, angle: float) -> Frame:
+    """The frame of a rotation by ``angle`` about the unit axis (x, y, z) (Rodrigues), no translation:
+    a revolute joint's motion."""
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return (
+        t * x * x + c, t * x * y - s * z, t * x * z + s * y,
+        t * x * y + s * z, t * y * y + c, t * y * z - s * x,
+        t * x * z - s * y, t * y * z + s * x, t * z * z + c,
+        0.0, 0.0, 0.0,
     )  # fmt: skip
 
 

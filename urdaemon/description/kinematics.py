@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from urdaemon.description.frames import compose, frame_of_pose
+from urdaemon.description.frames import axis_rotation, compose, frame_of_pose
 from urdaemon.description.urmodels import DhParameters
 from urdaemon.errors import DescriptionError
 
@@ -259,7 +259,7 @@ class KinematicTree:
                         x, y, z,
                     )  # fmt: skip
                 elif kind == _ROTATE:
-                    m = compose(m, _axis_rotation(ax, ay, az, value))
+                    m = compose(m, axis_rotation(ax, ay, az, value))
                 else:
                     r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = m
                     dx, dy, dz = ax * value, ay * value, az * value
@@ -275,18 +275,6 @@ class KinematicTree:
             qx, qy, qz, qw = quaternion_of(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8])
             result.append((name, (f[9], f[10], f[11], qx, qy, qz, qw)))
         return result
-
-
-def _axis_rotation(x: float, y: float, z: float, angle: float) -> Transform:
-    """Rotation by ``angle`` about the unit axis (x, y, z) (Rodrigues)."""
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return (
-        t * x * x + c, t * x * y - s * z, t * x * z + s * y,
-        t * x * y + s * z, t * y * y + c, t * y * z - s * x,
-        t * x * z - s * y, t * y * z + s * x, t * z * z + c,
-        0.0, 0.0, 0.0,
-    )  # fmt: skip
 
 
 def _tree_joint(joint: Any, joint_map: dict[str, Any]) -> TreeJoint:
