@@ -15,8 +15,8 @@ from collections.abc import Sequence
 import pytest
 
 from urdaemon.control.cartesian import CartesianLimits
-from urdaemon.control.twist import rotation_of
 from urdaemon.description.dls import singularity
+from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.ik import UrKinematics
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import GoalRejected
@@ -124,11 +124,11 @@ def test_a_tool_twist_turns_with_the_tool() -> None:
     pose = _tcp(robot, -1)
     before = _tcp(robot, -2)
     way = _unit([b - a for a, b in zip(before[:3], pose[:3], strict=True)])
-    r = rotation_of(*pose[3:])
+    r = frame_of_pose(pose)
     tool_x = (r[0], r[3], r[6])
     assert sum(a * b for a, b in zip(way, tool_x, strict=True)) > 0.999
     # Half a turn about the tool's z axis: its x axis now points back where it started.
-    r0 = rotation_of(*KIN.forward(Q0)[3:])
+    r0 = frame_of_pose(KIN.forward(Q0))
     assert r[0] * r0[0] + r[3] * r0[3] + r[6] * r0[6] < -0.99
     check_command_limits(robot.commands, UR10E_LIMITS, PERIOD)
     _check_jerk(robot)

@@ -30,6 +30,7 @@ from urdaemon.control.streams import STREAM_EXPIRED, STREAM_FAILED, StreamFollow
 from urdaemon.control.trajectory import RUCKIG_ERRORS, run_robustly
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.dls import damped_velocity, singularity
+from urdaemon.description.frames import frame_of_pose, rotate
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointCommand, JointLimits
 
@@ -38,7 +39,6 @@ __all__ = [
     "TwistFollower",
     "check_twist",
     "reach_of",
-    "rotation_of",
     "singular_share",
     "uniform_scale",
 ]
@@ -57,28 +57,6 @@ so its singular values grow with the arm: 0.12 per metre slows a UR10e (1.3 m) b
 (0.5 m) below 0.06, both well under their values in ordinary poses (0.3 and 0.12 at home)."""
 SLOWEST = 0.1
 """The share of the twist kept at the singularity itself, so the arm can still be jogged away from it."""
-
-
-def rotation_of(rx: float, ry: float, rz: float) -> tuple[float, ...]:
-    """The rotation matrix (row-major, 9 values) of the rotation vector (rx, ry, rz) (Rodrigues)."""
-    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if angle < 1e-12:
-        return (1.0, -rz, ry, rz, 1.0, -rx, -ry, rx, 1.0)
-    x, y, z = rx / angle, ry / angle, rz / angle
-    c = math.cos(angle)
-    s = math.sin(angle)
-    t = 1.0 - c
-    return (
-        t * x * x + c,
-        t * x * y - s * z,
-        t * x * z + s * y,
-        t * x * y + s * z,
-        t * y * y + c,
-        t * y * z - s * x,
-        t * x * z - s * y,
-        t * y * z + s * x,
-        t * z * z + c,
-    )
 
 
 def check_twist(twist: Sequence[float], frame: str, caps: CartesianLimits) -> tuple[float, ...]:
@@ -254,15 +232,8 @@ class TwistFollower:
         base = self._target_base
         if self._tool:
             pose = kin.forward(q, tcp)
-            r = rotation_of(pose[3], pose[4], pose[5])
-            want = [
-                r[0] * t[0] + r[1] * t[1] + r[2] * t[2],
-                r[3] * t[0] + r[4] * t[1] + r[5] * t[2],
-                r[6] * t[0] + r[7] * t[1] + r[8] * t[2],
-                r[0] * t[3] + r[1] * t[4] + r[2] * t[5],
-                r[3] * t[3] + r[4] * t[4] + r[5] * t[5],
-                r[6] * t[3] + r[7] * t[4] + r[8] * t[5],
-            ]
+            tool = frame_of_pose(pose)
+            want = [*rotate(tool, t[0:3]), *rotate(tool, t[3:6])]
         else:
             want = t
         share = singular_share(self.sigma, self._slow_below)
