@@ -8,6 +8,11 @@ One daemon serves two UR10e of one cell with the same TCP offset: ``alice`` on a
 at ``HOME``. Each goal's request is built once and sent to both (the same bytes). The fake's own record
 is its arm's TCP pose (RTDE ``actual_TCP_pose``) after every controller cycle, with the controller's
 timestamp. Every wait is on a goal's result or on the fake's cycles, bounded in count and time.
+
+The fake ticks on a ``LockstepClock``: while the program streams, each controller cycle waits for the
+daemon's frame for the one before, so what the arm does is what the daemon commanded, whatever the
+machine's load (on its own real-time clock a starved test process let the fake run cycles without
+the daemon's servoj, and the held-then-jumped target showed as jerk the daemon never commanded).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import pytest
 
 from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
+from tests.ur.lockstep import LockstepClock
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.client import Client, GoalHandle, RobotClient
 from urdaemon.control.stopping import SETTLE_POSITION
@@ -77,6 +83,8 @@ class Record:
     servoing: bool = False
     done: bool = False
     poses: list[tuple[float, ...]] = field(default_factory=list)
+    answered: list[bool] = field(default_factory=list)
+    """Per recorded cycle: whether the daemon had answered the cycle before (``LockstepClock``)."""
 
 
 @dataclass
@@ -91,7 +99,7 @@ class Pair:
     replies: dict[str, list[tuple[bytes, dict[str, Any]]]]
 
 
-def _record(fake: FakeController, record: Record, backend: Callable[[], Any]) -> None:
+def _record(fake: FakeController, record: Record, clock: LockstepClock, backend: Callable[[], Any]) -> None:
     arm = fake.arm
     step: Callable[[float], None] = arm.step
 
@@ -105,8 +113,23 @@ def _record(fake: FakeController, record: Record, backend: Callable[[], Any]) ->
             return
         record.servoing = servoing
         record.poses.append(tuple(arm.actual_tcp_pose()))
+        record.answered.append(clock.last_answered)
 
     arm.step = recorded  # type: ignore[method-assign]
+
+
+def _lockstep(clock: LockstepClock, backend: UrBackend) -> None:
+    """The fake waits for the daemon's frame every cycle while the program streams."""
+    send = backend.send_command
+
+    def sent() -> None:
+        before = backend.turnaround.count
+        send()
+        if backend.turnaround.count != before:
+            clock.answered()
+
+    backend.send_command = sent  # type: ignore[method-assign]
+    clock.follow = lambda: backend.servers.reverse.connected and backend.state.ready_for_motion
 
 
 def _spy(pair: Pair) -> None:
@@ -146,9 +169,11 @@ def _spy(pair: Pair) -> None:
 @asynccontextmanager
 async def _pair() -> AsyncIterator[Pair]:
     fake = FakeController("ur10e", address=fake_address(), initial_positions=HOME, powered=True)
+    clock = LockstepClock(PERIOD)
+    fake.use_clock(clock, 0)
     record = Record()
     found: list[Any] = []
-    _record(fake, record, lambda: found[0])
+    _record(fake, record, clock, lambda: found[0])
     text = "cell: cartcell\nrobots:" + _robot("alice", "ur", fake.address) + _robot("bob", "mock", None)
     async with fake, running_daemon(text) as (daemon, client):
         pair = Pair(
@@ -157,6 +182,7 @@ async def _pair() -> AsyncIterator[Pair]:
         backend = daemon.runtimes[0].backend
         assert isinstance(backend, UrBackend)
         found.append(backend)
+        _lockstep(clock, backend)
         await fake.until(
             lambda: backend.state.ready_for_motion and backend.servers.reverse.connected,
             cycles=20_000,
@@ -263,6 +289,7 @@ async def test_a_linear_goal_on_the_fake_is_straight_within_the_limits_as_on_the
 
         poses = pair.record.poses
         assert len(poses) > plans[0].sample_count, "recorded the whole motion"
+        assert all(pair.record.answered), "every recorded cycle ran after the daemon's frame"
         deviation = max(_line_distance(p, start, end) for p in poses)
         assert deviation < 1e-4, f"{deviation * 1e3:.4f} mm off the straight line"
         assert math.dist(poses[-1][:3], end[:3]) < 1e-5
