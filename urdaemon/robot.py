@@ -133,9 +133,7 @@ class RobotRuntime:
             self.log,
             on_tcp=self._use_tcp,
         )
-        self.cartesian = Cartesian(
-            robot, backend, controller, self.goals, (self.gate, self.requests), arm, self.log
-        )
+        self.cartesian = Cartesian(robot, backend, controller, self.goals, self.gate, arm, self.log)
         self.lease = LeaseKeeper(
             self.keys,
             LeaseBook(robot.name, self.keys.lease),  # checked unless the cell says not (daemon.py)

@@ -557,7 +557,7 @@ async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuse
         assert busy == {
             "v": 1,
             "accepted": False,
-            "reason": "busy: still planning trajectory linear goal of 1 pose",
+            "reason": "busy: still planning linear goal of 1 pose",
         }
         tcp = await served.ask("service/set_tcp", {"pose": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]})
         assert tcp == {
@@ -567,7 +567,7 @@ async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuse
         }
         canceled = await served.ask("goal/cancel", {})
         assert canceled["canceled"] is True, canceled
-        assert canceled["planned"] == "the trajectory goal being planned (linear goal of 1 pose) is refused"
+        assert canceled["planned"] == "the goal being planned (linear goal of 1 pose) is refused"
     finally:
         go.set()
     reply = await planning

@@ -24,6 +24,7 @@ from urdaemon.model import Lifecycle, RobotMode, SafetyMode
 from urdaemon.publish import codec
 from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
+from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import Requests
 
 CELL = """
@@ -47,7 +48,8 @@ robots:
 class _Goals:
     """What Cartesian uses of the robot's goals: the pose goal handler, start_move and the answers."""
 
-    def __init__(self) -> None:
+    def __init__(self, gate: MotionGate, requests: Requests) -> None:
+        self._gate, self._requests = gate, requests  # what the real plan_in_task uses
         self.pose_goal: Callable[[object, codec.MoveGoalMessage], None] | None = None
         self.answers: list[tuple[str, object]] = []
         self.started: list[tuple[float, ...]] = []
@@ -61,6 +63,8 @@ class _Goals:
 
     def accept(self, query: object, kind: str, goal_id: str, duration: float, extra: object = None) -> None:
         self.answers.append(("accepted", extra))
+
+    plan_in_task = Goals.plan_in_task  # the real one, on this stub's gate, requests and answers
 
 
 def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, MotionGate]:
@@ -79,9 +83,10 @@ def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, M
     controller = MotionController(limits, period=backend.period)
     kin = arm_kinematics(robot, description.tree, limits.names, (limits.min_position, limits.max_position))
     controller.set_arm(kin, twist_limits(robot))
-    gate = MotionGate(backend)
+    gate, requests = MotionGate(backend), Requests()
     log = logging.LoggerAdapter(logging.getLogger("test"), {})
-    cartesian = Cartesian(robot, backend, controller, _Goals(), (gate, Requests()), kin, log)  # type: ignore[arg-type]
+    goals = _Goals(gate, requests)
+    cartesian = Cartesian(robot, backend, controller, goals, gate, kin, log)  # type: ignore[arg-type]
     return cartesian, controller, backend, gate
 
 
@@ -173,7 +178,7 @@ async def _answered(cartesian: Cartesian, goal: codec.MoveGoalMessage) -> list[t
     goals = _fake(cartesian)
     assert goals.pose_goal is not None
     goals.pose_goal(object(), goal)
-    await asyncio.gather(*cartesian._requests.tasks)
+    await asyncio.gather(*_fake(cartesian)._requests.tasks)
     return goals.answers
 
 
@@ -239,10 +244,10 @@ async def test_a_pose_goal_being_solved_makes_goals_busy_and_a_stop_refuses_it(
     goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
     assert gate.planning == "pose move goal"
     goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    assert goals.answers == [("refused", "busy: still planning trajectory pose move goal")]
+    assert goals.answers == [("refused", "busy: still planning pose move goal")]
     gate.interrupt_planning()  # as a stop or a cancel does
     slices.hold.set()
-    await asyncio.gather(*cartesian._requests.tasks)
+    await asyncio.gather(*_fake(cartesian)._requests.tasks)
     assert goals.answers[1:] == [("refused", STOPPED_WHILE_PLANNING)]
     assert slices.count == 1  # refused at its first slice, before any IK work
     assert _planning(gate) is None

@@ -57,7 +57,7 @@ def test_a_trajectory_goal_being_planned_does_not_hold_streams() -> None:
     """A trajectory goal's plan starts from the setpoint when it is accepted, not from a pose fixed
     when its planning began: streams go on meanwhile (only ``from_rest`` holds them)."""
     gate = _gate()
-    gate.planning = "of 3 points"
+    gate.planning = "trajectory of 3 points"
     gate.check_accepting()
     gate.check_not_planning_from_rest()
 

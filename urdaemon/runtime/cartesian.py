@@ -39,7 +39,7 @@ from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
-from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload
+from urdaemon.runtime.queries import SHUTTING_DOWN, payload
 from urdaemon.runtime.slicing import sliced
 
 __all__ = ["Cartesian", "shown_pose"]
@@ -59,7 +59,7 @@ class Cartesian:
         backend: Backend,
         controller: MotionController,
         goals: Goals,
-        parts: tuple[MotionGate, Requests],
+        gate: MotionGate,
         kinematics: ArmKinematics | None,
         log: logging.LoggerAdapter[logging.Logger],
     ) -> None:
@@ -67,7 +67,7 @@ class Cartesian:
         self._backend = backend
         self._controller = controller
         self._goals = goals
-        self._gate, self._requests = parts
+        self._gate = gate
         self._kin = kinematics
         self._log = log
         world = base_in_world(robot)
@@ -106,18 +106,8 @@ class Cartesian:
     # ---- pose move goals -----------------------------------------------------------------------
 
     def on_pose_goal(self, query: Any, goal: codec.MoveGoalMessage) -> None:
-        """A pose move goal (decoded, free to move): refused at once while another goal is planned,
-        else solved in slices in a task that answers it once."""
-        gate = self._gate
-        if gate.planning is not None:
-            self._goals.refuse(
-                query, "move", GoalRejected(f"busy: still planning trajectory {gate.planning}")
-            )
-            return
-        gate.planning = "pose move goal"
-        # what ended motion before this query counts as before it: recorded now, not when it starts
-        work = self._pose_goal(query, goal, gate.generation)
-        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+        """A pose move goal (decoded, free to move), solved in slices in a task (``plan_in_task``)."""
+        self._goals.plan_in_task(query, "move", "pose move goal", lambda g: self._pose_goal(query, goal, g))
 
     async def _pose_goal(self, query: Any, goal: codec.MoveGoalMessage, generation: int) -> None:
         try:
@@ -206,20 +196,10 @@ class Cartesian:
         return CartesianLimits(*values)
 
     def on_linear_goal(self, query: Any) -> None:
-        """A linear goal: refused at once while another goal is planned, else planned in a task."""
-        gate = self._gate
-        if gate.closing:
-            self._goals.refuse(query, "linear", GoalRejected(SHUTTING_DOWN))
-            return
-        if gate.planning is not None:  # refused before reading a byte of it
-            self._goals.refuse(
-                query, "linear", GoalRejected(f"busy: still planning trajectory {gate.planning}")
-            )
-            return
-        gate.planning = "being decoded"
-        # what ended motion before this query counts as before it: recorded now, not when it starts
-        work = self._linear_goal(query, gate.generation)
-        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+        """A linear goal, planned in slices in a task (``plan_in_task``)."""
+        self._goals.plan_in_task(
+            query, "linear", "linear goal being decoded", lambda g: self._linear_goal(query, g)
+        )
 
     async def _linear_goal(self, query: Any, generation: int) -> None:
         try:

@@ -151,9 +151,9 @@ class CellGoals:
             parts = self._parts(request, tokens)
             for name, runtime in parts:  # no robot goal is planned beside its part
                 if runtime.gate.planning is not None:
-                    raise GoalRejected(f"{name}: busy: still planning trajectory {runtime.gate.planning}")
+                    raise GoalRejected(f"{name}: busy: still planning {runtime.gate.planning}")
             for _, runtime in parts:
-                runtime.gate.planning = "of a cell goal"
+                runtime.gate.planning = "a cell goal's part"
                 claimed.append(runtime)
             planned = {name: await self._plan(name, request, generations, owned) for name, _ in parts}
             run = self._start(request.on_abort, planned, tokens, generations)

@@ -31,7 +31,7 @@ class MotionGate:
         self.in_contact = False
         """The robot reported a tool contact and rests where it touched until ``end_tool_contact``."""
         self.planning: str | None = None
-        """What trajectory goal is being decoded or planned (for replies), None when none is."""
+        """What goal is being decoded or planned, kind first (for replies), None when none is."""
         self.from_rest = False
         """The goal being planned starts where the robot rests now (a linear goal's plan is the joints of
         every cycle from there): until it is answered nothing else may move the robot."""
@@ -75,8 +75,8 @@ class MotionGate:
         self.check_free_to_move()
 
     def interrupt_planning(self) -> str | None:
-        """Make the trajectory goal being planned (if any) be refused; what it was, for the reply."""
+        """Make the goal being planned (if any) be refused; what it was, for the reply."""
         self.generation += 1
         if self.planning is None:
             return None
-        return f"the trajectory goal being planned ({self.planning}) is refused"
+        return f"the goal being planned ({self.planning}) is refused"

@@ -23,7 +23,7 @@ import logging
 import secrets
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -243,21 +243,28 @@ class Goals:
 
     # ---- trajectory goals ------------------------------------------------------------------------
 
-    def on_trajectory_goal(self, query: Any) -> None:
-        """A trajectory goal: refused at once while another is planned, else planned in a task."""
+    def plan_in_task(
+        self, query: Any, kind: str, planning: str, work: Callable[[int], Coroutine[Any, Any, None]]
+    ) -> None:
+        """A goal planned in slices: refused at once while shutting down or while another goal is
+        planned (before reading a byte of it), else ``gate.planning`` says ``planning`` and
+        ``work(generation)`` runs in a task that answers ``query`` once and clears it. The generation
+        is recorded now: what ended motion before this query counts as before it."""
         gate = self._gate
         if gate.closing:
-            self._reject(query, "trajectory", GoalRejected(SHUTTING_DOWN))
+            self.refuse(query, kind, GoalRejected(SHUTTING_DOWN))
             return
-        if gate.planning is not None:  # refused before reading a byte of it
-            self._reject(
-                query, "trajectory", GoalRejected(f"busy: still planning trajectory {gate.planning}")
-            )
+        if gate.planning is not None:
+            self.refuse(query, kind, GoalRejected(f"busy: still planning {gate.planning}"))
             return
-        gate.planning = "being decoded"
-        # what ended motion before this query counts as before it: recorded now, not when it starts
-        work = self._trajectory_goal(query, gate.generation)
-        self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
+        gate.planning = planning
+        self._requests.spawn(work(gate.generation), query, {"accepted": False, "reason": SHUTTING_DOWN})
+
+    def on_trajectory_goal(self, query: Any) -> None:
+        """A trajectory goal, planned in a task (``plan_in_task``)."""
+        self.plan_in_task(
+            query, "trajectory", "trajectory being decoded", lambda g: self._trajectory_goal(query, g)
+        )
 
     async def _trajectory_goal(self, query: Any, generation: int) -> None:
         """Decode, check, plan (and for passthrough encode) a trajectory goal, all in slices between
@@ -305,7 +312,7 @@ class Goals:
         if goal.passthrough:
             self.passthrough.check_available()
         controller.check_can_start(self._backend.state, time.monotonic(), goal.preempt)
-        gate.planning = f"of {len(goal.points)} points"
+        gate.planning = f"trajectory of {len(goal.points)} points"
         planner = await check_sliced(controller.check_trajectory(names, goal.points, self._backend.state))
         owned.append(planner)  # the controller keeps the plan it finishes, never the planner
         await plan_tail(planner)
