@@ -11,12 +11,19 @@ Reproduction: on dd4200c^ the gate had no ``from_rest`` nor ``check_not_planning
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
+from typing import Any, cast
 
 import pytest
 
+from urdaemon.backends.base import Backend
+from urdaemon.control import MotionController
 from urdaemon.errors import GoalRejected
+from urdaemon.model import ForceModeRequest
+from urdaemon.publish import services
 from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
+from urdaemon.runtime.service_runner import ServiceRunner
 
 BUSY = (
     "busy: a linear goal is being planned from where the robot rests (linear goal of 2 poses); "
@@ -79,3 +86,36 @@ def test_the_other_rules_still_come_first() -> None:
     gate.closing = True
     with pytest.raises(GoalRejected, match="shut"):
         gate.check_accepting()
+
+
+@dataclass
+class _ForceBackend(_Backend):
+    """Records the force mode commands it was given."""
+
+    started: list[object] | None = None
+
+    async def force_mode(self, command: object) -> None:
+        assert self.started is not None
+        self.started.append(command)
+
+
+async def test_force_mode_is_refused_while_a_linear_goal_is_planned_from_rest() -> None:
+    """Reproduction: ``start_force_mode`` went to the backend while a linear goal was planned from where
+    the robot rests (force mode moves it; only the plan's start check refused the plan afterwards).
+    Now the service is refused as busy, as streams and move goals are; once answered it starts."""
+    backend = _ForceBackend(started=[])
+    gate = _gate(backend)
+    parts: Any = (gate, None, None, None)  # force mode uses only the gate and the backend
+    log = logging.LoggerAdapter(logging.getLogger("test"))
+    runner = ServiceRunner(cast(Backend, backend), cast(MotionController, None), parts, log)
+    request = ForceModeRequest((0.0,) * 6, (0, 0, 1, 0, 0, 0), (0.0, 0.0, -5.0, 0.0, 0.0, 0.0), (0.1,) * 6)
+    handle = services.spec("start_force_mode").handle
+    assert handle is not None
+    gate.planning, gate.from_rest = "linear goal of 2 poses", True
+    with pytest.raises(GoalRejected) as err:
+        await handle(runner, request)
+    assert str(err.value) == BUSY
+    assert backend.started == []
+    gate.planning, gate.from_rest = None, False
+    await handle(runner, request)
+    assert len(backend.started) == 1

@@ -79,6 +79,10 @@ class ServiceHost(Protocol):
         """Make ``pose`` the robot's TCP offset: the controller's (refused unless idle), the
         backend's, and tcp_pose's."""
 
+    def check_not_planning_from_rest(self) -> None:
+        """Refuse (``GoalRejected``) what would move the robot while a goal is planned from where
+        it rests (a linear goal)."""
+
 
 @dataclass(frozen=True, slots=True)
 class ServiceSpec:
@@ -154,6 +158,7 @@ async def _set_tool_voltage(host: ServiceHost, request: ToolVoltageRequest) -> R
 async def _start_force_mode(host: ServiceHost, request: ForceModeRequest) -> Reply:
     from urdaemon.protocols.script_command import StartForceMode
 
+    host.check_not_planning_from_rest()  # force mode moves the robot off where that plan starts
     await host.backend.force_mode(
         StartForceMode(
             task_frame=request.task_frame,
@@ -350,7 +355,10 @@ SERVICES: tuple[ServiceSpec, ...] = (
             f"0..{MAX_FORCE_MODE['limits']:g}), `type`? (1–3, default {FORCE_MODE_TYPE}), `damping`? "
             f"(0..1, {FORCE_MODE_DAMPING:g}), `gain_scaling`? (0..2, {FORCE_MODE_GAIN_SCALING:g})"
         ),
-        reply_doc="URScript `force_mode` semantics (UR)",
+        reply_doc=(
+            "URScript `force_mode` semantics (UR); refused as busy while a linear goal is planned from "
+            "where the robot rests"
+        ),
     ),
     _payloadless(
         "end_force_mode",

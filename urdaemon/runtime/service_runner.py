@@ -126,6 +126,10 @@ class ServiceRunner:
         self._gate.interrupt_planning()
         await self._backend.hand_back_control()
 
+    def check_not_planning_from_rest(self) -> None:
+        """Refuse while a linear goal is planned from where the robot rests (the gate's)."""
+        self._gate.check_not_planning_from_rest()
+
     async def end_tool_contact(self) -> None:
         """End tool-contact detection; motion starts anew from where the robot rests, never from a
         setpoint of before the contact."""
