@@ -1,7 +1,8 @@
 """Build the URDF of a whole cell: every robot's description, prefixed, hanging off one ``world`` link.
 
 UR robots use ``resources/urdf/ur_arm.xacro`` with a params file computed here (calibrated joint
-origins, limits after the cell's overrides, inertials); custom robots call their own xacro macro.
+origins, limits after the cell's overrides, inertials, the links' shapes from ``geometry``), and the
+cell defines the shapes' two materials once; custom robots call their own xacro macro, untouched.
 xacro runs as a library on a generated cell file; nothing needs ROS.
 """
 
@@ -23,6 +24,7 @@ from urdaemon.cell.config import Cell, Robot
 from urdaemon.description._transforms import matrix_of, rot_z, rpy_of, xyz_rpy
 from urdaemon.description.calibration import joint_origins, load_calibration
 from urdaemon.description.frames import compose
+from urdaemon.description.geometry import MATERIALS, ur_geometry
 from urdaemon.description.urmodels import INERTIA_KEYS, LinkInertial, load_ur_model
 from urdaemon.errors import ConfigError, DescriptionError
 from urdaemon.model import UR_JOINTS
@@ -107,6 +109,9 @@ def ur_params(robot: Robot) -> dict[str, Any]:
         "joints": joints,
         "flange": {"xyz": list(chain.flange.xyz), "rpy": list(chain.flange.rpy)},
         "inertials": inertials,
+        "geometry": {
+            link: [s.params() for s in shapes] for link, shapes in ur_geometry(model, chain).items()
+        },
     }
 
 
@@ -223,11 +228,20 @@ def _cell_xacro(name: str, robots: tuple[Robot, ...], params: dict[str, Path]) -
         '<?xml version="1.0"?>',
         f'<robot name="{name}" xmlns:xacro="http://www.ros.org/wiki/xacro">',
         *(f'  <xacro:include filename="{_escape(path)}"/>' for path in includes),
+        *(_materials() if any(r.is_ur for r in robots) else []),
         f'  <link name="{ROOT_LINK}"/>',
         *calls,
         "</robot>",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _materials() -> list[str]:
+    """The UR shapes' materials, defined once for the cell (``ur_arm.xacro`` refers to them by name)."""
+    return [
+        f'  <material name="urdaemon_ur_{name}"><color rgba="{_floats(rgba)}"/></material>'
+        for name, rgba in MATERIALS.items()
+    ]
 
 
 def _process(
