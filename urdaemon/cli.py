@@ -1,5 +1,5 @@
 """The ``urdaemon`` command: serve, check, urdf, echo, move, teleop, cancel, stop, service, dashboard,
-lease.
+lease, view.
 
 Client commands that command a robot (``move``, ``teleop``, ``cancel``, ``service``, ``dashboard``)
 acquire its command lease first and release it when they exit; ``stop`` never needs it; ``lease``
@@ -92,7 +92,36 @@ def _parser() -> argparse.ArgumentParser:
     _add_client_tools(sub)
     _add_goal_tools(sub)
     _add_calibration(sub)
+    _add_view(sub)
     return parser
+
+
+def _add_view(sub: Any) -> None:
+    """``view``: the live 3-D view of a cell in the browser (urdaemon/view/, the ``view`` extra)."""
+    from urdaemon.client import DEFAULT_ENDPOINT
+
+    view = sub.add_parser(
+        "view", help="serve a live 3-D view of a cell with joint sliders, jog and stop (the view extra)"
+    )
+    source = view.add_mutually_exclusive_group()
+    source.add_argument("--connect", default=None, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})")
+    source.add_argument(
+        "--config", default=None, help="cell file: start it with every robot on the mock backend and view it"
+    )
+    view.add_argument("--zenoh-config", metavar="FILE", default=None, help="Zenoh JSON5 config (e.g. TLS)")
+    view.add_argument("--cell", default=None, help="cell name (default: the one cell served)")
+    view.add_argument("--host", default="127.0.0.1", help="address the page is served on (default 127.0.0.1)")
+    view.add_argument(
+        "--port",
+        type=_view_port_arg,
+        default=8080,
+        help="port of the page (default 8080; taken: the next free one; 0: any free port)",
+    )
+
+
+def _view_port_arg(text: str) -> int:
+    """``view --port``: 0 (any free port) or a port number."""
+    return 0 if text.strip() == "0" else _port_arg(text)
 
 
 def _add_serve(sub: Any) -> None:
@@ -409,6 +438,10 @@ def _dispatch(args: argparse.Namespace) -> int:
             return asyncio.run(_lease(args))
         if args.command == "calibration":
             return _calibration(args)
+        if args.command == "view":
+            from urdaemon.view.command import view_main
+
+            return view_main(args)
     except (ConfigError, DescriptionError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT

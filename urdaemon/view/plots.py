@@ -1,0 +1,76 @@
+"""One robot's live plots: joint positions and velocities over the last ``WINDOW_S`` seconds.
+
+The display task ``record``s the robot's newest joints at display rate (never per sample: a robot
+publishes up to 500 Hz); the plots are redrawn every ``REDRAW_S``, a few times a second.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from urdaemon.view.feed import JointSample
+
+__all__ = ["REDRAW_S", "WINDOW_S", "JointPlots"]
+
+WINDOW_S = 10.0
+"""The plots show this many seconds."""
+REDRAW_S = 0.25
+"""The plots are sent to the page at most this often (4 Hz)."""
+KEPT = 400
+"""Samples kept: 10 s at the display rate (~30 Hz) with room to spare."""
+_COLORS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324")
+
+
+class JointPlots:
+    """Two uPlot charts in the current GUI container (the robot's folder)."""
+
+    def __init__(self, gui: Any, joint_labels: Sequence[str]) -> None:
+        self.labels = tuple(joint_labels)
+        self._samples: deque[JointSample] = deque(maxlen=KEPT)
+        self._drawn_at = float("-inf")
+        empty = self._data([], "positions")
+        self.positions = gui.add_uplot(empty, self._series("rad"), title="joint positions (rad)", aspect=2.0)
+        self.velocities = gui.add_uplot(
+            empty, self._series("rad/s"), title="joint velocities (rad/s)", aspect=2.0
+        )
+
+    def _series(self, unit: str) -> tuple[dict[str, Any], ...]:
+        lines = tuple(
+            {"label": label, "stroke": _COLORS[i % len(_COLORS)], "width": 1.5}
+            for i, label in enumerate(self.labels)
+        )
+        return ({"label": "s"}, *lines)
+
+    def record(self, sample: JointSample | None) -> None:
+        """Keep ``sample`` (the robot's newest joints) unless it is the one kept last."""
+        if sample is None or len(sample.positions) != len(self.labels):
+            return
+        if self._samples and self._samples[-1] is sample:
+            return
+        self._samples.append(sample)
+
+    def redraw(self, now: float) -> bool:
+        """Send the last ``WINDOW_S`` seconds to the page if ``REDRAW_S`` has passed; whether it did."""
+        if now - self._drawn_at < REDRAW_S:
+            return False
+        self._drawn_at = now
+        while self._samples and now - self._samples[0].received > WINDOW_S:
+            self._samples.popleft()
+        shown = list(self._samples)
+        self.positions.data = self._data(shown, "positions")
+        self.velocities.data = self._data(shown, "velocities")
+        return True
+
+    def _data(self, shown: Sequence[JointSample], field: str) -> tuple[np.ndarray, ...]:
+        """(times relative to now, then one array per joint), as uPlot takes them."""
+        count = len(self.labels)
+        if not shown:
+            return (np.zeros(0), *(np.zeros(0) for _ in range(count)))
+        last = shown[-1].received
+        times = np.array([s.received - last for s in shown])
+        values = np.array([getattr(s, field) for s in shown]).reshape(len(shown), count)
+        return (times, *(values[:, i].copy() for i in range(count)))

@@ -1,0 +1,147 @@
+"""The 3-D cell in viser's scene: every link of the cell URDF at its world pose, whatever ``<visual>``
+geometry the URDF gives drawn on it, the world frame, each robot's TCP frame, and a label plus a colour
+over a robot that is disconnected or stopped.
+
+Link poses come from the cell's forward kinematics of the robots' newest joints
+(``KinematicTree``, the daemon's own model of ``tf``), computed here at display rate: the daemon does
+no extra work for a viewer. Every link is one scene node ``/cell/<link>`` placed in the world frame;
+its geometry hangs under it (with the visual's origin baked in), so moving a link is one update.
+A link without geometry shows small axes, so a URDF without any still shows every robot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from urdaemon.description.kinematics import KinematicTree
+
+__all__ = ["PROBLEM_COLOR", "CellScene", "robot_of_link"]
+
+PROBLEM_COLOR = (220, 40, 40)
+"""The colour of a disconnected or stopped robot's links."""
+DEFAULT_COLOR = (170, 180, 195)
+"""Geometry without a material colour."""
+LABEL_HEIGHT_M = 1.1
+"""A robot's label floats this far above its base link."""
+
+
+def robot_of_link(link: str, robots: Iterable[str]) -> str | None:
+    """The robot whose link ``link`` is (its name is the link's prefix, ``<robot>_``), the longest such
+    name when several match; None for the cell's own links (``world``)."""
+    owners = [r for r in robots if link.startswith(f"{r}_")]
+    return max(owners, key=len) if owners else None
+
+
+class CellScene:
+    """The cell's scene nodes in ``server`` (a ``viser.ViserServer``), built from the cell URDF
+    ``urdf`` (a yourdfpy ``URDF`` with its scene graph) for ``robots``."""
+
+    def __init__(self, server: Any, urdf: Any, robots: Sequence[str]) -> None:
+        self.server = server
+        self.tree = KinematicTree.from_urdf(urdf)
+        self.robots = tuple(robots)
+        self.link_robot = {link: robot_of_link(link, robots) for link in self.tree.links}
+        self.frames: dict[str, Any] = {}
+        """Link name -> its viser frame handle (placed in the world frame)."""
+        self.meshes: dict[str | None, list[tuple[Any, tuple[int, int, int]]]] = {}
+        """Robot (None: the cell's) -> its mesh handles with their own colours."""
+        self.tcp_frames: dict[str, Any] = {}
+        self.labels: dict[str, Any] = {}
+        self.problems: dict[str, str | None] = dict.fromkeys(robots)
+        self._last: dict[str, float] | None = None
+        server.scene.add_frame("/world", axes_length=0.3, axes_radius=0.01)
+        drawn = self._add_geometry(urdf)
+        for link in self.tree.links:
+            self.frames[link] = server.scene.add_frame(
+                f"/cell/{link}", show_axes=link not in drawn, axes_length=0.06, axes_radius=0.004
+            )
+        for robot in robots:
+            self.labels[robot] = server.scene.add_label(
+                f"/cell/{self.base_link(robot)}/label",
+                robot,
+                position=(0.0, 0.0, LABEL_HEIGHT_M),
+                anchor="bottom-center",
+                visible=False,
+            )
+
+    def base_link(self, robot: str) -> str:
+        """The robot's base link (``<robot>_base``, else its first link; the root without any)."""
+        if f"{robot}_base" in self.link_robot:
+            return f"{robot}_base"
+        return next((link for link, r in self.link_robot.items() if r == robot), self.tree.root)
+
+    def _add_geometry(self, urdf: Any) -> set[str]:
+        """Every visual of the URDF as a mesh under its link's node; the links that have one."""
+        scene = getattr(urdf, "scene", None)
+        if scene is None:
+            return set()
+        parents = scene.graph.transforms.parents
+        drawn: set[str] = set()
+        for index, (name, mesh) in enumerate(scene.geometry.items()):
+            link = parents.get(name)
+            if link not in self.link_robot or not hasattr(mesh, "faces") or len(mesh.faces) == 0:
+                continue
+            placed = mesh.copy()
+            placed.apply_transform(urdf.get_transform(name, link))
+            color = _color_of(placed)
+            handle = self.server.scene.add_mesh_simple(
+                f"/cell/{link}/visual_{index}",
+                np.asarray(placed.vertices, dtype=np.float32),
+                np.asarray(placed.faces, dtype=np.uint32),
+                color=color,
+            )
+            self.meshes.setdefault(self.link_robot[link], []).append((handle, color))
+            drawn.add(link)
+        return drawn
+
+    def place(self, positions: Mapping[str, float]) -> bool:
+        """Every link at its pose for the joints ``positions`` (prefixed names); False when nothing
+        changed since the last call (nothing sent)."""
+        if positions == self._last:
+            return False
+        self._last = dict(positions)
+        for link, (x, y, z, qx, qy, qz, qw) in self.tree.link_poses(positions):
+            frame = self.frames[link]
+            frame.position = (x, y, z)
+            frame.wxyz = (qw, qx, qy, qz)
+        return True
+
+    def set_tcp(self, robot: str, message: Mapping[str, Any]) -> None:
+        """The robot's TCP frame at a ``tcp_pose`` message (in its ``frame``, the robot's base link)."""
+        frame = str(message.get("frame", ""))
+        position, orientation = message.get("position"), message.get("orientation")
+        if frame not in self.frames or not isinstance(position, list) or not isinstance(orientation, list):
+            return
+        handle = self.tcp_frames.get(robot)
+        if handle is None:
+            handle = self.tcp_frames[robot] = self.server.scene.add_frame(
+                f"/cell/{frame}/tcp", axes_length=0.1, axes_radius=0.006
+            )
+        qx, qy, qz, qw = (float(v) for v in orientation)
+        handle.position = tuple(float(v) for v in position)
+        handle.wxyz = (qw, qx, qy, qz)
+
+    def set_problem(self, robot: str, problem: str | None) -> None:
+        """Show ``problem`` (e.g. ``disconnected``) over the robot and colour it; None: clear both."""
+        if self.problems.get(robot) == problem:
+            return
+        self.problems[robot] = problem
+        label = self.labels[robot]
+        if problem is not None:
+            label.text = f"{robot}: {problem}"
+        label.visible = problem is not None
+        for handle, color in self.meshes.get(robot, ()):
+            handle.color = color if problem is None else PROBLEM_COLOR
+
+
+def _color_of(mesh: Any) -> tuple[int, int, int]:
+    """The mesh's material colour (yourdfpy paints the URDF's ``<material>`` on its faces)."""
+    visual = getattr(mesh, "visual", None)
+    colors = getattr(visual, "face_colors", None) if getattr(visual, "kind", None) == "face" else None
+    if colors is None or len(colors) == 0:
+        return DEFAULT_COLOR
+    red, green, blue = (int(c) for c in colors[0][:3])
+    return (red, green, blue)
