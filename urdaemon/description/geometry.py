@@ -89,11 +89,12 @@ class Shape:
     material: Material
 
     def params(self) -> dict[str, Any]:
-        """The ``ur_arm.xacro`` params entry of this shape."""
+        """The ``ur_arm.xacro`` params entry of this shape (``xyz`` and ``rpy`` as URDF text, which
+        xacro reads with one expression each instead of three)."""
         return {
             "name": self.name,
-            "xyz": list(self.xyz),
-            "rpy": list(self.rpy),
+            "xyz": " ".join(repr(v) for v in self.xyz),
+            "rpy": " ".join(repr(v) for v in self.rpy),
             "radius": self.radius,
             "length": self.length,
             "material": self.material,
