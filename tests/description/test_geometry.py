@@ -77,6 +77,11 @@ def _assert_joined_up(urdf: Any, prefix: str, rng: np.random.Generator, poses: i
         for link, child in TUBES.items():
             _, end = _cylinder_ends(urdf, f"{prefix}{link}_tube")
             np.testing.assert_allclose(end, _origin_of(urdf, prefix + child), rtol=0, atol=1e-9)
+        for link in DRAWN_LINKS[1:-1]:
+            # each housing lies on its joint's axis (the link's z through its origin)
+            frame = urdf.get_transform(prefix + link, urdf.base_link)
+            for end in _cylinder_ends(urdf, f"{prefix}{link}_housing"):
+                np.testing.assert_allclose(np.cross(end - frame[:3, 3], frame[:3, 2]), 0.0, atol=1e-9)
         _, base_top = _cylinder_ends(urdf, f"{prefix}base_link_inertia_base")
         shoulder_bottom, _ = _cylinder_ends(urdf, f"{prefix}shoulder_link_housing")
         np.testing.assert_allclose(base_top, shoulder_bottom, rtol=0, atol=1e-9)
