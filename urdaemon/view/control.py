@@ -190,7 +190,7 @@ class RobotControl:
                     break
                 self._twist((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), frame)
                 await asyncio.sleep(STREAM_PERIOD_S)
-            await self._settle()
+            await self._settle(frame)
         except UrDaemonError as err:
             self._disable_soon(str(err))
         finally:
@@ -205,7 +205,7 @@ class RobotControl:
         self.robot.twist(linear, angular, frame=frame)
         self.sent += 1
 
-    async def _settle(self) -> None:
+    async def _settle(self, frame: str) -> None:
         """Wait (bounded) until the robot rests, then make where it is the stream's targets."""
         for _ in range(SETTLE_TICKS):
             current = self._joints()
@@ -213,7 +213,7 @@ class RobotControl:
                 break
             if not self.enabled:
                 return
-            self._twist((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), "base")  # hold the deadman off: decelerating
+            self._twist((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), frame)  # still decelerating: keep the stream
             await asyncio.sleep(STREAM_PERIOD_S)
         current = self._joints()
         if self.enabled and current is not None:
