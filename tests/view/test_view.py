@@ -212,3 +212,34 @@ async def test_a_robot_that_goes_silent_is_shown_disconnected(viewed: Viewed) ->
     assert view.scene.problems["alice"] is None
     assert "disconnected" in view.panels["bob"].status.content
     assert math.isfinite(_scene_pose(viewed, "bob_tool0")[0])
+
+
+async def test_closing_the_last_page_disables_and_releases_the_lease(viewed: Viewed) -> None:
+    """A page is a websocket client of the viser server: when the last one goes, no robot may keep
+    streaming (its lease is released and the daemon stops it)."""
+    import msgspec
+    import viser
+    from viser import _messages
+    from websockets.asyncio.client import connect
+
+    view = viewed.view
+    ws_url = view.url.replace("http://", "ws://")
+    # viser counts a page as a client once it reported its camera, as a browser does on load
+    camera = _messages.ViewerCameraMessage(
+        (1.0, 0.0, 0.0, 0.0), (3.0, 3.0, 3.0), 1.0, 0.01, 100.0, 480, 640, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    )
+    async with connect(ws_url, subprotocols=[f"viser-v{viser.__version__}"]) as page:  # type: ignore[list-item]
+        await page.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        await viewed.until("the page connected", lambda: len(view.server.get_clients()) == 1)
+        view.panels["alice"].enable.value = True
+        await _submitted(viewed, "alice")
+        assert view.controls["alice"].enabled
+        await page.close()
+    await viewed.until("alice disabled", lambda: not view.controls["alice"].enabled)
+    alice = await viewed.client.robot("alice")
+    for _ in range(100):  # the release is on its way: ask until the daemon shows it (bounded)
+        if await alice.lease_info() is None:
+            break
+        await view.drawn(10.0)
+    assert await alice.lease_info() is None
+    assert view.controls["alice"].refusal == "the last page was closed"
