@@ -46,7 +46,9 @@ class _Recorder(io.StringIO):
 
 
 @pytest.mark.timeout(180)
-def test_view_config_serves_a_mock_cell_and_ends_on_ctrl_c(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_view_config_serves_a_mock_cell_and_ends_on_ctrl_c(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     from urdaemon.cli import main
 
     out = _Recorder()
@@ -66,7 +68,7 @@ def test_view_config_serves_a_mock_cell_and_ends_on_ctrl_c(monkeypatch: pytest.M
     visitor.start()
     code = main(["view", "--config", str(DEMO), "--port", "0"])
     visitor.join(30)
-    assert code == 0, out.getvalue()
+    assert code == 0, (out.getvalue(), capsys.readouterr().err)
     assert out.url is not None
     assert not out.url.endswith(":0")
     assert fetched

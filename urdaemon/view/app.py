@@ -132,7 +132,7 @@ async def _start(
 
     loop = asyncio.get_running_loop()
     cell, robots = await _cell_robots(client, cell)
-    urdf = await loop.run_in_executor(None, load_urdf, await client.robot_description(cell))
+    urdf = await loop.run_in_executor(None, load_urdf, await _description(client, cell))
     feeds = {name: RobotFeed(name) for name in robots}
     for name, feed in feeds.items():
         feed.subscribe(client.session, RobotKeys(cell, name), loop)
@@ -175,6 +175,21 @@ async def _cell_robots(client: Client, cell: str | None) -> tuple[str, list[str]
         if loop.time() > deadline:
             named = f"cell {cell!r}" if cell is not None else "no robot"
             raise UrTimeoutError(f"{named} is not served at {client.endpoint} (waited {ROBOTS_WAIT_S:g} s)")
+        await asyncio.sleep(0.1)
+
+
+async def _description(client: Client, cell: str) -> str:
+    """The cell URDF. A session that has just connected may not know the daemon's queryable yet (its
+    declaration is on its way, while the robots' liveliness tokens already answered): ask again, for
+    at most ``ROBOTS_WAIT_S``."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + ROBOTS_WAIT_S
+    while True:
+        try:
+            return await client.robot_description(cell)
+        except UrTimeoutError:
+            if loop.time() > deadline:
+                raise
         await asyncio.sleep(0.1)
 
 
