@@ -162,3 +162,107 @@ def test_event_loop_floor_publishes_to_a_subscriber_in_another_process(transport
             pub.put(floor.SAMPLE)
     finally:
         assert publishers.close() == 0
+
+
+@pytest.fixture(scope="module")
+def view_cost() -> ModuleType:
+    return _load("view_cost")
+
+
+def test_view_cost_cells_are_valid(view_cost: ModuleType) -> None:
+    cell = parse_cell(view_cost.mock_cell_yaml(4), base_dir=ROOT)
+    assert [r.name for r in cell.robots] == ["r0", "r1", "r2", "r3"]
+    assert [r.model for r in cell.robots] == ["ur10e", "ur3e", "ur10e", "ur3e"]
+    assert all(r.backend == "mock" for r in cell.robots)
+    assert len({r.pose.xyz for r in cell.robots}) == 4  # nobody stands in another's place
+    assert (
+        cell.publish.tf_rate_hz
+        == parse_cell(view_cost.DEMO_CELL.read_text(), base_dir=ROOT).publish.tf_rate_hz
+    )
+
+
+def test_view_cost_subscribes_to_what_the_view_subscribes_to(view_cost: ModuleType) -> None:
+    import asyncio
+
+    from urdaemon.publish.keys import RobotKeys
+    from urdaemon.view.feed import RobotFeed
+
+    declared: list[str] = []
+
+    class Session:
+        def declare_subscriber(self, key: str, _callback: object) -> object:
+            declared.append(key)
+            return object()
+
+    loop = asyncio.new_event_loop()
+    try:
+        RobotFeed("alice").subscribe(Session(), RobotKeys("demo_cell", "alice"), loop)
+    finally:
+        loop.close()
+    keys = RobotKeys("demo_cell", "alice")
+    assert sorted(declared) == sorted(getattr(keys, k) for k in view_cost.VIEW_KEYS)
+    assert view_cost.SUBSCRIBED["subscribed"] == view_cost.VIEW_KEYS
+    assert set(view_cost.SUBSCRIBED) < set(view_cost.CASES)
+
+
+def test_view_cost_reads_proc_of_this_process_and_its_child(view_cost: ModuleType) -> None:
+    import os
+    import subprocess
+
+    fields = view_cost.stat_fields("42 (a) b (c)) S 7 42 42 0 -1 4194304 1 0 0 0 250 130 0 0 20 0 1 0")
+    assert (fields[0], fields[1], fields[11], fields[12]) == ("S", "7", "250", "130")
+    assert view_cost.cpu_seconds(os.getpid()) > 0.0  # pytest has run: some CPU was used
+    child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        tree = view_cost.process_tree(os.getpid())
+        assert tree[0] == os.getpid()
+        assert child.pid in tree
+        assert view_cost.tree_cpu_seconds([*tree, 2**22 + 1]) >= view_cost.cpu_seconds(os.getpid())
+    finally:
+        child.communicate(b"")
+    assert child.returncode == 0
+
+
+def test_view_cost_counts_connections_to_the_page(view_cost: ModuleType) -> None:
+    import socket
+
+    table = (
+        "  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid\n"
+        "   0: 0100007F:1F90 00000000:0000 0A 00000000:00000000 00:00000000 00000000     0\n"
+        "   1: 0100007F:1F90 0100007F:A1B2 01 00000000:00000000 00:00000000 00000000     0\n"
+        "   2: 0100007F:A1B2 0100007F:1F90 01 00000000:00000000 00:00000000 00000000     0\n"
+        "   3: 0100007F:1F90 0100007F:A1B4 06 00000000:00000000 00:00000000 00000000     0\n"
+    )
+    assert view_cost.established(table, 8080) == 1  # the listener, the client's side, TIME_WAIT: no
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        assert view_cost.page_connections(port) == 0
+        with socket.create_connection(("127.0.0.1", port)):
+            accepted, _ = server.accept()
+            with accepted:
+                assert view_cost.page_connections(port) == 1
+
+
+def test_view_cost_table(view_cost: ModuleType) -> None:
+    window = view_cost.Window
+    windows = [window(0.10, 0.05, None, 1000.0, 1, 0, None), window(0.08, 0.07, None, 400.0, 2, 1, None)]
+    windows.append(window(0.12, None, None, 0.0, 0, 0, None))  # no cycle ran: no figure per cycle
+    row = view_cost.summarize("view", 2, windows)
+    assert (row.daemon, row.daemon_spread, row.browser) == (0.10, (0.08, 0.12), None)
+    assert row.viewer == pytest.approx(0.06)
+    assert (row.missed, row.late, row.p99_us) == (3, 1, None)
+    assert (row.cycle_rate, row.us_per_cycle) == (200.0, 150.0)  # medians over the windows
+    assert "| 2 | view | 10.0 (8.0-12.0) | 5.0 | 150.0 | 200 | 6.0 | - | 3 / 1 | - |" in view_cost.table(
+        [row]
+    )
+    timed = view_cost.summarize(
+        "idle", 1, [window(0.02, None, None, 500.0, 0, 0, 80.0), window(0.02, None, None, 500.0, 0, 0, 95.0)]
+    )
+    assert view_cost.table([timed]).endswith("| 0 / 0 | 95 |")
+    command = view_cost.chromium_command("/usr/bin/chromium", "http://127.0.0.1:8080", ROOT / "profile")
+    assert command[0] == "/usr/bin/chromium"
+    assert command[-1] == "http://127.0.0.1:8080"
+    assert "--headless=new" in command
+    assert f"--user-data-dir={ROOT / 'profile'}" in command
