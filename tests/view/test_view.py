@@ -129,6 +129,24 @@ async def test_enabling_takes_the_lease_and_moves_nothing(viewed: Viewed) -> Non
     for _ in range(200):  # 0.4 s of alice's joint_states while the stream goes out: nothing moves
         assert close(tuple((await states.get_json(10.0))["position"]), start, 1e-9)
     assert control.sent > sent + 5  # the stream was running all along
+    await viewed.until("the lease event shown", lambda: "lease: acquired" in panel.events.content)
+
+
+async def test_the_plots_show_the_joints_over_time(viewed: Viewed) -> None:
+    view = viewed.view
+    plots = view.panels["bob"].plots
+
+    def plotted() -> int:
+        return len(plots.positions.data[0])
+
+    await viewed.until("a few samples plotted", lambda: plotted() >= 5)
+    times, *lines = plots.positions.data
+    assert len(lines) == 6
+    assert times[-1] == 0.0  # the newest sample is "now"
+    assert all(t < 0 for t in times[:-1])
+    assert times[0] >= -10.0
+    assert [line[-1] for line in lines] == pytest.approx([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    assert len(plots.velocities.data) == 7
 
 
 async def test_a_slider_moves_its_joint_and_disabling_brakes(viewed: Viewed) -> None:

@@ -129,6 +129,10 @@ class RobotFeed:
         newest = self._joints
         return newest is None or now - newest[1] > STALE_S
 
+    def last_events(self) -> list[str]:
+        """The last events, oldest first (a copy: Zenoh's threads append meanwhile)."""
+        return list(self.events)  # one C call under the GIL: never sees the deque half changed
+
     def tcp_pose(self) -> dict[str, Any] | None:
         """The newest ``tcp_pose`` message."""
         return None if self._tcp is None else _json_object(self._tcp)

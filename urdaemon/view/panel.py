@@ -13,7 +13,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future
 from typing import Any
@@ -132,9 +131,11 @@ class RobotPanel:
         self.plots.redraw(now)
         _set_content(
             self.status,
-            status_markdown(self.feed.status(), self.feed.stale(time.monotonic()), self.control.refusal),
+            status_markdown(self.feed.status(), self.feed.stale(now), self.control.refusal),
         )
-        _set_content(self.events, "\n".join(f"- {line}" for line in self.feed.events) or "(no events yet)")
+        _set_content(
+            self.events, "\n".join(f"- {line}" for line in self.feed.last_events()) or "(no events yet)"
+        )
         if sample is not None and not self.control.enabled:
             with self._setting():
                 for slider, position in zip(self.sliders.values(), sample.positions, strict=False):

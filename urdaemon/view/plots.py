@@ -20,8 +20,11 @@ WINDOW_S = 10.0
 """The plots show this many seconds."""
 REDRAW_S = 0.25
 """The plots are sent to the page at most this often (4 Hz)."""
-KEPT = 400
-"""Samples kept: 10 s at the display rate (~30 Hz) with room to spare."""
+SAMPLE_S = 0.1
+"""The plots keep one sample per this long (10 Hz): 10 s of six joints is ~100 points a line, a few
+kB per redraw, whatever the robot's rate."""
+KEPT = 200
+"""Samples kept: 10 s at ``SAMPLE_S`` with room to spare."""
 _COLORS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324")
 
 
@@ -46,10 +49,10 @@ class JointPlots:
         return ({"label": "s"}, *lines)
 
     def record(self, sample: JointSample | None) -> None:
-        """Keep ``sample`` (the robot's newest joints) unless it is the one kept last."""
+        """Keep ``sample`` (the robot's newest joints) if ``SAMPLE_S`` passed since the one kept last."""
         if sample is None or len(sample.positions) != len(self.labels):
             return
-        if self._samples and self._samples[-1] is sample:
+        if self._samples and sample.received - self._samples[-1].received < SAMPLE_S:
             return
         self._samples.append(sample)
 

@@ -26,6 +26,9 @@ DEFAULT_COLOR = (170, 180, 195)
 """Geometry without a material colour."""
 LABEL_HEIGHT_M = 1.1
 """A robot's label floats this far above its base link."""
+CAMERA_POSITION = (1.6, -2.4, 1.6)
+CAMERA_LOOK_AT = (0.0, 0.0, 0.4)
+"""Where a new page's camera starts: the cell seen from the front right, above the robots' bases."""
 
 
 def robot_of_link(link: str, robots: Iterable[str]) -> str | None:
@@ -52,6 +55,8 @@ class CellScene:
         self.labels: dict[str, Any] = {}
         self.problems: dict[str, str | None] = dict.fromkeys(robots)
         self._last: dict[str, float] | None = None
+        server.initial_camera.position = CAMERA_POSITION
+        server.initial_camera.look_at = CAMERA_LOOK_AT
         server.scene.add_frame("/world", axes_length=0.3, axes_radius=0.01)
         drawn = self._add_geometry(urdf)
         for link in self.tree.links:
