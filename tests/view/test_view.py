@@ -265,3 +265,24 @@ async def test_closing_the_last_page_disables_and_releases_the_lease(viewed: Vie
         await view.drawn(10.0)
     assert await alice.lease_info() is None
     assert view.controls["alice"].refusal == "the last page was closed"
+
+
+async def test_a_lease_taken_over_while_enabled_disables_with_the_reason(viewed: Viewed) -> None:
+    view = viewed.view
+    panel, control = view.panels["alice"], view.controls["alice"]
+    panel.enable.value = True
+    await _submitted(viewed, "alice")
+    assert control.enabled
+    other = await Client.connect(viewed.client.endpoint, holder="the cell supervisor")
+    try:
+        await (await other.robot("alice")).take_over("maintenance")
+        await viewed.until("alice disabled", lambda: not control.enabled)
+        await viewed.until("the reason shown", lambda: "refused" in panel.status.content)
+        assert "taken over by the cell supervisor: maintenance" in control.refusal
+        assert panel.enable.value is False
+        sent = control.sent
+        await view.drawn(10.0)
+        await view.drawn(10.0)
+        assert control.sent == sent  # nothing more is streamed
+    finally:
+        await other.close()
