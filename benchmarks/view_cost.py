@@ -27,7 +27,8 @@ process tree); and from each robot's ``cycle_stats`` service the missed and late
 turnaround (reset at each window's start; the mock backend has none). Printed: per case the median
 window, the daemon's CPU as % of one core per robot, and per robot cycle run (a starved daemon skips
 cycles: on a busy machine the CPU per cycle compares cases fairly, the CPU per second does not), and
-the worst robot's figures.
+the worst robot's figures. The daemon's CPU is also split: its main thread (the asyncio loop, where
+every robot's cycle, encoding and ``put`` run) and the rest (Zenoh's threads, which send).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import argparse
 import asyncio
 import contextlib
 import importlib.util
+import logging
 import math
 import os
 import platform
@@ -96,6 +98,13 @@ def stat_fields(text: str) -> list[str]:
 def cpu_seconds(pid: int) -> float:
     """utime + stime of the whole process (every thread), in seconds."""
     fields = stat_fields(Path(f"/proc/{pid}/stat").read_text())
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def main_thread_cpu_seconds(pid: int) -> float:
+    """utime + stime of the process's main thread (the daemon's asyncio loop, where every robot's
+    cycle runs); the rest of the process's CPU is its other threads' (Zenoh's runtime, callbacks)."""
+    fields = stat_fields(Path(f"/proc/{pid}/task/{pid}/stat").read_text())
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
@@ -267,6 +276,8 @@ class Window:
     """One measuring window: CPU-seconds per second of each process, cycle figures over robots."""
 
     daemon: float
+    loop: float
+    """The daemon's main thread (its asyncio loop) alone."""
     viewer: float | None
     browser: float | None
     cycles: float
@@ -290,12 +301,14 @@ async def measure_window(handles: list[RobotClient], daemon: int, watched: Watch
     before = [await h.cycle_stats(reset=True) for h in handles]
     browser = process_tree(watched.browser) if watched.browser is not None else []
     t0 = time.monotonic()
+    loop0 = main_thread_cpu_seconds(daemon)
     cpu0 = (
         cpu_seconds(daemon),
         cpu_seconds(watched.viewer) if watched.viewer else 0.0,
         tree_cpu_seconds(browser),
     )
     await asyncio.sleep(seconds)
+    loop1 = main_thread_cpu_seconds(daemon)
     cpu1 = (
         cpu_seconds(daemon),
         cpu_seconds(watched.viewer) if watched.viewer else 0.0,
@@ -307,6 +320,7 @@ async def measure_window(handles: list[RobotClient], daemon: int, watched: Watch
     p99s = [a["turnaround"].get("p99_us") for a in after if a["turnaround"].get("count")]
     return Window(
         daemon=(cpu1[0] - cpu0[0]) / wall,
+        loop=(loop1 - loop0) / wall,
         viewer=(cpu1[1] - cpu0[1]) / wall if watched.viewer else None,
         browser=(cpu1[2] - cpu0[2]) / wall if watched.browser else None,
         cycles=sum(a["cycles"] - b["cycles"] for a, b in pairs) / wall,
@@ -324,6 +338,8 @@ class Row:
     robots: int
     daemon: float
     daemon_spread: tuple[float, float]
+    loop: float
+    """The daemon's loop thread's CPU (median window); the rest is Zenoh's threads'."""
     viewer: float | None
     browser: float | None
     cycle_rate: float
@@ -350,6 +366,7 @@ def summarize(case: str, robots: int, windows: list[Window]) -> Row:
         robots=robots,
         daemon=statistics.median(daemon),
         daemon_spread=(min(daemon), max(daemon)),
+        loop=statistics.median(w.loop for w in windows),
         viewer=median([w.viewer for w in windows]),
         browser=median([w.browser for w in windows]),
         cycle_rate=statistics.median(w.cycles for w in windows) / robots,
@@ -367,17 +384,17 @@ def _percent(value: float | None) -> str:
 def table(rows: list[Row]) -> str:
     """The rows as a Markdown table (CPU as % of one core)."""
     lines = [
-        "| robots | case | daemon CPU % (min-max) | per robot % | µs per robot cycle | cycles/s per robot "
-        "| viewer % | browser % | missed / late cycles | turnaround p99 µs (worst) |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| robots | case | daemon CPU % (min-max) | of which its loop % | per robot % | µs per robot cycle "
+        "| cycles/s per robot | viewer % | browser % | missed / late cycles | turnaround p99 µs (worst) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in rows:
         low, high = r.daemon_spread
         p99 = "-" if r.p99_us is None else f"{r.p99_us:.0f}"
         lines.append(
             f"| {r.robots} | {r.case} | {_percent(r.daemon)} ({_percent(low)}-{_percent(high)}) "
-            f"| {_percent(r.daemon / r.robots)} | {r.us_per_cycle:.1f} | {r.cycle_rate:.0f} "
-            f"| {_percent(r.viewer)} | {_percent(r.browser)} "
+            f"| {_percent(r.loop)} | {_percent(r.daemon / r.robots)} | {r.us_per_cycle:.1f} "
+            f"| {r.cycle_rate:.0f} | {_percent(r.viewer)} | {_percent(r.browser)} "
             f"| {r.missed} / {r.late} | {p99} |"
         )
     return "\n".join(lines)
@@ -482,6 +499,8 @@ async def streaming_view(cell: Cell, browser: str, logs: Path) -> AsyncIterator[
     """A view in this process with a page open, every robot enabled and a slider sweeping."""
     from urdaemon.view.app import running_view
 
+    # a browser's speculative connection that sends no request is logged with a traceback: not ours
+    logging.getLogger("websockets").setLevel(logging.CRITICAL)
     async with running_view(cell.endpoint, port=0) as view, page(browser, view.url, logs) as chromium:
         deadline = time.monotonic() + START_TIMEOUT_S
         while not view.server.get_clients():

@@ -212,6 +212,7 @@ def test_view_cost_reads_proc_of_this_process_and_its_child(view_cost: ModuleTyp
     fields = view_cost.stat_fields("42 (a) b (c)) S 7 42 42 0 -1 4194304 1 0 0 0 250 130 0 0 20 0 1 0")
     assert (fields[0], fields[1], fields[11], fields[12]) == ("S", "7", "250", "130")
     assert view_cost.cpu_seconds(os.getpid()) > 0.0  # pytest has run: some CPU was used
+    assert 0.0 < view_cost.main_thread_cpu_seconds(os.getpid()) <= view_cost.cpu_seconds(os.getpid())
     child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
     try:
         tree = view_cost.process_tree(os.getpid())
@@ -247,18 +248,24 @@ def test_view_cost_counts_connections_to_the_page(view_cost: ModuleType) -> None
 
 def test_view_cost_table(view_cost: ModuleType) -> None:
     window = view_cost.Window
-    windows = [window(0.10, 0.05, None, 1000.0, 1, 0, None), window(0.08, 0.07, None, 400.0, 2, 1, None)]
-    windows.append(window(0.12, None, None, 0.0, 0, 0, None))  # no cycle ran: no figure per cycle
+    windows = [window(0.10, 0.06, 0.05, None, 1000.0, 1, 0, None)]
+    windows.append(window(0.08, 0.05, 0.07, None, 400.0, 2, 1, None))
+    windows.append(window(0.12, 0.07, None, None, 0.0, 0, 0, None))  # no cycle ran: no figure per cycle
     row = view_cost.summarize("view", 2, windows)
     assert (row.daemon, row.daemon_spread, row.browser) == (0.10, (0.08, 0.12), None)
     assert row.viewer == pytest.approx(0.06)
     assert (row.missed, row.late, row.p99_us) == (3, 1, None)
     assert (row.cycle_rate, row.us_per_cycle) == (200.0, 150.0)  # medians over the windows
-    assert "| 2 | view | 10.0 (8.0-12.0) | 5.0 | 150.0 | 200 | 6.0 | - | 3 / 1 | - |" in view_cost.table(
-        [row]
-    )
+    assert row.loop == 0.06
+    line = "| 2 | view | 10.0 (8.0-12.0) | 6.0 | 5.0 | 150.0 | 200 | 6.0 | - | 3 / 1 | - |"
+    assert line in view_cost.table([row])
     timed = view_cost.summarize(
-        "idle", 1, [window(0.02, None, None, 500.0, 0, 0, 80.0), window(0.02, None, None, 500.0, 0, 0, 95.0)]
+        "idle",
+        1,
+        [
+            window(0.02, 0.01, None, None, 500.0, 0, 0, 80.0),
+            window(0.02, 0.01, None, None, 500.0, 0, 0, 95.0),
+        ],
     )
     assert view_cost.table([timed]).endswith("| 0 / 0 | 95 |")
     command = view_cost.chromium_command("/usr/bin/chromium", "http://127.0.0.1:8080", ROOT / "profile")
