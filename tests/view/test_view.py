@@ -210,9 +210,11 @@ async def test_a_jog_click_moves_the_tcp_along_its_axis_and_stops(viewed: Viewed
     poses = viewed.client.subscribe("demo_cell/alice/tcp_pose", maxsize=5)
     after = (await poses.get_json(10.0))["position"]
     dx, dy, dz = (a - b for a, b in zip(after, before, strict=True))
-    assert dz > 0.005  # 0.05 m/s for 0.3 s, then a jerk-limited stop
-    assert abs(dx) < 1e-3
-    assert abs(dy) < 1e-3
+    # up, and only up: how far depends on how many of the 0.3 s of twists the daemon's cycles ran
+    # (fewer on a loaded machine), so the distance is only bounded below
+    assert dz > 1e-3
+    assert abs(dx) < 0.1 * dz
+    assert abs(dy) < 0.1 * dz
     sample = view.feeds["alice"].joints()
     assert sample is not None
     assert all(abs(v) < 1e-3 for v in sample.velocities)

@@ -48,6 +48,9 @@ class RobotFeed:
         self._tcp: bytes | None = None
         self._status: bytes | None = None
         self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
+        self.replaced = 0
+        """Stream samples the daemon replaced by a newer one before reading them (counted, not listed:
+        on a busy machine they come often and would push every other event out)."""
         self.on_rejected: Callable[[str, str], None] | None = None
         """Called on the loop with (key, reason) for each ``command_rejected`` event."""
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -92,7 +95,10 @@ class RobotFeed:
         event = _json_object(sample.payload.to_bytes())
         if event is None:
             return
-        self.events.append(event_text(event))
+        if event.get("kind") == "command_rejected" and str(event.get("reason", "")).startswith("busy:"):
+            self.replaced += 1
+        else:
+            self.events.append(event_text(event))
         loop, handler = self._loop, self.on_rejected
         if event.get("kind") == "command_rejected" and loop is not None and handler is not None:
             with contextlib.suppress(RuntimeError):  # the loop has closed

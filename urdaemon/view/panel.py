@@ -131,7 +131,9 @@ class RobotPanel:
         self.plots.redraw(now)
         _set_content(
             self.status,
-            status_markdown(self.feed.status(), self.feed.stale(now), self.control.refusal),
+            status_markdown(
+                self.feed.status(), self.feed.stale(now), self.control.refusal, self.feed.replaced
+            ),
         )
         _set_content(
             self.events, "\n".join(f"- {line}" for line in self.feed.last_events()) or "(no events yet)"
@@ -143,8 +145,9 @@ class RobotPanel:
                         slider.value = _within(position, slider.min, slider.max)
 
 
-def status_markdown(status: dict[str, Any] | None, stale: bool, refusal: str) -> str:
-    """The robot's state in a few lines of markdown."""
+def status_markdown(status: dict[str, Any] | None, stale: bool, refusal: str, replaced: int = 0) -> str:
+    """The robot's state in a few lines of markdown (``replaced``: stream samples the daemon replaced
+    by newer ones before reading them)."""
     lines = []
     if stale:
         lines.append("**disconnected** (no joint_states)")
@@ -157,6 +160,8 @@ def status_markdown(status: dict[str, Any] | None, stale: bool, refusal: str) ->
         lease = status.get("lease")
         holder = lease.get("holder") if isinstance(lease, dict) else None
         lines.append(f"lease: {holder or 'free'}")
+    if replaced:
+        lines.append(f"stream samples replaced by newer ones: {replaced}")
     if refusal:
         lines.append(f"refused: {refusal}")
     return "  \n".join(lines) or "waiting for the robot..."

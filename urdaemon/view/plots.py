@@ -36,12 +36,15 @@ class JointPlots:
         self._samples: deque[JointSample] = deque(maxlen=KEPT)
         self._drawn_at = float("-inf")
         empty = self._data([], "positions")
-        self.positions = gui.add_uplot(empty, self._series("rad"), title="joint positions (rad)", aspect=2.0)
+        scales = {"x": {"time": False}}  # seconds before now, not a date
+        self.positions = gui.add_uplot(
+            empty, self._series(), title="joint positions (rad), last 10 s", aspect=2.0, scales=scales
+        )
         self.velocities = gui.add_uplot(
-            empty, self._series("rad/s"), title="joint velocities (rad/s)", aspect=2.0
+            empty, self._series(), title="joint velocities (rad/s)", aspect=2.0, scales=scales
         )
 
-    def _series(self, unit: str) -> tuple[dict[str, Any], ...]:
+    def _series(self) -> tuple[dict[str, Any], ...]:
         lines = tuple(
             {"label": label, "stroke": _COLORS[i % len(_COLORS)], "width": 1.5}
             for i, label in enumerate(self.labels)

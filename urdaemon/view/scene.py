@@ -26,8 +26,8 @@ DEFAULT_COLOR = (170, 180, 195)
 """Geometry without a material colour."""
 LABEL_HEIGHT_M = 1.1
 """A robot's label floats this far above its base link."""
-CAMERA_POSITION = (1.6, -2.4, 1.6)
-CAMERA_LOOK_AT = (0.0, 0.0, 0.4)
+CAMERA_POSITION = (1.1, -1.8, 1.2)
+CAMERA_LOOK_AT = (0.0, 0.0, 0.35)
 """Where a new page's camera starts: the cell seen from the front right, above the robots' bases."""
 
 
