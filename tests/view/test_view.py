@@ -280,7 +280,8 @@ async def test_a_lease_taken_over_while_enabled_disables_with_the_reason(viewed:
         await (await other.robot("alice")).take_over("maintenance")
         await viewed.until("alice disabled", lambda: not control.enabled)
         await viewed.until("the reason shown", lambda: "refused" in panel.status.content)
-        assert "taken over by the cell supervisor: maintenance" in control.refusal
+        # the client hears of the take-over, or the daemon refuses a sample first: either names the holder
+        assert "the cell supervisor" in control.refusal
         assert panel.enable.value is False
         sent = control.sent
         await view.drawn(10.0)
