@@ -7,6 +7,7 @@ Reproduction on the code before issue 18: there was no ``urdaemon.view``, so eve
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,7 +16,7 @@ import pytest
 from urdaemon.client import LeaseHeld
 from urdaemon.errors import UrDaemonError
 from urdaemon.view.control import ANGULAR_PER_LINEAR, RobotControl, jog_twist
-from urdaemon.view.feed import JointSample
+from urdaemon.view.feed import STALE_S, JointSample
 from urdaemon.view.panel import problem_of, status_markdown
 from urdaemon.view.scene import robot_of_link
 
@@ -59,7 +60,7 @@ def _enabled(control: RobotControl) -> bool:
 
 
 def _at_rest() -> JointSample:
-    return JointSample(("alice_j1",) * 6, START, (0.0,) * 6, 0.0)
+    return JointSample(("alice_j1",) * 6, START, (0.0,) * 6, time.monotonic())
 
 
 async def test_enable_streams_the_robots_own_joints_first() -> None:
@@ -96,6 +97,20 @@ async def test_enable_without_joint_states_gives_the_lease_back() -> None:
     assert not await control.enable()
     assert "no joint_states" in control.refusal
     assert robot.calls == [("lease", None), ("release", None)]
+
+
+async def test_enable_refuses_joint_states_older_than_the_staleness_limit() -> None:
+    """Reproduction: enable took whatever sample the feed held, however old, as the targets; a robot
+    that moved since (or a feed that stopped) would then be streamed back towards an old pose."""
+    robot = FakeRobot()
+    old = JointSample(("alice_j1",) * 6, START, (0.0,) * 6, 100.0)
+    control = RobotControl(robot, lambda: old, clock=lambda: 100.0 + STALE_S + 0.5)
+    assert not await control.enable()
+    assert "are 1.5 s old" in control.refusal
+    control.tick()
+    assert robot.calls == [("lease", None), ("release", None)]
+    fresh = RobotControl(robot, lambda: old, clock=lambda: 100.0 + STALE_S)
+    assert await fresh.enable()
 
 
 async def test_a_refused_stream_disables_but_a_replaced_sample_does_not() -> None:

@@ -5,7 +5,8 @@ Safety, in order:
 
 - **Enable** takes the robot's command lease (refused, with the holder named, when someone else has
   it: nothing is sent) and sets every target to the robot's current joints *before* the stream
-  starts, so enabling moves nothing.
+  starts, so enabling moves nothing; without joint_states newer than ``STALE_S`` it gives the lease
+  back and refuses (the robot may be elsewhere than the last sample says).
 - **While enabled** ``tick`` (the view's stream loop, every ``STREAM_PERIOD_S``) sends the targets as
   one joint position command; the daemon tracks them jerk-limited (ruckig). When ticks stop (the view
   disabled, the page closed, the process died) the daemon's deadman (``motion.stream_timeout``) brings
@@ -24,11 +25,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import time
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from urdaemon.errors import GoalRejected, UrDaemonError
-from urdaemon.view.feed import JointSample
+from urdaemon.view.feed import STALE_S, JointSample
 
 __all__ = [
     "JOG_S",
@@ -87,9 +89,16 @@ def jog_twist(axis: str, sign: int, speed: float) -> tuple[tuple[float, ...], tu
 class RobotControl:
     """One robot's commands from the view; every method runs on the asyncio loop."""
 
-    def __init__(self, robot: Commandable, joints: Callable[[], JointSample | None]) -> None:
+    def __init__(
+        self,
+        robot: Commandable,
+        joints: Callable[[], JointSample | None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.robot = robot
         self._joints = joints
+        self._clock = clock
+        """The clock of the samples' ``received`` (``time.monotonic``)."""
         self.enabled = False
         self.targets: list[float] | None = None
         """The joint stream's targets (the sliders' values) while enabled."""
@@ -119,6 +128,12 @@ class RobotControl:
         if current is None or not all(math.isfinite(p) for p in current.positions):
             await self._release()
             return self._refused(f"no joint_states from {self.robot.name} yet: nothing to start from")
+        age = self._clock() - current.received
+        if age > STALE_S:  # the robot may be elsewhere by now: never stream towards an old pose
+            await self._release()
+            return self._refused(
+                f"the newest joint_states from {self.robot.name} are {age:.1f} s old: nothing to start from"
+            )
         self.targets = list(current.positions)
         self.enabled = True
         self.refusal = ""
