@@ -40,7 +40,9 @@ clear of the control panel on the right."""
 EMPTY: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.75), (0.5, 0.0, 1.35), (-0.5, 0.0, 0.85))
 """Where nothing stands: above the world frame between the robots, above alice, above bob."""
 SHOTS = 40
-"""At most this many screenshots while waiting for the page to draw both robots."""
+"""At most this many screenshots while waiting for the page to draw both robots..."""
+DRAW_WAIT_S = 60.0
+"""...and for at most this long (each screenshot waits for the page's next frame)."""
 SAMPLES = 5000
 """At most this many joint_states (10 s of alice at 500 Hz) for anything a test waits on."""
 KEY_PRESSES = 100
@@ -83,11 +85,15 @@ def _folder(page: Page, robot: str) -> Locator:
 
 
 async def _picture(page: Page, seen: SeenCamera, robots: dict[str, list[Any]]) -> Picture:
-    """A screenshot once every robot's points are drawn (at most ``SHOTS`` screenshots)."""
+    """A screenshot once every robot's points are drawn (at most ``SHOTS`` screenshots in
+    ``DRAW_WAIT_S``); else the last one."""
+    deadline = asyncio.get_running_loop().time() + DRAW_WAIT_S
     for _ in range(SHOTS):
         picture = Picture(await page.screenshot())
         if all(picture.drawn(seen.pixel(p)) > 0.5 for points in robots.values() for p in points):
-            return picture
+            break
+        if asyncio.get_running_loop().time() > deadline:
+            break
     return picture
 
 
