@@ -37,8 +37,9 @@ PICTURE_ENV = "URDAEMON_VIEW_PNG"
 CELL_CAMERA = Camera(position=(1.3, -2.7, 1.6), look_at=(0.62, 0.0, 0.38), fov=math.radians(38.0))
 """In front of the cell, a little to alice's side and above; the cell is left of the page's centre,
 clear of the control panel on the right."""
-EMPTY: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.75), (0.5, 0.0, 1.35), (-0.5, 0.0, 0.85))
-"""Where nothing stands: above the world frame between the robots, above alice, above bob."""
+EMPTY: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.75), (0.85, 0.0, 0.4), (-0.5, 0.0, 0.85))
+"""Where nothing stands: above the world frame between the robots, under alice's forearm (between
+her upper arm and her wrist), above bob (below where a problem's label would float)."""
 SHOTS = 40
 """At most this many screenshots while waiting for the page to draw both robots..."""
 DRAW_WAIT_S = 60.0
