@@ -6,7 +6,9 @@ screenshot of the cell (the picture in docs/view.md and the README) to that path
 
 Reproduction on the code before issue 18: there was no ``urdaemon.view``, so the fixtures fail at
 import; with a view that drew no geometry, or put a robot elsewhere, the pixels where the daemon's
-``tf`` puts each robot are background and ``test_both_robots_are_drawn_where_they_stand`` fails.
+``tf`` puts each robot are background and ``test_both_robots_are_drawn_where_they_stand`` fails;
+with a slider whose page changes never reach the robot's control, alice's joint_states never reach
+the slider's value and ``test_a_slider_moved_in_the_page_moves_its_joint`` fails.
 """
 
 from __future__ import annotations
