@@ -1,6 +1,7 @@
 """The fake takes RTDE input packages as a controller does: while it keeps time, as they arrive (the
-last write of a cycle wins); after it was held up, one per client per cycle, in arrival order (the
-fake's clock turned by hand, its wall clock too: the packages arrive between two cycles)."""
+last write of a cycle wins); after it was held up, or when it read together packages an output it
+sent meanwhile may have released, one per client per cycle, in arrival order (the fake's clock turned
+by hand, its wall clock too: the packages arrive between two cycles)."""
 
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ MIRROR = (
 """A program that shows, every cycle, what it reads of input_int_register_0."""
 
 
-async def _mirroring(controller: FakeController, clock: ManualClock) -> Link:
-    """The mirror program running, and an RTDE client owning input_int_register_0."""
+async def _mirroring(controller: FakeController, clock: ManualClock, frequency: float = 10.0) -> Link:
+    """The mirror program running, and an RTDE client owning input_int_register_0 (its outputs at
+    ``frequency``)."""
     primary = await Link.open(prim.PrimaryConnection(Side.DAEMON), controller.address, 30001)
     await primary.next(prim.VersionMessage)
     await primary.send(prim.Script(MIRROR))
@@ -52,7 +54,7 @@ async def _mirroring(controller: FakeController, clock: ManualClock) -> Link:
     configured = await link.next(rtde.InputsConfigured)
     assert configured.recipe_id == 1
     assert not configured.in_use
-    await link.send(rtde.SetupOutputs(10.0, ("timestamp",)))
+    await link.send(rtde.SetupOutputs(frequency, ("timestamp",)))
     await link.next(rtde.OutputsConfigured)
     await link.send(rtde.Start())
     assert (await link.next(rtde.StartReply)).accepted
@@ -124,4 +126,60 @@ async def test_a_client_faster_than_the_cycles_never_falls_behind_a_fake_that_ke
             assert controller.arm.io.registers_int[0] == first + 2
             await link.send(rtde.Start())  # (each arrival ends with a pause request)
             assert (await link.next(rtde.StartReply)).accepted
+        link.close()
+
+
+def _write(link: Link, values: list[int]) -> None:
+    """``values`` as input packages, into the socket at once; nothing awaited, so the fake (on this
+    loop) does not read them before the test next awaits."""
+    for value in values:
+        link.conn.send(rtde.InputData((value,), recipe_id=1))
+    link.writer.write(link.conn.data_to_send())
+
+
+async def test_a_package_an_output_released_while_the_fake_had_not_read_the_one_before_waits() -> None:
+    """Reproduction (the side-by-side stress run, ur_rtde's watchdog judge): ur_rtde's speedj package
+    sat unread in the fake's socket while the fake, held up by less than a period, ran a cycle; that
+    cycle's output package acknowledged it, and the acknowledgement let ur_rtde's TCP send the
+    watchdog kick it was holding back (Nagle: ur_rtde sets TCP_NODELAY, then boost::asio::connect
+    opens a new socket). The fake, on time by its wall clock, read both at once and applied both,
+    so its program never read speedj. On a controller the kick comes after that output, in the next
+    cycle: the program must see the first package, then the second."""
+    wall = Wall()
+    async with manual_fake(powered=True, wall_clock=wall) as (controller, clock):
+        link = await _mirroring(controller, clock, frequency=500.0)
+        _write(link, [7])
+        wall.now += controller.step_time
+        clock.turn(1)  # a cycle on time: its output goes to the client while 7 waits unread
+        assert controller.arm.io.registers_int.get(0, 0) == 0
+        await _arrive_together(link, [8])  # the package that output released, read with 7
+        assert controller.input_registers.ints[0] == 7
+        wall.now += controller.step_time
+        clock.turn(1)
+        assert controller.arm.io.registers_int[0] == 7
+        clock.turn(1)
+        assert controller.arm.io.registers_int[0] == 8
+        link.close()
+
+
+async def test_packages_read_one_at_a_time_in_a_cycle_after_an_output_still_end_on_the_last() -> None:
+    """The other side of that rule: a client streaming at the controller's rate that sends two
+    packages in one cycle, each read on its own (the fake keeps time), has the last write win, as on a
+    controller; neither waits for a later cycle."""
+    wall = Wall()
+    async with manual_fake(powered=True, wall_clock=wall) as (controller, clock):
+        link = await _mirroring(controller, clock, frequency=500.0)
+        for first in range(1, 20, 2):
+            wall.now += controller.step_time
+            clock.turn(1)
+            await _arrive_together(link, [first])
+            await link.send(rtde.Start())  # (each arrival ends with a pause request)
+            assert (await link.next(rtde.StartReply)).accepted
+            await _arrive_together(link, [first + 1])
+            assert controller.input_registers.ints[0] == first + 1
+            await link.send(rtde.Start())
+            assert (await link.next(rtde.StartReply)).accepted
+            wall.now += controller.step_time
+            clock.turn(1)
+            assert controller.arm.io.registers_int[0] == first + 1
         link.close()

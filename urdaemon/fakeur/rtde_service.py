@@ -17,10 +17,21 @@ applied between two steps of the programs; the ones after it wait in arrival ord
 client. So a fake that was held up and finds two packages of one client (ur_rtde's speedj and its
 first watchdog kick) lets its program see each in a cycle of its own, as the cycles a controller
 would have run in that time would have. Only this I/O side reads the clock (to tell a stall).
+
+The same holds, whatever the clock says, for several packages of a client found in one read after
+an output package went to that client since its previous read: the fake ran that cycle with the
+first package unread in its socket, and the output may be what released the others. ur_rtde sends its
+watchdog kick right after speedj, but its socket runs with Nagle's algorithm (ur_rtde sets
+TCP_NODELAY, then ``boost::asio::connect`` opens a new socket), so the kick leaves only when the
+controller's next output package acknowledges speedj. In the fake's model a controller takes its
+inputs when its programs step and sends its outputs right after (how a real one phases the two is not
+documented), so the kick is read a cycle after speedj. A read's end is told by a callback the loop
+runs after the read's packages (``_read_done``).
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import time
@@ -77,6 +88,21 @@ class _RtdeClient:
     """Input packages received and not yet applied, oldest first (one is applied per cycle)."""
     applied_in: int = -1
     """The cycle in which its latest input package was applied (``RtdeService.cycle``)."""
+    sent: int = 0
+    """Output packages sent to it so far."""
+    sent_at_read: int = 0
+    """``sent`` when its latest read began."""
+    reading: bool = False
+    """A read of its packages is being handled: set by the read's first package, cleared once the
+    loop has handed over all of that read's packages (a callback run after them)."""
+    after_output: bool = False
+    """The read being handled began after an output went to it: packages that sat in the socket
+    while the fake sent that output, and those the output released (see ``_receive_inputs``)."""
+
+
+def _read_done(client: _RtdeClient) -> None:
+    """Every package of the client's latest read was handed over (run by the loop after them)."""
+    client.reading = False
 
 
 class RtdeService:
@@ -152,6 +178,7 @@ class RtdeService:
                 client.next_due += client.period
                 if client.next_due < now:  # fell behind (a stall): resume on the grid, no burst
                     client.next_due = now + client.period
+                client.sent += 1
                 self._send(client, rtde.OutputData(tuple(get(arm) for get in client.getters)))
 
     def after_cycle(self) -> None:
@@ -168,10 +195,18 @@ class RtdeService:
             self.waiting = [client for client in self.waiting if client.pending]
 
     def _receive_inputs(self, client: _RtdeClient, values: dict[str, Any]) -> None:
-        """Apply one input package now if none of this client's was applied since the last step or the
-        fake keeps time, else queue it for a later cycle (the oldest waiting one applied at once when
-        the queue is full)."""
-        if not client.pending and (client.applied_in != self.cycle or not self._behind()):
+        """Apply one input package now if none of this client's was applied since the last step, or
+        if one was and the fake keeps time and this package did not come in one read, after an
+        output, with the one applied; else queue it for a later cycle (the oldest waiting one
+        applied at once when the queue is full)."""
+        if not client.reading:
+            client.reading = True
+            client.after_output = client.sent != client.sent_at_read
+            client.sent_at_read = client.sent
+            asyncio.get_running_loop().call_soon(_read_done, client)
+        if not client.pending and (
+            client.applied_in != self.cycle or not (client.after_output or self._behind())
+        ):
             client.applied_in = self.cycle
             self.apply_inputs(values)
             return
