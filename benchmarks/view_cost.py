@@ -16,6 +16,8 @@ these cases back to back, each over ``--windows`` windows of ``--window`` second
   of every robot's ``joint_states``; of its ``tcp_pose``; of everything the view subscribes to
   (``joint_states``, ``tcp_pose``, ``status``, ``events``): what the subscriptions alone cost;
 - ``view``: ``urdaemon view --connect ENDPOINT --port 0`` running, no page open;
+- ``shared``: the view and the bare subscribers of ``subscribed`` together: what a view adds when
+  another client already follows the same keys;
 - ``page``: the same view with one headless Chromium page open on it (WebGL in software);
 - ``stream``: a view in this process (``running_view``) with a page open, every robot enabled as
   the page's switch does (the lease, then the sliders' joint stream at 50 Hz) and one slider per
@@ -61,7 +63,7 @@ from urdaemon.publish.keys import RobotKeys
 ROOT = Path(__file__).resolve().parent.parent
 DEMO_CELL = ROOT / "configs" / "dual_robot_mock.yaml"
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-CASES = ("idle", "joints", "poses", "subscribed", "view", "page", "stream")
+CASES = ("idle", "joints", "poses", "subscribed", "view", "shared", "page", "stream")
 VIEW_KEYS = ("joint_states", "tcp_pose", "status", "events")
 """What ``urdaemon view`` subscribes to per robot (urdaemon/view/feed.py)."""
 SUBSCRIBED = {"joints": ("joint_states",), "poses": ("tcp_pose",), "subscribed": VIEW_KEYS}
@@ -536,6 +538,10 @@ async def case(name: str, client: Client, cell: Cell, browser: str, logs: Path) 
     elif name == "view":
         async with view_process(cell, logs) as (pid, _url):
             yield Watched(viewer=pid)
+    elif name == "shared":
+        with subscribed(client, cell, VIEW_KEYS):
+            async with view_process(cell, logs) as (pid, _url):
+                yield Watched(viewer=pid)
     elif name == "page":
         async with view_process(cell, logs) as (pid, url), page(browser, url, logs) as chromium:
             yield Watched(viewer=pid, browser=chromium)
