@@ -33,7 +33,7 @@ from urdaemon.runtime.lease import LeaseBook
 from urdaemon.runtime.lease_keeper import LeaseKeeper
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.service_runner import ServiceRunner
-from urdaemon.runtime.status import StatusPublisher
+from urdaemon.runtime.status import StatusPublisher, tool_link
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
 
@@ -64,7 +64,7 @@ class TcpPoses:
         custom = robot.description
         self.frame = f"{robot.prefix}base" if custom is None else f"{robot.prefix}{custom.base_link}"
         """The frame of tcp_pose: UR ``<robot>_base``, custom robots their base link."""
-        self._tool_link = f"{robot.prefix}tool0" if custom is None else f"{robot.prefix}{custom.tool_link}"
+        self._tool_link = tool_link(robot)
         self._tcp_child = f"{robot.prefix}tcp"
         self._tcp: tuple[float, ...] = ()
         self._tool: ToolOffset | None = None

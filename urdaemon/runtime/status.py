@@ -1,9 +1,11 @@
 """One robot's status, IO and events messages: published on change and on slow timers.
 
 The status goes out at once when what users act on changes (lifecycle, modes, a percent of speed
-scaling, the program, the active goal) and every status period; the IO when it changes (looked at
-every IO period) and at least once a second. Events are notices, rejected commands and the command
-lease's changes; the status names the lease's holder.
+scaling, the program, the active goal, the TCP offset) and every status period; the IO when it
+changes (looked at every IO period) and at least once a second. Events are notices, rejected
+commands and the command lease's changes; the status names the lease's holder and the robot's TCP
+(``tcp``: its tool link, and the offset in that link's frame), so a viewer draws the TCP from
+``joint_states`` without following ``tcp_pose``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,14 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 
-__all__ = ["StatusPublisher"]
+__all__ = ["StatusPublisher", "tool_link"]
+
+
+def tool_link(robot: Robot) -> str:
+    """The robot's tool link, prefixed: ``<robot>_tool0`` (UR), a custom robot's own ``tool_link``;
+    the TCP offset (``set_tcp``, the cell file's ``tcp``) is in its frame."""
+    custom = robot.description
+    return f"{robot.prefix}tool0" if custom is None else f"{robot.prefix}{custom.tool_link}"
 
 
 class StatusPublisher:
@@ -37,6 +46,7 @@ class StatusPublisher:
         self._robot = robot
         self._backend = backend
         self._controller = controller
+        self._tool_link = tool_link(robot)
         self._log = log
         self._status_period = 1.0 / publish.status_rate_hz
         self._io_period = 1.0 / publish.io_rate_hz
@@ -87,6 +97,8 @@ class StatusPublisher:
             # UR robots: does the robot's kinematics hash match the configured calibration (None: not checked)
             "calibration_ok": getattr(backend, "calibration_ok", None),
             "lease": self.lease,
+            # the TCP offset in the tool link's frame: the TCP's pose is the link's composed with it
+            "tcp": {"link": self._tool_link, "pose": list(self._controller.tcp)},
         }
 
     def io_message(self) -> dict[str, Any]:
@@ -118,6 +130,7 @@ class StatusPublisher:
             round(state.speed_scaling, 2),
             state.program_running,
             self._controller.active_goal_id,
+            self._controller.tcp,  # set_tcp: a viewer's TCP frame moves at once
         )
 
     def publish_if_changed(self) -> None:
