@@ -13,8 +13,9 @@ these cases back to back, each over ``--windows`` windows of ``--window`` second
 
 - ``idle``: nobody but the benchmark's own client (which only asks ``cycle_stats``);
 - ``joints``, ``poses``, ``subscribed``: a bare Zenoh subscriber (no-op callbacks, in this process)
-  of every robot's ``joint_states``; of its ``tcp_pose``; of everything the view subscribes to
-  (``joint_states``, ``tcp_pose``, ``status``, ``events``): what the subscriptions alone cost;
+  of every robot's ``joint_states``; of its ``tcp_pose`` (which the view no longer follows: it draws
+  the TCP from the joints and the status's ``tcp``); of everything the view subscribes to
+  (``joint_states``, ``status``, ``events``): what the subscriptions alone cost;
 - ``view``: ``urdaemon view --connect ENDPOINT --port 0`` running, no page open;
 - ``shared``: the view and the bare subscribers of ``subscribed`` together: what a view adds when
   another client already follows the same keys;
@@ -64,7 +65,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DEMO_CELL = ROOT / "configs" / "dual_robot_mock.yaml"
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 CASES = ("idle", "joints", "poses", "subscribed", "view", "shared", "page", "stream")
-VIEW_KEYS = ("joint_states", "tcp_pose", "status", "events")
+VIEW_KEYS = ("joint_states", "status", "events")
 """What ``urdaemon view`` subscribes to per robot (urdaemon/view/feed.py)."""
 SUBSCRIBED = {"joints": ("joint_states",), "poses": ("tcp_pose",), "subscribed": VIEW_KEYS}
 """The keys of each robot the bare-subscriber cases subscribe to."""

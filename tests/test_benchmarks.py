@@ -182,6 +182,8 @@ def test_view_cost_cells_are_valid(view_cost: ModuleType) -> None:
 
 
 def test_view_cost_subscribes_to_what_the_view_subscribes_to(view_cost: ModuleType) -> None:
+    """The view follows no ``tcp_pose`` (the daemon would compute, encode and put it every cycle for
+    it). Reproduction on 17fa302: the view subscribed to ``tcp_pose`` too, and so did ``VIEW_KEYS``."""
     import asyncio
 
     from urdaemon.publish.keys import RobotKeys
@@ -200,6 +202,7 @@ def test_view_cost_subscribes_to_what_the_view_subscribes_to(view_cost: ModuleTy
     finally:
         loop.close()
     keys = RobotKeys("demo_cell", "alice")
+    assert keys.tcp_pose not in declared
     assert sorted(declared) == sorted(getattr(keys, k) for k in view_cost.VIEW_KEYS)
     assert view_cost.SUBSCRIBED["subscribed"] == view_cost.VIEW_KEYS
     assert set(view_cost.SUBSCRIBED) < set(view_cost.CASES)

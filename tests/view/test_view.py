@@ -45,6 +45,51 @@ def _scene_pose(viewed: Viewed, link: str) -> tuple[float, ...]:
     return (*(float(v) for v in frame.position), x, y, z, w)
 
 
+def _compose(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, ...]:
+    """The pose ``b`` (x, y, z, qx, qy, qz, qw) given in the frame at pose ``a``, in a's parent frame."""
+    ax, ay, az, aqx, aqy, aqz, aqw = a
+    bx, by, bz, bqx, bqy, bqz, bqw = b
+    # b's position rotated by a's quaternion: t + 2 w (u x t) + 2 u x (u x t)
+    cx, cy, cz = aqy * bz - aqz * by, aqz * bx - aqx * bz, aqx * by - aqy * bx
+    dx, dy, dz = aqy * cz - aqz * cy, aqz * cx - aqx * cz, aqx * cy - aqy * cx
+    return (
+        ax + bx + 2.0 * (aqw * cx + dx),
+        ay + by + 2.0 * (aqw * cy + dy),
+        az + bz + 2.0 * (aqw * cz + dz),
+        aqw * bqx + aqx * bqw + aqy * bqz - aqz * bqy,
+        aqw * bqy - aqx * bqz + aqy * bqw + aqz * bqx,
+        aqw * bqz + aqx * bqy - aqy * bqx + aqz * bqw,
+        aqw * bqw - aqx * bqx - aqy * bqy - aqz * bqz,
+    )
+
+
+def _same_pose(a: tuple[float, ...], b: tuple[float, ...], tol: float) -> bool:
+    """Whether two poses are within ``tol`` (a quaternion and its negative are the same rotation)."""
+    return close(a[:3], b[:3], tol) and (
+        close(a[3:], b[3:], tol) or close(a[3:], tuple(-v for v in b[3:]), tol)
+    )
+
+
+def _drawn_tcp(viewed: Viewed, robot: str) -> tuple[float, ...]:
+    """The robot's TCP frame in the world as the scene draws it: its parent link's node (named in its
+    path, ``/cell/<link>/tcp``) composed with its own pose."""
+    handle = viewed.view.scene.tcp_frames[robot]
+    link = handle.name.split("/")[2]
+    w, x, y, z = (float(v) for v in handle.wxyz)
+    return _compose(_scene_pose(viewed, link), (*(float(v) for v in handle.position), x, y, z, w))
+
+
+async def _tcp_pose_in_world(viewed: Viewed, robot: str) -> tuple[float, ...]:
+    """The robot's next ``tcp_pose`` (in its base frame) put in the world with the base as drawn."""
+    poses = viewed.client.subscribe(f"demo_cell/{robot}/tcp_pose", maxsize=5)
+    try:
+        message = await poses.get_json(10.0)
+    finally:
+        viewed.client.unsubscribe(poses)
+    pose = (*message["position"], *message["orientation"])
+    return _compose(_scene_pose(viewed, message["frame"]), tuple(float(v) for v in pose))
+
+
 async def _next_states(states: Subscription, check: Any, what: str) -> dict[str, Any]:
     """The first joint_states message (at most ``SAMPLES``) for which ``check`` holds."""
     for _ in range(SAMPLES):
@@ -90,6 +135,15 @@ async def test_every_link_is_drawn_where_the_daemons_tf_puts_it(viewed: Viewed) 
     assert view.scene.meshes.get("alice")
     assert view.scene.meshes.get("bob")
     await viewed.until("TCP frames", lambda: set(view.scene.tcp_frames) == {"alice", "bob"})
+    for robot in ("alice", "bob"):  # where the daemon's own tcp_pose puts the TCP
+        assert _same_pose(_drawn_tcp(viewed, robot), await _tcp_pose_in_world(viewed, robot), SHOWN), robot
+    # a set_tcp moves the drawn TCP with it: 0.1 m along tool0's z and turned about its x
+    alice = await viewed.client.robot("alice")
+    await alice.set_tcp([0.0, 0.0, 0.1, 0.3, 0.0, 0.0])
+    await alice.release()
+    expected = await _tcp_pose_in_world(viewed, "alice")
+    await viewed.until("the new TCP drawn", lambda: _same_pose(_drawn_tcp(viewed, "alice"), expected, SHOWN))
+    assert not _same_pose(_scene_pose(viewed, "alice_tool0"), expected, 0.05)  # the TCP is off tool0 now
 
 
 async def test_the_scene_follows_a_moving_robot(viewed: Viewed) -> None:

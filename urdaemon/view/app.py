@@ -69,10 +69,10 @@ class View:
             if self.scene.place({k: v for k, v in positions.items() if math.isfinite(v)}):
                 self.moves += 1
             for name, feed in self.feeds.items():
-                tcp = feed.tcp_pose()
-                if tcp is not None:
-                    self.scene.set_tcp(name, tcp)
-                self.scene.set_problem(name, problem_of(feed.status(), feed.stale(now)))
+                status = feed.status()
+                if status is not None:
+                    self.scene.set_tcp(name, status.get("tcp"))
+                self.scene.set_problem(name, problem_of(status, feed.stale(now)))
                 self.panels[name].show(now)
         self.draws += 1
         self._drawn.set()

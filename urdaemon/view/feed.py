@@ -1,6 +1,8 @@
 """The newest messages of one robot, kept as Zenoh's threads deliver them and read by the view's loops.
 
-A robot publishes ``joint_states`` at up to 500 Hz; the view draws at ~30 Hz. So a callback only
+A robot publishes ``joint_states`` at up to 500 Hz; the view draws at ~30 Hz. It follows no
+``tcp_pose``: the daemon would compute, encode and put it every cycle for the view, which draws the
+TCP from the joints and the status's ``tcp`` (scene.py). So a callback only
 keeps the newest payload (bytes, no decoding on Zenoh's thread) and counts it; the display task
 decodes the newest one when it draws. Events are kept as the last few; a ``command_rejected`` one
 is also handed to the loop (``on_rejected``), where the robot's control decides what it means.
@@ -37,7 +39,7 @@ class JointSample:
 
 
 class RobotFeed:
-    """The newest ``joint_states``, ``tcp_pose`` and ``status`` of one robot, and its last events."""
+    """The newest ``joint_states`` and ``status`` of one robot, and its last events."""
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -45,7 +47,6 @@ class RobotFeed:
         """``joint_states`` messages received (a test waits on it)."""
         self._joints: tuple[bytes, float] | None = None
         self._decoded: tuple[bytes, JointSample] | None = None
-        self._tcp: bytes | None = None
         self._status: bytes | None = None
         self.events: deque[str] = deque(maxlen=EVENTS_KEPT)
         self.replaced = 0
@@ -63,7 +64,6 @@ class RobotFeed:
         self._loop = loop
         for key, callback in (
             (keys.joint_states, self._on_joint_states),
-            (keys.tcp_pose, self._on_tcp_pose),
             (keys.status, self._on_status),
             (keys.events, self._on_event),
         ):
@@ -84,9 +84,6 @@ class RobotFeed:
         if self.joint_states_count == 1 and self._loop is not None:
             with contextlib.suppress(RuntimeError):  # the loop has closed
                 self._loop.call_soon_threadsafe(self.first_joint_states.set)
-
-    def _on_tcp_pose(self, sample: Any) -> None:
-        self._tcp = sample.payload.to_bytes()
 
     def _on_status(self, sample: Any) -> None:
         self._status = sample.payload.to_bytes()
@@ -138,10 +135,6 @@ class RobotFeed:
     def last_events(self) -> list[str]:
         """The last events, oldest first (a copy: Zenoh's threads append meanwhile)."""
         return list(self.events)  # one C call under the GIL: never sees the deque half changed
-
-    def tcp_pose(self) -> dict[str, Any] | None:
-        """The newest ``tcp_pose`` message."""
-        return None if self._tcp is None else _json_object(self._tcp)
 
     def status(self) -> dict[str, Any] | None:
         """The newest ``status`` message."""

@@ -2,10 +2,13 @@
 geometry the URDF gives drawn on it, the world frame, each robot's TCP frame, and a label plus a colour
 over a robot that is disconnected or stopped.
 
-Link poses come from the cell's forward kinematics of the robots' newest joints
-(``KinematicTree``, the daemon's own model of ``tf``), computed here at display rate: the daemon does
-no extra work for a viewer. Every link is one scene node ``/cell/<link>`` placed in the world frame;
-its geometry hangs under it (with the visual's origin baked in), so moving a link is one update.
+Link poses come from the cell's forward kinematics of the robots' newest ``joint_states``
+(``KinematicTree``, the daemon's own model of ``tf``), computed here at display rate: the daemon
+computes no ``tf`` for a viewer. The TCP frame is the robot's tool link composed with its TCP offset
+(the status's ``tcp``), so the view needs no ``tcp_pose``: that stream would cost the daemon the
+TCP's kinematics, an encoding and a put every cycle. Every link is one scene node ``/cell/<link>``
+placed in the world frame; its geometry hangs under it (with the visual's origin baked in), so
+moving a link is one update.
 A link without geometry shows small axes, so a URDF without any still shows every robot.
 """
 
@@ -16,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from urdaemon.description.kinematics import KinematicTree
+from urdaemon.description.frames import frame_of_pose
+from urdaemon.description.kinematics import KinematicTree, quaternion_of
 
 __all__ = ["PROBLEM_COLOR", "CellScene", "robot_of_link"]
 
@@ -52,6 +56,8 @@ class CellScene:
         self.meshes: dict[str | None, list[tuple[Any, tuple[int, int, int]]]] = {}
         """Robot (None: the cell's) -> its mesh handles with their own colours."""
         self.tcp_frames: dict[str, Any] = {}
+        """Robot -> its TCP frame handle (a child of its tool link's node), once a status came."""
+        self._tcp_shown: dict[str, tuple[str, tuple[float, ...]]] = {}
         self.labels: dict[str, Any] = {}
         self.problems: dict[str, str | None] = dict.fromkeys(robots)
         self._last: dict[str, float] | None = None
@@ -114,20 +120,31 @@ class CellScene:
             frame.wxyz = (qw, qx, qy, qz)
         return True
 
-    def set_tcp(self, robot: str, message: Mapping[str, Any]) -> None:
-        """The robot's TCP frame at a ``tcp_pose`` message (in its ``frame``, the robot's base link)."""
-        frame = str(message.get("frame", ""))
-        position, orientation = message.get("position"), message.get("orientation")
-        if frame not in self.frames or not isinstance(position, list) or not isinstance(orientation, list):
+    def set_tcp(self, robot: str, tcp: object) -> None:
+        """The robot's TCP frame at the status's ``tcp`` (``link``, and ``pose``: x, y, z, rx, ry, rz in
+        that link's frame): a child of the link's node, so it follows the link's pose as drawn; no
+        frame before a status names the link."""
+        if not isinstance(tcp, Mapping):
+            return
+        link, pose = str(tcp.get("link", "")), tcp.get("pose")
+        if link not in self.frames or not isinstance(pose, list) or len(pose) != 6:
+            return
+        key = (link, tuple(float(v) for v in pose))
+        if self._tcp_shown.get(robot) == key:
             return
         handle = self.tcp_frames.get(robot)
+        if handle is not None and self._tcp_shown[robot][0] != link:
+            handle.remove()
+            handle = None
         if handle is None:
             handle = self.tcp_frames[robot] = self.server.scene.add_frame(
-                f"/cell/{frame}/tcp", axes_length=0.1, axes_radius=0.006
+                f"/cell/{link}/tcp", axes_length=0.1, axes_radius=0.006
             )
-        qx, qy, qz, qw = (float(v) for v in orientation)
-        handle.position = tuple(float(v) for v in position)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = frame_of_pose(key[1])
+        qx, qy, qz, qw = quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22)
+        handle.position = (x, y, z)
         handle.wxyz = (qw, qx, qy, qz)
+        self._tcp_shown[robot] = key
 
     def set_problem(self, robot: str, problem: str | None) -> None:
         """Show ``problem`` (e.g. ``disconnected``) over the robot and colour it; None: clear both."""
