@@ -271,16 +271,17 @@ def _settle(future: asyncio.Future[CliRun], result: CliRun | None, err: BaseExce
 
 
 async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: float) -> list[str]:
-    """Read the process's stderr until a line contains ``text``; returns the lines read."""
+    """Read the process's stderr until a line contains ``text``; returns the lines read.
+
+    Each line is read on a thread of its own, not on the loop's default executor: there, reads
+    queued behind other blocking work (another test's, a client's query) could return a line long
+    after it was printed, and a test would act on a process that had already moved on."""
     assert proc.stderr is not None
     stream = proc.stderr
-    loop = asyncio.get_running_loop()
     deadline = time.monotonic() + timeout
     lines: list[str] = []
     while time.monotonic() < deadline:
-        line = await asyncio.wait_for(
-            loop.run_in_executor(None, stream.readline), deadline - time.monotonic()
-        )
+        line = await asyncio.wait_for(_read_line(stream), deadline - time.monotonic())
         if not line:
             raise AssertionError(
                 f"process exited ({proc.poll()}) before printing {text!r}:\n{''.join(lines)}"
@@ -289,6 +290,33 @@ async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: floa
         if text in line:
             return lines
     raise AssertionError(f"{text!r} not printed within {timeout} s:\n{''.join(lines)}")
+
+
+def _read_line(stream: Any) -> asyncio.Future[str]:
+    """``stream.readline()`` on a daemon thread of its own; its line as a future of the running loop."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[str] = loop.create_future()
+
+    def settle(line: str | None, error: BaseException | None) -> None:
+        if future.done():
+            return
+        if error is not None:
+            future.set_exception(error)
+        else:
+            future.set_result(line or "")
+
+    def read() -> None:
+        try:
+            line = stream.readline()
+        except Exception as err:  # the pipe closed under us: the waiter hears it
+            with contextlib.suppress(RuntimeError):  # the loop has closed: nobody waits
+                loop.call_soon_threadsafe(settle, None, err)
+            return
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(settle, line, None)
+
+    threading.Thread(target=read, name="wait-for-line", daemon=True).start()
+    return future
 
 
 def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:

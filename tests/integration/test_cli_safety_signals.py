@@ -63,6 +63,7 @@ async def test_ctrl_c_on_move_cancels_its_goal_before_exiting() -> None:
             match = re.search(r"goal (\S+) accepted", lines[-1])
             assert match, lines
             goal_id = match.group(1)
+            assert proc.poll() is None, "move had ended before its 'accepted' line was read"
             proc.send_signal(signal.SIGINT)
             code = await _wait(proc)
         finally:

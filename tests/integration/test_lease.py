@@ -386,8 +386,11 @@ async def test_a_flood_of_puts_without_the_token_never_reaches_the_loop(
     async with served() as (daemon, endpoint):
         holder, stranger = open_session(endpoint), open_session(endpoint)
         try:
-            grant = await acquire_lease(holder, "testcell", "alice", holder="streamer")
+            # subscribed before the lease is asked for on the same session: the daemon has the
+            # subscription before it grants the lease, so before the flood (another session's puts
+            # could otherwise overtake the declaration, and the refusals' one event be lost)
             events = Inbox(holder, "testcell/alice/events")
+            grant = await acquire_lease(holder, "testcell", "alice", holder="streamer")
             key = "testcell/alice/command/joint_position"
             assert daemon.node is not None
             latest = daemon.node.latest[key]
