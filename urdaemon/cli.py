@@ -402,6 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return client_config_main(words[1:])
     args = _parser().parse_args(_join_option_values(words))
+    args.owns_process = argv is None  # run as the ``urdaemon`` command, not called with arguments
     installed = setup_logging(args.verbose)  # a bounded queue to stderr: never blocks the loop
     try:
         return _dispatch(args)
@@ -417,7 +418,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         if args.command == "urdf":
             return _urdf(args.config)
         if args.command == "serve":
-            return _serve(args.config, args.listen)
+            return _serve(args.config, args.listen, args.owns_process)
         if args.command == "fake-robot":
             return _fake_robot(args)
         if args.command == "echo":
@@ -585,12 +586,13 @@ def _urdf(path: str) -> int:
     return EXIT_OK
 
 
-def _serve(path: str, listen: list[str] | None) -> int:
+def _serve(path: str, listen: list[str] | None, owns_process: bool) -> int:
     from urdaemon.cell import load_cell
     from urdaemon.daemon import Daemon
 
     cell = load_cell(path)
     daemon = Daemon(cell, listen=tuple(listen) if listen else None)
+    previous = None if owns_process else stop_signal_handlers()
 
     async def run() -> None:
         stop = asyncio.Event()
@@ -611,7 +613,7 @@ def _serve(path: str, listen: list[str] | None) -> int:
             return _fail(err, "Zenoh: ")
         raise
     finally:
-        ignore_stop_signals()
+        end_stop_signals(previous)
     return EXIT_OK
 
 
@@ -647,14 +649,30 @@ def stop_on_signals(stop: asyncio.Event, what: str) -> None:
         signal.signal(sig, handler)
 
 
-def ignore_stop_signals() -> None:
-    """After a clean stop: ignore the stop signals for the rest of the process's exit (Python resets
-    its own handlers to the default, fatal one while it finalizes; an ignored signal stays ignored)."""
+def stop_signal_handlers() -> dict[signal.Signals, Any]:
+    """The stop signals' handlers now, to put back with ``end_stop_signals`` (main thread only)."""
     import threading
 
-    if threading.current_thread() is threading.main_thread():
-        for sig in STOP_SIGNALS:
-            signal.signal(sig, signal.SIG_IGN)
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+
+
+def end_stop_signals(previous: dict[signal.Signals, Any] | None) -> None:
+    """After a clean stop. A command that owns its process (``previous`` None: run as ``urdaemon``)
+    ignores the stop signals for the rest of the exit (Python resets its own handlers to the default,
+    fatal one while it finalizes; an ignored signal stays ignored). Run in-process (``main`` given
+    its arguments: a test, a program), the handlers ``previous`` are put back instead: an ignored
+    SIGINT would outlive the command, and every process started afterwards would inherit it
+    (Ctrl-C would no longer stop a ``urdaemon move`` started by the same test worker)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig in STOP_SIGNALS:
+        handler = signal.SIG_IGN if previous is None else previous.get(sig)
+        if handler is not None:
+            signal.signal(sig, handler)
 
 
 def _run_loop(main: Coroutine[Any, Any, None]) -> None:

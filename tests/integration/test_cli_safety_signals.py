@@ -12,6 +12,7 @@ import asyncio
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 from collections.abc import AsyncIterator
@@ -135,3 +136,35 @@ async def test_repeated_sigterm_while_stopping_still_exits_normally(tmp_path: Pa
         assert sent > 1
         assert code == 0, f"exit {code} after {sent} SIGTERMs\n{''.join(log)}"
         assert any("already stopping" in line for line in log), "".join(log)
+
+
+def test_serve_called_in_process_gives_ctrl_c_back_to_its_caller(tmp_path: Path) -> None:
+    """Reproduction: ``serve`` run through ``main(argv)`` (a test, a program) left SIGINT, SIGTERM and
+    SIGHUP ignored in the calling process when it returned, and every process started afterwards
+    inherited the ignored SIGINT: in the suite, a ``urdaemon move`` started later by the same worker
+    ran its whole goal through Ctrl-C (test_ctrl_c_on_move_cancels_its_goal_before_exiting failed,
+    exit 0 instead of 130, whenever such a test had run before it on its worker). The command run as
+    ``urdaemon`` still ignores them for its own exit."""
+    from urdaemon.cli import STOP_SIGNALS, main
+
+    before = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    config = tmp_path / "cell.yaml"
+    config.write_text(TWO_MOCKS, encoding="utf-8")
+    with socket.socket() as taken:  # the daemon cannot listen: serve starts, then ends at once
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        code = main(["serve", "--config", str(config), "--listen", f"tcp/127.0.0.1:{port}"])
+    assert code != 0
+    assert {sig: signal.getsignal(sig) for sig in STOP_SIGNALS} == before
+    child = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import signal; print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert child.stdout.strip() == "True", "a process started afterwards has Ctrl-C"

@@ -169,13 +169,14 @@ def run_fakes(args: argparse.Namespace) -> int:
             for fake in started:
                 await fake.close()
 
-    from urdaemon.cli import ignore_stop_signals
+    from urdaemon.cli import end_stop_signals, stop_signal_handlers
 
+    previous = None if getattr(args, "owns_process", True) else stop_signal_handlers()
     try:
         asyncio.run(serve())
     except OSError as err:
         print(f"error: cannot listen: {err}", file=sys.stderr)
         return 1
     finally:
-        ignore_stop_signals()  # stopped cleanly: a late signal must not turn the exit into -15
+        end_stop_signals(previous)  # stopped cleanly: a late signal must not turn the exit into -15
     return 0
