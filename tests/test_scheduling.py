@@ -217,6 +217,10 @@ def test_the_fake_robot_command_serves_with_its_startup_objects_frozen(
 
     monkeypatch.setattr(fake_cli, "build_fakes", lambda args: [Fake()])
     monkeypatch.setattr(fake_cli, "share_clock", lambda fakes, phases: None)
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     assert fake_cli.run_fakes(argparse.Namespace(late_start=0.0, phases="aligned")) == 0
     assert seen[0] > 0, "frozen while serving"
     assert seen[1] == 0, "unfrozen before the fakes close"
+    # called, not run as `urdaemon fake-robot`: the caller keeps its handlers (an ignored SIGINT left
+    # here was inherited by every `urdaemon move` this worker started later: Ctrl-C did nothing)
+    assert {sig: signal.getsignal(sig) for sig in before} == before

@@ -171,7 +171,8 @@ def run_fakes(args: argparse.Namespace) -> int:
 
     from urdaemon.cli import end_stop_signals, stop_signal_handlers
 
-    previous = None if getattr(args, "owns_process", True) else stop_signal_handlers()
+    # only ``urdaemon fake-robot`` itself owns its process; called otherwise, it gives the handlers back
+    previous = None if getattr(args, "owns_process", False) else stop_signal_handlers()
     try:
         asyncio.run(serve())
     except OSError as err:
