@@ -25,7 +25,7 @@ import pytest
 from tests.browser.chromium import PAGE_TIMEOUT_MS
 from tests.browser.conftest import Opened
 from tests.browser.picture import Camera, Picture, SeenCamera, set_camera
-from tests.view.conftest import close
+from tests.view.conftest import close, tf_links
 from urdaemon.client import Client, Subscription
 from urdaemon.view.panel import SLIDER_STEP
 
@@ -50,16 +50,6 @@ SAMPLES = 5000
 """At most this many joint_states (10 s of alice at 500 Hz) for anything a test waits on."""
 KEY_PRESSES = 100
 """Arrow key presses on the slider's thumb: 0.1 rad at the sliders' step."""
-
-
-async def _tf_links(client: Client) -> dict[str, list[float]]:
-    """The daemon's newest ``tf``: each link's world pose (x, y, z, qx, qy, qz, qw)."""
-    sub = client.subscribe("demo_cell/tf", maxsize=10)
-    try:
-        links: dict[str, list[float]] = (await sub.get_json(10.0))["links"]
-        return links
-    finally:
-        client.unsubscribe(sub)
 
 
 def _standing(links: dict[str, list[float]], robot: str) -> list[tuple[float, float, float]]:
@@ -104,7 +94,7 @@ async def test_both_robots_are_drawn_where_they_stand(opened: Opened) -> None:
     page, client = opened.page, opened.viewed.client
     seen = await set_camera(opened.page_client, CELL_CAMERA)
     await _close_notices(page)
-    links = await _tf_links(client)
+    links = await tf_links(client)
     robots = {robot: _standing(links, robot) for robot in ("alice", "bob")}
     panel = await _folder(page, "alice").bounding_box()
     assert panel is not None

@@ -45,3 +45,13 @@ async def viewed() -> AsyncIterator[Viewed]:
 
 def close(a: tuple[float, ...], b: tuple[float, ...], tol: float) -> bool:
     return len(a) == len(b) and all(math.isclose(x, y, abs_tol=tol) for x, y in zip(a, b, strict=True))
+
+
+async def tf_links(client: Client) -> dict[str, list[float]]:
+    """The daemon's newest ``demo_cell/tf``: each link's world pose (x, y, z, qx, qy, qz, qw)."""
+    sub = client.subscribe("demo_cell/tf", maxsize=10)
+    try:
+        links: dict[str, list[float]] = (await sub.get_json(10.0))["links"]
+        return links
+    finally:
+        client.unsubscribe(sub)

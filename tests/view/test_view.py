@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from tests.view.conftest import Viewed, close
+from tests.view.conftest import Viewed, close, tf_links
 from urdaemon.client import Client, Subscription
 from urdaemon.view.scene import PROBLEM_COLOR
 
@@ -27,15 +27,6 @@ pose within ``numpy.allclose`` (relative 1e-5) of the one it shows, so the last 
 motion may stay unsent."""
 SAMPLES = 3000
 """At most this many joint_states (6 s of alice at 500 Hz) for anything a test waits on."""
-
-
-async def _tf(client: Client) -> dict[str, list[float]]:
-    sub = client.subscribe("demo_cell/tf", maxsize=10)
-    try:
-        links: dict[str, list[float]] = (await sub.get_json(10.0))["links"]
-        return links
-    finally:
-        client.unsubscribe(sub)
 
 
 def _scene_pose(viewed: Viewed, link: str) -> tuple[float, ...]:
@@ -125,7 +116,7 @@ async def test_the_view_serves_its_page(viewed: Viewed) -> None:
 async def test_every_link_is_drawn_where_the_daemons_tf_puts_it(viewed: Viewed) -> None:
     view = viewed.view
     await viewed.until("both robots drawn", lambda: view.moves >= 1)
-    tf = await _tf(viewed.client)
+    tf = await tf_links(viewed.client)
     assert set(tf) <= set(view.scene.frames)
     for link, pose in tf.items():
         assert close(_scene_pose(viewed, link), tuple(pose), SHOWN), link
@@ -155,7 +146,7 @@ async def test_the_scene_follows_a_moving_robot(viewed: Viewed) -> None:
     assert (await goal.result(timeout=30.0))["status"] == "succeeded"
     await bob.release()
     for _ in range(100):  # the goal ends within tolerance: the robot may still settle for a moment
-        tf = await _tf(viewed.client)
+        tf = await tf_links(viewed.client)
         await view.drawn(10.0)
         if close(_scene_pose(viewed, "bob_tool0"), tuple(tf["bob_tool0"]), SHOWN):
             break
