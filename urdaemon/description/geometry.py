@@ -26,20 +26,13 @@ from typing import Any, Literal
 from urdaemon.description._transforms import matrix_of, rpy_of
 from urdaemon.description.calibration import Origin, UrChain
 from urdaemon.description.frames import Frame, axis_rotation
-from urdaemon.description.urmodels import UrModel
+from urdaemon.description.urmodels import UR_LINKS, UrModel
 
 __all__ = ["GEOMETRY_LINKS", "MATERIALS", "Radii", "Shape", "ur_geometry"]
 
-GEOMETRY_LINKS: tuple[str, ...] = (
-    "base_link_inertia",
-    "shoulder_link",
-    "upper_arm_link",
-    "forearm_link",
-    "wrist_1_link",
-    "wrist_2_link",
-    "wrist_3_link",
-)
-"""The links that carry shapes, without the robot prefix; ``base_link_inertia`` holds the base."""
+GEOMETRY_LINKS: tuple[str, ...] = ("base_link_inertia", *UR_LINKS[1:])
+"""The links that carry shapes, without the robot prefix: the moving links, and the base on
+``base_link_inertia`` (the DH base frame) instead of the mounting frame ``base_link``."""
 
 Material = Literal["housing", "tube"]
 
