@@ -9,10 +9,13 @@ Without either, the tests skip and say which is missing, unless ``URDAEMON_REQUI
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import importlib.util
 import os
+import re
 import shutil
+import sys
 import tempfile
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -38,11 +41,27 @@ FLAGS = (
     "--disable-sync",
     "--no-first-run",
     "--disable-quic",
+    # what Playwright's own launch adds: no throttling of a page nobody looks at, colours as drawn
+    "--disable-background-timer-throttling",
+    "--disable-backgrounding-occluded-windows",
+    "--disable-renderer-backgrounding",
+    "--disable-ipc-flooding-protection",
+    "--disable-hang-monitor",
+    "--disable-dev-shm-usage",
+    "--disable-extensions",
+    "--disable-breakpad",
+    "--force-color-profile=srgb",
+    "--hide-scrollbars",
+    "--mute-audio",
 )
 WIDTH, HEIGHT = 1280, 720
 """The page's size in CSS pixels (one device pixel each): the screenshot's size."""
 PAGE_TIMEOUT_MS = 120_000
 """Playwright's bound on any one page action (load, click, key, screenshot) on a busy machine."""
+CLOSE_TIMEOUT_S = 30.0
+"""Chromium must end within this long of SIGTERM, else it is killed."""
+STARTUP_LINES = 200
+"""At most this many lines of Chromium's standard error before its DevTools address."""
 
 
 def chromium_or_skip() -> str:
@@ -70,13 +89,8 @@ async def chromium_page(executable: str, url: str) -> AsyncIterator[Page]:
     from playwright.async_api import async_playwright
 
     with tempfile.TemporaryDirectory(prefix="urdaemon-chromium-") as folder:
-        async with async_playwright() as playwright:
-            browser = await playwright.chromium.launch(
-                executable_path=_niced(executable, Path(folder)),
-                args=list(FLAGS),
-                headless=True,
-                timeout=PAGE_TIMEOUT_MS,
-            )
+        async with _chromium(executable, Path(folder)) as devtools, async_playwright() as playwright:
+            browser = await playwright.chromium.connect_over_cdp(devtools, timeout=PAGE_TIMEOUT_MS)
             try:
                 page = await browser.new_page(
                     viewport={"width": WIDTH, "height": HEIGHT}, device_scale_factor=1
@@ -88,12 +102,56 @@ async def chromium_page(executable: str, url: str) -> AsyncIterator[Page]:
                 await browser.close()
 
 
-def _niced(executable: str, folder: Path) -> str:
-    """A launcher that runs ``executable`` at the lowest CPU priority (``nice -n 19``; its renderer
-    and GPU processes inherit it). Software WebGL takes one and a half of this machine's two cores
-    for as long as a page is open: at normal priority it starved the real-time tests (fake
-    controllers, the daemon's cycles) of a suite run beside this one."""
-    launcher = folder / "chromium"
-    launcher.write_text(f'#!/bin/sh\nexec nice -n 19 "{executable}" "$@"\n', encoding="utf-8")
-    launcher.chmod(0o755)
-    return str(launcher)
+@contextlib.asynccontextmanager
+async def _chromium(executable: str, profile: Path) -> AsyncIterator[str]:
+    """Chromium running in this process's session at a plain priority (tests/browser/plain_priority.py
+    says why), with its DevTools on a port the OS picks; yields the DevTools address."""
+    process = await asyncio.create_subprocess_exec(
+        sys.executable,
+        str(Path(__file__).with_name("plain_priority.py")),
+        executable,
+        *FLAGS,
+        f"--user-data-dir={profile}",
+        "--remote-debugging-address=127.0.0.1",
+        "--remote-debugging-port=0",
+        "about:blank",
+        stdin=asyncio.subprocess.DEVNULL,
+        stdout=asyncio.subprocess.DEVNULL,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    assert process.stderr is not None
+    draining: asyncio.Task[None] | None = None
+    try:
+        devtools = await asyncio.wait_for(_devtools_address(process.stderr), PAGE_TIMEOUT_MS / 1000)
+        draining = asyncio.create_task(_drain(process.stderr))  # a full pipe would block chromium
+        yield devtools
+    finally:
+        if process.returncode is None:
+            process.terminate()
+            try:
+                await asyncio.wait_for(process.wait(), CLOSE_TIMEOUT_S)
+            except TimeoutError:
+                process.kill()
+                await process.wait()
+        if draining is not None:
+            draining.cancel()
+
+
+async def _devtools_address(stderr: asyncio.StreamReader) -> str:
+    """The ``ws://`` address Chromium prints once its DevTools listen (at most ``STARTUP_LINES``
+    lines of its standard error)."""
+    seen = []
+    for _ in range(STARTUP_LINES):
+        line = (await stderr.readline()).decode(errors="replace")
+        if not line:
+            break
+        found = re.search(r"DevTools listening on (ws://\S+)", line)
+        if found:
+            return found.group(1)
+        seen.append(line.rstrip())
+    raise AssertionError("chromium printed no DevTools address:\n" + "\n".join(seen[-20:]))
+
+
+async def _drain(stderr: asyncio.StreamReader) -> None:
+    while await stderr.read(65536):
+        pass
