@@ -39,9 +39,13 @@ robots:
     backend: mock
     pose: {xyz: [0.5, 0.0, 0.0]}
     mock: {initial_positions: [0.3, -1.8, 1.6, -1.4, -1.5708, 0.2]}
-    motion: {stream_timeout: 0.1}
+    motion: {stream_timeout: 0.5}
 """
-"""alice away from every singularity, with a short deadman."""
+"""alice away from every singularity. Her deadman (0.5 s) is longer than teleop's release
+(``RELEASE_S``, 0.15 s, then zero twists): what stops her when the keys stop is teleop's own
+Cartesian brake, along the line, the behaviour under test. A shorter deadman fired whenever the
+teleop process stalled for 0.1 s on a loaded machine, and its joint-space brake curved the path
+(6.3 mm along +y with 0.9 mm across); tests/integration/test_cartesian.py tests that brake."""
 WAIT_S = 20.0
 """Bound of every wait for one message."""
 STATES_PER_POLL = 25
