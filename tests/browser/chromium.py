@@ -26,7 +26,7 @@ import pytest
 if TYPE_CHECKING:
     from playwright.async_api import Page
 
-__all__ = ["FLAGS", "HEIGHT", "REQUIRE_ENV", "WIDTH", "chromium_or_skip", "chromium_page"]
+__all__ = ["FLAGS", "HEIGHT", "PICTURE_SIZE", "REQUIRE_ENV", "WIDTH", "chromium_or_skip", "chromium_page"]
 
 REQUIRE_ENV = "URDAEMON_REQUIRE_BROWSER"
 """Set to 1: a missing browser fails the browser tests instead of skipping them."""
@@ -54,8 +54,11 @@ FLAGS = (
     "--hide-scrollbars",
     "--mute-audio",
 )
-WIDTH, HEIGHT = 1280, 720
-"""The page's size in CSS pixels (one device pixel each): the screenshot's size."""
+WIDTH, HEIGHT = 960, 540
+"""The page's size in CSS pixels (one device pixel each): the screenshot's size. Every frame is
+drawn in software, so the tests' page is about half the pixels of the picture's (``PICTURE_SIZE``)."""
+PICTURE_SIZE = 1280, 720
+"""The page's size for the picture in docs/ (``URDAEMON_VIEW_PNG``)."""
 PAGE_TIMEOUT_MS = 120_000
 """Playwright's bound on any one page action (load, click, key, screenshot) on a busy machine."""
 CLOSE_TIMEOUT_S = 30.0
@@ -83,9 +86,11 @@ def chromium_or_skip() -> str:
 
 
 @contextlib.asynccontextmanager
-async def chromium_page(executable: str, url: str) -> AsyncIterator[Page]:
-    """``url`` open in a new headless Chromium (a fresh profile, removed at the end) until the
-    block ends."""
+async def chromium_page(
+    executable: str, url: str, size: tuple[int, int] = (WIDTH, HEIGHT)
+) -> AsyncIterator[Page]:
+    """``url`` open in a new headless Chromium (a fresh profile, removed at the end) in a page of
+    ``size`` (CSS pixels) until the block ends."""
     from playwright.async_api import async_playwright
 
     with tempfile.TemporaryDirectory(prefix="urdaemon-chromium-") as folder:
@@ -93,7 +98,7 @@ async def chromium_page(executable: str, url: str) -> AsyncIterator[Page]:
             browser = await playwright.chromium.connect_over_cdp(devtools, timeout=PAGE_TIMEOUT_MS)
             try:
                 page = await browser.new_page(
-                    viewport={"width": WIDTH, "height": HEIGHT}, device_scale_factor=1
+                    viewport={"width": size[0], "height": size[1]}, device_scale_factor=1
                 )
                 page.set_default_timeout(PAGE_TIMEOUT_MS)
                 await page.goto(url)

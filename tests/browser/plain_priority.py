@@ -1,5 +1,5 @@
 """Run a command as one more ordinary process of the test run: ``python plain_priority.py COMMAND
-[ARG...]`` runs COMMAND at nice 5, unable to raise its own priority.
+[ARG...]`` runs COMMAND at nice 0, unable to raise its own priority.
 
 Chromium is the command (tests/browser/chromium.py). Software WebGL keeps its GPU process busy for
 as long as a page is open, up to one and a half of this machine's two cores, and two things made it
@@ -15,7 +15,8 @@ starve the real-time tests (fake controllers, the daemons' cycles) of a suite ru
 
 A lower priority was tried and is worse: a browser kept at nice 19 (or its session's autogroup at
 nice 10 or 19) waits so long for each of the thousands of wake-ups a page load takes that, beside
-two CPU-bound processes, the page did not load within two minutes.
+two CPU-bound processes, the page did not load within two minutes; at nice 5 it did, but beside
+another suite run it did not answer a click.
 """
 
 from __future__ import annotations
@@ -26,8 +27,10 @@ import ctypes.util
 import os
 import sys
 
-NICE = 5
-"""A little below the test processes' 0: the browser yields to them, without waiting behind them."""
+NICE = 0
+"""The test processes' own: each of the browser's processes gets the share any of them gets. At
+nice 5 a page beside a whole other suite run (a dozen busy processes) got too little to answer a
+click within two minutes."""
 PR_CAPBSET_DROP = 24
 CAP_SYS_NICE = 23
 """From <linux/prctl.h> and <linux/capability.h>."""

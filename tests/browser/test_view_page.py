@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from tests.browser.chromium import PAGE_TIMEOUT_MS
-from tests.browser.conftest import Opened
+from tests.browser.conftest import PICTURE_ENV, Opened
 from tests.browser.picture import Camera, Picture, SeenCamera, set_camera
 from tests.view.conftest import close, tf_links
 from urdaemon.client import Client, Subscription
@@ -34,8 +34,6 @@ if TYPE_CHECKING:
 
 pytestmark = pytest.mark.timeout(300)
 
-PICTURE_ENV = "URDAEMON_VIEW_PNG"
-"""Names a path: the cell's screenshot is saved there."""
 CELL_CAMERA = Camera(position=(1.3, -2.7, 1.6), look_at=(0.62, 0.0, 0.38), fov=math.radians(38.0))
 """In front of the cell, a little to alice's side and above; the cell is left of the page's centre,
 clear of the control panel on the right."""
