@@ -9,6 +9,7 @@ so a robot at rest for 20 s was redrawn 80 times and
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 from urdaemon.view.feed import JointSample
@@ -45,7 +46,7 @@ def _run(plots: JointPlots, start: float, seconds: float, position: Any) -> list
 def test_a_moving_robot_is_redrawn_every_redraw_period() -> None:
     plots = JointPlots(_Gui(), NAMES)
     drawn = _run(plots, 100.0, 20.0, lambda t: 0.01 * t)
-    gaps = [b - a for a, b in zip(drawn, drawn[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(drawn)]
     assert len(drawn) >= 20.0 / (REDRAW_S + TICK)
     assert max(gaps) < REDRAW_S + 2 * TICK
 
@@ -54,7 +55,7 @@ def test_a_robot_at_rest_is_drawn_while_its_window_fills_then_not_again() -> Non
     plots = JointPlots(_Gui(), NAMES)
     drawn = _run(plots, 100.0, 2 * WINDOW_S, lambda t: 0.5)
     assert drawn[0] == 100.0
-    gaps = [b - a for a, b in zip(drawn, drawn[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(drawn)]
     assert min(gaps) >= REST_REDRAW_S - TICK / 2
     assert drawn[-1] <= 100.0 + WINDOW_S + REST_REDRAW_S  # not redrawn once its window was full of rest
     times = plots.positions.data[0]
@@ -66,5 +67,6 @@ def test_a_robot_that_moves_again_is_redrawn_at_once() -> None:
     plots = JointPlots(_Gui(), NAMES)
     _run(plots, 100.0, 2 * WINDOW_S, lambda t: 0.5)
     drawn = _run(plots, 100.0 + 2 * WINDOW_S, 1.0, lambda t: 0.6)
-    assert drawn and drawn[0] - (100.0 + 2 * WINDOW_S) < REDRAW_S
+    assert drawn
+    assert drawn[0] - (100.0 + 2 * WINDOW_S) < REDRAW_S
     assert plots.positions.data[1][-1] == 0.6

@@ -27,6 +27,10 @@ JOG_TRANSLATE = ("+x", "-x", "+y", "-y", "+z", "-z")
 JOG_ROTATE = ("+rx", "-rx", "+ry", "-ry", "+rz", "-rz")
 JOG_SPEEDS = (0.01, 0.25, 0.01, 0.05)
 """The jog speed slider: min, max, step, initial (m/s; rotations turn 5 rad/s per m/s)."""
+TEXT_S = 0.25
+"""The status and events texts are sent to the page at most this often (4 Hz): on a loaded machine
+they change with every stream sample the daemon replaces, and each change re-renders markdown in the
+page."""
 SLIDER_STEP = 0.001
 
 
@@ -46,6 +50,7 @@ class RobotPanel:
         self.control = control
         self.joint_names = tuple(name for name, _, _ in joints)
         self._following = False
+        self._text_at = float("-inf")
         self.pending: list[Future[Any]] = []
         """Commands handed to the loop from the page (a test may wait on them)."""
         with gui.add_folder(feed.name):
@@ -125,19 +130,22 @@ class RobotPanel:
             self.jog_translate.visible = self.jog_rotate.visible = enabled
 
     def show(self, now: float) -> None:
-        """The display task's update: status, events, plots, and sliders following a disabled robot."""
+        """The display task's update: status and events (every ``TEXT_S``), plots, and sliders following
+        a disabled robot."""
         sample = self.feed.joints()
         self.plots.record(sample)
         self.plots.redraw(now)
-        _set_content(
-            self.status,
-            status_markdown(
-                self.feed.status(), self.feed.stale(now), self.control.refusal, self.feed.replaced
-            ),
-        )
-        _set_content(
-            self.events, "\n".join(f"- {line}" for line in self.feed.last_events()) or "(no events yet)"
-        )
+        if now - self._text_at >= TEXT_S:
+            self._text_at = now
+            _set_content(
+                self.status,
+                status_markdown(
+                    self.feed.status(), self.feed.stale(now), self.control.refusal, self.feed.replaced
+                ),
+            )
+            _set_content(
+                self.events, "\n".join(f"- {line}" for line in self.feed.last_events()) or "(no events yet)"
+            )
         if sample is not None and not self.control.enabled:
             with self._setting():
                 for slider, position in zip(self.sliders.values(), sample.positions, strict=False):
