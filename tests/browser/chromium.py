@@ -101,6 +101,10 @@ async def chromium_page(
                     viewport={"width": size[0], "height": size[1]}, device_scale_factor=1
                 )
                 page.set_default_timeout(PAGE_TIMEOUT_MS)
+                # what the page says, in the test's captured output (shown when it fails)
+                page.on("console", lambda message: print(f"page console {message.type}: {message.text}"))
+                page.on("pageerror", lambda error: print(f"page error: {error}"))
+                page.on("crash", lambda _: print("page crashed"))
                 await page.goto(url)
                 yield page
             finally:
