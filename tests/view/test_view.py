@@ -17,6 +17,7 @@ import pytest
 
 from tests.view.conftest import Viewed, close, tf_links
 from urdaemon.client import Client, Subscription
+from urdaemon.description.kinematics import compose_poses
 from urdaemon.view.scene import PROBLEM_COLOR
 
 pytestmark = pytest.mark.timeout(120)
@@ -36,24 +37,6 @@ def _scene_pose(viewed: Viewed, link: str) -> tuple[float, ...]:
     return (*(float(v) for v in frame.position), x, y, z, w)
 
 
-def _compose(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, ...]:
-    """The pose ``b`` (x, y, z, qx, qy, qz, qw) given in the frame at pose ``a``, in a's parent frame."""
-    ax, ay, az, aqx, aqy, aqz, aqw = a
-    bx, by, bz, bqx, bqy, bqz, bqw = b
-    # b's position rotated by a's quaternion: t + 2 w (u x t) + 2 u x (u x t)
-    cx, cy, cz = aqy * bz - aqz * by, aqz * bx - aqx * bz, aqx * by - aqy * bx
-    dx, dy, dz = aqy * cz - aqz * cy, aqz * cx - aqx * cz, aqx * cy - aqy * cx
-    return (
-        ax + bx + 2.0 * (aqw * cx + dx),
-        ay + by + 2.0 * (aqw * cy + dy),
-        az + bz + 2.0 * (aqw * cz + dz),
-        aqw * bqx + aqx * bqw + aqy * bqz - aqz * bqy,
-        aqw * bqy - aqx * bqz + aqy * bqw + aqz * bqx,
-        aqw * bqz + aqx * bqy - aqy * bqx + aqz * bqw,
-        aqw * bqw - aqx * bqx - aqy * bqy - aqz * bqz,
-    )
-
-
 def _same_pose(a: tuple[float, ...], b: tuple[float, ...], tol: float) -> bool:
     """Whether two poses are within ``tol`` (a quaternion and its negative are the same rotation)."""
     return close(a[:3], b[:3], tol) and (
@@ -67,7 +50,7 @@ def _drawn_tcp(viewed: Viewed, robot: str) -> tuple[float, ...]:
     handle = viewed.view.scene.tcp_frames[robot]
     link = handle.name.split("/")[2]
     w, x, y, z = (float(v) for v in handle.wxyz)
-    return _compose(_scene_pose(viewed, link), (*(float(v) for v in handle.position), x, y, z, w))
+    return compose_poses(_scene_pose(viewed, link), (*(float(v) for v in handle.position), x, y, z, w))
 
 
 async def _tcp_pose_in_world(viewed: Viewed, robot: str) -> tuple[float, ...]:
@@ -78,7 +61,7 @@ async def _tcp_pose_in_world(viewed: Viewed, robot: str) -> tuple[float, ...]:
     finally:
         viewed.client.unsubscribe(poses)
     pose = (*message["position"], *message["orientation"])
-    return _compose(_scene_pose(viewed, message["frame"]), tuple(float(v) for v in pose))
+    return compose_poses(_scene_pose(viewed, message["frame"]), tuple(float(v) for v in pose))
 
 
 async def _next_states(states: Subscription, check: Any, what: str) -> dict[str, Any]:

@@ -16,7 +16,16 @@ from urdaemon.description.frames import axis_rotation, compose, frame_of_pose
 from urdaemon.description.urmodels import DhParameters
 from urdaemon.errors import DescriptionError
 
-__all__ = ["DhJoint", "DhKinematics", "KinematicTree", "TreeJoint", "dh_chain", "dh_joints", "quaternion_of"]
+__all__ = [
+    "DhJoint",
+    "DhKinematics",
+    "KinematicTree",
+    "TreeJoint",
+    "compose_poses",
+    "dh_chain",
+    "dh_joints",
+    "quaternion_of",
+]
 
 Transform = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
 """Row-major rotation r00 r01 r02 r10 r11 r12 r20 r21 r22, then translation x y z."""
@@ -24,6 +33,25 @@ Transform = tuple[float, float, float, float, float, float, float, float, float,
 _IDENTITY: Transform = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 
 _FIXED, _ROTATE_Z, _ROTATE, _SLIDE = 0, 1, 2, 3
+
+
+def compose_poses(a: Sequence[float], b: Sequence[float]) -> tuple[float, ...]:
+    """The pose ``b`` given in the frame at pose ``a``, in ``a``'s parent frame; both, and the result,
+    (x, y, z, qx, qy, qz, qw)."""
+    px, py, pz, ax, ay, az, aw = a
+    tx, ty, tz, bx, by, bz, bw = b
+    # b's position rotated by the quaternion a: t + 2 w (u x t) + 2 u x (u x t), u = (ax, ay, az)
+    cx, cy, cz = ay * tz - az * ty, az * tx - ax * tz, ax * ty - ay * tx
+    dx, dy, dz = ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx
+    return (
+        px + tx + 2.0 * (aw * cx + dx),
+        py + ty + 2.0 * (aw * cy + dy),
+        pz + tz + 2.0 * (aw * cz + dz),
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def quaternion_of(
@@ -123,30 +151,15 @@ class DhKinematics:
 class ToolOffset:
     """A TCP offset (x, y, z, rx, ry, rz in the tool0 frame) applied to tool0 poses, precomputed once."""
 
-    __slots__ = ("_q", "_t")
+    __slots__ = ("_offset",)
 
     def __init__(self, tcp: Sequence[float]) -> None:
         r00, r01, r02, r10, r11, r12, r20, r21, r22, x, y, z = frame_of_pose(tcp)
-        self._t = (x, y, z)
-        self._q = quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22)
+        self._offset = (x, y, z, *quaternion_of(r00, r01, r02, r10, r11, r12, r20, r21, r22))
 
     def apply(self, pose: Sequence[float]) -> tuple[float, ...]:
         """(x, y, z, qx, qy, qz, qw) of the TCP for the tool0 pose ``pose`` (same layout)."""
-        px, py, pz, ax, ay, az, aw = pose
-        tx, ty, tz = self._t
-        bx, by, bz, bw = self._q
-        # t rotated by the quaternion a: t + 2 w (u x t) + 2 u x (u x t), u = (ax, ay, az)
-        cx, cy, cz = ay * tz - az * ty, az * tx - ax * tz, ax * ty - ay * tx
-        dx, dy, dz = ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx
-        return (
-            px + tx + 2.0 * (aw * cx + dx),
-            py + ty + 2.0 * (aw * cy + dy),
-            pz + tz + 2.0 * (aw * cz + dz),
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        )
+        return compose_poses(pose, self._offset)
 
 
 @dataclass(frozen=True, slots=True)
