@@ -56,22 +56,32 @@ async def _mirroring(controller: FakeController, clock: ManualClock, frequency: 
     assert not configured.in_use
     await link.send(rtde.SetupOutputs(frequency, ("timestamp",)))
     await link.next(rtde.OutputsConfigured)
-    await link.send(rtde.Start())
-    assert (await link.next(rtde.StartReply)).accepted
+    await _start(link)
     clock.turn(2)
     assert controller.arm.io.registers_int.get(0, 0) == 0
     return link
 
 
+def _queue(link: Link, values: list[int]) -> None:
+    """``values`` as input packages, encoded and not yet written."""
+    for value in values:
+        link.conn.send(rtde.InputData((value,), recipe_id=1))
+
+
 async def _arrive_together(link: Link, values: list[int]) -> None:
     """``values`` as input packages in one write, then wait until the fake has read them all (its
     reply to the pause request that follows them); no cycle runs meanwhile."""
-    for value in values:
-        link.conn.send(rtde.InputData((value,), recipe_id=1))
+    _queue(link, values)
     link.conn.send(rtde.Pause())
     link.writer.write(link.conn.data_to_send())
     await link.writer.drain()
     assert (await link.next(rtde.PauseReply)).accepted
+
+
+async def _start(link: Link) -> None:
+    """Start the client's outputs (again, after ``_arrive_together``'s pause request)."""
+    await link.send(rtde.Start())
+    assert (await link.next(rtde.StartReply)).accepted
 
 
 async def test_two_input_packages_in_one_cycle_reach_the_program_in_turn() -> None:
@@ -124,16 +134,14 @@ async def test_a_client_faster_than_the_cycles_never_falls_behind_a_fake_that_ke
             wall.now += controller.step_time
             clock.turn(1)
             assert controller.arm.io.registers_int[0] == first + 2
-            await link.send(rtde.Start())  # (each arrival ends with a pause request)
-            assert (await link.next(rtde.StartReply)).accepted
+            await _start(link)  # (each arrival ends with a pause request)
         link.close()
 
 
 def _write(link: Link, values: list[int]) -> None:
     """``values`` as input packages, into the socket at once; nothing awaited, so the fake (on this
     loop) does not read them before the test next awaits."""
-    for value in values:
-        link.conn.send(rtde.InputData((value,), recipe_id=1))
+    _queue(link, values)
     link.writer.write(link.conn.data_to_send())
 
 
@@ -173,12 +181,10 @@ async def test_packages_read_one_at_a_time_in_a_cycle_after_an_output_still_end_
             wall.now += controller.step_time
             clock.turn(1)
             await _arrive_together(link, [first])
-            await link.send(rtde.Start())  # (each arrival ends with a pause request)
-            assert (await link.next(rtde.StartReply)).accepted
+            await _start(link)  # (each arrival ends with a pause request)
             await _arrive_together(link, [first + 1])
             assert controller.input_registers.ints[0] == first + 1
-            await link.send(rtde.Start())
-            assert (await link.next(rtde.StartReply)).accepted
+            await _start(link)
             wall.now += controller.step_time
             clock.turn(1)
             assert controller.arm.io.registers_int[0] == first + 1
