@@ -19,7 +19,9 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, TypeVar
+
+T = TypeVar("T")
 
 __all__ = [
     "UR_PORTS",
@@ -242,32 +244,41 @@ async def run_cli_in_thread(*args: str, timeout: float = 60.0) -> CliRun:
 
 async def in_thread(call: Callable[[], CliRun], name: str, timeout: float) -> CliRun:
     """Run ``call`` in a daemon thread of its own and wait (on this loop) at most ``timeout`` s for it."""
-    loop = asyncio.get_running_loop()
-    done: asyncio.Future[CliRun] = loop.create_future()
-
-    def work() -> None:
-        try:
-            result = call()
-        except BaseException as err:  # handed to the test, which raises it
-            loop.call_soon_threadsafe(_settle, done, None, err)
-        else:
-            loop.call_soon_threadsafe(_settle, done, result, None)
-
-    threading.Thread(target=work, name=name, daemon=True).start()
+    done = _thread_future(call, name)
     try:
         return await asyncio.wait_for(asyncio.shield(done), timeout)
     except TimeoutError:
         raise AssertionError(f"{name} did not finish within {timeout} s") from None
 
 
-def _settle(future: asyncio.Future[CliRun], result: CliRun | None, err: BaseException | None) -> None:
-    if future.done():
-        return
-    if err is not None:
-        future.set_exception(err)
-    else:
-        assert result is not None
+def _thread_future(call: Callable[[], T], name: str) -> asyncio.Future[T]:
+    """``call()`` in a daemon thread of its own; what it returns or raises, as a future of the running
+    loop (the test raises its error)."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[T] = loop.create_future()
+
+    def work() -> None:
+        try:
+            result = call()
+        except BaseException as err:  # handed to the test, which raises it
+            with contextlib.suppress(RuntimeError):  # the loop has closed: nobody waits
+                loop.call_soon_threadsafe(_fail, future, err)
+            return
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(_succeed, future, result)
+
+    threading.Thread(target=work, name=name, daemon=True).start()
+    return future
+
+
+def _succeed(future: asyncio.Future[T], result: T) -> None:
+    if not future.done():
         future.set_result(result)
+
+
+def _fail(future: asyncio.Future[Any], err: BaseException) -> None:
+    if not future.done():
+        future.set_exception(err)
 
 
 async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: float) -> list[str]:
@@ -281,7 +292,9 @@ async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: floa
     deadline = time.monotonic() + timeout
     lines: list[str] = []
     while time.monotonic() < deadline:
-        line = await asyncio.wait_for(_read_line(stream), deadline - time.monotonic())
+        line = await asyncio.wait_for(
+            _thread_future(stream.readline, "wait-for-line"), deadline - time.monotonic()
+        )
         if not line:
             raise AssertionError(
                 f"process exited ({proc.poll()}) before printing {text!r}:\n{''.join(lines)}"
@@ -290,33 +303,6 @@ async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: floa
         if text in line:
             return lines
     raise AssertionError(f"{text!r} not printed within {timeout} s:\n{''.join(lines)}")
-
-
-def _read_line(stream: Any) -> asyncio.Future[str]:
-    """``stream.readline()`` on a daemon thread of its own; its line as a future of the running loop."""
-    loop = asyncio.get_running_loop()
-    future: asyncio.Future[str] = loop.create_future()
-
-    def settle(line: str | None, error: BaseException | None) -> None:
-        if future.done():
-            return
-        if error is not None:
-            future.set_exception(error)
-        else:
-            future.set_result(line or "")
-
-    def read() -> None:
-        try:
-            line = stream.readline()
-        except Exception as err:  # the pipe closed under us: the waiter hears it
-            with contextlib.suppress(RuntimeError):  # the loop has closed: nobody waits
-                loop.call_soon_threadsafe(settle, None, err)
-            return
-        with contextlib.suppress(RuntimeError):
-            loop.call_soon_threadsafe(settle, line, None)
-
-    threading.Thread(target=read, name="wait-for-line", daemon=True).start()
-    return future
 
 
 def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:
