@@ -36,6 +36,12 @@ FLAGS = (
     "--use-gl=angle",
     "--use-angle=swiftshader",  # WebGL in software: no GPU on these machines
     "--enable-unsafe-swiftshader",
+    # the plots' 2D canvases drawn by the renderer, as Chrome does when it falls back to software
+    # WebGL. Drawn through SwiftShader instead, each canvas frame made the renderer's main thread
+    # wait until the GPU process had finished everything queued before it ("GPU backpressure" in
+    # Chrome's trace); on a busy machine that wait took 5-20 s, several in a row, and a click
+    # waited behind it for over two minutes.
+    "--disable-accelerated-2d-canvas",
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",

@@ -15,8 +15,7 @@ starve the real-time tests (fake controllers, the daemons' cycles) of a suite ru
 
 A lower priority was tried and is worse: a browser kept at nice 19 (or its session's autogroup at
 nice 10 or 19) waits so long for each of the thousands of wake-ups a page load takes that, beside
-two CPU-bound processes, the page did not load within two minutes; at nice 5 it did, but beside
-another suite run it did not answer a click.
+two CPU-bound processes, the page did not load within two minutes.
 """
 
 from __future__ import annotations
@@ -28,9 +27,7 @@ import os
 import sys
 
 NICE = 0
-"""The test processes' own: each of the browser's processes gets the share any of them gets. At
-nice 5 a page beside a whole other suite run (a dozen busy processes) got too little to answer a
-click within two minutes."""
+"""The test processes' own: each of the browser's processes gets the share any of them gets."""
 PR_CAPBSET_DROP = 24
 CAP_SYS_NICE = 23
 """From <linux/prctl.h> and <linux/capability.h>."""
