@@ -59,6 +59,8 @@ def _poll(condition: Callable[[], bool], seconds: float) -> None:
         time.sleep(0.01)
 
 
+STEP_S = 0.002
+"""An e-Series controller's RTDE period (500 Hz): what the timestamps of consecutive packages differ by."""
 CONSECUTIVE_WINDOW_S = 2.0
 """Robot time ``getTimestamp`` is read for, at most, until two consecutive packages were seen. The
 reader (this thread and ur_rtde's receive thread) sees every package only while it is never
@@ -67,7 +69,7 @@ many chances (1000 packages) rather than one short window."""
 
 
 def _read_until_consecutive(receiver: Any) -> set[float]:
-    """The timestamps read as fast as this thread can: until two in a row 2 ms apart (and 0.2 s of
+    """The timestamps read as fast as this thread can: until two in a row ``STEP_S`` apart (and 0.2 s of
     robot time), or ``CONSECUTIVE_WINDOW_S`` of robot time, or 30 s of real time."""
     first = last = receiver.getTimestamp()
     stamps = {first}
@@ -76,7 +78,7 @@ def _read_until_consecutive(receiver: Any) -> set[float]:
     for _ in range(50_000_000):
         now = receiver.getTimestamp()
         if now != last:
-            consecutive = consecutive or abs(now - last - 0.002) < 1e-6
+            consecutive = consecutive or abs(now - last - STEP_S) < 1e-6
             stamps.add(now)
             last = now
             if (consecutive and now - first >= 0.2) or now - first >= CONSECUTIVE_WINDOW_S:
@@ -97,8 +99,9 @@ def test_rtde_receive_reads_joint_positions_and_modes_at_500_hz(powered_fake: st
         stamps = _read_until_consecutive(receiver)
         assert max(stamps) - min(stamps) >= 0.2, "the fake's RTDE clock advanced"
         steps = sorted({round(b - a, 6) for a, b in itertools.pairwise(sorted(stamps))})
-        assert steps[0] == pytest.approx(0.002), f"the fake's RTDE runs at 500 Hz, saw steps {steps[:5]}"
-        assert all(round(step / 0.002, 3).is_integer() for step in steps), f"steps off the 2 ms grid: {steps}"
+        assert steps[0] == pytest.approx(STEP_S), f"the fake's RTDE runs at 500 Hz, saw steps {steps[:5]}"
+        off_grid = [step for step in steps if not round(step / STEP_S, 3).is_integer()]
+        assert not off_grid, f"steps off the 2 ms grid: {off_grid}"
     finally:
         receiver.disconnect()
 
