@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import importlib
 import json
 import logging
 import math
@@ -41,6 +42,9 @@ EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 """``move`` interrupted by Ctrl-C (after it canceled its goal), as shells report SIGINT."""
+TOOL_MODULES: tuple[str, ...] = ()
+"""Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``
+(``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """Each stops ``serve`` and ``fake-robot`` cleanly; a repeated one while stopping is only logged."""
 
@@ -93,6 +97,8 @@ def _parser() -> argparse.ArgumentParser:
     _add_goal_tools(sub)
     _add_calibration(sub)
     _add_view(sub)
+    for name in TOOL_MODULES:
+        importlib.import_module(name).add_parsers(sub)
     return parser
 
 
@@ -413,6 +419,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     try:
+        run: Callable[[argparse.Namespace], int] | None = getattr(args, "run", None)
+        if run is not None:
+            return run(args)
         if args.command == "check":
             return _check(args.config)
         if args.command == "urdf":
