@@ -44,6 +44,9 @@ PURE = {
     "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/faults.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/urp.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    # what a recording holds and its CDR: messages in, bytes out (recording/channels.py)
+    "recording/cdr.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
+    "recording/channels.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
 }
 
 
