@@ -628,9 +628,12 @@ def test_encode_feedback() -> None:
         actual=(0.25, 1.0),
         error=(0.25, 0.0),
     )
-    assert json.loads(encode_feedback("alice", feedback)) == {
+    state = make_state([0.5, 1.0], [0.0, 0.0], [0.0, 0.0])
+    assert json.loads(encode_feedback("alice", feedback, state)) == {
         "v": 1,
         "robot": "alice",
+        "host_time_ns": 1_700_000_000_123_456_789,
+        "controller_time": 12.004,
         "goal_id": "g1",
         "time_from_start": 1.0,
         "duration": 4.0,
@@ -650,9 +653,12 @@ def test_encode_result() -> None:
         final_error=(0.3,),
         duration=2.5,
     )
-    assert json.loads(encode_result("bob", result)) == {
+    state = make_state([1.0], [0.0], [0.0])
+    assert json.loads(encode_result("bob", result, state)) == {
         "v": 1,
         "robot": "bob",
+        "host_time_ns": 1_700_000_000_123_456_789,
+        "controller_time": 12.004,
         "goal_id": "g2",
         "status": "aborted",
         "reason": "path tolerance",
@@ -769,6 +775,7 @@ def test_encode_pose_layout() -> None:
         "host_time_ns": 1_700_000_000_123_456_789,
         "position": [0.1, 0.2, 0.3],
         "orientation": [0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
+        "pose": [0.1, 0.2, 0.3, 0.0, 0.0, pytest.approx(math.pi / 2, abs=1e-15)],
     }
 
 

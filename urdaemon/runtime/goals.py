@@ -133,7 +133,7 @@ class Goals:
             if isinstance(event, GoalResult):
                 self.passthrough.ended_here(event.goal_id)
             if isinstance(event, GoalFeedback):
-                message = codec.encode_feedback(self._robot.name, event)
+                message = codec.encode_feedback(self._robot.name, event, self._backend.state)
                 key = self._keys_of.get(event.goal_id)
                 if key is not None:  # at the feedback rate, never once per cycle
                     on = self._keys.goal_feedback(event.goal_id)
@@ -142,7 +142,7 @@ class Goals:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
-        message = codec.encode_result(self._robot.name, result)
+        message = codec.encode_result(self._robot.name, result, self._backend.state)
         key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
         on = self._keys.goal_result(result.goal_id)  # signed with the key it goes out on
         signature = signing.sign(key, on, message)

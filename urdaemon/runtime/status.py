@@ -76,6 +76,7 @@ class StatusPublisher:
         stats = backend.statistics()
         return {
             "robot": self._robot.name,
+            **codec.state_time(state),  # the state it reports: modes, scaling and program come from it
             "backend": backend.kind,
             "model": self._robot.model,
             "lifecycle": state.lifecycle.value,
@@ -106,6 +107,7 @@ class StatusPublisher:
         s = self._backend.state
         return {
             "robot": self._robot.name,
+            **codec.state_time(s),
             "digital_out": list(s.digital_out),
             "configurable_out": list(s.configurable_out),
             "tool_out": list(s.tool_out),
@@ -147,14 +149,16 @@ class StatusPublisher:
     def publish_io(self) -> None:
         """Publish the IO message now."""
         message = self.io_message()
-        self._io_signature = tuple(str(v) for v in message.values())
+        self._io_signature = _io_signature(message)
         if self._pub_io is not None:
             self._pub_io.put(codec.encode(message))
 
     def event(self, body: dict[str, Any]) -> None:
         """Publish an event (``kind`` and what it says) of this robot."""
         if self._pub_events is not None:
-            self._pub_events.put(codec.encode({"robot": self._robot.name, **body}))
+            # when it happened: now (a notice, a refusal, a lease's change is news as it is published)
+            stamped = {"robot": self._robot.name, "host_time_ns": time.time_ns(), **body}
+            self._pub_events.put(codec.encode(stamped))
 
     async def run(self) -> None:
         """Publish the status every status period and the IO when it changed (or each second)."""
@@ -166,9 +170,17 @@ class StatusPublisher:
                 if now - last_status >= self._status_period:
                     self.publish()
                     last_status = now
-                io_signature = tuple(str(v) for v in self.io_message().values())
+                io_signature = _io_signature(self.io_message())
                 if io_signature != self._io_signature or now - last_io >= 1.0:
                     self.publish_io()
                     last_io = now
             except Exception:  # a publishing error must not end this robot's (or the cell's) tasks
                 self._log.exception("publishing status/IO failed")
+
+
+_TIME_FIELDS = ("host_time_ns", "controller_time")
+
+
+def _io_signature(message: dict[str, Any]) -> tuple[str, ...]:
+    """What, when it changes, makes the IO go out at once: its values, not the time they were read."""
+    return tuple(str(v) for k, v in message.items() if k not in _TIME_FIELDS)
