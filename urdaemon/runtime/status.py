@@ -22,7 +22,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 
-__all__ = ["StatusPublisher", "tool_link"]
+__all__ = ["StatusPublisher", "io_signature", "tool_link"]
 
 
 def tool_link(robot: Robot) -> str:
@@ -149,7 +149,7 @@ class StatusPublisher:
     def publish_io(self) -> None:
         """Publish the IO message now."""
         message = self.io_message()
-        self._io_signature = _io_signature(message)
+        self._io_signature = io_signature(message)
         if self._pub_io is not None:
             self._pub_io.put(codec.encode(message))
 
@@ -170,8 +170,8 @@ class StatusPublisher:
                 if now - last_status >= self._status_period:
                     self.publish()
                     last_status = now
-                io_signature = _io_signature(self.io_message())
-                if io_signature != self._io_signature or now - last_io >= 1.0:
+                signature = io_signature(self.io_message())
+                if signature != self._io_signature or now - last_io >= 1.0:
                     self.publish_io()
                     last_io = now
             except Exception:  # a publishing error must not end this robot's (or the cell's) tasks
@@ -181,6 +181,6 @@ class StatusPublisher:
 _TIME_FIELDS = ("host_time_ns", "controller_time")
 
 
-def _io_signature(message: dict[str, Any]) -> tuple[str, ...]:
+def io_signature(message: dict[str, Any]) -> tuple[str, ...]:
     """What, when it changes, makes the IO go out at once: its values, not the time they were read."""
     return tuple(str(v) for k, v in message.items() if k not in _TIME_FIELDS)
