@@ -301,12 +301,12 @@ class Daemon:
             if not wanted.active:  # the whole cell's forward kinematics, for nobody: skip it
                 continue
             positions: dict[str, float] = {}
-            times: dict[str, dict[str, Any]] = {}
+            times: dict[str, dict[str, Any]] = {}  # each robot's: the state its links are computed from
             try:
                 for runtime in self.runtimes:
                     state = runtime.state
                     positions.update(zip(state.joint_names, state.positions, strict=True))
-                    times[runtime.robot.name] = codec.state_time(state)  # the state the links are of
+                    times[runtime.robot.name] = codec.state_time(state, time.time_ns())
                 links = {name: list(pose) for name, pose in tree.link_poses(positions)}
                 publisher.put(codec.encode(tf_message(links, times)))
             except Exception as err:  # tf must never take the robots down with it; say so once per cause

@@ -35,6 +35,7 @@ from urdaemon.publish.codec import (
     encode,
     encode_feedback,
     encode_result,
+    state_time,
 )
 
 Decoder = Callable[[bytes | None], object]
@@ -629,7 +630,7 @@ def test_encode_feedback() -> None:
         error=(0.25, 0.0),
     )
     state = make_state([0.5, 1.0], [0.0, 0.0], [0.0, 0.0])
-    assert json.loads(encode_feedback("alice", feedback, state)) == {
+    assert json.loads(encode_feedback("alice", feedback, state_time(state, 0))) == {
         "v": 1,
         "robot": "alice",
         "host_time_ns": 1_700_000_000_123_456_789,
@@ -654,7 +655,7 @@ def test_encode_result() -> None:
         duration=2.5,
     )
     state = make_state([1.0], [0.0], [0.0])
-    assert json.loads(encode_result("bob", result, state)) == {
+    assert json.loads(encode_result("bob", result, state_time(state, 0))) == {
         "v": 1,
         "robot": "bob",
         "host_time_ns": 1_700_000_000_123_456_789,

@@ -13,7 +13,6 @@ import heapq
 import json
 import math
 import re
-import time
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -813,21 +812,22 @@ def request_body(request: object | None) -> dict[str, Any]:
     return body
 
 
-def state_time(state: RobotState) -> dict[str, Any]:
+def state_time(state: RobotState, now_ns: int) -> dict[str, Any]:
     """The time fields of a message about ``state``: when it arrived on the host (``host_time_ns``, Unix
     ns) and the robot's clock then (``controller_time``, s). Before any state arrived there is no robot
-    clock to tell: ``host_time_ns`` is now and ``controller_time`` null (docs/keys.md, "Time fields")."""
+    clock to tell: ``host_time_ns`` is ``now_ns`` (the caller's clock; this module reads none) and
+    ``controller_time`` null (docs/keys.md, "Time fields")."""
     if state.host_time_ns > 0:
         return {"host_time_ns": state.host_time_ns, "controller_time": state.controller_time}
-    return {"host_time_ns": time.time_ns(), "controller_time": None}
+    return {"host_time_ns": now_ns, "controller_time": None}
 
 
-def encode_feedback(robot: str, feedback: GoalFeedback, state: RobotState) -> bytes:
-    """Encode goal feedback, stamped with ``state``'s time (the cycle it reports)."""
+def encode_feedback(robot: str, feedback: GoalFeedback, stamp: dict[str, Any]) -> bytes:
+    """Encode goal feedback with its time fields ``stamp`` (``state_time`` of the cycle it reports)."""
     return encode(
         {
             "robot": robot,
-            **state_time(state),
+            **stamp,
             "goal_id": feedback.goal_id,
             "time_from_start": feedback.time_from_start,
             "duration": feedback.duration,
@@ -839,12 +839,13 @@ def encode_feedback(robot: str, feedback: GoalFeedback, state: RobotState) -> by
     )
 
 
-def encode_result(robot: str, result: GoalResult, state: RobotState) -> bytes:
-    """Encode a goal result, stamped with ``state``'s time (the newest state when the goal ended)."""
+def encode_result(robot: str, result: GoalResult, stamp: dict[str, Any]) -> bytes:
+    """Encode a goal result with its time fields ``stamp`` (``state_time`` of the newest state when the
+    goal ended)."""
     return encode(
         {
             "robot": robot,
-            **state_time(state),
+            **stamp,
             "goal_id": result.goal_id,
             "status": result.status.value,
             "reason": result.reason,

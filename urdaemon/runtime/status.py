@@ -76,7 +76,8 @@ class StatusPublisher:
         stats = backend.statistics()
         return {
             "robot": self._robot.name,
-            **codec.state_time(state),  # the state it reports: modes, scaling and program come from it
+            # the state it reports: the modes, scaling and program are that state's
+            **codec.state_time(state, time.time_ns()),
             "backend": backend.kind,
             "model": self._robot.model,
             "lifecycle": state.lifecycle.value,
@@ -107,7 +108,7 @@ class StatusPublisher:
         s = self._backend.state
         return {
             "robot": self._robot.name,
-            **codec.state_time(s),
+            **codec.state_time(s, time.time_ns()),
             "digital_out": list(s.digital_out),
             "configurable_out": list(s.configurable_out),
             "tool_out": list(s.tool_out),
