@@ -5,7 +5,8 @@ scaling, the program, the active goal, the TCP offset) and every status period; 
 changes (looked at every IO period) and at least once a second. Events are notices, rejected
 commands and the command lease's changes; the status names the lease's holder and the robot's TCP
 (``tcp``: its tool link, and the offset in that link's frame), so a viewer draws the TCP from
-``joint_states`` without following ``tcp_pose``.
+``joint_states`` without following ``tcp_pose``. Status and IO carry the time of the state they
+report, events the time they happened (docs/keys.md, "Time fields").
 """
 
 from __future__ import annotations
