@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -38,7 +39,7 @@ from urdaemon.runtime.lease_keeper import watch_lease_holders
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
-__all__ = ["CellDescription", "Daemon", "describe_cell", "twist_limits"]
+__all__ = ["CellDescription", "Daemon", "describe_cell", "tf_message", "twist_limits"]
 
 log = logging.getLogger(__name__)
 
@@ -300,14 +301,26 @@ class Daemon:
             if not wanted.active:  # the whole cell's forward kinematics, for nobody: skip it
                 continue
             positions: dict[str, float] = {}
+            times: dict[str, dict[str, Any]] = {}  # each robot's: the state its links are computed from
             try:
                 for runtime in self.runtimes:
                     state = runtime.state
                     positions.update(zip(state.joint_names, state.positions, strict=True))
+                    times[runtime.robot.name] = codec.state_time(state, time.time_ns())
                 links = {name: list(pose) for name, pose in tree.link_poses(positions)}
-                publisher.put(codec.encode({"frame": "world", "links": links}))
+                publisher.put(codec.encode(tf_message(links, times)))
             except Exception as err:  # tf must never take the robots down with it; say so once per cause
                 text = f"{type(err).__name__}: {err}"
                 if text != last_error:
                     log.error("tf not published: %s", text, exc_info=not isinstance(err, UrDaemonError))
                     last_error = text
+
+
+def tf_message(links: dict[str, list[float]], times: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The ``tf`` message: the world poses of ``links``, computed from each robot's newest joint state,
+    whose time fields (``codec.state_time``) are ``times``, by robot. Its ``host_time_ns`` is the oldest
+    of them (every link is at least that new); it has no ``controller_time`` of its own, as each robot
+    has its own clock: ``robot_times`` gives each robot's."""
+    oldest = min((t["host_time_ns"] for t in times.values()), default=None)
+    stamp = time.time_ns() if oldest is None else oldest
+    return {"frame": "world", "host_time_ns": stamp, "robot_times": times, "links": links}

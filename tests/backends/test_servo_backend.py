@@ -262,7 +262,11 @@ def test_servo_backend_publishes_16_ints_each_step() -> None:
     backend.step()
     assert len(published) == 1
     message = json.loads(published[0])
-    assert list(message) == ["v", "robot", "pwm_frequency_hz", "channels"]
+    assert list(message) == ["v", "robot", "pwm_frequency_hz", "host_time_ns", "controller_time", "channels"]
+    assert (message["host_time_ns"], message["controller_time"]) == (
+        backend.state.host_time_ns,
+        backend.state.controller_time,
+    )
     assert message["v"] == 1
     assert message["robot"] == "arm"
     assert message["pwm_frequency_hz"] == 50.0

@@ -35,6 +35,7 @@ from urdaemon.publish.codec import (
     encode,
     encode_feedback,
     encode_result,
+    state_time,
 )
 
 Decoder = Callable[[bytes | None], object]
@@ -628,9 +629,12 @@ def test_encode_feedback() -> None:
         actual=(0.25, 1.0),
         error=(0.25, 0.0),
     )
-    assert json.loads(encode_feedback("alice", feedback)) == {
+    state = make_state([0.5, 1.0], [0.0, 0.0], [0.0, 0.0])
+    assert json.loads(encode_feedback("alice", feedback, state_time(state, 0))) == {
         "v": 1,
         "robot": "alice",
+        "host_time_ns": 1_700_000_000_123_456_789,
+        "controller_time": 12.004,
         "goal_id": "g1",
         "time_from_start": 1.0,
         "duration": 4.0,
@@ -650,9 +654,12 @@ def test_encode_result() -> None:
         final_error=(0.3,),
         duration=2.5,
     )
-    assert json.loads(encode_result("bob", result)) == {
+    state = make_state([1.0], [0.0], [0.0])
+    assert json.loads(encode_result("bob", result, state_time(state, 0))) == {
         "v": 1,
         "robot": "bob",
+        "host_time_ns": 1_700_000_000_123_456_789,
+        "controller_time": 12.004,
         "goal_id": "g2",
         "status": "aborted",
         "reason": "path tolerance",
@@ -769,6 +776,7 @@ def test_encode_pose_layout() -> None:
         "host_time_ns": 1_700_000_000_123_456_789,
         "position": [0.1, 0.2, 0.3],
         "orientation": [0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
+        "pose": [0.1, 0.2, 0.3, 0.0, 0.0, pytest.approx(math.pi / 2, abs=1e-15)],
     }
 
 

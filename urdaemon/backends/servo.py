@@ -96,16 +96,16 @@ class ServoBackend(MockBackend):
         super().__init__(name, joint_names, options.rate_hz, initial_positions=initial_positions)
         self.mapping = ServoMapping(tuple(joint_names), prefix, options)
         self._publish = publish
-        self._head = (
-            f'{{"v":1,"robot":{json.dumps(name)},"pwm_frequency_hz":{options.pwm_frequency_hz!r},"channels":['
-        )
+        self._head = f'{{"v":1,"robot":{json.dumps(name)},"pwm_frequency_hz":{options.pwm_frequency_hz!r},'
 
     def step(self) -> None:
         """Mirror the command into state, then publish the channel values of the new positions."""
         super().step()
         channels = self.mapping.update(self.state.positions)
         if self._publish is not None:
-            self._publish(f"{self._head}{','.join(map(str, channels))}]}}".encode())
+            state = self.state  # stamped as joint_states: the state the channels were computed from
+            stamp = f'"host_time_ns":{state.host_time_ns},"controller_time":{state.controller_time!r}'
+            self._publish(f'{self._head}{stamp},"channels":[{",".join(map(str, channels))}]}}'.encode())
 
     async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
         """Servo arms have no IO."""

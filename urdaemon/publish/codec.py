@@ -72,6 +72,8 @@ __all__ = [
     "encode_feedback",
     "encode_result",
     "request_body",
+    "rotation_vector_of_quaternion",
+    "state_time",
 ]
 
 SCHEMA_VERSION = 1
@@ -810,11 +812,22 @@ def request_body(request: object | None) -> dict[str, Any]:
     return body
 
 
-def encode_feedback(robot: str, feedback: GoalFeedback) -> bytes:
-    """Encode goal feedback."""
+def state_time(state: RobotState, now_ns: int) -> dict[str, Any]:
+    """The time fields of a message about ``state``: when it arrived on the host (``host_time_ns``, Unix
+    ns) and the robot's clock then (``controller_time``, s). Before any state arrived there is no robot
+    clock to tell: ``host_time_ns`` is ``now_ns`` (the caller's clock; this module reads none) and
+    ``controller_time`` null (docs/keys.md, "Time fields")."""
+    if state.host_time_ns > 0:
+        return {"host_time_ns": state.host_time_ns, "controller_time": state.controller_time}
+    return {"host_time_ns": now_ns, "controller_time": None}
+
+
+def encode_feedback(robot: str, feedback: GoalFeedback, stamp: dict[str, Any]) -> bytes:
+    """Encode goal feedback with its time fields ``stamp`` (``state_time`` of the cycle it reports)."""
     return encode(
         {
             "robot": robot,
+            **stamp,
             "goal_id": feedback.goal_id,
             "time_from_start": feedback.time_from_start,
             "duration": feedback.duration,
@@ -826,11 +839,13 @@ def encode_feedback(robot: str, feedback: GoalFeedback) -> bytes:
     )
 
 
-def encode_result(robot: str, result: GoalResult) -> bytes:
-    """Encode a goal result."""
+def encode_result(robot: str, result: GoalResult, stamp: dict[str, Any]) -> bytes:
+    """Encode a goal result with its time fields ``stamp`` (``state_time`` of the newest state when the
+    goal ended)."""
     return encode(
         {
             "robot": robot,
+            **stamp,
             "goal_id": result.goal_id,
             "status": result.status.value,
             "reason": result.reason,
@@ -881,7 +896,8 @@ class JointStateEncoder:
 
     def encode_pose(self, state: RobotState, frame: str, child: str, pose: Sequence[float]) -> bytes:
         """The tcp_pose message: the robot, and the position and quaternion (x, y, z, w) of ``child``
-        in ``frame``."""
+        in ``frame``; and the same as ``pose``, [x, y, z, rx, ry, rz] with a rotation vector, as every
+        pose input takes it (``rotation_vector_of_quaternion``)."""
         known = self._poses.get((frame, child))
         if known is None:
             head = (
@@ -889,17 +905,49 @@ class JointStateEncoder:
                 f'"child":{json.dumps(child)},'
             )
             template = _escape(head) + (
-                '"controller_time":%r,"host_time_ns":%d,"position":[%r,%r,%r],"orientation":[%r,%r,%r,%r]}'
+                '"controller_time":%r,"host_time_ns":%d,"position":[%s],"orientation":[%r,%r,%r,%r],'
+                '"pose":[%s,%r,%r,%r]}'
             )
             known = self._poses[(frame, child)] = (head, template)
         head, template = known
         check = sum(pose) + state.controller_time
         if len(pose) == 7 and check - check == 0.0:
-            return (template % (state.controller_time, state.host_time_ns, *pose)).encode()
+            x, y, z, qx, qy, qz, qw = pose
+            position = f"{x!r},{y!r},{z!r}"  # written once, used twice
+            rx, ry, rz = rotation_vector_of_quaternion(qx, qy, qz, qw)
+            stamp = (state.controller_time, state.host_time_ns)
+            return (template % (*stamp, position, qx, qy, qz, qw, position, rx, ry, rz)).encode()
+        rotation = rotation_vector_of_quaternion(*pose[3:7]) if len(pose) == 7 else (math.nan,) * 3
         return (
             f'{head}"controller_time":{_float(state.controller_time)},"host_time_ns":{state.host_time_ns},'
-            f'"position":[{_floats(pose[:3])}],"orientation":[{_floats(pose[3:7])}]}}'
+            f'"position":[{_floats(pose[:3])}],"orientation":[{_floats(pose[3:7])}],'
+            f'"pose":[{_floats(pose[:3])},{_floats(rotation)}]}}'
         ).encode()
+
+
+def rotation_vector_of_quaternion(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
+    """The rotation vector (axis times angle, rad) of a quaternion (any length), as pose inputs take it
+    (``description.frames.frame_of_pose``): the angle in [0, pi], so ``q`` and ``-q`` give the same
+    vector. At exactly pi (``qw`` 0) both signs of the axis are the same turn; the one whose largest
+    component is positive is given, as ``description.frames.pose_of_frame`` does. Plain float math:
+    ``tcp_pose`` runs it every robot cycle."""
+    s = math.hypot(qx, qy, qz)
+    if s == 0.0:  # no turn (and a zero quaternion has none to tell)
+        return (0.0, 0.0, 0.0)
+    if qw < 0.0:  # the other half of the double cover: the same turn, the angle under pi
+        qx, qy, qz, qw = -qx, -qy, -qz, -qw
+    elif qw == 0.0 and _largest_negative(qx, qy, qz):
+        qx, qy, qz = -qx, -qy, -qz
+    k = 2.0 * math.atan2(s, qw) / s
+    return (qx * k, qy * k, qz * k)
+
+
+def _largest_negative(x: float, y: float, z: float) -> bool:
+    """Is the component of (x, y, z) of the largest size (the first of equals) negative?"""
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax >= ay and ax >= az:
+        return x < 0.0
+    return y < 0.0 if ay >= az else z < 0.0
 
 
 def _escape(text: str) -> str:

@@ -33,6 +33,7 @@ import itertools
 import json
 import logging
 import secrets
+import time
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -288,7 +289,14 @@ class CellGoals:
             robot, part_status, why = run.failed
             status = "canceled" if part_status is GoalStatus.CANCELED else "aborted"
             reason = f"robot {robot!r} ended {part_status.value}: {why}"
-        body = {"goal_id": run.goal_id, "status": status, "robots": run.results, "reason": reason}
+        # when the last part ended: now; no controller_time, the robots' clocks are their own results'
+        body = {
+            "host_time_ns": time.time_ns(),
+            "goal_id": run.goal_id,
+            "status": status,
+            "robots": run.results,
+            "reason": reason,
+        }
         message = codec.encode(body)
         on = self._keys.goal_result(run.goal_id)  # signed with the key it goes out on
         signature = signing.sign(run.key, on, message)

@@ -59,6 +59,11 @@ ResultListener = Callable[[GoalResult, bytes], None]
 """Told a goal's result (and its message as published) once it is published: a cell goal's part."""
 
 
+def _stamp(backend: Backend) -> dict[str, Any]:
+    """The time fields of a goal message: the newest state's (the cycle's, in a cycle)."""
+    return codec.state_time(backend.state, time.time_ns())
+
+
 def put_signed(node: ZenohNode, key: str, payload: bytes, attachment: bytes) -> None:
     """Publish once on ``key`` with ``attachment`` (a goal message's signature), dropped rather than
     blocking when congested (``ZenohNode.put``)."""
@@ -133,7 +138,7 @@ class Goals:
             if isinstance(event, GoalResult):
                 self.passthrough.ended_here(event.goal_id)
             if isinstance(event, GoalFeedback):
-                message = codec.encode_feedback(self._robot.name, event)
+                message = codec.encode_feedback(self._robot.name, event, _stamp(self._backend))
                 key = self._keys_of.get(event.goal_id)
                 if key is not None:  # at the feedback rate, never once per cycle
                     on = self._keys.goal_feedback(event.goal_id)
@@ -142,7 +147,7 @@ class Goals:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
-        message = codec.encode_result(self._robot.name, result)
+        message = codec.encode_result(self._robot.name, result, _stamp(self._backend))
         key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
         on = self._keys.goal_result(result.goal_id)  # signed with the key it goes out on
         signature = signing.sign(key, on, message)

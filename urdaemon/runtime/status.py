@@ -5,7 +5,8 @@ scaling, the program, the active goal, the TCP offset) and every status period; 
 changes (looked at every IO period) and at least once a second. Events are notices, rejected
 commands and the command lease's changes; the status names the lease's holder and the robot's TCP
 (``tcp``: its tool link, and the offset in that link's frame), so a viewer draws the TCP from
-``joint_states`` without following ``tcp_pose``.
+``joint_states`` without following ``tcp_pose``. Status and IO carry the time of the state they
+report, events the time they happened (docs/keys.md, "Time fields").
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 
-__all__ = ["StatusPublisher", "tool_link"]
+__all__ = ["StatusPublisher", "io_signature", "tool_link"]
 
 
 def tool_link(robot: Robot) -> str:
@@ -76,6 +77,8 @@ class StatusPublisher:
         stats = backend.statistics()
         return {
             "robot": self._robot.name,
+            # the state it reports: the modes, scaling and program are that state's
+            **codec.state_time(state, time.time_ns()),
             "backend": backend.kind,
             "model": self._robot.model,
             "lifecycle": state.lifecycle.value,
@@ -106,6 +109,7 @@ class StatusPublisher:
         s = self._backend.state
         return {
             "robot": self._robot.name,
+            **codec.state_time(s, time.time_ns()),
             "digital_out": list(s.digital_out),
             "configurable_out": list(s.configurable_out),
             "tool_out": list(s.tool_out),
@@ -147,14 +151,16 @@ class StatusPublisher:
     def publish_io(self) -> None:
         """Publish the IO message now."""
         message = self.io_message()
-        self._io_signature = tuple(str(v) for v in message.values())
+        self._io_signature = io_signature(message)
         if self._pub_io is not None:
             self._pub_io.put(codec.encode(message))
 
     def event(self, body: dict[str, Any]) -> None:
         """Publish an event (``kind`` and what it says) of this robot."""
         if self._pub_events is not None:
-            self._pub_events.put(codec.encode({"robot": self._robot.name, **body}))
+            # when it happened: now (a notice, a refusal, a lease's change is news as it is published)
+            stamped = {"robot": self._robot.name, "host_time_ns": time.time_ns(), **body}
+            self._pub_events.put(codec.encode(stamped))
 
     async def run(self) -> None:
         """Publish the status every status period and the IO when it changed (or each second)."""
@@ -166,9 +172,17 @@ class StatusPublisher:
                 if now - last_status >= self._status_period:
                     self.publish()
                     last_status = now
-                io_signature = tuple(str(v) for v in self.io_message().values())
-                if io_signature != self._io_signature or now - last_io >= 1.0:
+                signature = io_signature(self.io_message())
+                if signature != self._io_signature or now - last_io >= 1.0:
                     self.publish_io()
                     last_io = now
             except Exception:  # a publishing error must not end this robot's (or the cell's) tasks
                 self._log.exception("publishing status/IO failed")
+
+
+_TIME_FIELDS = ("host_time_ns", "controller_time")
+
+
+def io_signature(message: dict[str, Any]) -> tuple[str, ...]:
+    """What, when it changes, makes the IO go out at once: its values, not the time they were read."""
+    return tuple(str(v) for k, v in message.items() if k not in _TIME_FIELDS)
