@@ -24,11 +24,15 @@ import contextlib
 import gc
 import os
 import sys
+import threading
 from collections.abc import Callable, Iterator
 
 from urdaemon.errors import UrDaemonError
 
-__all__ = ["RealtimeUnavailable", "startup_objects_frozen", "use_realtime_priority"]
+__all__ = ["RealtimeUnavailable", "realtime_request", "startup_objects_frozen", "use_realtime_priority"]
+
+_REQUESTS: dict[int, tuple[int, str | None]] = {}
+"""Per thread: the priority last asked of ``use_realtime_priority`` and why it failed (None: it took)."""
 
 
 class RealtimeUnavailable(UrDaemonError, OSError):
@@ -52,17 +56,26 @@ def use_realtime_priority(priority: int) -> Callable[[], None]:
     try:
         setter(0, fifo | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
     except OSError as err:
+        _REQUESTS[threading.get_ident()] = (priority, err.strerror or str(err))
         raise RealtimeUnavailable(
             f"not permitted to use SCHED_FIFO priority {priority} ({err.strerror}): give the user an "
             f"rtprio limit of at least {priority} (/etc/security/limits.conf, or LimitRTPRIO= in a "
             "systemd unit, or --ulimit rtprio= / cap_add SYS_NICE in a container) or the "
             "CAP_SYS_NICE capability"
         ) from err
+    _REQUESTS[threading.get_ident()] = (priority, None)
 
     def restore() -> None:
         setter(0, *before)
+        _REQUESTS.pop(threading.get_ident(), None)
 
     return restore
+
+
+def realtime_request() -> tuple[int, str | None]:
+    """What the calling thread asked of ``use_realtime_priority`` (0: nothing, or it was put back),
+    and why it was refused (None: it took, or nothing was asked)."""
+    return _REQUESTS.get(threading.get_ident(), (0, None))
 
 
 @contextlib.contextmanager

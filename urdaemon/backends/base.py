@@ -13,6 +13,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
@@ -120,6 +121,11 @@ class Backend(abc.ABC):
     async def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (0, 12 or 24 V)."""
         raise BackendError(f"{self.kind} backend has no tool voltage")
+
+    async def doctor_facts(self) -> dict[str, Any] | None:
+        """What the doctor learns of the robot's controller (``ur``: backends/ur/diagnosis.py); None
+        for a backend whose robot has none: the daemon's own clock drives it."""
+        return None
 
     def passthrough_problem(self) -> str | None:
         """Why a passthrough trajectory cannot start now (None when it can)."""

@@ -153,6 +153,18 @@ class UrServices:
 
     # ---- the dashboard --------------------------------------------------------------------------------
 
+    async def query(self, line: str, timeout: float) -> str:
+        """Send a dashboard line and return the reply's text within ``timeout`` s (``UrTimeoutError``
+        after it; the link is dropped then, as its late reply would answer the next command)."""
+        command = dash.parse_command(line) or dash.Raw(line)
+        ur = self.ur
+        try:
+            reply = await (await ur._dashboard_link()).command(command, timeout=max(timeout, 0.001))
+        except (ConnectionLostError, UrTimeoutError):
+            ur._drop_dashboard()
+            raise
+        return str(getattr(reply, "text", ""))
+
     async def dashboard(self, line: str) -> tuple[bool, str]:
         """Send a dashboard command line; (success, the robot's reply)."""
         command = dash.parse_command(line) or dash.Raw(line)
