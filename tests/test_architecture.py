@@ -44,6 +44,8 @@ PURE = {
     "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/faults.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/urp.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    # the doctor's checks: facts in, verdicts out (doctor/checks.py)
+    "doctor/checks.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "os"},
 }
 
 

@@ -369,7 +369,7 @@ def _cycles(robot: Facts) -> Check:
     if cycles == 0:
         return Check("cycles", Verdict.UNKNOWN, "no cycle ran yet (is the robot connected?)")
     lagged = (missed + late) / (cycles + missed)
-    measured = f"{missed} missed, {late} late of {cycles} cycles ({lagged:.3%})"
+    measured = f"{missed} missed, {late} late of {cycles} cycles since the daemon started ({lagged:.3%})"
     if lagged <= LAG_WARN_FRACTION:
         return Check("cycles", Verdict.OK, measured)
     return Check(

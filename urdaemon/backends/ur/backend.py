@@ -24,11 +24,11 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import astuple
 from typing import Any
 
 from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.backends.ur.dashboard_link import DashboardLink
+from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.frames import (
     ReverseWriter,
     encode_passthrough_point,
@@ -95,6 +95,7 @@ class UrBackend(Backend):
         self._messages = RobotMessages(self.name, self.notice, self._program)
         self._services = UrServices(self)
         self._start_up = StartUp(self)
+        self.diagnosis: Diagnosis = Diagnosis(self)  # the doctor's: what it learns of the controller
         step_time = reverse.step_time_for_frequency(self.rate_hz)
         self._writer.servo_timeout = _servo_timeout(self.options, step_time)
         self._first_package = asyncio.Event()
@@ -103,9 +104,6 @@ class UrBackend(Backend):
         self._cycle_error_logged = False
         self._command_sent = True
         self._runs = 0
-        self.clock_reference: tuple[int, float] | None = None
-        """(host receive time ns, controller timestamp s) of a package soon after RTDE came up: the
-        doctor's baseline for the drift between the two clocks (taken by the watch, not the cycle)."""
 
     # ---- link supervision ------------------------------------------------------------------------------
 
@@ -137,7 +135,6 @@ class UrBackend(Backend):
         state = self.state
         self._runs += 1
         self._mapper.forget()
-        self.clock_reference = None
         if self._runs == 1:
             state.lifecycle = Lifecycle.CONNECTING
             state.lifecycle_reason = f"connecting to {self.address}"
@@ -198,8 +195,7 @@ class UrBackend(Backend):
             if primary_task in done:
                 primary_task.result()
                 raise ConnectionLostError("primary: link ended")
-            if self.clock_reference is None and self._first_package.is_set():
-                self.clock_reference = (self.state.host_time_ns, self.state.controller_time)
+            self.diagnosis.watch()  # the clocks' reference pair, once per RTDE link
             silent = time.monotonic() - self._package_at
             if self._first_package.is_set() and silent > RTDE_WATCHDOG_S:
                 raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")
@@ -253,33 +249,6 @@ class UrBackend(Backend):
     async def dashboard(self, line: str) -> tuple[bool, str]:
         """Send a dashboard command line; (success, the robot's reply)."""
         return await self._services.dashboard(line)
-
-    async def dashboard_within(self, line: str, timeout: float) -> str:
-        """Send a dashboard query; the robot's reply within ``timeout`` s (the doctor's)."""
-        return await self._services.query(line, timeout)
-
-    async def doctor_facts(self) -> dict[str, Any] | None:
-        """The controller's facts for the doctor (``diagnosis.gather``: within about 3 s)."""
-        from urdaemon.backends.ur.diagnosis import gather
-
-        return await gather(self)
-
-    def link_facts(self) -> dict[str, Any]:
-        """The links, the controller's version RTDE reported, and the callback ports (the doctor's)."""
-        rtde, primary = self._rtde, self._primary
-        version = rtde.controller_version if rtde is not None else None
-        return {
-            "address": self.address,
-            "headless": self.robot.headless,
-            "read_only": self.options.read_only,
-            "links": {
-                "rtde": rtde is not None and not rtde.closed.done(),
-                "primary": primary is not None and not primary.closed.done(),
-                "error": self.state.lifecycle_reason,
-            },
-            "rtde_version": None if version is None else list(astuple(version)),
-            "callbacks": self.servers.facts(self._program.host_ip),
-        }
 
     async def zero_ft_sensor(self) -> None:
         """Zero the force/torque sensor (script command)."""
@@ -485,11 +454,6 @@ class UrBackend(Backend):
     def calibration_ok(self) -> bool | None:
         """Whether the robot's kinematics are the configured calibration's (None: not checked yet)."""
         return self._messages.calibration_ok
-
-    @property
-    def _program_links_up_at(self) -> float:
-        """When the program last held all its links (``program.links_up_at``)."""
-        return self._program.links_up_at
 
 
 def _servo_timeout(options: UrOptions, step_time: float) -> float:

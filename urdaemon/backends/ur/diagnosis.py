@@ -5,9 +5,9 @@ left of the budget): ``PolyscopeVersion``, ``is in remote control``, then ``robo
 ``ROUND_TRIPS`` times, each timed. Meanwhile a task reads the host receive time and the controller's
 timestamp of the newest RTDE package every ``SAMPLE_EVERY_S`` (two attribute reads: the cycle does
 no work for it), which give the packages' arrival jitter and the clock offset; the drift is judged
-against the pair the backend kept when its RTDE link came up (``clock_reference``). The links and
-the callback ports are the backend's own facts (``UrBackend.link_facts``). Nothing here commands the
-robot: every dashboard line sent is a query.
+against a pair taken soon after the RTDE link came up (``Diagnosis.watch``, called by the backend's
+watch of its links). The links and the callback ports are read where the backend keeps them.
+Nothing here commands the robot: every dashboard line sent is a query.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import astuple
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.errors import UrDaemonError
@@ -25,7 +26,7 @@ if TYPE_CHECKING:
     from urdaemon.backends.ur.backend import UrBackend
     from urdaemon.model import RobotState
 
-__all__ = ["BUDGET_S", "ROUND_TRIPS", "SAMPLE_EVERY_S", "clock_facts", "gather"]
+__all__ = ["BUDGET_S", "DETREND_AFTER_S", "ROUND_TRIPS", "SAMPLE_EVERY_S", "Diagnosis", "clock_facts"]
 
 BUDGET_S = 3.0
 """The whole diagnosis ends within about this long (a reply already asked for may take the dashboard
@@ -34,44 +35,91 @@ ROUND_TRIPS = 20
 """``robotmode`` queries timed for the round trip."""
 SAMPLE_EVERY_S = 0.005
 """How often the newest RTDE package's two times are read while the diagnosis runs."""
+DETREND_AFTER_S = 1.0
+"""The reference's drift is taken out of the jitter once it is at least this old."""
 MIN_WINDOW_S = 0.5
 """The clock is sampled at least this long, however fast the dashboard answered."""
 
 
-async def gather(ur: UrBackend, budget_s: float = BUDGET_S) -> dict[str, Any]:
-    """The controller's facts as ``doctor.checks`` reads them (under ``"controller"``)."""
-    loop = asyncio.get_running_loop()
-    started = loop.time()
-    deadline = started + budget_s
-    samples: list[tuple[int, float]] = []
-    stop = asyncio.Event()
-    sampler = loop.create_task(_sample(ur.state, samples, stop, deadline))
-    try:
-        board = await _dashboard(ur, deadline)
-        await asyncio.wait({sampler}, timeout=max(0.0, min(deadline, started + MIN_WINDOW_S) - loop.time()))
-    finally:
-        stop.set()
-        await sampler
-    facts = ur.link_facts()
-    facts["dashboard"] = board
-    facts["polyscope_version"] = board.pop("polyscope_version", None)
-    facts["remote_control"] = board.pop("remote_control", None)
-    facts["remote_control_text"] = board.pop("remote_control_text", None)
-    facts["clock"] = clock_facts(samples, ur.clock_reference, ur.period)
-    return facts
+class Diagnosis:
+    """What the doctor learns of one UR backend's controller; part of the backend, like its
+    ``UrServices``, so it reads the backend's links where the backend keeps them."""
+
+    def __init__(self, ur: UrBackend) -> None:
+        self.ur = ur
+        self.reference: tuple[int, float] | None = None
+        """(host receive time ns, controller timestamp s) of a package soon after the RTDE link came up:
+        the baseline of the drift between the two clocks."""
+        self._reference_link: object | None = None
+
+    def watch(self) -> None:
+        """Take the reference pair once per RTDE link, once a package came (the backend's watch calls
+        this every few hundred ms: the cycle does nothing for it)."""
+        rtde = self.ur._rtde
+        if (
+            rtde is None
+            or rtde is self._reference_link
+            or not rtde.packages
+            or not self.ur.state.host_time_ns
+        ):
+            return
+        self._reference_link = rtde
+        self.reference = (self.ur.state.host_time_ns, self.ur.state.controller_time)
+
+    async def gather(self, budget_s: float = BUDGET_S) -> dict[str, Any]:
+        """The controller's facts as ``doctor.checks`` reads them (under ``"controller"``)."""
+        ur = self.ur
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        deadline = started + budget_s
+        samples: list[tuple[int, float]] = []
+        stop = asyncio.Event()
+        sampler = loop.create_task(_sample(ur.state, samples, stop, deadline))
+        try:
+            board = await _dashboard(ur._services.query, deadline)
+            window = max(0.0, min(deadline, started + MIN_WINDOW_S) - loop.time())
+            await asyncio.wait({sampler}, timeout=window)
+        finally:
+            stop.set()
+            await sampler
+        facts = self.link_facts()
+        facts["dashboard"] = board
+        for name in ("polyscope_version", "remote_control", "remote_control_text"):
+            facts[name] = board.pop(name, None)
+        reference = self.reference if self._reference_link is ur._rtde else None
+        facts["clock"] = clock_facts(samples, reference, ur.period)
+        return facts
+
+    def link_facts(self) -> dict[str, Any]:
+        """The links, the controller's version RTDE reported, and the callback ports."""
+        ur = self.ur
+        rtde, primary = ur._rtde, ur._primary
+        version = rtde.controller_version if rtde is not None else None
+        return {
+            "address": ur.address,
+            "headless": ur.robot.headless,
+            "read_only": ur.options.read_only,
+            "links": {
+                "rtde": rtde is not None and not rtde.closed.done(),
+                "primary": primary is not None and not primary.closed.done(),
+                "error": ur.state.lifecycle_reason,
+            },
+            "rtde_version": None if version is None else list(astuple(version)),
+            "callbacks": ur.servers.facts(ur._program.host_ip),
+        }
 
 
-async def _dashboard(ur: UrBackend, deadline: float) -> dict[str, Any]:
+async def _dashboard(query: Callable[[str, float], Awaitable[str]], deadline: float) -> dict[str, Any]:
     """The version, remote control and the timed round trips; ``connected`` once anything answered."""
     loop = asyncio.get_running_loop()
     facts: dict[str, Any] = {"connected": False, "error": None, "round_trips_ms": []}
     try:
-        text = await ur.dashboard_within(dash.GetPolyscopeVersion().line, deadline - loop.time())
+        text = await query(dash.GetPolyscopeVersion().line, deadline - loop.time())
         facts["connected"] = True
         facts["polyscope"] = text
         version = dash.GetPolyscopeVersion().decode_reply(text).version
         facts["polyscope_version"] = list(version) if version else None
-        text = await ur.dashboard_within(dash.IsInRemoteControl().line, deadline - loop.time())
+        text = await query(dash.IsInRemoteControl().line, deadline - loop.time())
         facts["remote_control"] = dash.IsInRemoteControl().decode_reply(text).remote
         facts["remote_control_text"] = text
         trips: list[float] = facts["round_trips_ms"]
@@ -80,7 +128,7 @@ async def _dashboard(ur: UrBackend, deadline: float) -> dict[str, Any]:
             if left <= 0:
                 break
             sent = time.perf_counter()
-            await ur.dashboard_within(dash.GetRobotMode().line, left)
+            await query(dash.GetRobotMode().line, left)
             trips.append((time.perf_counter() - sent) * 1e3)
     except (UrDaemonError, OSError) as err:
         facts["error"] = str(err)
@@ -106,24 +154,26 @@ async def _sample(
 def clock_facts(
     samples: Sequence[tuple[int, float]], reference: tuple[int, float] | None, period_s: float
 ) -> dict[str, Any]:
-    """The offset of the host's clock to the controller's (the smallest of the samples', the package
+    """The offset of the host's clock to the controller's at the last sample (that of the packages
     that waited least), the packages' arrival jitter (peak to peak of the offsets) and, against
     ``reference`` (a pair taken when RTDE came up), the drift with its bound: the reference's own
-    delay may be anything within the jitter."""
+    delay may be anything within the jitter. With a reference at least ``DETREND_AFTER_S`` old, the
+    offsets are first taken about the drift it shows, so drift is not counted as jitter."""
     facts: dict[str, Any] = {"samples": len(samples), "period_ms": period_s * 1e3, "offset_s": None}
     if not samples:
         return facts
+    last = samples[-1][0]
     offsets = [host - round(controller * 1e9) for host, controller in samples]
-    low, high = min(offsets), max(offsets)
+    elapsed_ns = last - reference[0] if reference is not None else 0
+    then = reference[0] - round(reference[1] * 1e9) if reference is not None else 0
+    slope = (offsets[-1] - then) / elapsed_ns if elapsed_ns >= DETREND_AFTER_S * 1e9 else 0.0
+    residuals = [o - round(slope * (host - last)) for o, (host, _) in zip(offsets, samples, strict=True)]
+    low, high = min(residuals), max(residuals)
     facts["offset_s"] = low / 1e9
     facts["jitter_ms"] = (high - low) / 1e6
-    facts["baseline_s"] = 0.0
+    facts["baseline_s"] = elapsed_ns / 1e9
     facts["drift_ppm"] = facts["drift_bound_ppm"] = None
-    if reference is not None:
-        elapsed_ns = samples[-1][0] - reference[0]
-        facts["baseline_s"] = elapsed_ns / 1e9
-        if elapsed_ns > 0:
-            then = reference[0] - round(reference[1] * 1e9)
-            facts["drift_ppm"] = (low - then) / elapsed_ns * 1e6
-            facts["drift_bound_ppm"] = (high - low) / elapsed_ns * 1e6
+    if elapsed_ns > 0:
+        facts["drift_ppm"] = (low - then) / elapsed_ns * 1e6
+        facts["drift_bound_ppm"] = (high - low) / elapsed_ns * 1e6
     return facts
