@@ -225,6 +225,12 @@ ROBOT_TABLE: list[tuple[str, dict[str, Any], dict[str, Verdict], str]] = [
         "",
     ),
     (
+        "one package: the stream stands still",
+        _robot({"clock": {"samples": 1, "offset_s": None}}),
+        {"rtde_jitter": UNKNOWN, "clock_offset": UNKNOWN},
+        "",
+    ),
+    (
         "clocks drift apart",
         _robot({"clock": {**CONTROLLER["clock"], "drift_ppm": -400.0, "drift_bound_ppm": 5.0}}),
         {"clock_offset": WARN},

@@ -80,6 +80,8 @@ def _pair(controller_s: float, delay_us: int = 0, drift_ppm: float = 0.0) -> tup
 
 def test_clock_facts_without_samples() -> None:
     assert clock_facts([], None, 0.002) == {"samples": 0, "period_ms": 2.0, "offset_s": None}
+    still = clock_facts([_pair(1060.0)], None, 0.002)  # one package in the window: a stream at rest
+    assert still["offset_s"] is None
 
 
 def test_clock_facts_offset_and_jitter() -> None:

@@ -305,8 +305,9 @@ def _callbacks(c: Facts) -> Check:
 
 def _rtde_jitter(c: Facts) -> Check:
     clock = c.get("clock") or {}
-    if not clock.get("samples"):
-        return Check("rtde_jitter", Verdict.UNKNOWN, "no RTDE packages seen (RTDE link down?)")
+    if clock.get("offset_s") is None:
+        seen = int(clock.get("samples") or 0)
+        return Check("rtde_jitter", Verdict.UNKNOWN, f"{seen} RTDE packages seen (RTDE link down?)")
     jitter = float(clock.get("jitter_ms", 0.0))
     period = float(clock.get("period_ms", 0.0))
     measured = (

@@ -81,7 +81,8 @@ async def _doctor(args: argparse.Namespace) -> int:
         ) as client:
             targets = await _targets(client, args)
             if not targets:
-                print(f"error: no robot is served at {args.connect}", file=sys.stderr)
+                where = f" in cell {args.cell!r}" if args.cell is not None else ""
+                print(f"error: no robot is served at {args.connect}{where}", file=sys.stderr)
                 return EXIT_FAILED
             replies = await asyncio.gather(*(_ask(client, cell, robot) for cell, robot in targets))
     except UrDaemonError as err:

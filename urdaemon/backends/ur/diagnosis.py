@@ -13,7 +13,6 @@ Nothing here commands the robot: every dashboard line sent is a query.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import astuple
@@ -147,8 +146,7 @@ async def _sample(
         if pair[0] and pair != last:
             samples.append(pair)
             last = pair
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(stop.wait(), SAMPLE_EVERY_S)
+        await asyncio.sleep(SAMPLE_EVERY_S)
 
 
 def clock_facts(
@@ -160,7 +158,7 @@ def clock_facts(
     delay may be anything within the jitter. With a reference at least ``DETREND_AFTER_S`` old, the
     offsets are first taken about the drift it shows, so drift is not counted as jitter."""
     facts: dict[str, Any] = {"samples": len(samples), "period_ms": period_s * 1e3, "offset_s": None}
-    if not samples:
+    if len(samples) < 2:  # one package in the whole window: the stream stands still
         return facts
     last = samples[-1][0]
     offsets = [host - round(controller * 1e9) for host, controller in samples]

@@ -9,6 +9,7 @@ read-only robot, or a link that is not there; the backend's ``Backend`` methods 
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 from typing import TYPE_CHECKING, Any
@@ -158,8 +159,13 @@ class UrServices:
         after it; the link is dropped then, as its late reply would answer the next command)."""
         command = dash.parse_command(line) or dash.Raw(line)
         ur = self.ur
+        timeout = max(timeout, 0.001)
+        try:  # a connection that does not come is given up within the time too (nothing sent yet)
+            link = await asyncio.wait_for(ur._dashboard_link(), timeout)
+        except TimeoutError:
+            raise UrTimeoutError(f"dashboard: not connected within {timeout:.1f} s") from None
         try:
-            reply = await (await ur._dashboard_link()).command(command, timeout=max(timeout, 0.001))
+            reply = await link.command(command, timeout=timeout)
         except (ConnectionLostError, UrTimeoutError):
             ur._drop_dashboard()
             raise
