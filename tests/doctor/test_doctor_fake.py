@@ -76,7 +76,7 @@ async def test_every_controller_check_on_a_running_fake_e_series() -> None:
         }
         assert verdicts["remote_control"] == "ok"
         assert verdicts["callback_ports"] == "ok"
-        assert verdicts["clock_offset"] == "ok"
+        assert verdicts["clock_offset"] in ("ok", "warn")
         assert verdicts["round_trip"] in ("ok", "warn")  # a loaded test machine may be slow: the truth
         assert verdicts["rtde_jitter"] in ("ok", "warn")
         assert verdicts["turnaround"] in ("ok", "warn", "fail")
@@ -87,8 +87,12 @@ async def test_every_controller_check_on_a_running_fake_e_series() -> None:
         assert len(controller["dashboard"]["round_trips_ms"]) == ROUND_TRIPS
         assert controller["rtde_version"] == [5, 15, 0, 0]
         assert controller["clock"]["samples"] > 10
-        # the fake's clock is this host's monotonic clock: the drift, once judged, is small
-        assert controller["clock"]["offset_s"] is not None
+        clock = controller["clock"]
+        assert clock["offset_s"] is not None
+        if clock["drift_ppm"] is not None:  # the fake can only lose ticks (a loaded host), never gain
+            assert clock["drift_ppm"] >= -clock["drift_bound_ppm"] - 1.0, clock
+        if verdicts["clock_offset"] == "warn":
+            assert clock["baseline_s"] >= 10.0, "the drift is judged only over 10 s"
         # nothing moved: the arm rests where it did, the program still runs
         assert fake.arm.q == client_q
         assert fake.arm.program_running

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 from pathlib import Path
 
@@ -54,7 +55,24 @@ def test_host_facts_read_the_files_given(tmp_path: Path) -> None:
     assert missing["preempt_rt"] is ("PREEMPT_RT" in os.uname().version)
 
 
-def test_the_realtime_request_is_remembered_per_thread() -> None:
+async def test_a_refused_realtime_request_is_kept_for_its_event_loop_only(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def refuse(pid: int, policy: int, param: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    with pytest.raises(RealtimeUnavailable):
+        use_realtime_priority(30)
+    assert realtime_request() == (30, "Operation not permitted")
+
+    async def elsewhere() -> tuple[int, str | None]:
+        return realtime_request()
+
+    assert await asyncio.to_thread(asyncio.run, elsewhere()) == (0, None), "another loop asked nothing"
+
+
+async def test_the_realtime_request_is_remembered_per_event_loop() -> None:
     assert realtime_request() == (0, None)
     try:
         restore = use_realtime_priority(1)
