@@ -89,8 +89,6 @@ async def test_every_controller_check_on_a_running_fake_e_series() -> None:
         assert controller["clock"]["samples"] > 10
         clock = controller["clock"]
         assert clock["offset_s"] is not None
-        if clock["drift_ppm"] is not None:  # the fake can only lose ticks (a loaded host), never gain
-            assert clock["drift_ppm"] >= -clock["drift_bound_ppm"] - 1.0, clock
         if verdicts["clock_offset"] == "warn":
             assert clock["baseline_s"] >= 10.0, "the drift is judged only over 10 s"
         # nothing moved: the arm rests where it did, the program still runs

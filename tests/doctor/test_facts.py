@@ -5,10 +5,11 @@ from __future__ import annotations
 import asyncio
 import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
-from urdaemon.backends.ur.diagnosis import clock_facts
+from urdaemon.backends.ur.diagnosis import Diagnosis, clock_facts
 from urdaemon.doctor.host import host_facts, preempt_rt, sys_nice_capable
 from urdaemon.scheduling import RealtimeUnavailable, realtime_request, use_realtime_priority
 
@@ -121,3 +122,29 @@ def test_clock_facts_drift_against_the_reference(drift_ppm: float) -> None:
     # the window's smallest offset stands for its whole 0.1 s: within 1 ppm over a 100 s baseline
     assert facts["drift_ppm"] == pytest.approx(drift_ppm, abs=1.0)
     assert facts["drift_bound_ppm"] == pytest.approx(0.2, rel=0.01)  # 20 µs of jitter over 100 s
+
+
+class _Link:
+    packages = 1
+
+
+def test_the_reference_is_the_pair_that_waited_least_of_the_first_looks_per_link() -> None:
+    state = SimpleNamespace(host_time_ns=0, controller_time=0.0)
+    ur = SimpleNamespace(_rtde=None, state=state)
+    diagnosis = Diagnosis(ur)  # type: ignore[arg-type]
+    diagnosis.watch()
+    assert _reference(diagnosis) is None, "no link, no reference"
+    ur._rtde = _Link()
+    delays = [500, 300, 900, 100, 700, 400, 800, 600, 50, 20]  # µs; the last two come after 8 looks
+    for i, delay_us in enumerate(delays):
+        state.host_time_ns, state.controller_time = _pair(1000.0 + i * 0.25, delay_us)
+        diagnosis.watch()
+    assert _reference(diagnosis) == _pair(1000.0 + 3 * 0.25, 100), "the least delayed of the first 8"
+    ur._rtde = _Link()  # a new link: chosen anew
+    state.host_time_ns, state.controller_time = _pair(2000.0, 300)
+    diagnosis.watch()
+    assert _reference(diagnosis) == _pair(2000.0, 300)
+
+
+def _reference(diagnosis: Diagnosis) -> tuple[int, float] | None:
+    return diagnosis.reference

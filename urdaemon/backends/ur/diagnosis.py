@@ -25,7 +25,15 @@ if TYPE_CHECKING:
     from urdaemon.backends.ur.backend import UrBackend
     from urdaemon.model import RobotState
 
-__all__ = ["BUDGET_S", "DETREND_AFTER_S", "ROUND_TRIPS", "SAMPLE_EVERY_S", "Diagnosis", "clock_facts"]
+__all__ = [
+    "BUDGET_S",
+    "DETREND_AFTER_S",
+    "REFERENCE_LOOKS",
+    "ROUND_TRIPS",
+    "SAMPLE_EVERY_S",
+    "Diagnosis",
+    "clock_facts",
+]
 
 BUDGET_S = 3.0
 """The whole diagnosis ends within about this long (a reply already asked for may take the dashboard
@@ -36,6 +44,8 @@ SAMPLE_EVERY_S = 0.005
 """How often the newest RTDE package's two times are read while the diagnosis runs."""
 DETREND_AFTER_S = 1.0
 """The reference's drift is taken out of the jitter once it is at least this old."""
+REFERENCE_LOOKS = 8
+"""How many of the link watch's looks (every ~0.25 s) choose the clocks' reference pair."""
 MIN_WINDOW_S = 0.5
 """The clock is sampled at least this long, however fast the dashboard answered."""
 
@@ -47,23 +57,26 @@ class Diagnosis:
     def __init__(self, ur: UrBackend) -> None:
         self.ur = ur
         self.reference: tuple[int, float] | None = None
-        """(host receive time ns, controller timestamp s) of a package soon after the RTDE link came up:
-        the baseline of the drift between the two clocks."""
+        """(host receive time ns, controller timestamp s) of a package soon after the RTDE link came up,
+        the one that waited least of ``REFERENCE_LOOKS``: the baseline of the clocks' drift."""
         self._reference_link: object | None = None
+        self._looks = 0
 
     def watch(self) -> None:
-        """Take the reference pair once per RTDE link, once a package came (the backend's watch calls
-        this every few hundred ms: the cycle does nothing for it)."""
-        rtde = self.ur._rtde
-        if (
-            rtde is None
-            or rtde is self._reference_link
-            or not rtde.packages
-            or not self.ur.state.host_time_ns
-        ):
+        """Look at the newest package's two times, the first ``REFERENCE_LOOKS`` times per RTDE link
+        once packages come, and keep the pair that waited least (the backend's watch calls this every
+        few hundred ms: the cycle does nothing for it)."""
+        rtde, state = self.ur._rtde, self.ur.state
+        if rtde is None or not rtde.packages or not state.host_time_ns:
             return
-        self._reference_link = rtde
-        self.reference = (self.ur.state.host_time_ns, self.ur.state.controller_time)
+        if rtde is not self._reference_link:
+            self._reference_link, self._looks, self.reference = rtde, 0, None
+        if self._looks >= REFERENCE_LOOKS:
+            return
+        self._looks += 1
+        pair = (state.host_time_ns, state.controller_time)
+        if self.reference is None or _offset(pair) < _offset(self.reference):
+            self.reference = pair
 
     async def gather(self, budget_s: float = BUDGET_S) -> dict[str, Any]:
         """The controller's facts as ``doctor.checks`` reads them (under ``"controller"``)."""
@@ -161,9 +174,9 @@ def clock_facts(
     if len(samples) < 2:  # one package in the whole window: the stream stands still
         return facts
     last = samples[-1][0]
-    offsets = [host - round(controller * 1e9) for host, controller in samples]
+    offsets = [_offset(pair) for pair in samples]
     elapsed_ns = last - reference[0] if reference is not None else 0
-    then = reference[0] - round(reference[1] * 1e9) if reference is not None else 0
+    then = _offset(reference) if reference is not None else 0
     slope = (offsets[-1] - then) / elapsed_ns if elapsed_ns >= DETREND_AFTER_S * 1e9 else 0.0
     residuals = [o - round(slope * (host - last)) for o, (host, _) in zip(offsets, samples, strict=True)]
     low, high = min(residuals), max(residuals)
@@ -175,3 +188,8 @@ def clock_facts(
         facts["drift_ppm"] = (low - then) / elapsed_ns * 1e6
         facts["drift_bound_ppm"] = (high - low) / elapsed_ns * 1e6
     return facts
+
+
+def _offset(pair: tuple[int, float]) -> int:
+    """The host's time less the controller's, in ns, of one (host ns, controller s) pair."""
+    return pair[0] - round(pair[1] * 1e9)
