@@ -47,6 +47,8 @@ PURE = {
     # what a recording holds and its CDR: messages in, bytes out (recording/channels.py)
     "recording/cdr.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
     "recording/channels.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
+    # the doctor's checks: facts in, verdicts out (doctor/checks.py)
+    "doctor/checks.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "os"},
 }
 
 

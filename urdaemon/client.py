@@ -1178,6 +1178,11 @@ class RobotClient(_CartesianCommands):
         max) since the last reset; ``reset`` starts a new measuring window after this reply."""
         return await self.service("cycle_stats", CycleStatsRequest(reset))
 
+    async def doctor(self, *, timeout: float | None = None) -> dict[str, Any]:
+        """The doctor's checks of this robot and its host: each with a verdict (``ok``, ``warn``,
+        ``fail``, ``unknown``, ``n/a``), what was measured and what to do (docs/doctor.md)."""
+        return await self.service("doctor", timeout=timeout)
+
     async def zero_ft_sensor(self) -> dict[str, Any]:
         """Zero the force/torque sensor."""
         return await self.service("zero_ft_sensor")

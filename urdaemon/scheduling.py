@@ -20,15 +20,23 @@ collections walk only what was made since.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import gc
 import os
 import sys
+import weakref
 from collections.abc import Callable, Iterator
 
 from urdaemon.errors import UrDaemonError
 
-__all__ = ["RealtimeUnavailable", "startup_objects_frozen", "use_realtime_priority"]
+__all__ = ["RealtimeUnavailable", "realtime_request", "startup_objects_frozen", "use_realtime_priority"]
+
+_REQUESTS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, tuple[int, str | None]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per event loop (the daemon asks from its loop's thread): the priority last asked of
+``use_realtime_priority`` and why it was refused (None: it took); gone with the loop."""
 
 
 class RealtimeUnavailable(UrDaemonError, OSError):
@@ -52,17 +60,45 @@ def use_realtime_priority(priority: int) -> Callable[[], None]:
     try:
         setter(0, fifo | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
     except OSError as err:
+        _remember(priority, err.strerror or str(err))
         raise RealtimeUnavailable(
             f"not permitted to use SCHED_FIFO priority {priority} ({err.strerror}): give the user an "
             f"rtprio limit of at least {priority} (/etc/security/limits.conf, or LimitRTPRIO= in a "
             "systemd unit, or --ulimit rtprio= / cap_add SYS_NICE in a container) or the "
             "CAP_SYS_NICE capability"
         ) from err
+    _remember(priority, None)
 
     def restore() -> None:
         setter(0, *before)
+        _remember(0, None)
 
     return restore
+
+
+def realtime_request() -> tuple[int, str | None]:
+    """What was asked of ``use_realtime_priority`` on the running event loop's thread (0: nothing,
+    or it was put back), and why it was refused (None: it took, or nothing was asked)."""
+    loop = _running_loop()
+    return (0, None) if loop is None else _REQUESTS.get(loop, (0, None))
+
+
+def _remember(priority: int, refused: str | None) -> None:
+    """Keep what was asked for the running loop (nothing outside one: no daemon asked it)."""
+    loop = _running_loop()
+    if loop is None:
+        return
+    if priority:
+        _REQUESTS[loop] = (priority, refused)
+    else:
+        _REQUESTS.pop(loop, None)
+
+
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None
 
 
 @contextlib.contextmanager

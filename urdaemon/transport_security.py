@@ -163,7 +163,7 @@ def _grant_rules(grant: Grant, cell: str) -> list[_Rule]:
 
 def _read_rules(cell: str, robot: str) -> list[_Rule]:
     """Subscribing to a robot's state, events and goal messages; asking for goal results, the
-    services that only read (``cycle_stats``) and the cell's description (static: what any reader
+    services that only read (``cycle_stats``, ``doctor``) and the cell's description (static: what any reader
     needs to draw the robot). ``*``: every robot, the cell's tf (every robot's link poses) and the
     cell goals' messages."""
     keys, whole = RobotKeys(cell, robot), CellKeys(cell)

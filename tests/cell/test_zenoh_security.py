@@ -197,6 +197,7 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
     assert _allowed(acl, "viewer", "ingress", "query") == {
         "sec/alice/goal/*/result",
         "sec/alice/service/cycle_stats",
+        "sec/alice/service/doctor",
         "sec/robot_description",
     }
     assert "sec/tf" not in _allowed(acl, "viewer", "ingress", "declare_subscriber")  # bob's poses too

@@ -163,6 +163,7 @@ CALLS: list[tuple[str, str, tuple[Any, ...], object]] = [
     ("start_force_mode", "start_force_mode", FORCE, ForceModeRequest(*FORCE)),
     ("set_tcp", "set_tcp", ((0.0, 0.0, 0.1, 0.0, 0.0, 0.2),), SetTcpRequest((0.0, 0.0, 0.1, 0.0, 0.0, 0.2))),
     ("cycle_stats", "cycle_stats", (), CycleStatsRequest(False)),
+    ("doctor", "doctor", (), None),
     ("startup", "startup", (), None),
     ("resend_program", "resend_program", (), None),
     ("hand_back_control", "hand_back_control", (), None),
@@ -197,6 +198,7 @@ def test_the_client_waits_as_it_did_for_each_service() -> None:
     waits = {name: services.spec(name).timeout for name in services.names()}
     assert waits.pop("startup") == 60.0
     assert waits.pop("dashboard") == 30.0
+    assert waits.pop("doctor") == 15.0
     assert set(waits.values()) == {5.0}
 
 
@@ -297,3 +299,4 @@ async def test_each_backend_answers_every_service_its_own_way(
     refused = {name: answer["reason"] for name, answer in answers.items() if not answer["ok"]}
     assert refused == refusals
     assert answers["cycle_stats"]["turnaround"]["count"] == 0
+    assert {c["name"]: c["verdict"] for c in answers["doctor"]["checks"]}["controller"] == "n/a"

@@ -13,6 +13,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 from urdaemon.backends.timing import Histogram, LagLog
 from urdaemon.errors import BackendError
@@ -22,7 +23,7 @@ PassthroughResult = Callable[[str, int, str | None], None]
 """How a passthrough goal's end is told: (goal id, the trajectory result code, why the daemon's side
 ended it, or None for the robot's own result)."""
 
-__all__ = ["IO_KINDS", "Backend", "BackendStatistics"]
+__all__ = ["IO_KINDS", "Backend", "BackendStatistics", "Diagnoser"]
 
 log = logging.getLogger("urdaemon.backends")
 
@@ -39,6 +40,14 @@ class BackendStatistics:
     late_cycles: int
     max_lateness_s: float
     reconnects: int
+
+
+class Diagnoser(Protocol):
+    """Gathers what the doctor learns of a robot's controller (backends/ur/diagnosis.py)."""
+
+    async def gather(self) -> dict[str, Any]:
+        """The controller's facts, as doctor/checks.py reads them; bounded in time."""
+        ...
 
 
 class Backend(abc.ABC):
@@ -66,6 +75,8 @@ class Backend(abc.ABC):
         """Set by the runtime: called when the backend changes the state outside a cycle (lifecycle)."""
         self.on_notice: Callable[[str, str], None] | None = None
         """Set by the runtime: ``(kind, text)`` of what the robot or the backend wants users to know."""
+        self.diagnosis: Diagnoser | None = None
+        """What gathers the doctor's facts of the robot's controller (``ur``: backends/ur/diagnosis.py)."""
         self.tcp: tuple[float, ...] = (0.0,) * 6
         """The TCP offset (x, y, z m, rx, ry, rz rad: the TCP in the tool flange frame) last set with
         ``set_tcp``; the ``ur`` backend starts from the cell file's and keeps its controller's equal."""
@@ -120,6 +131,11 @@ class Backend(abc.ABC):
     async def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (0, 12 or 24 V)."""
         raise BackendError(f"{self.kind} backend has no tool voltage")
+
+    async def doctor_facts(self) -> dict[str, Any] | None:
+        """What the doctor learns of the robot's controller (``diagnosis``); None for a backend whose
+        robot has none (mock, servo: the daemon's own clock drives it)."""
+        return None if self.diagnosis is None else await self.diagnosis.gather()
 
     def passthrough_problem(self) -> str | None:
         """Why a passthrough trajectory cannot start now (None when it can)."""

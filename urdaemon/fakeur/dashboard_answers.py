@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PROGRAMS_DIR",
+    "REMOTE_CONTROL_SINCE",
     "SCRIPT_SUFFIXES",
     "URP_SUFFIX",
     "dashboard_answer",
@@ -48,6 +49,9 @@ URP_SUFFIX = ".urp"
 """PolyScope program files: translated to URScript when loaded (``fakeur.urp``); one the fake cannot
 translate is refused at ``load`` with the dashboard's "Error while loading program"."""
 SERIAL_NUMBER = "20235500001"
+REMOTE_CONTROL_SINCE = (5, 6)
+"""The first version whose dashboard answers ``is in remote control`` (docs/protocols.md §3.2: not on
+CB3, e-Series from 5.6); older ones do not understand it."""
 _PROGRAM_STATES = {
     RuntimeState.PLAYING: dash.ProgramState.PLAYING,
     RuntimeState.PAUSING: dash.ProgramState.PLAYING,  # playing until paused, as a controller says
@@ -138,7 +142,7 @@ def _query_reply(fake: FakeController, command: Any) -> str | None:
         return dash.running_text(arm.program_running)
     if isinstance(command, dash.GetLoadedProgram):
         return dash.loaded_program_text(program)
-    if isinstance(command, dash.IsInRemoteControl):
+    if isinstance(command, dash.IsInRemoteControl) and fake.controller_version[:2] >= REMOTE_CONTROL_SINCE:
         return dash.remote_control_text(arm.remote_control)
     if isinstance(command, dash.GetPolyscopeVersion):
         return dash.polyscope_version_text(fake.controller_version, "Jan 01 2026")
@@ -148,7 +152,7 @@ def _query_reply(fake: FakeController, command: Any) -> str | None:
         return SERIAL_NUMBER
     if isinstance(command, dash.GetRobotModel):
         return fake.model.model.upper().removesuffix("E")
-    if isinstance(command, dash.GetOperationalMode | dash.GetUserRole):  # not on this series
+    if isinstance(command, dash.GetOperationalMode | dash.GetUserRole | dash.IsInRemoteControl):  # not here
         return dash.unknown_command_text(command.KEYWORD)
     return None
 

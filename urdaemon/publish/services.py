@@ -187,6 +187,12 @@ async def _cycle_stats(host: ServiceHost, request: CycleStatsRequest) -> Reply:
     return body
 
 
+async def _doctor(host: ServiceHost, request: None) -> Reply:
+    from urdaemon.doctor.report import doctor_report
+
+    return await doctor_report(host.backend)
+
+
 def _acting(act: Callable[[ServiceHost], Awaitable[None]]) -> Callable[[ServiceHost, None], Awaitable[Reply]]:
     """The handler of a service without arguments: it acts, the reply adds nothing."""
 
@@ -408,6 +414,25 @@ SERVICES: tuple[ServiceSpec, ...] = (
             "publishes; on `mock` and `servo`, ticks of the daemon's own clock that were missed or ran "
             "late"
         ),
+    ),
+    ServiceSpec(
+        "doctor",
+        "check what decides whether the robot runs well: each check's verdict and what to do",
+        None,
+        _without_arguments("doctor"),
+        _doctor,
+        needs=None,
+        commanding=False,  # measures only, changes nothing: anyone may ask
+        request_doc="none, or `{}`",
+        reply_doc=(
+            '`{"ok": true, "robot", "verdict", "checks": [{"name", "verdict", "measured", "action"}], '
+            '"host": {…}, "facts": {…}}`: each check\'s verdict is `ok`, `warn`, `fail`, `unknown` or '
+            "`n/a`, `verdict` the worst of them; the host's kernel and real-time priority, and per "
+            "robot (UR) the dashboard and primary links, the dashboard round trip, the controller's "
+            "version, remote control, the callback ports, the RTDE arrival jitter and clock offset, then "
+            "the cycles and turnaround ([doctor.md](doctor.md)); within about 3 s, dashboard queries only"
+        ),
+        timeout=15.0,
     ),
 )
 """Every service but ``stop``, in docs/keys.md's order; each runs through the runtime's one service

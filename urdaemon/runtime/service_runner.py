@@ -3,7 +3,8 @@
 Every service but ``stop`` runs through ``run``: refused once the daemon shuts down, refused while
 the same service still runs (a burst never acts more than once at a time), its request decoded and
 checked before anything acts, answered exactly once. ``stop`` is answered at once, never refused.
-A commanding service (every one but ``stop`` and ``cycle_stats``) needs the robot's command lease.
+A commanding service (every one but ``stop``, ``cycle_stats`` and ``doctor``) needs the robot's
+command lease.
 """
 
 from __future__ import annotations

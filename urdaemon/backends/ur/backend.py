@@ -28,6 +28,7 @@ from typing import Any
 
 from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.backends.ur.dashboard_link import DashboardLink
+from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.frames import (
     ReverseWriter,
     encode_passthrough_point,
@@ -94,6 +95,7 @@ class UrBackend(Backend):
         self._messages = RobotMessages(self.name, self.notice, self._program)
         self._services = UrServices(self)
         self._start_up = StartUp(self)
+        self.diagnosis: Diagnosis = Diagnosis(self)  # the doctor's: what it learns of the controller
         step_time = reverse.step_time_for_frequency(self.rate_hz)
         self._writer.servo_timeout = _servo_timeout(self.options, step_time)
         self._first_package = asyncio.Event()
@@ -193,6 +195,7 @@ class UrBackend(Backend):
             if primary_task in done:
                 primary_task.result()
                 raise ConnectionLostError("primary: link ended")
+            self.diagnosis.watch()  # the clocks' reference pair, once per RTDE link
             silent = time.monotonic() - self._package_at
             if self._first_package.is_set() and silent > RTDE_WATCHDOG_S:
                 raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")
@@ -451,11 +454,6 @@ class UrBackend(Backend):
     def calibration_ok(self) -> bool | None:
         """Whether the robot's kinematics are the configured calibration's (None: not checked yet)."""
         return self._messages.calibration_ok
-
-    @property
-    def _program_links_up_at(self) -> float:
-        """When the program last held all its links (``program.links_up_at``)."""
-        return self._program.links_up_at
 
 
 def _servo_timeout(options: UrOptions, step_time: float) -> float:

@@ -186,6 +186,16 @@ class CallbackServer:
         """True while the robot is connected."""
         return self.link is not None
 
+    def facts(self) -> dict[str, Any]:
+        """Its port, whether it listens, and who is connected (the doctor's)."""
+        link = self.link
+        return {
+            "port": self.port,
+            "listening": self._server is not None,
+            "connected": link is not None,
+            "peer": link.peer if link is not None else None,
+        }
+
     def send(self, message: Any) -> bool:
         """Send to the connected robot; False if none is connected."""
         link = self.link
@@ -262,6 +272,14 @@ class CallbackServers:
     def missing(self) -> list[str]:
         """The program's links that are not connected (empty while the program holds them all)."""
         return [server.name for server in self.program_links if server.link is None]
+
+    def facts(self, dials: str) -> dict[str, Any]:
+        """Where the servers listen, the address the program dials (``dials``), and each port's facts."""
+        return {
+            "listening_on": self.listening_on,
+            "dials": dials,
+            "ports": {server.name: server.facts() for server in self.all},
+        }
 
     def set_robot_address(self, address: str) -> None:
         """Accept connections from ``address`` (the robot's resolved IP)."""

@@ -9,6 +9,7 @@ read-only robot, or a link that is not there; the backend's ``Backend`` methods 
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 from typing import TYPE_CHECKING, Any
@@ -152,6 +153,23 @@ class UrServices:
             raise BackendError("the control program is not connected (no script command link)")
 
     # ---- the dashboard --------------------------------------------------------------------------------
+
+    async def query(self, line: str, timeout: float) -> str:
+        """Send a dashboard line and return the reply's text within ``timeout`` s (``UrTimeoutError``
+        after it; the link is dropped then, as its late reply would answer the next command)."""
+        command = dash.parse_command(line) or dash.Raw(line)
+        ur = self.ur
+        timeout = max(timeout, 0.001)
+        try:  # a connection that does not come is given up within the time too (nothing sent yet)
+            link = await asyncio.wait_for(ur._dashboard_link(), timeout)
+        except TimeoutError:
+            raise UrTimeoutError(f"dashboard: not connected within {timeout:.1f} s") from None
+        try:
+            reply = await link.command(command, timeout=timeout)
+        except (ConnectionLostError, UrTimeoutError):
+            ur._drop_dashboard()
+            raise
+        return str(getattr(reply, "text", ""))
 
     async def dashboard(self, line: str) -> tuple[bool, str]:
         """Send a dashboard command line; (success, the robot's reply)."""
