@@ -61,6 +61,8 @@ class Bridge:
     """Samples that could not be converted (logged once per distinct reason)."""
     subscriptions: dict[str, int] = field(default_factory=dict)
     """Foxglove subscribers per topic now."""
+    following: set[str] = field(default_factory=set)
+    """Topics whose Zenoh key is followed now (those with a Foxglove subscriber)."""
 
 
 @contextlib.asynccontextmanager
@@ -165,9 +167,11 @@ class _Served:
             self.subscribers[plan.topic] = self.session.declare_subscriber(
                 plan.key_expr, self.handoff.on_sample
             )
+            self.bridge.following.add(plan.topic)
             log.info("following %s for %s", plan.key_expr, plan.topic)
         elif now == 0 and plan.topic in self.subscribers:
             _undeclare(self.subscribers.pop(plan.topic))
+            self.bridge.following.discard(plan.topic)
             log.info("no longer following %s", plan.key_expr)
 
     def close(self) -> None:
@@ -175,6 +179,8 @@ class _Served:
         for sub in self.subscribers.values():
             _undeclare(sub)
         self.subscribers.clear()
+        if self.bridge is not None:
+            self.bridge.following.clear()
 
     # ------------------------------------------------------------------ on the converter thread
 

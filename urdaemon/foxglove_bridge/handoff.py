@@ -7,6 +7,7 @@ nothing the bridge does reaches back to the daemon's cycle.
 from __future__ import annotations
 
 import queue
+import threading
 import time
 from typing import Any
 
@@ -24,6 +25,7 @@ class Handoff:
 
     def __init__(self, capacity: int = CAPACITY) -> None:
         self._queue: queue.Queue[Item] = queue.Queue(capacity)
+        self._count = threading.Lock()  # Zenoh calls back on several threads; never held long
         self.offered = 0
         """Samples offered (kept or dropped)."""
         self.dropped = 0
@@ -35,12 +37,15 @@ class Handoff:
 
     def offer(self, key: str, payload: bytes) -> bool:
         """Queue one message unless the queue is full (then it is dropped and counted)."""
-        self.offered += 1
         try:
             self._queue.put_nowait((key, payload, time.time_ns()))
         except queue.Full:
-            self.dropped += 1
+            with self._count:
+                self.offered += 1
+                self.dropped += 1
             return False
+        with self._count:
+            self.offered += 1
         return True
 
     def take(self, timeout: float) -> Item | None:
