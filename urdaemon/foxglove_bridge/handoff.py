@@ -14,7 +14,7 @@ from typing import Any
 __all__ = ["CAPACITY", "Handoff", "Item"]
 
 CAPACITY = 4096
-"""Samples waiting for the converter at most (~1 s of two 500 Hz robots and their tf)."""
+"""Samples waiting for the converter at most (a few seconds of two 500 Hz robots)."""
 
 Item = tuple[str, bytes, int]
 """(key, payload, ``time.time_ns()`` when it came)."""
