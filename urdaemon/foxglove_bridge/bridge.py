@@ -113,8 +113,8 @@ async def running_bridge(
             server_listener=cast("ServerListener", _Listener(served, urdf)),  # implements the parts it needs
             context=context,
         )
+        stack.callback(served.close)  # after the server: no subscription can come in any more
         stack.callback(server.stop)
-        stack.callback(served.close)
         bridge = Bridge(f"ws://{_url_host(host)}:{server.port}", server.port, cell, robots, plans, handoff)
         served.bridge = bridge
         worker = threading.Thread(target=served.convert, args=(joints,), name="foxglove-convert", daemon=True)
@@ -149,13 +149,14 @@ class _Served:
         self.bridge: Bridge | None = None
         self._reasons: set[str] = set()
         self._resend = threading.Event()
+        self._closed = False
 
     # ------------------------------------------------------------------ on the loop
 
     def want(self, channel_id: int, delta: int) -> None:
         """A Foxglove client subscribed (``delta`` 1) or unsubscribed (-1) to a channel."""
         plan = self.plans.get(channel_id)
-        if plan is None or self.bridge is None:
+        if plan is None or self.bridge is None or self._closed:
             return
         counts = self.bridge.subscriptions
         now = counts[plan.topic] = max(0, counts.get(plan.topic, 0) + delta)
@@ -175,7 +176,8 @@ class _Served:
             log.info("no longer following %s", plan.key_expr)
 
     def close(self) -> None:
-        """Undeclare every Zenoh subscriber."""
+        """Undeclare every Zenoh subscriber; none is declared afterwards."""
+        self._closed = True
         for sub in self.subscribers.values():
             _undeclare(sub)
         self.subscribers.clear()
