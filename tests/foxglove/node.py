@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-__all__ = ["CLIENT", "REQUIRE_ENV", "node_or_skip"]
+__all__ = ["CLIENT", "HERE", "PACKAGES", "REQUIRE_ENV", "node_or_skip"]
 
 HERE = Path(__file__).resolve().parent
 CLIENT = HERE / "client.mjs"
