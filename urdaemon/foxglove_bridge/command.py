@@ -1,0 +1,106 @@
+"""``urdaemon foxglove``: serve a running cell live over Foxglove's WebSocket protocol until Ctrl-C
+(or SIGTERM); open it in the Foxglove app at ws://HOST:PORT (docs/foxglove.md).
+
+Exit codes: 0 ended by Ctrl-C or SIGTERM; 1 no cell answered, or the server could not start (the port
+taken); 2 bad arguments, or foxglove-sdk not installed (the ``foxglove`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from typing import Any
+
+from urdaemon.errors import ConfigError, UrDaemonError
+
+__all__ = ["DEFAULT_PORT", "NEEDS_EXTRA", "add_parsers", "foxglove_main"]
+
+NEEDS_EXTRA = "urdaemon foxglove needs the foxglove extra: pip install 'urdaemon[foxglove]'"
+DEFAULT_PORT = 8765
+"""Foxglove's usual WebSocket port."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def add_parsers(sub: Any) -> None:
+    """The ``foxglove`` command's parser."""
+    from urdaemon.client import DEFAULT_ENDPOINT
+
+    parser = sub.add_parser(
+        "foxglove", help="serve a cell live over Foxglove's WebSocket protocol (the foxglove extra)"
+    )
+    parser.add_argument("--connect", default=None, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})")
+    parser.add_argument("--zenoh-config", metavar="FILE", default=None, help="Zenoh JSON5 config (e.g. TLS)")
+    parser.add_argument("--cell", default=None, help="cell name (default: the one cell served)")
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address the WebSocket server listens on (default 127.0.0.1)"
+    )
+    parser.add_argument(
+        "--port",
+        type=_port_arg,
+        default=DEFAULT_PORT,
+        help=f"port of the WebSocket server (default {DEFAULT_PORT}; 0: any free port)",
+    )
+    parser.set_defaults(run=foxglove_main)
+
+
+def _port_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a port number, got {text!r}") from None
+    if not 0 <= value < 65536:
+        raise argparse.ArgumentTypeError(f"must be within 0..65535, got {value}")
+    return value
+
+
+def foxglove_main(args: argparse.Namespace) -> int:
+    """Run ``urdaemon foxglove`` with its parsed arguments; the exit code."""
+    try:
+        import foxglove  # noqa: F401  (only to say early that the extra is missing)
+    except ImportError:
+        print(NEEDS_EXTRA, file=sys.stderr)
+        return 2
+    try:
+        return asyncio.run(_serve(args))
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except UrDaemonError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+
+
+async def _serve(args: argparse.Namespace) -> int:
+    from urdaemon.client import DEFAULT_ENDPOINT
+    from urdaemon.foxglove_bridge.bridge import running_bridge
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    handled = []
+    for sig in STOP_SIGNALS:
+        with contextlib.suppress(ValueError, RuntimeError):  # only the main thread may
+            loop.add_signal_handler(sig, stop.set)
+            handled.append(sig)
+    try:
+        try:
+            bridge_cm = running_bridge(
+                args.connect or DEFAULT_ENDPOINT,
+                host=args.host,
+                port=args.port,
+                cell=args.cell,
+                zenoh_config=args.zenoh_config,
+            )
+            async with bridge_cm as bridge:
+                print(f"urdaemon foxglove of cell {bridge.cell!r}: {bridge.url}", flush=True)
+                await stop.wait()
+                print("urdaemon foxglove: stopping", file=sys.stderr)
+        except RuntimeError as err:  # foxglove-sdk could not start its server (the port taken, ...)
+            print(f"error: the Foxglove server did not start: {err}", file=sys.stderr)
+            return 1
+    finally:
+        for sig in handled:
+            loop.remove_signal_handler(sig)
+    return 0
