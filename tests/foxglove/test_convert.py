@@ -1,6 +1,7 @@
 """A published sample → the Foxglove messages it becomes, read back with rosbags (an independent CDR
-reader): joint states as the recorder writes them, tf as one message per parent link, the URDF as a
-``std_msgs/msg/String``; a key the recorder does not keep gives none, a bad payload a clear error."""
+reader): joint states as the recorder writes them, tf as one message of parent → child transforms,
+the URDF as a ``std_msgs/msg/String``; a key the recorder does not keep gives none, a bad payload a
+clear error."""
 
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ def test_joint_states_as_the_recorder_writes_them() -> None:
     assert (read.header.stamp.sec, read.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
 
 
-def test_tf_goes_out_per_parent_link_with_the_childs_pose_in_its_parent() -> None:
+def test_tf_goes_out_as_one_message_with_each_childs_pose_in_its_parent() -> None:
     message = {
         "v": 1,
         "frame": "world",
@@ -52,14 +53,14 @@ def test_tf_goes_out_per_parent_link_with_the_childs_pose_in_its_parent() -> Non
         },
     }
     records = records_of("c/tf", json.dumps(message).encode(), 42, JOINTS)
-    assert [(topic, log_time) for topic, _, log_time in records] == [("/c/tf", 42), ("/c/tf", 42)]
-    messages: list[Any] = [TYPES.deserialize_cdr(data, "tf2_msgs/msg/TFMessage") for _, data, _ in records]
-    read = [m.transforms for m in messages]
-    assert [[(t.header.frame_id, t.child_frame_id) for t in ts] for ts in read] == [
-        [("world", "a_base")],
-        [("a_base", "a_l1"), ("a_base", "a_l2")],
+    assert [(topic, log_time) for topic, _, log_time in records] == [("/c/tf", 42)]
+    read: Any = TYPES.deserialize_cdr(records[0][1], "tf2_msgs/msg/TFMessage")
+    assert [(t.header.frame_id, t.child_frame_id) for t in read.transforms] == [
+        ("world", "a_base"),
+        ("a_base", "a_l1"),
+        ("a_base", "a_l2"),
     ]
-    l2 = read[1][1].transform
+    l2 = read.transforms[2].transform
     # 0.1 m towards -x in the world is +x in a_base, which is turned half a turn
     assert [l2.translation.x, l2.translation.y, l2.translation.z] == pytest.approx([0.1, 0.0, 0.0], abs=1e-12)
     assert abs(l2.rotation.w) == pytest.approx(1.0)

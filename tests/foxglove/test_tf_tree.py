@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from urdaemon.description.kinematics import compose_poses
 from urdaemon.errors import DescriptionError
-from urdaemon.foxglove_bridge.tf_tree import by_parent, inverse_pose, joint_links, joint_transforms
+from urdaemon.foxglove_bridge.tf_tree import inverse_pose, joint_links, joint_transforms
 
 URDF = """<robot name="r">
   <link name="world"/><link name="a_base"/><link name="a_l1"/><link name="a_l2"/><link name="a_tool"/>
@@ -75,12 +75,6 @@ def test_world_itself_may_be_missing_and_links_without_poses_are_left_out() -> N
     assert [(p, c) for p, c, _ in out] == [("world", "a_base"), ("a_base", "a_l1")]
     assert close(out[0][2], (0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
     assert close(out[1][2], (0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 1.0))
-
-
-def test_by_parent_groups_in_first_seen_order() -> None:
-    out = by_parent([("w", "a", IDENTITY), ("a", "b", IDENTITY), ("w", "c", IDENTITY)])
-    assert list(out) == ["w", "a"]
-    assert [child for child, _ in out["w"]] == ["a", "c"]
 
 
 _unit = st.floats(-1.0, 1.0, allow_nan=False)

@@ -155,3 +155,11 @@ def test_nan_survives_the_round_trip() -> None:
 def test_malformed_bytes_are_refused_naming_why(data: bytes, problem: str) -> None:
     with pytest.raises(ValueError, match=problem):
         cdr.decode_joint_state(data)
+
+
+def test_transforms_each_with_its_own_parent_match_rosbags() -> None:
+    pose = [0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 1.0]
+    ours = cdr.encode_transforms(7, [("world", "a", pose), ("a", "b", pose)])
+    read: Any = STORE.deserialize_cdr(ours, "tf2_msgs/msg/TFMessage")
+    assert [(t.header.frame_id, t.child_frame_id) for t in read.transforms] == [("world", "a"), ("a", "b")]
+    assert [(t.frame_id, t.child_frame_id) for t in cdr.decode_tf(ours)] == [("world", "a"), ("a", "b")]

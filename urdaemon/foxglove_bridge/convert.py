@@ -9,7 +9,7 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
-from urdaemon.foxglove_bridge.tf_tree import by_parent, joint_transforms
+from urdaemon.foxglove_bridge.tf_tree import joint_transforms
 from urdaemon.recording import cdr
 from urdaemon.recording.channels import kind_of, time_of
 
@@ -41,11 +41,7 @@ def _tf_records(
     if not isinstance(links, dict):
         raise ValueError(f"{topic}: links is not an object")
     root = str(message.get("frame", "world"))
-    transforms = joint_transforms(links, joints, root)
-    return [
-        (topic, cdr.encode_tf(log_time, parent, children), log_time)
-        for parent, children in by_parent(transforms).items()
-    ]
+    return [(topic, cdr.encode_transforms(log_time, joint_transforms(links, joints, root)), log_time)]
 
 
 def description_record(topic: str, urdf: str, now_ns: int) -> Record:

@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from urdaemon.description.kinematics import compose_poses
 from urdaemon.errors import DescriptionError
 
-__all__ = ["Transform", "by_parent", "inverse_pose", "joint_links", "joint_transforms"]
+__all__ = ["Transform", "inverse_pose", "joint_links", "joint_transforms"]
 
 Transform = tuple[str, str, tuple[float, ...]]
 """(parent link, child link, the child's pose in the parent: x, y, z, qx, qy, qz, qw)."""
@@ -56,12 +56,3 @@ def joint_transforms(
             continue
         out.append((parent, child, compose_poses(inverse_pose(parent_pose), child_pose)))
     return out
-
-
-def by_parent(transforms: Sequence[Transform]) -> dict[str, list[tuple[str, tuple[float, ...]]]]:
-    """The transforms grouped by parent (each group one ``tf2_msgs/TFMessage``: the recorder's encoder
-    stamps every transform of a message with one parent), in first-seen order."""
-    groups: dict[str, list[tuple[str, tuple[float, ...]]]] = {}
-    for parent, child, pose in transforms:
-        groups.setdefault(parent, []).append((child, pose))
-    return groups

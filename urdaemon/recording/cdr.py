@@ -29,6 +29,7 @@ __all__ = [
     "encode_pose_stamped",
     "encode_string",
     "encode_tf",
+    "encode_transforms",
     "stamp_of",
 ]
 
@@ -222,10 +223,16 @@ def decode_pose_stamped(data: bytes | memoryview) -> PoseStampedMessage:
 def encode_tf(time_ns: int, frame_id: str, links: Sequence[tuple[str, Sequence[float]]]) -> bytes:
     """``tf2_msgs/msg/TFMessage``: one transform from ``frame_id`` to each link (name, x, y, z, qx, qy,
     qz, qw), all stamped ``time_ns``."""
+    return encode_transforms(time_ns, [(frame_id, child, pose) for child, pose in links])
+
+
+def encode_transforms(time_ns: int, transforms: Sequence[tuple[str, str, Sequence[float]]]) -> bytes:
+    """``tf2_msgs/msg/TFMessage`` of (parent, child, x, y, z, qx, qy, qz, qw) transforms, all stamped
+    ``time_ns``."""
     out = _Writer()
-    out.u32(len(links))
-    for child, transform in links:
-        out.header(time_ns, frame_id)
+    out.u32(len(transforms))
+    for parent, child, transform in transforms:
+        out.header(time_ns, parent)
         out.string(child)
         out.fixed_doubles(transform)
     return bytes(out.buf)
