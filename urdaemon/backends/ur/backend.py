@@ -453,6 +453,22 @@ class UrBackend(Backend):
         return self._messages.calibration_ok
 
     @property
+    def controller_version(self) -> dict[str, Any] | None:
+        """The controller's software, as its primary interface's VERSION message named it on the
+        current connection (None: not connected, or not said yet); ``urdaemon info`` shows it."""
+        version = self._primary.version if self._primary is not None else None
+        if version is None:
+            return None
+        return {
+            "project": version.project_name,
+            "major": version.major_version,
+            "minor": version.minor_version,
+            "bugfix": version.bugfix_version,
+            "build": version.build_number,
+            "date": version.build_date,
+        }
+
+    @property
     def _program_links_up_at(self) -> float:
         """When the program last held all its links (``program.links_up_at``)."""
         return self._program.links_up_at
