@@ -150,7 +150,10 @@ class DaemonInfo:
                 "lease": status["lease"],
                 "calibration_ok": status["calibration_ok"],
                 "tcp": status["tcp"],
-                "controller_version": getattr(runtime.backend, "controller_version", None),
+                # the ur backend's RobotMessages (backends/ur/robot_messages.py) heard it; others have none
+                "controller_version": getattr(
+                    getattr(runtime.backend, "messages", None), "controller_version", None
+                ),
             }
             robots.append({**fixed, **live})
         return {**self._fixed, "host_time_ns": time.time_ns(), "robots": robots}
