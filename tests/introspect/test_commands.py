@@ -206,3 +206,17 @@ async def test_echo_with_a_timeout_keeps_waiting_for_a_robot_that_does_not_exist
     assert "warning:" in run.stderr
     assert "no robot 'carol'" in run.stderr
     assert "within 3.5 s" in run.stderr
+
+
+async def test_the_daemon_answers_its_key_once_and_no_robot_may_be_named_so(served: Served) -> None:
+    from urdaemon.cell import parse_cell
+    from urdaemon.errors import ConfigError
+
+    replies = await served.client.query(f"{served.cell}/daemon")
+    assert len(replies) == 1  # the cell-level queryable that names unknown robots stays silent
+    answer = json.loads(replies[0])
+    assert (answer["v"], answer["cell"]) == (1, served.cell)
+    covering = await served.client.query_replies("**", timeout=2.0, every_queryable=True)
+    assert [r.key for r in covering if r.key.endswith("/daemon")] == [f"{served.cell}/daemon"]
+    with pytest.raises(ConfigError, match="daemon"):
+        parse_cell(TWO_MOCKS.replace("name: bob", "name: daemon"))

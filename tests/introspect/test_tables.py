@@ -61,6 +61,7 @@ def _daemon(cell: str, *robots: dict[str, Any]) -> dict[str, Any]:
         "started_at_ns": 0,
         "host_time_ns": 125 * S,
         "listen": ["tcp/127.0.0.1:7447"],
+        "keys": {"published": [f"{cell}/tf", f"{cell}/goal/*/*"], "queryables": [f"{cell}/daemon"]},
         "robots": list(robots),
     }
 
@@ -142,6 +143,7 @@ def test_find_robot(name: str, cell: str | None, answer: tuple[str, str | None])
         ("north/tff", False, "no robot 'tff' in cell north"),
         ("*/nobody/status", False, "no daemon reachable publishes on it; cells: north, south, west"),
         ("north/tf", True, "published as north/tf"),
+        ("north/goal/g1/result", True, "published as north/goal/*/*"),
     ],
 )
 def test_a_silent_key_is_explained(key: str, published: bool, text: str) -> None:

@@ -48,7 +48,7 @@ class Survey:
         for daemon in self.daemons.values():
             for robot in daemon.get("robots", []):
                 keys += robot.get("keys", {}).get("published", [])
-            keys += [f"{daemon.get('cell')}/tf"]
+            keys += daemon.get("keys", {}).get("published", [])
         return keys
 
 

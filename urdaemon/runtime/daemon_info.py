@@ -106,7 +106,17 @@ class DaemonInfo:
                 "status": publish.status_rate_hz,
                 "io": publish.io_rate_hz,
             },
-            "keys": [self._keys.tf, self._keys.robot_description, self._keys.stop, self._keys.daemon],
+            "keys": {
+                "published": [self._keys.tf, self._keys.goal_messages],
+                "queryables": [
+                    self._keys.robot_description,
+                    self._keys.stop,
+                    self._keys.goal_trajectory,
+                    self._keys.goal_cancel,
+                    self._keys.goal_results,
+                    self._keys.daemon,
+                ],
+            },
         }
         self._robots = [self._robot_facts(rt, limits[rt.robot.name], cell) for rt in self._runtimes]
 
