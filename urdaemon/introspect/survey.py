@@ -3,6 +3,7 @@ robot's liveliness token, over any number of cells (a wildcard query, never one 
 
 from __future__ import annotations
 
+import asyncio
 import json
 from dataclasses import dataclass, field
 from typing import Any
@@ -10,10 +11,14 @@ from typing import Any
 from urdaemon.client import Client
 from urdaemon.publish.keys import CellKeys
 
-__all__ = ["SURVEY_TIMEOUT_S", "Survey", "find_robot", "survey"]
+__all__ = ["ROUNDS", "SURVEY_TIMEOUT_S", "Survey", "find_robot", "survey"]
 
-SURVEY_TIMEOUT_S = 2.0
-"""How long the daemons are given to answer (each answers from memory, at once)."""
+SURVEY_TIMEOUT_S = 5.0
+"""How long the daemons are given to answer (each answers from memory, at once: the time is spent
+only on a daemon that does not answer)."""
+ROUNDS = 3
+"""Rounds of questions at most (see ``survey``)."""
+ROUND_PAUSE_S = 0.1
 
 
 @dataclass
@@ -53,21 +58,33 @@ class Survey:
 
 
 async def survey(client: Client, *, timeout: float = SURVEY_TIMEOUT_S) -> Survey:
-    """Ask every daemon reachable to describe itself, and list the robots' liveliness tokens."""
-    found = Survey(alive=await client.robots(timeout=timeout))
+    """Ask every daemon reachable to describe itself, and list the robots' liveliness tokens.
+
+    A session that just connected may hear of some tokens and queryables a moment late (a router
+    passes them on): the question is asked again until a round adds nothing (at most ``ROUNDS``)."""
+    found = Survey()
+    for round_ in range(ROUNDS):
+        seen = (set(found.daemons), set(found.alive))
+        await _ask(client, found, timeout)
+        if round_ and (set(found.daemons), set(found.alive)) == seen:
+            break
+        await asyncio.sleep(ROUND_PAUSE_S)
+    return found
+
+
+async def _ask(client: Client, found: Survey, timeout: float) -> None:
+    """One round: the tokens and the daemons' answers, added to ``found``."""
+    found.alive = sorted(set(found.alive) | set(await client.robots(timeout=timeout)))
     replies = await client.query_replies(CellKeys("*").daemons, timeout=timeout, every_queryable=True)
     for reply in replies:
         try:
             data = json.loads(reply.payload)
         except ValueError:
             continue
-        if (
-            isinstance(data, dict)
-            and isinstance(data.get("cell"), str)
-            and isinstance(data.get("robots"), list)
-        ):
+        if not isinstance(data, dict) or not isinstance(data.get("robots"), list):
+            continue
+        if isinstance(data.get("cell"), str):
             found.daemons[data["cell"]] = data
-    return found
 
 
 def find_robot(found: Survey, name: str, cell: str | None) -> tuple[str, str | None]:
