@@ -9,7 +9,7 @@ import sys
 import time
 
 from urdaemon.errors import UrDaemonError
-from urdaemon.introspect.connection import EXIT_FAILED, EXIT_OK, connect, error
+from urdaemon.introspect.connection import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, connect, error
 from urdaemon.introspect.rates import DEFAULT_WINDOW, format_stats
 from urdaemon.introspect.sampling import Collector
 from urdaemon.introspect.silence import SILENCE_S, explain
@@ -44,7 +44,7 @@ async def hz_command(args: argparse.Namespace) -> int:
     try:
         zenoh.KeyExpr(args.key)
     except zenoh.ZError as err:
-        return error(f"{args.key!r} is not a valid key expression: {err}", 2)
+        return error(f"{args.key!r} is not a valid key expression: {err}", EXIT_BAD_INPUT)
     try:
         client = await connect(args)
     except UrDaemonError as err:
