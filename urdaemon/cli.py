@@ -45,6 +45,7 @@ EXIT_INTERRUPTED = 130
 TOOL_MODULES: tuple[str, ...] = (
     "urdaemon.doctor.command",
     "urdaemon.foxglove_bridge.command",
+    "urdaemon.introspect.commands",
 )
 """Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``
 (``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
@@ -219,9 +220,14 @@ def _add_client_tools(sub: Any) -> None:
     echo.add_argument(
         "--timeout",
         type=_seconds_arg(True),
-        default=0.0,
-        help="give up after S seconds without a sample (0: never)",
+        default=None,
+        help=(
+            "give up after S seconds without a sample (0: never); not given: wait while something "
+            "publishes on the key, give up after 3 s when nothing does"
+        ),
     )
+    echo.add_argument("--field", default=None, help="print only this field, e.g. position or tcp.pose.0")
+    echo.add_argument("--rate", type=_rate_arg, default=None, help="at most HZ samples a second of each key")
     _connect_arg(echo)
 
     call = sub.add_parser(
@@ -710,35 +716,30 @@ async def _echo(args: argparse.Namespace) -> int:
     import zenoh
 
     from urdaemon.client import zenoh_message
+    from urdaemon.introspect.echo import echo_command
 
-    key, count, timeout = args.key, args.count, args.timeout
     problem = _bad_connection(args)
     try:
-        zenoh.KeyExpr(key)
+        zenoh.KeyExpr(args.key)
     except zenoh.ZError as err:
-        problem = f"{key!r} is not a valid key expression: {zenoh_message(err)}"
+        problem = f"{args.key!r} is not a valid key expression: {zenoh_message(err)}"
+    if problem is None and args.field is not None and not all(args.field.split(".")):
+        problem = f"--field {args.field!r} is not a field path like position or tcp.pose.0"
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    return await echo_command(args)
+
+
+def _rate_arg(text: str) -> float:
+    """``echo --rate``: a finite rate > 0 (Hz)."""
     try:
-        client = await _connect(args)
-    except UrDaemonError as err:
-        return _fail(err)
-    async with client:
-        sub = client.subscribe(key)
-        received = 0
-        while count <= 0 or received < count:
-            try:
-                sample_key, payload = await sub.get(timeout if timeout > 0 else None)
-            except UrDaemonError as err:
-                return _fail(err)
-            try:
-                value: object = json.loads(payload)
-            except (UnicodeDecodeError, json.JSONDecodeError):
-                value = payload.decode(errors="replace")
-            print(json.dumps({"key": sample_key, "value": value}), flush=True)
-            received += 1
-    return EXIT_OK
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a rate in Hz, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite rate in Hz > 0, got {text}")
+    return value
 
 
 SERVICE_NAME = r"^[a-z_]{1,40}$"

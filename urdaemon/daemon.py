@@ -35,6 +35,7 @@ from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals
+from urdaemon.runtime.daemon_info import DaemonInfo
 from urdaemon.runtime.lease_keeper import watch_lease_holders
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
@@ -190,6 +191,8 @@ class Daemon:
             node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)
             node.cell_queryable(self.keys.any_robot, self._on_any_robot)
             node.queryable(self.keys.stop, self._on_cell_stop, max_bytes=None)  # never refused: any payload
+            info = DaemonInfo(self.cell, self.runtimes, self.description.limits, self.listen_endpoints)
+            node.cell_queryable(self.keys.daemon, info.on_query)  # also answers ``*/daemon``: every cell
             tf_pub = node.publisher(self.keys.tf)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))

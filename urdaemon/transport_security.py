@@ -163,15 +163,20 @@ def _grant_rules(grant: Grant, cell: str) -> list[_Rule]:
 
 def _read_rules(cell: str, robot: str) -> list[_Rule]:
     """Subscribing to a robot's state, events and goal messages; asking for goal results, the
-    services that only read (``cycle_stats``, ``doctor``) and the cell's description (static: what any reader
-    needs to draw the robot). ``*``: every robot, the cell's tf (every robot's link poses) and the
-    cell goals' messages."""
+    services that only read (``cycle_stats``, ``doctor``), the cell's description (static: what any
+    reader needs to draw the robot) and the daemon's description of itself (``daemon``: what
+    ``urdaemon list`` and ``info`` read). ``*``: every robot, the cell's tf (every robot's link poses)
+    and the cell goals' messages."""
     keys, whole = RobotKeys(cell, robot), CellKeys(cell)
     readable = tuple(keys.service(s.name) for s in SERVICES if not s.commanding and s is not STOP)
     state = (keys.joint_states, keys.tcp_pose, keys.status, keys.io, keys.events, keys.servo_command)
     rules = [
         _Rule(f"read {robot}: state", _SUBSCRIBE, (*state, keys.goal_messages)),
-        _Rule(f"read {robot}: queries", _GET, (keys.goal_results, *readable, whole.robot_description)),
+        _Rule(
+            f"read {robot}: queries",
+            _GET,
+            (keys.goal_results, *readable, whole.robot_description, whole.daemon),
+        ),
         _Rule(f"read {robot}: alive", _WATCH, (keys.alive,)),
     ]
     if robot == ALL_ROBOTS:

@@ -199,6 +199,7 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
         "sec/alice/service/cycle_stats",
         "sec/alice/service/doctor",
         "sec/robot_description",
+        "sec/daemon",  # what urdaemon list and info read
     }
     assert "sec/tf" not in _allowed(acl, "viewer", "ingress", "declare_subscriber")  # bob's poses too
     assert "sec/alice/joint_states" in _allowed(acl, "viewer", "ingress", "declare_subscriber")

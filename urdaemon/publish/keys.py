@@ -26,6 +26,17 @@ class CellKeys:
         return f"{self.cell}/robot_description"
 
     @property
+    def daemon(self) -> str:
+        """Queryable: the daemon serving the cell describes itself and its robots (what ``urdaemon
+        list`` and ``info`` show; runtime/daemon_info.py)."""
+        return f"{self.cell}/daemon"
+
+    @property
+    def daemons(self) -> str:
+        """Every cell's ``daemon`` queryable (wildcard: what a client asks to find every cell)."""
+        return "*/daemon"
+
+    @property
     def any_robot(self) -> str:
         """Every key under any robot's name (the daemon answers queries on robots it does not serve)."""
         return f"{self.cell}/*/**"

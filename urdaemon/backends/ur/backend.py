@@ -92,7 +92,7 @@ class UrBackend(Backend):
         """Who hears the running passthrough goal's result."""
         self._writer = ReverseWriter(self.servers)
         self._program = ControlProgram(robot, self.options, self.ports, self.servers, program)
-        self._messages = RobotMessages(self.name, self.notice, self._program)
+        self.messages = RobotMessages(self.name, self.notice, self._program)
         self._services = UrServices(self)
         self._start_up = StartUp(self)
         self.diagnosis: Diagnosis = Diagnosis(self)  # the doctor's: what it learns of the controller
@@ -115,7 +115,7 @@ class UrBackend(Backend):
             await self._program.listen(self.address)
         try:
             rtde = await self._connect_rtde()
-            primary = self._primary = await PrimaryLink.connect(self.address, self._messages.on_message)
+            primary = self._primary = await PrimaryLink.connect(self.address, self.messages.on_message)
             primary_task = asyncio.get_running_loop().create_task(primary.run())
             try:
                 await self._serve(primary, primary_task, rtde)
@@ -171,7 +171,7 @@ class UrBackend(Backend):
             await self._dashboard_link()
         except UrDaemonError as err:  # PolyScope X has none; services will say so when asked
             log.warning("[%s] no dashboard: %s", self.name, err)
-        await self._messages.check_calibration(primary, self.expected_hash, self.options.calibration_check)
+        await self.messages.check_calibration(primary, self.expected_hash, self.options.calibration_check)
         self._first_package.clear()
         await rtde.start()
         if self.options.startup:
@@ -448,12 +448,12 @@ class UrBackend(Backend):
     @property
     def robot_messages(self) -> list[str]:
         """The robot's last messages (``robot_messages.KEPT_MESSAGES``)."""
-        return self._messages.recent
+        return self.messages.recent
 
     @property
     def calibration_ok(self) -> bool | None:
         """Whether the robot's kinematics are the configured calibration's (None: not checked yet)."""
-        return self._messages.calibration_ok
+        return self.messages.calibration_ok
 
 
 def _servo_timeout(options: UrOptions, step_time: float) -> float:

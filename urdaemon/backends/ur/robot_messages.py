@@ -28,7 +28,7 @@ KEPT_MESSAGES = 20
 class RobotMessages:
     """The robot's messages of one backend, told through ``notice(kind, text)``."""
 
-    __slots__ = ("calibration_ok", "name", "notice", "program", "recent")
+    __slots__ = ("calibration_ok", "controller_version", "name", "notice", "program", "recent")
 
     def __init__(self, name: str, notice: Callable[[str, str], None], program: ControlProgram) -> None:
         self.name = name
@@ -39,11 +39,23 @@ class RobotMessages:
         """The last ``KEPT_MESSAGES`` texts."""
         self.calibration_ok: bool | None = None
         """Whether the robot's kinematics hash is the configured one (None: not checked yet)."""
+        self.controller_version: dict[str, Any] | None = None
+        """The controller's software as its VERSION message named it (None: not said yet); kept
+        after the link drops, until a new connection says it again (``urdaemon info`` shows it)."""
 
     def on_message(self, message: Any) -> None:
         """One message from the primary interface."""
         text = ""
-        if isinstance(message, prim.RuntimeExceptionMessage):
+        if isinstance(message, prim.VersionMessage):
+            self.controller_version = {
+                "project": message.project_name,
+                "major": message.major_version,
+                "minor": message.minor_version,
+                "bugfix": message.bugfix_version,
+                "build": message.build_number,
+                "date": message.build_date,
+            }
+        elif isinstance(message, prim.RuntimeExceptionMessage):
             text = f"runtime exception at {message.line}:{message.column}: {message.text}"
             log.warning("[%s] %s", self.name, text)
             self.program.ended = text

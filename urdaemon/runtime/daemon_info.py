@@ -1,0 +1,187 @@
+"""The daemon's description of itself, answered on ``<cell>/daemon`` (what ``urdaemon list`` and
+``urdaemon info`` show).
+
+What never changes (host, pid, version, listen endpoints, each robot's model, ports, limits,
+configured rates and keys) is gathered once when the daemon starts; what changes (lifecycle, lease,
+calibration check, controller version, TCP) is read at the moment of the query from the owners that
+keep it (the robot's status message, its backend). Nothing here runs in a robot's cycle: the
+queryable is answered on the loop, between cycles, when someone asks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from urdaemon import __version__
+from urdaemon.cell.config import Cell, Robot
+from urdaemon.model import JointLimits
+from urdaemon.publish import codec
+from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.robot import RobotRuntime
+
+__all__ = ["DaemonInfo", "robot_keys", "ur_ports"]
+
+log = logging.getLogger(__name__)
+
+
+def ur_ports(robot: Robot) -> dict[str, Any] | None:
+    """A UR robot's ports: the controller's (primary, RTDE, dashboard) at its address, and the
+    daemon's callback ports its control program connects back to; None for other backends."""
+    if robot.backend != "ur":
+        return None
+    from urdaemon.protocols.dashboard import DASHBOARD_PORT
+    from urdaemon.protocols.primary import PRIMARY_PORT
+    from urdaemon.protocols.rtde import RTDE_PORT
+
+    return {
+        "address": robot.address,
+        "controller": {"primary": PRIMARY_PORT, "rtde": RTDE_PORT, "dashboard": DASHBOARD_PORT},
+        "callbacks": robot.ports.as_dict(),
+    }
+
+
+def robot_keys(keys: RobotKeys, services: Sequence[str], *, posed: bool, servo: bool) -> dict[str, list[str]]:
+    """The keys one robot serves: what it publishes, answers and subscribes to (docs/keys.md)."""
+    published = [keys.joint_states]
+    if posed:
+        published.append(keys.tcp_pose)
+    published += [keys.status, keys.io, keys.events]
+    if servo:
+        published.append(keys.servo_command)
+    published.append(keys.goal_messages)
+    queryables = [keys.goal_trajectory, keys.goal_move, keys.goal_linear, keys.goal_cancel]
+    queryables += [keys.goal_results, keys.lease, *(keys.service(name) for name in sorted(services))]
+    subscribed = [
+        keys.command_joint_position,
+        keys.command_joint_velocity,
+        keys.command_twist,
+        keys.command_freedrive,
+    ]
+    return {
+        "published": published,
+        "queryables": queryables,
+        "subscribed": subscribed,
+        "liveliness": [keys.alive],
+    }
+
+
+def _limits(limits: JointLimits) -> dict[str, Any]:
+    return {
+        "names": list(limits.names),
+        "min_position": list(limits.min_position),
+        "max_position": list(limits.max_position),
+        "max_velocity": list(limits.max_velocity),
+        "max_acceleration": list(limits.max_acceleration),
+    }
+
+
+class DaemonInfo:
+    """Answers ``<cell>/daemon``: the facts gathered at start-up, and the live ones at query time."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        runtimes: Sequence[RobotRuntime],
+        limits: dict[str, JointLimits],
+        listen: Sequence[str],
+    ) -> None:
+        self._keys = CellKeys(cell.cell)
+        self._runtimes = tuple(runtimes)
+        publish = cell.publish
+        self._fixed: dict[str, Any] = {
+            "cell": cell.cell,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "version": __version__,
+            "started_at_ns": time.time_ns(),
+            "listen": list(listen),
+            "rates_hz": {
+                "tf": publish.tf_rate_hz,
+                "status": publish.status_rate_hz,
+                "io": publish.io_rate_hz,
+            },
+            "keys": {
+                "published": [self._keys.tf, self._keys.goal_messages],
+                "queryables": [
+                    self._keys.robot_description,
+                    self._keys.stop,
+                    self._keys.goal_trajectory,
+                    self._keys.goal_cancel,
+                    self._keys.goal_results,
+                    self._keys.daemon,
+                ],
+            },
+        }
+        self._robots = [self._robot_facts(rt, limits[rt.robot.name], cell) for rt in self._runtimes]
+
+    @staticmethod
+    def _robot_facts(runtime: RobotRuntime, limits: JointLimits, cell: Cell) -> dict[str, Any]:
+        robot, backend = runtime.robot, runtime.backend
+        state_hz = backend.rate_hz / cell.publish.joint_states_decimation
+        posed = runtime.tcp_poses.available
+        rates: dict[str, float] = {"joint_states": state_hz}
+        if posed:
+            rates["tcp_pose"] = state_hz
+        rates |= {"status": cell.publish.status_rate_hz, "io": cell.publish.io_rate_hz}
+        if backend.kind == "servo":
+            rates["servo_command"] = backend.rate_hz
+        return {
+            "name": robot.name,
+            "backend": backend.kind,
+            "model": robot.model,
+            "rate_hz": backend.rate_hz,
+            "publish_rates_hz": rates,
+            "keys": robot_keys(
+                runtime.keys, sorted(runtime.service_names), posed=posed, servo=backend.kind == "servo"
+            ),
+            "ports": ur_ports(robot),
+            "calibration": {
+                "file": robot.calibration,
+                "expected_hash": getattr(backend, "expected_hash", None),
+            },
+            "tcp_configured": list(robot.tcp),
+            "joint_limits": _limits(limits),
+        }
+
+    def message(self) -> dict[str, Any]:
+        """The reply: the fixed facts, each robot's with its live ones, and when it was answered."""
+        robots = []
+        for runtime, fixed in zip(self._runtimes, self._robots, strict=True):
+            status = runtime.status_message()
+            live = {
+                "lifecycle": status["lifecycle"],
+                "reason": status["reason"],
+                "lease": status["lease"],
+                "calibration_ok": status["calibration_ok"],
+                "tcp": status["tcp"],
+                # the ur backend's RobotMessages (backends/ur/robot_messages.py) heard it; others have none
+                "controller_version": getattr(
+                    getattr(runtime.backend, "messages", None), "controller_version", None
+                ),
+            }
+            robots.append({**fixed, **live})
+        return {**self._fixed, "host_time_ns": time.time_ns(), "robots": robots}
+
+    def on_query(self, query: Any) -> None:
+        """Answer a query on (or a wildcard over) ``<cell>/daemon``; its payload is never read."""
+        try:
+            asked = str(query.key_expr)
+            if asked == self._keys.daemon or _intersects(asked, self._keys.daemon):
+                query.reply(self._keys.daemon, codec.encode(self.message()))
+        except Exception as err:  # the querier may have gone; this must never take the cell down
+            log.debug("answering %s failed: %s", self._keys.daemon, err)
+        finally:
+            with contextlib.suppress(Exception):
+                query.drop()
+
+
+def _intersects(asked: str, key: str) -> bool:
+    import zenoh
+
+    return bool(zenoh.KeyExpr(asked).intersects(zenoh.KeyExpr(key)))
