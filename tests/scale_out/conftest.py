@@ -128,7 +128,16 @@ async def wait_alive(client: Client, robots: set[str], site: Site, timeout: floa
 
 @asynccontextmanager
 async def connected(endpoint: str) -> AsyncIterator[Client]:
-    client = await Client.connect(endpoint, timeout=10.0)
+    """A client of the router at ``endpoint``."""
+    async with connected_with(endpoint, None) as client:
+        yield client
+
+
+@asynccontextmanager
+async def connected_with(endpoint: str, config_file: Path | None) -> AsyncIterator[Client]:
+    """A client of the router at ``endpoint``, its session started from ``config_file`` (TLS)."""
+    config = None if config_file is None else str(config_file)
+    client = await Client.connect(endpoint, timeout=10.0, config_file=config)
     try:
         yield client
     finally:
