@@ -131,20 +131,18 @@ def router_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("adminspace/enabled", "true")
     for field, given in (("listen", listen), ("connect", connect)):
-        if given:
-            endpoints = list(given)
-        else:
-            endpoints = _file_endpoints(conf, field)
-            if field == "listen" and not endpoints:
-                endpoints = [DEFAULT_LISTEN]
+        source = f"--{field}" if given else f"{field} (in --zenoh-config)"
+        endpoints = list(given) if given else _file_endpoints(conf, field)
+        if field == "listen" and not endpoints:
+            endpoints = [DEFAULT_LISTEN]
         for endpoint in endpoints:
             problem = endpoint_problem(endpoint)
             if problem is not None:
-                raise ConfigError(f"--{field} {problem}")
+                raise ConfigError(f"{source} {problem}")
         try:
             conf.insert_json5(f"{field}/endpoints", json.dumps(endpoints))
         except zenoh.ZError as err:
-            raise ConfigError(f"--{field} {endpoints}: {_first_line(err)}") from None
+            raise ConfigError(f"{source} {endpoints}: {_first_line(err)}") from None
     secure = [e for e in _file_endpoints(conf, "listen") if e.split("/", 1)[0] in _SECURE]
     if secure and json.loads(conf.get_json("transport/link/tls/listen_certificate")) is None:
         raise ConfigError(

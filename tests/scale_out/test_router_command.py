@@ -90,6 +90,14 @@ def test_a_config_file_zenoh_cannot_read_exits_2(tmp_path: Path) -> None:
     assert f"--zenoh-config {bad}:" in run.stderr
 
 
+def test_a_bad_endpoint_in_the_config_file_is_named_as_the_files(tmp_path: Path) -> None:
+    config = tmp_path / "router.json5"
+    config.write_text('{listen: {endpoints: ["tcp/127.0.0.1:99999"]}}', encoding="utf-8")
+    run = run_cli("router", "--zenoh-config", str(config))
+    assert run.code == 2, run
+    assert "listen (in --zenoh-config) 'tcp/127.0.0.1:99999' needs a port 0..65535" in run.stderr
+
+
 def test_a_taken_port_exits_1_naming_it() -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
