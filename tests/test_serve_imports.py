@@ -109,13 +109,13 @@ def test_serving_a_large_reply_maps_no_shared_memory_pool() -> None:
 def test_the_daemon_session_keeps_what_the_cell_file_sets() -> None:
     """Shared memory off must leave the cell's mode, endpoints, scouting and transport as given."""
     options = ZenohOptions(
-        mode="client",
+        mode="router",  # a mode that both listens and dials (a client daemon listens nowhere)
         connect=("tcp/127.0.0.1:7448",),
         multicast_scouting=True,
         low_latency=True,
     )
     conf = serve_config(options, ("tcp/127.0.0.1:7449",))
-    assert json.loads(conf.get_json("mode")) == "client"
+    assert json.loads(conf.get_json("mode")) == "router"
     assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7448"]
     assert json.loads(conf.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7449"]
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is True

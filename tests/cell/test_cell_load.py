@@ -316,10 +316,7 @@ def test_summarize_shows_address_calibration_and_connect(tmp_path: Path) -> None
     )
     summary = summarize(parse_cell(text, base_dir=tmp_path))
     first, second = summary.splitlines()
-    assert (
-        first
-        == "cell 'c': 1 robot(s); zenoh client listen=['tcp/127.0.0.1:7447'] connect=['tcp/10.0.0.1:7447']"
-    )
+    assert first == "cell 'c': 1 robot(s); zenoh client listen=[] connect=['tcp/10.0.0.1:7447']"
     assert second.startswith("  alice: ur5e backend=ur at 10.0.0.2 ports=50001/50002/50003/50004 ")
     assert second.endswith(f" calibration={(tmp_path / 'cal.yaml').resolve()}")
 

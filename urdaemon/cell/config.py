@@ -275,10 +275,12 @@ class AccessOptions(_Frozen):
 
 
 class ZenohOptions(_Frozen):
-    """How the daemon joins the Zenoh network."""
+    """How the daemon joins the Zenoh network: a peer that clients dial (the default), or a client of
+    a Zenoh router that several cells and their clients share (docs/scale-out.md)."""
 
     mode: Literal["peer", "client", "router"] = "peer"
     listen: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = (DEFAULT_ENDPOINT,)
+    """Where the daemon accepts sessions; none in ``client`` mode (its clients come through the router)."""
     connect: tuple[Annotated[str, Field(pattern=ENDPOINT_PATTERN)], ...] = ()
     multicast_scouting: bool = False
     low_latency: bool = False
@@ -291,12 +293,38 @@ class ZenohOptions(_Frozen):
     access: AccessOptions | None = None
     """Zenoh access control: which identities may read and command which robots."""
 
+    @model_validator(mode="before")
+    @classmethod
+    def _client_listens_nowhere(cls, data: Any) -> Any:
+        """In ``client`` mode ``listen`` defaults to none: the router is where sessions arrive (a
+        client listening on the default 7447 would take the port of a router on the same machine)."""
+        if isinstance(data, dict) and data.get("mode") == "client" and "listen" not in data:
+            return {**data, "listen": ()}
+        return data
+
     @model_validator(mode="after")
     def _client_needs_connect(self) -> ZenohOptions:
-        if self.mode == "client" and not self.connect:
-            raise ValueError("mode 'client' needs at least one connect endpoint")
+        if self.mode == "client":
+            self._client_consistent()
         self._tls_consistent()
         return self
+
+    def _client_consistent(self) -> None:
+        """A client daemon dials its router, accepts no session, and sees every client of the router
+        arrive on its one link to it, so it cannot tell them apart for ``access``."""
+        if not self.connect:
+            raise ValueError("mode 'client' needs at least one connect endpoint (the router, tcp/HOST:7447)")
+        if self.listen:
+            raise ValueError(
+                f"listen: {list(self.listen)}: a daemon in mode 'client' accepts no sessions (its clients "
+                "reach it through the router in 'connect'); leave 'listen' out, or use mode 'peer'"
+            )
+        if self.access is not None:
+            raise ValueError(
+                "access: in mode 'client' every client's messages reach the daemon over its one link to "
+                "the router, so grants cannot tell clients apart; put access control on the router "
+                "(docs/scale-out.md), or use mode 'peer' with clients dialling the daemon"
+            )
 
     def _tls_consistent(self) -> None:
         # Messages start with their own key path, as in Cell: a model validator has no location.

@@ -35,7 +35,7 @@ from typing import Any, Protocol
 import zenoh
 
 from urdaemon.cell.config import ZenohOptions
-from urdaemon.errors import UrDaemonError
+from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
 from urdaemon.transport_security import configure_daemon
 
@@ -191,7 +191,15 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | Non
     fifth of the process's memory; peers that use shared memory still connect, over the network
     transport (docs/performance.md, "The serve process"). ``cell``: the cell the access rules
     name (transport_security.py); without it they name any cell.
+
+    A daemon in ``client`` mode listens nowhere (the cell file refuses ``listen`` there), so a
+    ``listen`` given anyway (``urdaemon serve --listen``) is refused: ``ConfigError``.
     """
+    if options.mode == "client" and listen:
+        raise ConfigError(
+            f"the cell's zenoh mode is 'client' (it dials {list(options.connect)}) and accepts no sessions; "
+            f"cannot listen on {list(listen)} (leave out --listen, or use mode 'peer')"
+        )
     conf = zenoh_config(
         options.mode,
         listen,

@@ -28,6 +28,8 @@ from urdaemon.runtime.status import StatusPublisher
 
 __all__ = ["MAX_WAITING", "LeaseKeeper", "watch_lease_holders"]
 
+LEASE_PROBE_EVERY_S = 0.25
+"""How often an acquire that waits for its holder's token asks Zenoh for it again."""
 MAX_WAITING = 8
 """Most acquires of one robot waiting for their liveliness token at once (more are refused, busy)."""
 
@@ -138,15 +140,25 @@ class LeaseKeeper:
             watch.probe(key)
         try:
             try:
-                await asyncio.wait_for(event.wait(), LEASE_BIND_TIMEOUT_S)
-            except TimeoutError:
-                pass
+                await self._token_heard(event, key)
             finally:
                 del self._waiting[event]
             self._grant(query, request)  # a grant watches the key as the holder's before this lets go
         finally:
             if watch is not None:
                 watch.unwatch(key)
+
+    async def _token_heard(self, event: asyncio.Event, key: str) -> None:
+        """Wait up to ``LEASE_BIND_TIMEOUT_S`` for the token ``key``, asking Zenoh again every
+        ``LEASE_PROBE_EVERY_S``: through a Zenoh router a liveliness query can miss a token declared
+        a moment before (its sample came before the key was watched, and was not kept)."""
+        for _ in range(round(LEASE_BIND_TIMEOUT_S / LEASE_PROBE_EVERY_S)):
+            try:
+                await asyncio.wait_for(event.wait(), LEASE_PROBE_EVERY_S)
+                return
+            except TimeoutError:
+                if self._watch is not None:
+                    self._watch.probe(key)
 
     def _grant(self, query: Any, request: LeaseRequest) -> None:
         if not self._alive(request.session):
