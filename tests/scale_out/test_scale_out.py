@@ -72,6 +72,22 @@ async def test_one_client_of_the_router_moves_robots_of_two_cells() -> None:
             assert daemon.runtimes[0].backend.state.positions == pytest.approx(TARGET, abs=AT_TARGET_RAD)
 
 
+async def test_urdaemon_list_through_the_router_shows_both_cells() -> None:
+    router, endpoint = await open_router()
+    cells = [shipped_cell("cell_a", endpoint), shipped_cell("cell_b", endpoint)]
+    async with router, serving(cells) as site, connected(endpoint) as client:
+        await wait_alive(client, {"cell_a/alice", "cell_b/bob"}, site)
+        listed = await run_cli_in_thread("list", "--json", "--connect", endpoint, timeout=60.0)
+        assert listed.code == 0, listed.stderr
+        found = json.loads(listed.stdout)
+        assert sorted(found["daemons"]) == ["cell_a", "cell_b"], found
+        assert sorted(tuple(a) for a in found["alive"]) == [("cell_a", "alice"), ("cell_b", "bob")]
+        table = await run_cli_in_thread("list", "--connect", endpoint, timeout=60.0)
+        assert table.code == 0, table.stderr
+        assert "cell_a" in table.stdout
+        assert "cell_b" in table.stdout
+
+
 async def test_a_stop_of_one_cell_leaves_the_other_cell_moving() -> None:
     router, endpoint = await open_router()
     cells = [shipped_cell("cell_a", endpoint), shipped_cell("cell_b", endpoint)]
