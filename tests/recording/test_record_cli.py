@@ -46,18 +46,19 @@ class Heard:
             sub.undeclare()
 
 
-def _same(recorded: dict[str, Any], heard: list[dict[str, Any]], kind: str) -> bool:
-    """Whether ``recorded`` (read back from the file) is one of the messages heard on its key."""
-    if kind in ("joint_states", "tcp_pose"):
-        fields = ("names", "position", "velocity", "effort") if kind == "joint_states" else ("position",)
-        fields += ("orientation",) if kind == "tcp_pose" else ()
-        return any(
-            h["host_time_ns"] == recorded["host_time_ns"] and all(h[f] == recorded[f] for f in fields)
-            for h in heard
-        )
+def _compare(recorded: dict[str, Any], heard: list[dict[str, Any]], kind: str) -> str:
+    """``same`` when ``recorded`` (read back from the file) is one of the messages heard on its key,
+    ``differs`` when one heard has its time but other values, ``absent`` when none has its time."""
     if kind == "tf":
-        return any(h["links"] == recorded["links"] for h in heard)
-    return recorded in heard
+        return "same" if any(h["links"] == recorded["links"] for h in heard) else "absent"
+    if kind not in ("joint_states", "tcp_pose"):
+        return "same" if recorded in heard else "absent"
+    fields = ("names", "position", "velocity", "effort") if kind == "joint_states" else ("position",)
+    fields += ("orientation",) if kind == "tcp_pose" else ()
+    at_time = [h for h in heard if h["host_time_ns"] == recorded["host_time_ns"]]
+    if not at_time:
+        return "absent"
+    return "same" if any(all(h[f] == recorded[f] for f in fields) for h in at_time) else "differs"
 
 
 async def test_a_recording_holds_every_message_published_while_it_ran(
@@ -80,12 +81,18 @@ async def test_a_recording_holds_every_message_published_while_it_ran(
     urdf = [r for r in read if r.kind is None]
     assert [r.message["urdf"] for r in urdf] == [daemon.description.urdf]
     kinds: dict[str, int] = {}
+    outcomes: dict[str, int] = {}
     for record in read:
         if record.kind is None:
             continue
         key = key_of(record.topic, record.message)
         kinds[record.kind.name] = kinds.get(record.kind.name, 0) + 1
-        assert _same(record.message, heard.by_key.get(key, []), record.kind.name), (key, record.message)
+        outcome = _compare(record.message, heard.by_key.get(key, []), record.kind.name)
+        assert outcome != "differs", (key, record.message)
+        outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    # Zenoh's state publishers drop rather than block on a loaded machine: the test's own subscriber
+    # may miss a few per thousand that the recorder got (and the other way round, below)
+    assert outcomes.get("absent", 0) <= outcomes["same"] // 100, outcomes
     assert {"joint_states", "tcp_pose", "status", "tf", "goal_feedback"} <= set(kinds), kinds
 
     # the recorder dropped nothing: of alice's joint states the test heard between the first and the
@@ -95,7 +102,7 @@ async def test_a_recording_holds_every_message_published_while_it_ran(
     first, last = min(times), max(times)
     published = {m["host_time_ns"] for m in heard.by_key["testcell/alice/joint_states"]}
     window = {t for t in published if first <= t <= last}
-    assert len(times) == len(set(times)) and set(times) <= published
+    assert len(times) == len(set(times))
     assert len(window - set(times)) <= len(window) // 100, (len(window), len(window - set(times)))
     positions = {tuple(r.message["position"]) for r in read if r.topic == "/testcell/alice/joint_states"}
     assert len(positions) > 100, "alice moved while recorded"
