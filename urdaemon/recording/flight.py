@@ -126,7 +126,7 @@ class FlightProcess:
         self._writing.start()
 
     def _write(self, burst: Burst, items: list[tuple[str, bytes, int]]) -> None:
-        path = self._dir / file_name(self._cell, burst.first_ns, burst.reasons[0])
+        path = self._dir / file_name(self._cell, burst.first_ns, burst.reason)
         partial = path.with_name(path.name + ".partial")
         told = {"reasons": burst.reasons, "requests": burst.requests}
         try:

@@ -123,6 +123,21 @@ class Burst:
     reasons: list[str]
     requests: list[str] = field(default_factory=list)
 
+    @property
+    def reason(self) -> str:
+        """The reason the file is named after: the gravest (a stop before the goal it aborted)."""
+        return min(self.reasons, key=_gravity)
+
+
+_GRAVITY = ("emergency_stop", "protective_stop", "lost_link", "internal_error", "aborted", "request")
+
+
+def _gravity(reason: str) -> int:
+    for rank, prefix in enumerate(_GRAVITY):
+        if reason.startswith(prefix):
+            return rank
+    return len(_GRAVITY)
+
 
 class Bursts:
     """At most one file per burst of triggers (see the module's text)."""
@@ -167,4 +182,4 @@ def file_name(cell: str, first_ns: int, reason: str) -> str:
 
     seconds, ns = divmod(first_ns, 1_000_000_000)
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(seconds)) + f".{ns // 1_000_000:03d}"
-    return f"{cell}_{stamp}_{_UNSAFE.sub('_', reason)[:60]}.mcap"
+    return f"{cell}_{stamp}_{_UNSAFE.sub('_', reason).strip('_')[:60] or 'request'}.mcap"

@@ -94,6 +94,11 @@ class FlightRecorder:
         self._last_request = -REQUEST_INTERVAL_S
         self._last_internal_error = -REQUEST_INTERVAL_S
 
+    @property
+    def pid(self) -> int | None:
+        """The process's id while it runs."""
+        return None if self._proc is None else self._proc.pid
+
     def declare(self) -> None:
         """Serve ``<cell>/service/flight_record``."""
         self._node.queryable(CellKeys(self.cell).flight_record, self._on_query)
@@ -139,16 +144,19 @@ class FlightRecorder:
         try:
             async for line in proc.stdout:
                 self._on_line(line)
-        finally:
-            self.ready.clear()
-            code = await proc.wait()
-            self._proc = None
-            self._fail_waiting(f"the flight recorder stopped (exit code {code})")
-            if code:
-                log.error("flight recorder exited with code %d", code)
+        except asyncio.CancelledError:  # the daemon stops: the process writes its open burst and ends
+            await self._stop()
+            raise
+        self.ready.clear()
+        code = await proc.wait()
+        self._proc = None
+        self._fail_waiting(f"the flight recorder stopped (exit code {code})")
+        if code:
+            log.error("flight recorder exited with code %d", code)
 
     async def _stop(self) -> None:
         proc, self._proc = self._proc, None
+        self.ready.clear()
         if proc is None:
             return
         if proc.stdin is not None:
