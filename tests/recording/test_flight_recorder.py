@@ -5,6 +5,7 @@ backend), holding the seconds before it; restarted when it dies; refused with TL
 from __future__ import annotations
 
 import asyncio
+import itertools
 import os
 import signal
 import time
@@ -60,22 +61,26 @@ async def test_a_request_writes_the_seconds_before_it_and_answers_with_the_path(
             await sub.get(timeout=10.0)
         asked_ns = time.time_ns()
         replies = await zenoh_ask(client.session, "testcell/service/flight_record", timeout=60.0)
-        assert len(replies) == 1 and replies[0]["ok"] is True, replies
+        assert len(replies) == 1, replies
+        assert replies[0]["ok"] is True, replies
         path = replies[0]["path"]
         assert Path(path).parent == tmp_path / "flight"
-        assert Path(path).name.startswith("testcell_") and path.endswith("_request.mcap")
+        assert Path(path).name.startswith("testcell_")
+        assert path.endswith("_request.mcap")
         assert not list((tmp_path / "flight").glob("*.partial"))
 
         read = _read(path)
         alice = [r.log_time_ns for r in read if r.topic == "/testcell/alice/joint_states"]
         bob = [r.log_time_ns for r in read if r.topic == "/testcell/bob/joint_states"]
-        assert len(alice) >= 500 and len(bob) >= 100
+        assert len(alice) >= 500
+        assert len(bob) >= 100
         assert min(alice) <= asked_ns - 1_000_000_000  # the second before the request
         assert min(alice) >= ready_ns - 5_000_000_000  # not before the recorder was there
         assert max(alice) >= asked_ns  # and what came after it (after_s)
         assert any(r.kind is None for r in read), "the cell URDF"
         assert {r.topic for r in read} >= {"/testcell/alice/status", "/testcell/tf", "/testcell/bob/tcp_pose"}
-        assert daemon.flight_recorder is not None and daemon.flight_recorder.written[-1]["written"] == path
+        assert daemon.flight_recorder is not None
+        assert daemon.flight_recorder.written[-1]["written"] == path
 
 
 async def test_the_process_is_started_again_when_it_dies(tmp_path: Path) -> None:
@@ -88,7 +93,8 @@ async def test_the_process_is_started_again_when_it_dies(tmp_path: Path) -> None
             if recorder.restarts == 1 and recorder.ready.is_set():
                 break
             await asyncio.sleep(0.1)
-        assert recorder.restarts == 1 and recorder.ready.is_set()
+        assert recorder.restarts == 1
+        assert recorder.ready.is_set()
         assert recorder.pid not in (None, pid)
         replies = await zenoh_ask(client.session, "testcell/service/flight_record", timeout=60.0)
         assert replies[0]["ok"] is True, replies
@@ -165,7 +171,8 @@ async def test_a_protective_stop_writes_the_seconds_before_it(tmp_path: Path) ->
 
         [report] = recorder.written
         path = Path(report["written"])
-        assert path.parent == tmp_path and path.name.startswith("urcell_")
+        assert path.parent == tmp_path
+        assert path.name.startswith("urcell_")
         assert path.name.endswith("_protective_stop_alice.mcap"), path.name
         assert set(report["reasons"]) == {"protective_stop_alice", "aborted_alice"}, report
         read = _read(str(path))
@@ -175,7 +182,7 @@ async def test_a_protective_stop_writes_the_seconds_before_it(tmp_path: Path) ->
         assert stop_ns - 3_300_000_000 <= min(times) <= stop_ns - 2_500_000_000, (stop_ns - min(times)) / 1e9
         assert max(times) >= stop_ns + 200_000_000  # and about after_s after it
         assert min(times) > ready_ns
-        gaps = [b - a for a, b in zip(times, times[1:], strict=False)]
+        gaps = [b - a for a, b in itertools.pairwise(times)]
         assert max(gaps) < 100_000_000, "the seconds before the stop, without a hole"
         assert len({tuple(r.message["position"]) for r in states}) > 500, "the arm moving"
         lifecycles = [r.message["lifecycle"] for r in read if r.topic == "/urcell/alice/status"]

@@ -96,12 +96,15 @@ def test_stream_triggers_of_the_same_incident_make_no_second_file_but_requests_d
     bursts.trigger("protective_stop_alice", 0)
     assert bursts.due(1 * S) is not None
     bursts.trigger("lost_link_alice", 5 * S)  # 5 s after: the same incident
-    assert bursts.open is None and bursts.merged == 1
+    assert bursts.open is None
+    assert bursts.merged == 1
     bursts.trigger("lost_link_alice", 14 * S)  # 9 s after the one before: still the same incident
-    assert bursts.open is None and bursts.merged == 2
+    assert bursts.open is None
+    assert bursts.merged == 2
     bursts.trigger("request", 15 * S, request="1")  # a request always gets a file
     burst = bursts.due(16 * S)
-    assert burst is not None and burst.requests == ["1"]
+    assert burst is not None
+    assert burst.requests == ["1"]
     bursts.trigger("protective_stop_alice", 40 * S)  # quiet long enough: a new incident
     assert bursts.open is not None
 

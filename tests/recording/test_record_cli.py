@@ -175,7 +175,8 @@ async def test_an_unknown_robot_or_cell_is_refused_naming_what_is_served(
     assert not out.exists()
     result = await run_cli_in_thread("record", "--connect", endpoint, "-o", str(out), "--cell", "other")
     assert result.code == 2
-    assert "no cell 'other' is served" in result.stderr and "served: testcell" in result.stderr
+    assert "no cell 'other' is served" in result.stderr
+    assert "served: testcell" in result.stderr
 
 
 def test_an_unwritable_path_is_named(tmp_path: Path) -> None:

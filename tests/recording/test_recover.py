@@ -112,7 +112,8 @@ def test_record_recover_command_writes_a_complete_file(tmp_path: Path) -> None:
     kept = scan(io.BytesIO(broken.read_bytes())).messages
     assert f"recovered {kept} messages" in result.stdout
     summary = make_reader(fixed.open("rb")).get_summary()
-    assert summary is not None and summary.statistics is not None
+    assert summary is not None
+    assert summary.statistics is not None
     assert summary.statistics.message_count == kept > 0
 
 
@@ -121,7 +122,8 @@ def test_recovering_a_file_that_is_not_mcap_fails_saying_so(tmp_path: Path) -> N
     junk.write_bytes(b"not an mcap file at all")
     result = run_cli("record", "--recover", str(junk), "-o", str(tmp_path / "out.mcap"))
     assert result.code == 1
-    assert "reading stopped" in result.stdout and "magic" in result.stdout
+    assert "reading stopped" in result.stdout
+    assert "magic" in result.stdout
 
 
 class FullDisk(io.RawIOBase):
@@ -153,6 +155,7 @@ def test_a_full_disk_stops_the_writer_and_keeps_the_error() -> None:
     loop.start()
     loop.stop(timeout=30.0)
     assert not loop.alive
-    assert loop.error is not None and loop.error.errno == errno.ENOSPC
+    assert loop.error is not None
+    assert loop.error.errno == errno.ENOSPC
     kept = scan(io.BytesIO(bytes(disk.data)))
     assert 0 < kept.messages < 5000, kept
