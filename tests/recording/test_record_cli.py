@@ -4,6 +4,8 @@ bag read with rosbags; and bad input (an unwritable path, a ``--key`` that match
 
 from __future__ import annotations
 
+import errno
+import io
 import json
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -17,8 +19,11 @@ from tests.helpers import run_cli, run_cli_in_thread
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
+from urdaemon.recording import record_command
 from urdaemon.recording.channels import recorded_keys
 from urdaemon.recording.mcap_file import URDF_ATTACHMENT, key_of, read_recording
+from urdaemon.recording.output import Output
+from urdaemon.recording.recover import scan
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -53,8 +58,9 @@ def _compare(recorded: dict[str, Any], heard: list[dict[str, Any]], kind: str) -
         return "same" if any(h["links"] == recorded["links"] for h in heard) else "absent"
     if kind not in ("joint_states", "tcp_pose"):
         return "same" if recorded in heard else "absent"
-    fields = ("names", "position", "velocity", "effort") if kind == "joint_states" else ("position",)
-    fields += ("orientation",) if kind == "tcp_pose" else ()
+    fields: tuple[str, ...] = ("names", "position", "velocity", "effort")
+    if kind == "tcp_pose":
+        fields = ("position", "orientation")
     at_time = [h for h in heard if h["host_time_ns"] == recorded["host_time_ns"]]
     if not at_time:
         return "absent"
@@ -190,3 +196,51 @@ def test_an_existing_bag_directory_is_refused(tmp_path: Path) -> None:
     result = run_cli("record", "--ros2", "-o", str(tmp_path), "--duration", "1")
     assert result.code == 2
     assert f"cannot write {tmp_path}: the bag directory exists" in result.stderr
+
+
+class FillingDisk(io.RawIOBase):
+    """A file on a disk that fills up after the recorder's first chunk: every later write raises
+    ENOSPC (what a full disk does), what was written before stays in the file."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self._file = path.open("wb")
+        self.chunks = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def tell(self) -> int:
+        return self._file.tell()
+
+    def write(self, data: Any) -> int:
+        if self.chunks:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        written = self._file.write(data)
+        self.chunks += bytes(data[:1]) == b"\x06"  # a chunk record's opcode: not the header, nor the URDF
+        self._file.flush()
+        return written
+
+    def close(self) -> None:
+        self._file.close()
+        super().close()
+
+
+async def test_a_full_disk_stops_the_recording_and_says_how_much_was_kept(
+    cell: tuple[Daemon, Client, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _, _, endpoint = cell
+    out = tmp_path / "full.mcap"
+    monkeypatch.setattr(
+        record_command,
+        "open_output",
+        lambda target, ros2: Output(target, FillingDisk(target)),  # type: ignore[arg-type]
+    )
+    result = await run_cli_in_thread("record", "--connect", endpoint, "-o", str(out), "--duration", "60")
+    assert result.code == 1, result.stderr
+    with out.open("rb") as stream:
+        kept = scan(stream)
+    assert kept.messages > 0
+    assert f"error: writing {out} failed (the disk is full) after " in result.stderr
+    assert f"the file holds the {kept.messages} messages of its complete chunks" in result.stderr
+    assert f"urdaemon record --recover {out} -o " in result.stderr

@@ -149,7 +149,8 @@ class FullDisk(io.RawIOBase):
 def test_a_full_disk_stops_the_writer_and_keeps_the_error() -> None:
     disk = FullDisk(room=30_000)
     inbox = Inbox()
-    loop = WriteLoop(inbox, RecordingWriter(disk, cell="c", chunk_size=4_000), flush_s=3600.0)
+    writer = RecordingWriter(disk, cell="c", chunk_size=4_000)  # type: ignore[arg-type]
+    loop = WriteLoop(inbox, writer, flush_s=3600.0)
     for i in range(5000):
         inbox.offer("c/alice/joint_states", _state(i), 0)
     loop.start()
