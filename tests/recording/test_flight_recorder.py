@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import fake_address, free_tcp_port, zenoh_ask
+from tests.helpers import fake_address, free_tcp_port, run_cli_in_thread, zenoh_ask
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.cell import parse_cell
 from urdaemon.client import Client
@@ -84,7 +84,7 @@ async def test_a_request_writes_the_seconds_before_it_and_answers_with_the_path(
 
 
 async def test_the_process_is_started_again_when_it_dies(tmp_path: Path) -> None:
-    async with _mock_cell(tmp_path) as (daemon, client):
+    async with _mock_cell(tmp_path) as (daemon, _client):
         recorder = _recorder(daemon)
         pid = recorder.pid
         assert pid is not None
@@ -96,8 +96,13 @@ async def test_the_process_is_started_again_when_it_dies(tmp_path: Path) -> None
         assert recorder.restarts == 1
         assert recorder.ready.is_set()
         assert recorder.pid not in (None, pid)
-        replies = await zenoh_ask(client.session, "testcell/service/flight_record", timeout=60.0)
-        assert replies[0]["ok"] is True, replies
+        endpoint = daemon.listen_endpoints[0]
+        result = await run_cli_in_thread("record", "--flight", "--connect", endpoint, timeout=120.0)
+        assert result.code == 0, result.stderr
+        path = Path(result.stdout.strip())
+        assert path.parent == tmp_path / "flight"
+        assert path.name.endswith("_request.mcap")
+        assert path.name in os.listdir(path.parent)
 
 
 @pytest.mark.parametrize(

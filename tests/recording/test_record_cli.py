@@ -185,6 +185,13 @@ async def test_an_unknown_robot_or_cell_is_refused_naming_what_is_served(
     assert "served: testcell" in result.stderr
 
 
+async def test_asking_a_cell_without_a_flight_recorder_says_so(cell: tuple[Daemon, Client, str]) -> None:
+    _, _, endpoint = cell
+    result = await run_cli_in_thread("record", "--flight", "--connect", endpoint)
+    assert result.code == 1
+    assert "error: cell 'testcell' has no flight recorder (no 'record' in its cell file)" in result.stderr
+
+
 def test_an_unwritable_path_is_named(tmp_path: Path) -> None:
     target = tmp_path / "missing" / "x.mcap"
     result = run_cli("record", "-o", str(target), "--duration", "1")

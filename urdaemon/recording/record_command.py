@@ -56,6 +56,11 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument("--recover", metavar="BROKEN", default=None, help="recover a file cut short into -o")
     p.add_argument(
+        "--flight",
+        action="store_true",
+        help="ask the daemon's flight recorder (cell file 'record') to write its last seconds now",
+    )
+    p.add_argument(
         "--connect", default=DEFAULT_ENDPOINT, help=f"daemon endpoint (default {DEFAULT_ENDPOINT})"
     )
     p.add_argument("--zenoh-config", metavar="FILE", default=None, help="Zenoh JSON5 config (e.g. TLS)")
@@ -68,11 +73,13 @@ def run(args: argparse.Namespace) -> int:
         return _recover(args.recover, args.output)
     import asyncio
 
-    from urdaemon.recording.record_session import record
+    from urdaemon.recording.record_session import ask_flight_record, record
 
     problem = _bad_args(args)
     if problem is not None:
         return error(problem, EXIT_BAD_INPUT)
+    if args.flight:
+        return asyncio.run(ask_flight_record(args))
     output = None
     if args.output is not None:
         try:

@@ -30,11 +30,13 @@ from urdaemon.recording.output import (
 from urdaemon.recording.subscription import Inbox, subscribe
 from urdaemon.recording.write_loop import WriteLoop
 
-__all__ = ["KEY_CHECK_S", "find_cell", "key_expressions", "record"]
+__all__ = ["FLIGHT_TIMEOUT_S", "KEY_CHECK_S", "ask_flight_record", "find_cell", "key_expressions", "record"]
 
 KEY_CHECK_S = 3.0
 """After this long, each ``--key`` that matched nothing is named in a warning."""
 POLL_S = 0.1
+FLIGHT_TIMEOUT_S = 120.0
+"""How long ``--flight`` waits for the file (the seconds after, then the writing)."""
 SHOWN_KEYS = 30
 """At most this many published keys are named when a ``--key`` matches nothing."""
 
@@ -114,6 +116,28 @@ async def record(args: argparse.Namespace, output: Output | None) -> int:
                 return error(cannot_write(f"the recording of {cell}", err), EXIT_BAD_INPUT)
         urdf = await _urdf(client, cell)
         return await _record_into(client, args, cell, expressions, urdf, output)
+
+
+async def ask_flight_record(args: argparse.Namespace) -> int:
+    """``record --flight``: the daemon's flight recorder writes its last seconds; print the file."""
+    from urdaemon.client import NoSuchService
+    from urdaemon.publish.keys import CellKeys
+
+    try:
+        async with await Client.connect(args.connect, config_file=args.zenoh_config) as client:
+            cell = find_cell(await client.robots(), args.cell, [], args.connect)
+            try:
+                answer = await client.request(CellKeys(cell).flight_record, timeout=FLIGHT_TIMEOUT_S)
+            except NoSuchService:
+                return error(
+                    f"cell {cell!r} has no flight recorder (no 'record' in its cell file)", EXIT_FAILED
+                )
+    except UrDaemonError as err:
+        return error(str(err), EXIT_FAILED)
+    if not answer.get("ok"):
+        return error(f"no flight record: {answer.get('reason')}", EXIT_FAILED)
+    print(answer.get("path"))
+    return EXIT_OK
 
 
 async def _urdf(client: Client, cell: str) -> str | None:
