@@ -3,9 +3,13 @@ and a full disk while writing stops the writer with the error kept (``write_loop
 
 from __future__ import annotations
 
+import asyncio
 import errno
 import io
 import json
+import signal
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -15,8 +19,9 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from tests.helpers import run_cli
+from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.recording.mcap_file import RecordingWriter
-from urdaemon.recording.recover import recover, scan
+from urdaemon.recording.recover import Recovered, recover, scan
 from urdaemon.recording.subscription import Inbox
 from urdaemon.recording.write_loop import WriteLoop
 
@@ -160,3 +165,35 @@ def test_a_full_disk_stops_the_writer_and_keeps_the_error() -> None:
     assert loop.error.errno == errno.ENOSPC
     kept = scan(io.BytesIO(bytes(disk.data)))
     assert 0 < kept.messages < 5000, kept
+
+
+async def test_a_recorder_killed_outright_leaves_a_file_that_recovers(tmp_path: Path) -> None:
+    """``urdaemon record`` in a process of its own, killed with SIGKILL once its file holds a chunk:
+    the file is recovered up to its last whole chunk, every message in it readable."""
+    async with running_daemon(TWO_MOCKS) as (daemon, _client):
+        out = tmp_path / "killed.mcap"
+        argv = [sys.executable, "-m", "urdaemon", "record", "--connect", daemon.listen_endpoints[0]]
+        proc = subprocess.Popen([*argv, "-o", str(out), "--duration", "120"], stderr=subprocess.DEVNULL)
+        try:
+            for _ in range(600):  # the first chunk ends 2 s after the start (60 s at most)
+                if out.exists() and scan_file(out).messages > 0:
+                    break
+                await asyncio.sleep(0.1)
+        finally:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == -signal.SIGKILL
+    kept = scan_file(out)
+    assert kept.messages > 0
+    assert not kept.complete
+    fixed = tmp_path / "fixed.mcap"
+    result = run_cli("record", "--recover", str(out), "-o", str(fixed))
+    assert result.code == 0, result.stderr
+    messages = _messages(fixed.read_bytes())
+    assert len(messages) == kept.messages
+    assert any(topic == "/testcell/alice/joint_states" for topic, _, _ in messages)
+
+
+def scan_file(path: Path) -> Recovered:
+    with path.open("rb") as stream:
+        return scan(stream)
