@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import logging
 import os
 import signal
 import time
@@ -193,3 +194,18 @@ async def test_a_protective_stop_writes_the_seconds_before_it(tmp_path: Path) ->
         lifecycles = [r.message["lifecycle"] for r in read if r.topic == "/urcell/alice/status"]
         assert "protective_stop" in lifecycles
         assert "running" in lifecycles
+
+
+async def test_an_internal_error_the_daemon_logs_writes_a_file(tmp_path: Path) -> None:
+    async with _mock_cell(tmp_path) as (daemon, _client):
+        recorder = _recorder(daemon)
+        logging.getLogger("urdaemon.daemon").error("tf not published: a bug")  # no traceback: no file
+        try:
+            raise RuntimeError("a bug")
+        except RuntimeError:
+            logging.getLogger("urdaemon.daemon").exception("tf not published")
+        await asyncio.wait_for(recorder.file_written.wait(), 60.0)
+        [report] = recorder.written
+        assert report["reasons"] == ["internal_error"]
+        assert report["written"].endswith("_internal_error.mcap")
+        assert report["messages"] > 0

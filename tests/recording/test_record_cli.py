@@ -4,9 +4,13 @@ bag read with rosbags; and bad input (an unwritable path, a ``--key`` that match
 
 from __future__ import annotations
 
+import asyncio
 import errno
 import io
 import json
+import signal
+import subprocess
+import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -251,3 +255,33 @@ async def test_a_full_disk_stops_the_recording_and_says_how_much_was_kept(
     assert f"error: writing {out} failed (the disk is full) after " in result.stderr
     assert f"the file holds the {kept.messages} messages of its complete chunks" in result.stderr
     assert f"urdaemon record --recover {out} -o " in result.stderr
+
+
+async def test_ctrl_c_ends_the_file_cleanly(cell: tuple[Daemon, Client, str], tmp_path: Path) -> None:
+    _, _, endpoint = cell
+    out = tmp_path / "interrupted.mcap"
+    argv = [sys.executable, "-m", "urdaemon", "record", "--connect", endpoint, "-o", str(out)]
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(600):  # until its first chunk is in the file (60 s at most)
+            if out.exists() and _scan(out).messages > 0:
+                break
+            await asyncio.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = await asyncio.to_thread(proc.communicate, timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    assert "recorded " in stderr
+    assert "dropped 0" in stderr
+    with out.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.statistics.message_count >= _scan(out).messages > 0
+
+
+def _scan(path: Path) -> Any:
+    with path.open("rb") as stream:
+        return scan(stream)
