@@ -5,10 +5,13 @@ backend), holding the seconds before it; restarted when it dies; refused with TL
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import logging
 import os
 import signal
+import subprocess
+import sys
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -17,7 +20,14 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import fake_address, free_tcp_port, run_cli_in_thread, zenoh_ask
+from tests.helpers import (
+    drain_in_background,
+    fake_address,
+    free_tcp_port,
+    run_cli_in_thread,
+    wait_for_line,
+    zenoh_ask,
+)
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.cell import parse_cell
 from urdaemon.client import Client
@@ -209,3 +219,39 @@ async def test_an_internal_error_the_daemon_logs_writes_a_file(tmp_path: Path) -
         assert report["reasons"] == ["internal_error"]
         assert report["written"].endswith("_internal_error.mcap")
         assert report["messages"] > 0
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError):
+                text = (entry / "stat").read_text()
+                if int(text[text.rindex(")") + 2 :].split()[1]) == pid:
+                    found.append(int(entry.name))
+    return found
+
+
+async def test_serve_stops_its_flight_recorder_on_ctrl_c(tmp_path: Path) -> None:
+    config = tmp_path / "cell.yaml"
+    config.write_text(TWO_MOCKS + f"record: {{ring_s: 5, dir: {tmp_path / 'flight'}}}\n")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    argv = [sys.executable, "-m", "urdaemon", "serve", "--config", str(config), "--listen", endpoint]
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+    try:
+        await wait_for_line(proc, "flight recorder of 'testcell'", timeout=READY_S)
+        [child] = _children(proc.pid)
+        proc.send_signal(signal.SIGINT)
+        lines: list[str] = []
+        drain_in_background(proc, lines)
+        assert await asyncio.to_thread(proc.wait, 30) == 0, "".join(lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert child not in _children(1) + _children(proc.pid), "the flight recorder ended with the daemon"
+    assert _files(tmp_path / "flight") == [], "no file: nothing went wrong"
+
+
+def _files(directory: Path) -> list[str]:
+    return sorted(os.listdir(directory)) if directory.is_dir() else []

@@ -21,6 +21,7 @@ import contextlib
 import json
 import logging
 import os
+import signal
 import sys
 import threading
 import time
@@ -185,6 +186,10 @@ def main(argv: list[str] | None = None) -> int:
     from urdaemon.publish.node import zenoh_config
 
     args = _parser().parse_args(argv)
+    # the daemon ends this process by closing its stdin (after it wrote what is due): a Ctrl-C or a
+    # SIGTERM meant for the daemon must not cut a file short
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     logging.basicConfig(
         stream=sys.stderr, level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )

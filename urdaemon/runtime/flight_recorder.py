@@ -132,9 +132,12 @@ class FlightRecorder:
             *("--max-mb", str(options.max_mb)),
             *(("--low-latency",) if self._low_latency else ()),
         ]
-        try:
+        try:  # in a session of its own: a terminal's Ctrl-C is the daemon's, which then closes its stdin
             proc = await asyncio.create_subprocess_exec(
-                *command, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE
+                *command,
+                stdin=asyncio.subprocess.PIPE,
+                stdout=asyncio.subprocess.PIPE,
+                start_new_session=True,
             )
         except OSError as err:
             log.error("flight recorder not started: %s", err)
