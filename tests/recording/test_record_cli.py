@@ -253,7 +253,7 @@ async def test_a_full_disk_stops_the_recording_and_says_how_much_was_kept(
         kept = scan(stream)
     assert kept.messages > 0
     assert f"error: writing {out} failed (the disk is full) after " in result.stderr
-    assert f"the file holds the {kept.messages} messages of its complete chunks" in result.stderr
+    assert f"The file holds the {kept.messages} messages of its complete chunks" in result.stderr
     assert f"urdaemon record --recover {out} -o " in result.stderr
 
 

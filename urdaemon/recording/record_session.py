@@ -274,9 +274,9 @@ def _failed_write(output: Output, err: OSError, added: int) -> int:
     try:
         with output.path.open("rb") as stream:
             kept = scan(stream)
-        held = f"the file holds the {kept.messages} messages of its complete chunks"
+        held = f"The file holds the {kept.messages} messages of its complete chunks"
     except OSError as read_err:
-        held = f"the file cannot be read back ({read_err.strerror or read_err})"
+        held = f"The file cannot be read back ({read_err.strerror or read_err})"
     fixed = output.path.with_name(f"{output.path.stem}_recovered.mcap")
     return error(
         f"writing {output.path} failed ({reason}) after {added} messages; recording stopped. {held}: "
