@@ -113,6 +113,7 @@ class FlightProcess:
 
     def _finish(self) -> None:
         """The daemon is stopping: write the open burst now, and whatever is due."""
+        self._step(time.time_ns())  # what arrived last, and the last requests
         burst = self._bursts.due(sys.maxsize)
         if burst is not None:
             self._due.append(burst)

@@ -156,9 +156,13 @@ async def _record_into(
     urdf: str | None,
     output: Output,
 ) -> int:
-    writer = RecordingWriter(
-        output.stream, cell=cell, urdf=urdf, ros2_only=args.ros2, metadata={"keys": " ".join(expressions)}
-    )
+    try:
+        writer = RecordingWriter(
+            output.stream, cell=cell, urdf=urdf, ros2_only=args.ros2, metadata={"keys": " ".join(expressions)}
+        )
+    except OSError as err:
+        _discard(output)
+        return error(cannot_write(output.path, err), EXIT_FAILED)
     inbox = Inbox()
     loop = WriteLoop(inbox, writer, keep=_keep(args.robot))
     loop.start()
