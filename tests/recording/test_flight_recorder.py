@@ -255,3 +255,12 @@ async def test_serve_stops_its_flight_recorder_on_ctrl_c(tmp_path: Path) -> None
 
 def _files(directory: Path) -> list[str]:
     return sorted(os.listdir(directory)) if directory.is_dir() else []
+
+
+async def test_a_directory_the_daemon_cannot_write_stops_it_at_start(tmp_path: Path) -> None:
+    blocked = tmp_path / "file"
+    blocked.write_text("not a directory")
+    text = TWO_MOCKS + f"record: {{dir: {blocked / 'flight'}}}\n"
+    with pytest.raises(ConfigError, match=f"record.dir: cannot make {blocked / 'flight'}: Not a directory"):
+        async with running_daemon(text):
+            pass

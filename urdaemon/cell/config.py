@@ -355,7 +355,7 @@ class RecordOptions(_Frozen):
     """Cap of the ring's memory (MB); at 8 robots' 500 Hz the oldest messages go before ``ring_s``
     passed once it is reached."""
     dir: str
-    """Where the files go (relative: to the cell file's folder); made at start if missing."""
+    """Where the files go (relative: to the cell file's folder); the daemon makes it at start if missing."""
 
     @field_validator("dir")
     @classmethod

@@ -13,9 +13,11 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from urdaemon.cell.config import RECORDER_PROTOCOLS, Cell, RecordOptions
@@ -65,9 +67,22 @@ def flight_recorder(cell: Cell, listen: Sequence[str], node: ZenohNode) -> Fligh
             f"record: the flight recorder needs a tcp/ or unixsock-stream/ listen endpoint; "
             f"the daemon listens on {', '.join(listen) or 'nothing'}"
         )
+    _check_directory(cell.record.dir)
     recorder = FlightRecorder(cell.cell, cell.record, endpoint, node, low_latency=cell.zenoh.low_latency)
     recorder.declare()
     return recorder
+
+
+def _check_directory(directory: str) -> None:
+    """Make ``record.dir`` if missing; ``ConfigError`` when files cannot be written there (found at
+    start, not at the first stop)."""
+    path = Path(directory)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"record.dir: cannot make {path}: {err.strerror or err}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ConfigError(f"record.dir: {path} is not writable by this user")
 
 
 class FlightRecorder:
