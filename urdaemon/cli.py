@@ -46,6 +46,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "urdaemon.doctor.command",
     "urdaemon.foxglove_bridge.command",
     "urdaemon.introspect.commands",
+    "urdaemon.recording.record_command",
     "urdaemon.router",
 )
 """Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``

@@ -36,6 +36,7 @@ from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.daemon_info import DaemonInfo
+from urdaemon.runtime.flight_recorder import FlightRecorder, flight_recorder
 from urdaemon.runtime.lease_keeper import watch_lease_holders
 from urdaemon.runtime.queries import internal_error, reply
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
@@ -166,6 +167,8 @@ class Daemon:
         self.description = describe_cell(cell)
         self.runtimes: list[RobotRuntime] = []
         self.node: ZenohNode | None = None
+        self.flight_recorder: FlightRecorder | None = None
+        """The cell file's ``record``: the flight recorder's process, supervised (None without it)."""
 
     @property
     def listen_endpoints(self) -> tuple[str, ...]:
@@ -194,6 +197,7 @@ class Daemon:
             info = DaemonInfo(self.cell, self.runtimes, self.description.limits, self.listen_endpoints)
             node.cell_queryable(self.keys.daemon, info.on_query)  # also answers ``*/daemon``: every cell
             tf_pub = node.publisher(self.keys.tf)
+            self.flight_recorder = recorder = flight_recorder(self.cell, self.listen_endpoints, node)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
                 log.debug("%d objects of startup kept out of garbage collection", frozen)
@@ -201,6 +205,8 @@ class Daemon:
                     tasks = [group.create_task(rt.run()) for rt in self.runtimes]
                     tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
                     tasks.append(group.create_task(cell_goals.run()))
+                    if recorder is not None:  # its own process: nothing of it runs in a robot's cycle
+                        tasks.append(group.create_task(recorder.run()))
                     await stop.wait()
                     for task in tasks:
                         task.cancel()

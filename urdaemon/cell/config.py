@@ -51,6 +51,7 @@ __all__ = [
     "Ports",
     "Pose",
     "PublishOptions",
+    "RecordOptions",
     "Robot",
     "ServoJoint",
     "ServoOptions",
@@ -151,6 +152,8 @@ IDENTITY_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,31}$"
 ALL_ROBOTS = "*"
 """In a grant's ``read`` or ``command`` list: every robot of the cell, and the cell's own keys."""
 SECURE_PROTOCOLS = ("tls/", "quic/")
+RECORDER_PROTOCOLS = ("unixsock-stream/", "tcp/")
+"""Endpoints the flight recorder's process can connect to the daemon through, the first preferred."""
 """Endpoints whose links are encrypted and carry the peer's certificate."""
 
 
@@ -365,6 +368,33 @@ class PublishOptions(_Frozen):
     """Status is published on every change and at least at this rate."""
     io_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
     """IO is published on every change and at least at this rate."""
+
+
+class RecordOptions(_Frozen):
+    """The flight recorder (docs/recording.md): the last ``ring_s`` seconds of everything the cell
+    publishes, kept by a process of its own and written to ``dir`` on a stop, an aborted goal, a lost
+    link, an internal error, or a request on ``<cell>/service/flight_record``."""
+
+    ring_s: Annotated[float, Field(ge=1, le=3600)] = 60.0
+    """Seconds kept before a trigger."""
+    after_s: Annotated[float, Field(ge=0, le=10)] = 1.0
+    """Seconds after the trigger written too (what the stop looked like)."""
+    max_mb: Annotated[int, Field(ge=1, le=16384)] = 512
+    """Cap of the ring's memory (MB); at 8 robots' 500 Hz the oldest messages go before ``ring_s``
+    passed once it is reached."""
+    dir: str
+    """Where the files go (relative: to the cell file's folder); the daemon makes it at start if missing."""
+
+    @field_validator("dir")
+    @classmethod
+    def _directory(cls, value: str, info: ValidationInfo) -> str:
+        base = (info.context or {}).get("base_dir")
+        path = Path(value).expanduser()
+        if not path.is_absolute() and base is not None:
+            path = Path(base) / path
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"{path} is not a directory")
+        return str(path.resolve())
 
 
 class Ports(_Frozen):
@@ -735,6 +765,8 @@ class Cell(_Frozen):
     taken only from the client holding the robot's lease, and a robot whose holder's session goes away
     stops. ``false``: any client may command any robot (the lease can still be taken, and is not
     checked)."""
+    record: RecordOptions | None = None
+    """The flight recorder; none without it (docs/recording.md)."""
     robots: tuple[Robot, ...]
 
     @model_validator(mode="before")
@@ -786,6 +818,7 @@ class Cell(_Frozen):
                 owner[port] = f"robot {robot.name!r} {role} port"
         self._one_robot_per_controller(where)
         self._zenoh_ports_free(owner)
+        self._recorder_can_connect()
         access = self.zenoh.access
         unknown = access.unknown_robots([r.name for r in self.robots]) if access is not None else None
         if unknown is not None:
@@ -826,6 +859,21 @@ class Cell(_Frozen):
                     "one controller drives one arm (its dashboard, primary and RTDE ports are fixed)"
                 )
             controllers[robot.address.lower()] = robot.name
+
+    def _recorder_can_connect(self) -> None:
+        if self.record is None:
+            return
+        if self.zenoh.tls is not None or self.zenoh.access is not None:
+            raise ValueError(
+                "record: the flight recorder subscribes to the daemon over its own plain tcp/ or "
+                "unixsock-stream/ endpoint, which zenoh.tls and zenoh.access do not allow; leave 'record' "
+                "out and record with `urdaemon record` from a client with a certificate"
+            )
+        if not any(e.startswith(RECORDER_PROTOCOLS) for e in self.zenoh.listen):
+            raise ValueError(
+                "record: the flight recorder needs a tcp/ or unixsock-stream/ endpoint in zenoh.listen "
+                "to subscribe to the daemon"
+            )
 
     def _zenoh_ports_free(self, owner: dict[int, str]) -> None:
         listening = {

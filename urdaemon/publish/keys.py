@@ -52,6 +52,12 @@ class CellKeys:
         return f"{self.cell}/service/stop"
 
     @property
+    def flight_record(self) -> str:
+        """Queryable: write the flight recorder's last seconds to a file now (answered with its path);
+        served only with the cell file's ``record`` section."""
+        return f"{self.cell}/service/flight_record"
+
+    @property
     def goal_trajectory(self) -> str:
         """Queryable: a cell goal, trajectories that start together on several robots."""
         return f"{self.cell}/goal/trajectory"

@@ -1,0 +1,287 @@
+"""The daemon's side of the flight recorder (cell file ``record``, docs/recording.md): start its
+process (``python -m urdaemon.recording.flight``), restart it with a backoff when it dies, stop it with
+the daemon, and pass it what the stream cannot show: an internal error the daemon logged, and a
+client's request on ``<cell>/service/flight_record`` (answered with the file's path once written).
+
+The ring, the conversion and the disk are the process's: the daemon's loop only reads a line per file
+written, so the recorder never holds up a robot's cycle, and its memory is not the daemon's.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from urdaemon.cell.config import RECORDER_PROTOCOLS, Cell, RecordOptions
+from urdaemon.errors import ConfigError
+from urdaemon.publish.keys import CellKeys
+from urdaemon.publish.node import ZenohNode
+from urdaemon.runtime.queries import reply
+
+__all__ = [
+    "REQUEST_INTERVAL_S",
+    "REQUEST_TIMEOUT_S",
+    "RESTART_BACKOFF_S",
+    "FlightRecorder",
+    "flight_recorder",
+    "loopback_endpoint",
+]
+
+log = logging.getLogger(__name__)
+
+RESTART_BACKOFF_S = (1.0, 2.0, 5.0, 10.0, 30.0)
+"""Waits before each restart of a process that died; a process that ran a minute starts it over."""
+REQUEST_INTERVAL_S = 2.0
+"""A new request is taken at most this often (one waiting joins the file of the one before)."""
+REQUEST_TIMEOUT_S = 120.0
+"""A request not answered by then is answered with a failure."""
+STOP_WAIT_S = 10.0
+"""How long the process may take to write its open burst when the daemon stops."""
+
+
+def loopback_endpoint(listen: Sequence[str]) -> str | None:
+    """Where the recorder's process connects: the daemon's first ``unixsock-stream/`` endpoint, else its
+    first ``tcp/`` one with a wildcard address made loopback; None without either."""
+    for protocol in RECORDER_PROTOCOLS:
+        for endpoint in listen:
+            if endpoint.startswith(protocol):
+                return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
+    return None
+
+
+def flight_recorder(cell: Cell, listen: Sequence[str], node: ZenohNode) -> FlightRecorder | None:
+    """The cell's flight recorder, its queryable declared; None when the cell file has no ``record``."""
+    if cell.record is None:
+        return None
+    endpoint = loopback_endpoint(listen)
+    if endpoint is None:
+        raise ConfigError(
+            f"record: the flight recorder needs a tcp/ or unixsock-stream/ listen endpoint; "
+            f"the daemon listens on {', '.join(listen) or 'nothing'}"
+        )
+    _check_directory(cell.record.dir)
+    recorder = FlightRecorder(cell.cell, cell.record, endpoint, node, low_latency=cell.zenoh.low_latency)
+    recorder.declare()
+    return recorder
+
+
+def _check_directory(directory: str) -> None:
+    """Make ``record.dir`` if missing; ``ConfigError`` when files cannot be written there (found at
+    start, not at the first stop)."""
+    path = Path(directory)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"record.dir: cannot make {path}: {err.strerror or err}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ConfigError(f"record.dir: {path} is not writable by this user")
+
+
+class FlightRecorder:
+    """Supervises the flight recorder's process and forwards requests to it."""
+
+    def __init__(
+        self, cell: str, options: RecordOptions, endpoint: str, node: ZenohNode, *, low_latency: bool
+    ) -> None:
+        self.cell = cell
+        self.options = options
+        self.endpoint = endpoint
+        self._node = node
+        self._low_latency = low_latency
+        self.ready = asyncio.Event()
+        """Set while the process runs and is subscribed."""
+        self.written: list[dict[str, Any]] = []
+        """Every file the process reported (``written``, ``reasons``, ``messages``), oldest first."""
+        self.file_written = asyncio.Event()
+        """Set at each file written (clear it to wait for the next)."""
+        self.restarts = 0
+        self._proc: asyncio.subprocess.Process | None = None
+        self._waiting: dict[str, list[Any]] = {}
+        self._next_id = 0
+        self._last_request = -REQUEST_INTERVAL_S
+        self._last_internal_error = -REQUEST_INTERVAL_S
+
+    @property
+    def pid(self) -> int | None:
+        """The process's id while it runs."""
+        return None if self._proc is None else self._proc.pid
+
+    def declare(self) -> None:
+        """Serve ``<cell>/service/flight_record``."""
+        self._node.queryable(CellKeys(self.cell).flight_record, self._on_query)
+
+    async def run(self) -> None:
+        """Keep the process running until cancelled; then stop it."""
+        handler = _InternalErrors(self, asyncio.get_running_loop())
+        logging.getLogger("urdaemon").addHandler(handler)
+        failures = 0
+        try:
+            while True:
+                started = time.monotonic()
+                await self._run_once()
+                failures = 0 if time.monotonic() - started > 60.0 else failures + 1
+                wait = RESTART_BACKOFF_S[min(failures, len(RESTART_BACKOFF_S)) - 1]
+                log.warning("flight recorder stopped; starting it again in %g s", wait)
+                await asyncio.sleep(wait)
+                self.restarts += 1
+        finally:
+            logging.getLogger("urdaemon").removeHandler(handler)
+            await self._stop()
+
+    async def _run_once(self) -> None:
+        options = self.options
+        command = [
+            sys.executable,
+            "-m",
+            "urdaemon.recording.flight",
+            *("--connect", self.endpoint, "--cell", self.cell, "--dir", options.dir),
+            *("--ring-s", str(options.ring_s), "--after-s", str(options.after_s)),
+            *("--max-mb", str(options.max_mb)),
+            *(("--low-latency",) if self._low_latency else ()),
+        ]
+        try:  # in a session of its own: a terminal's Ctrl-C is the daemon's, which then closes its stdin
+            proc = await asyncio.create_subprocess_exec(
+                *command,
+                stdin=asyncio.subprocess.PIPE,
+                stdout=asyncio.subprocess.PIPE,
+                start_new_session=True,
+            )
+        except OSError as err:
+            log.error("flight recorder not started: %s", err)
+            return
+        self._proc = proc
+        assert proc.stdout is not None
+        try:
+            async for line in proc.stdout:
+                self._on_line(line)
+        except asyncio.CancelledError:  # the daemon stops: the process writes its open burst and ends
+            await self._stop()
+            raise
+        self.ready.clear()
+        code = await proc.wait()
+        self._proc = None
+        self._fail_waiting(f"the flight recorder stopped (exit code {code})")
+        if code:
+            log.error("flight recorder exited with code %d", code)
+
+    async def _stop(self) -> None:
+        proc, self._proc = self._proc, None
+        self.ready.clear()
+        if proc is None:
+            return
+        if proc.stdin is not None:
+            proc.stdin.close()  # the process writes its open burst and ends
+        try:
+            await asyncio.wait_for(proc.wait(), STOP_WAIT_S)
+        except TimeoutError:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+            await proc.wait()
+        if proc.stdout is not None:  # a file written while stopping is still logged
+            for line in (await proc.stdout.read()).splitlines():
+                self._on_line(line)
+
+    def _on_line(self, line: bytes) -> None:
+        try:
+            message = json.loads(line)
+        except ValueError:
+            log.warning("flight recorder said: %.200r", line)
+            return
+        if message.get("ready"):
+            self.ready.set()
+            return
+        requests = message.get("requests") or []
+        reasons = ", ".join(message.get("reasons") or ())
+        if "written" in message:
+            log.warning(
+                "flight record (%s): %d messages written to %s",
+                reasons,
+                message.get("messages", 0),
+                message["written"],
+            )
+            self.written.append(message)
+            self.file_written.set()
+            body = {
+                "ok": True,
+                "path": message["written"],
+                "reasons": message.get("reasons"),
+                "messages": message.get("messages"),
+            }
+        else:
+            log.error("flight record (%s) not written: %s", reasons, message.get("failed"))
+            body = {"ok": False, "reason": str(message.get("failed"))}
+        for ident in requests:
+            for query in self._waiting.pop(str(ident), ()):
+                reply(query, body)
+
+    def request(self, reason: str, ident: str | None = None) -> bool:
+        """Ask the process for a file; False when it is not running."""
+        proc = self._proc
+        if proc is None or proc.stdin is None or not self.ready.is_set():
+            return False
+        line = {"reason": reason} if ident is None else {"reason": reason, "id": ident}
+        proc.stdin.write(json.dumps(line).encode() + b"\n")
+        return True
+
+    def internal_error(self) -> None:
+        """The daemon logged an internal error: a file of the seconds around it (at most one per
+        ``REQUEST_INTERVAL_S``; the process merges a burst of them)."""
+        now = time.monotonic()
+        if now - self._last_internal_error >= REQUEST_INTERVAL_S:
+            self._last_internal_error = now
+            self.request("internal_error")
+
+    def _on_query(self, query: Any) -> None:
+        if self._waiting:  # one waiting already: this one gets the same file
+            next(iter(self._waiting.values())).append(query)
+            return
+        now = time.monotonic()
+        if now - self._last_request < REQUEST_INTERVAL_S:
+            wait = REQUEST_INTERVAL_S - (now - self._last_request)
+            busy = f"busy: one flight record per {REQUEST_INTERVAL_S:g} s; ask again in {wait:.1f} s"
+            reply(query, {"ok": False, "reason": busy})
+            return
+        self._next_id += 1
+        ident = str(self._next_id)
+        if not self.request("request", ident):
+            reply(
+                query,
+                {"ok": False, "reason": "the flight recorder is not running (it is being started again)"},
+            )
+            return
+        self._last_request = now
+        self._waiting[ident] = [query]
+        asyncio.get_running_loop().call_later(REQUEST_TIMEOUT_S, self._expire, ident)
+
+    def _expire(self, ident: str) -> None:
+        for query in self._waiting.pop(ident, ()):
+            reply(query, {"ok": False, "reason": f"no flight record written within {REQUEST_TIMEOUT_S:g} s"})
+
+    def _fail_waiting(self, reason: str) -> None:
+        waiting, self._waiting = self._waiting, {}
+        for queries in waiting.values():
+            for query in queries:
+                reply(query, {"ok": False, "reason": reason})
+
+
+class _InternalErrors(logging.Handler):
+    """Passes each internal error the daemon logs (an ERROR with its traceback) to the recorder."""
+
+    def __init__(self, recorder: FlightRecorder, loop: asyncio.AbstractEventLoop) -> None:
+        super().__init__(logging.ERROR)
+        self._recorder = recorder
+        self._loop = loop
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.exc_info is None or record.name == __name__:
+            return
+        with contextlib.suppress(RuntimeError):  # the loop closed
+            self._loop.call_soon_threadsafe(self._recorder.internal_error)
