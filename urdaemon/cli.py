@@ -42,7 +42,7 @@ EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 """``move`` interrupted by Ctrl-C (after it canceled its goal), as shells report SIGINT."""
-TOOL_MODULES: tuple[str, ...] = ()
+TOOL_MODULES: tuple[str, ...] = ("urdaemon.replay.command",)
 """Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``
 (``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
