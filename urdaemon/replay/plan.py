@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = [
-    "KINEMATIC_VELOCITY",
+    "KINEMATIC_MOVE",
     "MAX_BYTES",
     "MAX_POINTS",
     "REST_VELOCITY",
@@ -56,9 +56,9 @@ MAX_BYTES = 2 * 1024 * 1024 - 64 * 1024
 """JSON bytes of a cell goal's request: the daemon's 2 MiB, less room for the envelope."""
 REST_VELOCITY = 1e-6
 """A sample whose every joint velocity is at most this (rad/s) is at rest."""
-KINEMATIC_VELOCITY = 0.05
-"""While a joint moves at least this fast (rad/s), the ticks between two samples are read from its
-positions and velocities rather than from the host times."""
+KINEMATIC_MOVE = 1e-9
+"""When a joint moved more than this (rad) between two samples, the ticks between them are read from
+its positions and velocities rather than from the host times."""
 _SAME_ACCELERATION = 1e-6
 _NS = 1e-9
 
@@ -117,21 +117,52 @@ class Plan:
 
 
 def sample_ticks(samples: Sequence[Sample], period_s: float) -> list[int]:
-    """Each sample's tick on its robot's grid, counted from the first (strictly increasing)."""
+    """Each sample's tick on its robot's grid, counted from the first (strictly increasing).
+
+    While the robot moves, the ticks between two samples are what their positions and velocities
+    say: the interval is taken as one cubic starting with the acceleration the interval before ended
+    with (0 from rest), whose length solves ``a0·T²/6 + (v0 + Δv/3)·T = Δp`` on the joint that moved
+    most. Host times jitter by up to cycles on a busy machine, and a cycle the daemon missed moves
+    the host time on but not the motion. At rest the host time is all there is.
+    """
     ticks = [0]
+    acceleration: list[float] | None = None  # at the sample before, from the interval ending there
     for prev, cur in itertools.pairwise(samples):
         count = max(1, round((cur.time_ns - prev.time_ns) * _NS / period_s))
-        fastest, j = 0.0, -1
-        for i, (v0, v1) in enumerate(zip(prev.velocities, cur.velocities, strict=True)):
-            mean = 0.5 * (v0 + v1)
-            if abs(mean) > abs(fastest) and v0 * v1 > 0.0:
-                fastest, j = mean, i
-        if j >= 0 and abs(fastest) >= KINEMATIC_VELOCITY:
-            moved = (cur.positions[j] - prev.positions[j]) / (fastest * period_s)
-            if moved >= 0.5 and abs(moved - round(moved)) < 0.25:
-                count = round(moved)
+        if _at_rest(prev) and _at_rest(cur):
+            acceleration = None
+        else:
+            a0 = acceleration or [0.0] * len(prev.positions)
+            j = max(range(len(prev.positions)), key=lambda k: abs(cur.positions[k] - prev.positions[k]))
+            moved = cur.positions[j] - prev.positions[j]
+            length = _interval(a0[j], prev.velocities[j], cur.velocities[j], moved, count * period_s)
+            if length is not None and abs(moved) > KINEMATIC_MOVE:
+                count = max(1, round(length / period_s))
+            dt = count * period_s
+            acceleration = [
+                2.0 * (v1 - v0) / dt - (6.0 * (p1 - p0) - 4.0 * v0 * dt - 2.0 * v1 * dt) / (dt * dt)
+                for p0, p1, v0, v1 in zip(
+                    prev.positions, cur.positions, prev.velocities, cur.velocities, strict=True
+                )
+            ]
         ticks.append(ticks[-1] + count)
     return ticks
+
+
+def _interval(a0: float, v0: float, v1: float, moved: float, guess: float) -> float | None:
+    """The length T > 0 of a constant-jerk interval from (v0, a0) to v1 that moves ``moved``: the
+    smallest positive root of ``a0·T²/6 + (v0 + (v1 − v0)/3)·T − moved`` (None when there is none;
+    ``guess``, the host's, only decides whether the quadratic term matters)."""
+    b = v0 + (v1 - v0) / 3.0
+    a = a0 / 6.0
+    if abs(a) * guess * guess < 1e-9 * abs(b) * guess or a == 0.0:
+        return moved / b if b and moved / b > 0.0 else None
+    disc = b * b + 4.0 * a * moved
+    if disc < 0.0:
+        return None
+    root = math.sqrt(disc)
+    roots = [t for t in ((-b + root) / (2.0 * a), (-b - root) / (2.0 * a)) if t > 0.0]
+    return min(roots) if roots else None
 
 
 def estimate_accelerations(

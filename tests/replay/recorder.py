@@ -1,0 +1,128 @@
+"""A recorder for the replay tests: every message a cell publishes, kept as it arrived (with the
+joint states' ``cycle``, which a recording does not keep), written into a recording on demand."""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from urdaemon.recording.channels import recorded_keys
+from urdaemon.recording.mcap_file import RecordingWriter
+
+__all__ = ["Recorder", "State", "aligned_errors", "motion_starts"]
+
+
+@dataclass(frozen=True)
+class State:
+    """One joint_states message as published."""
+
+    cycle: int
+    positions: tuple[float, ...]
+    velocities: tuple[float, ...]
+
+
+@dataclass
+class Recorder:
+    """Subscribes (on ``session``) to what a recorder of ``cell`` keeps; ``close`` ends it."""
+
+    session: Any
+    cell: str
+    received: list[tuple[str, bytes, int]] = field(default_factory=list)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+    _subs: list[Any] = field(default_factory=list)
+
+    def start(self) -> Recorder:
+        for key in recorded_keys(self.cell):
+            self._subs.append(self.session.declare_subscriber(key, self._on_sample))
+        return self
+
+    def _on_sample(self, sample: Any) -> None:
+        with self._lock:
+            self.received.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+        self._subs.clear()
+
+    def states(self, robot: str) -> list[State]:
+        """The robot's joint_states in cycle order."""
+        with self._lock:
+            received = list(self.received)
+        out = []
+        for key, payload, _ in received:
+            if key == f"{self.cell}/{robot}/joint_states":
+                m = json.loads(payload)
+                out.append(State(int(m["cycle"]), tuple(m["position"]), tuple(m["velocity"])))
+        return sorted(out, key=lambda s: s.cycle)
+
+    def write(self, path: Path, urdf: str | None) -> Path:
+        """Everything received, as a recording (``RecordingWriter``)."""
+        buffer = io.BytesIO()
+        writer = RecordingWriter(buffer, cell=self.cell, urdf=urdf)
+        with self._lock:
+            received = list(self.received)
+        for key, payload, receive_ns in received:
+            writer.add(key, payload, receive_ns)
+        writer.finish()
+        path.write_bytes(buffer.getvalue())
+        return path
+
+
+def motion_starts(states: Sequence[State]) -> list[int]:
+    """For each run of moving samples, the index of the rest sample just before it."""
+    starts = []
+    for i in range(1, len(states)):
+        if any(states[i].velocities) and not any(states[i - 1].velocities):
+            starts.append(i - 1)
+    return starts
+
+
+def aligned_errors(
+    recorded: Sequence[State], replayed: Sequence[State], rate: float
+) -> tuple[list[float], int]:
+    """For each recorded sample of each move, the largest joint position error against the replayed
+    sample at the same time offset ÷ rate, offsets counted from the move's first moving sample (its
+    k-th move in both: a rest's length in cycles is not in a recording, whose time is the host's, and
+    a cycle the mock missed makes the two differ; its first moving sample found in the replay by its
+    positions), the move's offset shifted by the one of -1, 0, +1 cycle that fits best; and how many recorded samples had no replayed sample there (the subscriber
+    missed them; samples after the last replayed one are left out)."""
+    starts_r, starts_p = motion_starts(recorded), motion_starts(replayed)
+    assert len(starts_r) == len(starts_p), f"{len(starts_r)} moves recorded, {len(starts_p)} replayed"
+    by_cycle = {s.cycle: s for s in replayed}
+    last = replayed[-1].cycle
+    errors: list[float] = []
+    missing = 0
+    for k, (r0, p0) in enumerate(zip(starts_r, starts_p, strict=True)):
+        end = starts_r[k + 1] if k + 1 < len(starts_r) else len(recorded)
+        # the origin: the first moving sample, found in the replay by its positions (the subscriber
+        # may have missed the rest sample before it, or the first moving one)
+        first = recorded[r0 + 1]
+        window = [s for s in replayed[p0:] if s.cycle <= replayed[p0].cycle + round(20 / rate)]
+        base_r, base_p = first.cycle, min(window, key=lambda s: _error(first, s)).cycle
+        targets = [
+            (state, base_p + round((state.cycle - base_r) / rate))
+            for state in recorded[r0:end]
+            if base_p + round((state.cycle - base_r) / rate) + 1 <= last
+        ]
+        best: tuple[float, list[float], int] | None = None
+        for shift in (-1, 0, 1):
+            found = [(state, by_cycle.get(target + shift)) for state, target in targets]
+            errs = [_error(state, other) for state, other in found if other is not None]
+            worst = max(errs, default=0.0)
+            if best is None or worst < best[0]:
+                best = (worst, errs, len(found) - len(errs))
+        assert best is not None
+        errors += best[1]
+        missing += best[2]
+    return errors, missing
+
+
+def _error(a: State, b: State) -> float:
+    return max(abs(x - y) for x, y in zip(a.positions, b.positions, strict=True))
