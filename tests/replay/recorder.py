@@ -91,8 +91,9 @@ def aligned_errors(
     sample at the same time offset ÷ rate, offsets counted from the move's first moving sample (its
     k-th move in both: a rest's length in cycles is not in a recording, whose time is the host's, and
     a cycle the mock missed makes the two differ; its first moving sample found in the replay by its
-    positions), the move's offset shifted by the one of -1, 0, +1 cycle that fits best; and how many recorded samples had no replayed sample there (the subscriber
-    missed them; samples after the last replayed one are left out)."""
+    positions), the move's offset shifted by the one of -1, 0, +1 cycle that fits best; and how many
+    recorded samples had no replayed sample there (the subscriber missed them; samples after the last
+    replayed one are left out)."""
     starts_r, starts_p = motion_starts(recorded), motion_starts(replayed)
     assert len(starts_r) == len(starts_p), f"{len(starts_r)} moves recorded, {len(starts_p)} replayed"
     by_cycle = {s.cycle: s for s in replayed}

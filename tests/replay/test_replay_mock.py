@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import io
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -61,13 +60,13 @@ async def _record_motion(client: Client, path: Path) -> Recorder:
 
 
 @pytest.fixture
-async def recorded(tmp_path: Path) -> AsyncIterator[tuple[Path, Path, Recorder]]:
+async def recorded(tmp_path: Path) -> tuple[Path, Path, Recorder]:
     """The cell file, a recording of a motion on it, and what that recording's recorder saw."""
     config = tmp_path / "cell.yaml"
     config.write_text(TWO_MOCKS)
     async with running_daemon(TWO_MOCKS) as (_daemon, client):
         recorder = await _record_motion(client, tmp_path / "motion.mcap")
-    yield config, tmp_path / "motion.mcap", recorder
+    return config, tmp_path / "motion.mcap", recorder
 
 
 async def _replay(config: Path, recording: Path, *extra: str) -> tuple[Recorder, str, int]:
@@ -75,7 +74,14 @@ async def _replay(config: Path, recording: Path, *extra: str) -> tuple[Recorder,
     async with running_daemon(TWO_MOCKS) as (_daemon, client):
         recorder = Recorder(client.session, CELL).start()
         run = await run_cli_in_thread(
-            "replay", str(recording), "--config", str(config), "--connect", client.endpoint, *extra, timeout=120
+            "replay",
+            str(recording),
+            "--config",
+            str(config),
+            "--connect",
+            client.endpoint,
+            *extra,
+            timeout=120,
         )
         await _settle(recorder, "alice", 5)
         recorder.close()
@@ -87,9 +93,9 @@ def _check(recorded: Recorder, replayed: Recorder, robot: str, rate: float) -> N
     errors, missing = aligned_errors(recorded.states(robot), replayed.states(robot), rate)
     moving = sum(1 for s in recorded.states(robot) if any(s.velocities))
     # the subscriber may miss samples (the daemon drops rather than queues on a busy machine)
-    assert len(errors) + missing >= moving and missing <= len(errors) // 2, (
-        f"{robot}: {len(errors)} samples compared ({moving} moving), {missing} not replayed near"
-    )
+    said = f"{robot}: {len(errors)} samples compared ({moving} moving), {missing} not replayed near"
+    assert len(errors) + missing >= moving, said
+    assert missing <= len(errors) // 2, said
     worst = max(errors)
     assert worst <= TOLERANCE, f"{robot}: a recorded position is replayed {worst:.3g} rad off"
 
@@ -102,7 +108,9 @@ async def test_a_recorded_motion_is_reproduced_within_1e6_rad(recorded: tuple[Pa
     _check(original, replayed, "bob", 1.0)
 
 
-async def test_half_rate_reproduces_each_sample_at_twice_its_time(recorded: tuple[Path, Path, Recorder]) -> None:
+async def test_half_rate_reproduces_each_sample_at_twice_its_time(
+    recorded: tuple[Path, Path, Recorder],
+) -> None:
     config, recording, original = recorded
     replayed, stderr, _ = await _replay(config, recording, "--rate", "0.5")
     assert "rate 0.5 (samples)" in stderr
@@ -116,7 +124,8 @@ async def test_robot_picks_the_robots_driven(recorded: tuple[Path, Path, Recorde
     assert "replaying bob " in stderr
     _check(original, replayed, "bob", 1.0)
     alice = replayed.states("alice")
-    assert alice and all(s.positions == HOME for s in alice), "alice moved though only bob was replayed"
+    assert alice
+    assert all(s.positions == HOME for s in alice), "alice moved though only bob was replayed"
 
 
 def _synthetic(path: Path, robot: str, names: list[str]) -> Path:
