@@ -9,6 +9,7 @@ Each daemon runs in the test's loop, the command in a thread of its own (``run_c
 from __future__ import annotations
 
 import asyncio
+import json
 import io
 from pathlib import Path
 
@@ -140,7 +141,7 @@ def _synthetic(path: Path, robot: str, names: list[str]) -> Path:
             "effort": [0.0] * 6,
             "host_time_ns": 1_700_000_000_000_000_000 + 2_000_000 * i,
         }
-        writer.add(f"{CELL}/{robot}/joint_states", __import__("json").dumps(message).encode(), 1)
+        writer.add(f"{CELL}/{robot}/joint_states", json.dumps(message).encode(), 1)
     writer.finish()
     path.write_bytes(buffer.getvalue())
     return path
@@ -188,3 +189,40 @@ async def test_a_daemon_serving_another_cell_is_refused(tmp_path: Path) -> None:
     assert run.code == 2, run.stderr
     assert "does not serve the cell file's cell 'othercell'" in run.stderr
     assert "it serves testcell: alice, bob" in run.stderr
+
+
+async def test_ctrl_c_cancels_the_running_cell_goal_and_the_robots_stop(
+    recorded: tuple[Path, Path, Recorder], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C is what ``asyncio.run`` does with it: a cancel of the command's task, here while the
+    replay's cell goal moves alice and bob."""
+    from urdaemon import cli
+    from urdaemon.replay import command as replay_command
+    from urdaemon.replay.source import read_cell
+
+    config, recording, _original = recorded
+    async with running_daemon(TWO_MOCKS) as (daemon, client):
+        results = client.subscribe(f"{CELL}/goal/*/result")
+        args = cli._parser().parse_args(
+            ["replay", str(recording), "--config", str(config), "--connect", client.endpoint, "--rate", "0.5"]
+        )
+        assert replay_command._bad_arguments(args) is None
+        task = asyncio.ensure_future(replay_command._drive(args, read_cell(recording)))
+        alice = next(rt for rt in daemon.runtimes if rt.robot.name == "alice").controller
+        moved = client.subscribe(f"{CELL}/alice/goal/*/result")
+        _key, payload = await moved.get(timeout=30.0)  # the move to the start ended
+        move_goal = json.loads(payload)["goal_id"]
+        for _ in range(2000):  # then the cell goal's part runs
+            if alice.active_goal_id not in (None, move_goal):
+                break
+            await asyncio.sleep(0.005)
+        assert alice.active_goal_id not in (None, move_goal)
+        task.cancel()  # Ctrl-C
+        code = await asyncio.wait_for(task, 30)
+        _key, payload = await results.get(timeout=10.0)
+        assert json.loads(payload)["status"] == "canceled"
+        assert all(rt.controller.active_goal_id is None for rt in daemon.runtimes)
+    assert code == 130
+    err = capsys.readouterr().err
+    assert "interrupted: canceling cell goal" in err
+    assert "interrupted: the robots stop" in err

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {problem}", file=sys.stderr)
         return 2
     try:
-        recorded = read_cell(args.file, keep_messages=args.publish)
+        recorded = read_cell(args.file, samples=not args.publish)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

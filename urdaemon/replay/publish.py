@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import time
 from collections.abc import Sequence
@@ -65,9 +66,9 @@ class Republisher:
 
     def robots(self) -> list[str]:
         """Every robot a recorded message is about."""
-        names = set(self.recorded.samples)
-        for record in self.recorded.messages:
-            parts = record.topic.split("/")
+        names = set(self.recorded.names)
+        for topic in self.recorded.topics:
+            parts = topic.split("/")
             if len(parts) >= 4 and parts[2] not in ("goal", "tf", "robot_description"):
                 names.add(parts[2])
         return sorted(names)
@@ -103,7 +104,7 @@ class Republisher:
     async def wait_for_subscriber(self) -> None:
         """Until some session subscribes to a recorded robot's joint_states (or, with none, any key)."""
         keys = [RobotKeys(self.recorded.cell, r).joint_states for r in self.recorded.robots] or [
-            key_of(m.topic, m.message) for m in self.recorded.messages[:1]
+            key_of(m.topic, m.message) for m in itertools.islice(self.recorded.messages(), 1)
         ]
         loop = asyncio.get_running_loop()
         matched = asyncio.Event()
@@ -125,20 +126,20 @@ class Republisher:
 
     async def run(self) -> None:
         """Publish every recorded message at its time (the first at once)."""
-        messages: Sequence[Recorded] = [m for m in self.recorded.messages if m.kind is not None]
-        if not messages:
-            return
         loop = asyncio.get_running_loop()
-        first, start = messages[0].log_time_ns, loop.time()
-        i = 0
-        while i < len(messages):
-            wait = self._due(start, first, messages[i]) - loop.time()
+        messages = self.recorded.messages()
+        record = next(messages, None)
+        if record is None:
+            return
+        first, start = record.log_time_ns, loop.time()
+        while record is not None:
+            wait = self._due(start, first, record) - loop.time()
             if wait > _AHEAD_S:
                 await asyncio.sleep(wait)
             now = loop.time()
-            while i < len(messages) and self._due(start, first, messages[i]) <= now + _AHEAD_S:
-                self._put(messages[i])
-                i += 1
+            while record is not None and self._due(start, first, record) <= now + _AHEAD_S:
+                self._put(record)
+                record = next(messages, None)
 
     def _due(self, start: float, first_ns: int, record: Recorded) -> float:
         """When (loop time) ``record`` goes out: its recorded offset divided by the rate."""
@@ -198,8 +199,7 @@ async def publish_recording(
                 print("waiting for a subscriber to the recorded joint states", file=err)
                 await republisher.wait_for_subscriber()
             print(
-                f"publishing {len(recorded.messages)} recorded messages of cell {recorded.cell!r} "
-                f"at rate {rate:g}",
+                f"publishing {recorded.count} recorded messages of cell {recorded.cell!r} at rate {rate:g}",
                 file=err,
             )
             started = time.monotonic()

@@ -4,7 +4,7 @@ every message in log-time order (for ``--publish``); and what it checks against 
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -21,27 +21,38 @@ __all__ = ["RecordedCell", "mismatch", "read_cell", "sample_period"]
 
 @dataclass
 class RecordedCell:
-    """A recording, read once: the cell it is of, its URDF, each robot's joint names and samples
-    (in log-time order), and every message (``messages``, for ``--publish``)."""
+    """A recording, read through once: the cell it is of, its URDF, each robot's joint names and
+    samples (in log-time order; only when asked for), its topics and how many messages it holds;
+    ``messages()`` reads them again, one at a time (for ``--publish``)."""
 
+    path: str
     cell: str
     urdf: str | None
     names: dict[str, tuple[str, ...]] = field(default_factory=dict)
     samples: dict[str, list[Sample]] = field(default_factory=dict)
-    messages: list[Recorded] = field(default_factory=list)
+    topics: set[str] = field(default_factory=set)
+    count: int = 0
+    """Messages, the URDF's left out."""
 
     @property
     def robots(self) -> list[str]:
         """The robots that have joint states in the recording."""
-        return sorted(self.samples)
+        return sorted(self.names)
+
+    def messages(self) -> Iterator[Recorded]:
+        """Every message but the URDF's, in log-time order, read from the file as they are taken."""
+        with open(self.path, "rb") as stream:
+            for record in read_recording(stream):
+                if record.kind is not None:
+                    yield record
 
 
-def read_cell(path: str | Path, *, keep_messages: bool = False) -> RecordedCell:
-    """Read a recording; ``ConfigError`` naming the file when it is not one (or holds no joint
-    states and no cell)."""
+def read_cell(path: str | Path, *, samples: bool = True) -> RecordedCell:
+    """Read a recording (keeping each robot's samples unless ``samples`` is False); ``ConfigError``
+    naming the file when it is not one, or holds no message of a cell."""
     try:
         with open(path, "rb") as stream:
-            found = _collect(read_recording(stream), keep_messages)
+            found = _collect(str(path), read_recording(stream), samples)
     except OSError as err:
         raise ConfigError(f"{path}: cannot read it: {err.strerror or err}") from err
     except ConfigError as err:
@@ -53,29 +64,32 @@ def read_cell(path: str | Path, *, keep_messages: bool = False) -> RecordedCell:
     return found
 
 
-def _collect(records: Iterable[Recorded], keep_messages: bool) -> RecordedCell:
-    found = RecordedCell("", None)
+def _collect(path: str, records: Iterable[Recorded], samples: bool) -> RecordedCell:
+    found = RecordedCell(path, "", None)
     for record in records:
         cell = record.topic.split("/")[1]
         if found.cell and cell != found.cell:
             raise ConfigError(f"it holds two cells, {found.cell!r} and {cell!r}")
         found.cell = cell
-        if keep_messages:
-            found.messages.append(record)
         if record.kind is None:
             found.urdf = found.urdf or str(record.message.get("urdf", ""))
-        elif record.kind.name == "joint_states":
-            _add_sample(found, record)
+            continue
+        found.topics.add(record.topic)
+        found.count += 1
+        if record.kind.name == "joint_states":
+            _add_sample(found, record, samples)
     return found
 
 
-def _add_sample(found: RecordedCell, record: Recorded) -> None:
+def _add_sample(found: RecordedCell, record: Recorded, keep: bool) -> None:
     message = record.message
     robot = str(message.get("robot") or record.topic.split("/")[2])
     names = tuple(str(n) for n in message["names"])
     known = found.names.setdefault(robot, names)
     if known != names:
         raise ConfigError(f"robot {robot!r}: its joint names change within the recording ({known} → {names})")
+    if not keep:
+        return
     velocities = tuple(message.get("velocity") or (0.0,) * len(names))
     found.samples.setdefault(robot, []).append(
         Sample(record.log_time_ns, tuple(message["position"]), tuple(float(v) for v in velocities))
