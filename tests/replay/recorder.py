@@ -1,8 +1,9 @@
-"""A recorder for the replay tests: every message a cell publishes, kept as it arrived (with the
+"""A recorder for the replay tests, and the motion they record: every message a cell publishes, kept
 joint states' ``cycle``, which a recording does not keep), written into a recording on demand."""
 
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import threading
@@ -12,10 +13,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from urdaemon.client import Client
 from urdaemon.recording.channels import recorded_keys
 from urdaemon.recording.mcap_file import RecordingWriter
 
-__all__ = ["Recorder", "State", "aligned_errors", "motion_starts"]
+__all__ = ["Recorder", "State", "aligned_errors", "motion_starts", "record_motion", "settle"]
+
+CELL = "testcell"
+ALICE_A = [0.4, -1.3, 1.3, -1.4, -1.6, 0.3]
+ALICE_B = [0.1, -1.45, 1.5, -1.6, -1.5, -0.1]
+BOB_A = [-0.3, -1.7, 1.7, -1.6, -1.5, -0.2]
 
 
 @dataclass(frozen=True)
@@ -127,3 +134,32 @@ def aligned_errors(
 
 def _error(a: State, b: State) -> float:
     return max(abs(x - y) for x, y in zip(a.positions, b.positions, strict=True))
+
+
+async def settle(recorder: Recorder, robot: str, count: int) -> None:
+    """Until ``count`` more joint_states of ``robot`` arrived (bounded)."""
+    start = len(recorder.states(robot))
+    for _ in range(500):
+        if len(recorder.states(robot)) >= start + count:
+            return
+        await asyncio.sleep(0.01)
+    raise AssertionError(f"{robot}: fewer than {count} joint_states arrived")
+
+
+async def record_motion(client: Client, path: Path) -> Recorder:
+    """alice: two moves with a rest between; bob: one move while alice makes her first."""
+    recorder = Recorder(client.session, CELL).start()
+    await settle(recorder, "alice", 20)
+    alice, bob = await client.robot("alice"), await client.robot("bob")
+    first, bobs = await asyncio.gather(alice.move(ALICE_A), bob.move(BOB_A))
+    assert (await first.result(timeout=30))["status"] == "succeeded"
+    assert (await bobs.result(timeout=30))["status"] == "succeeded"
+    await settle(recorder, "alice", 40)
+    second = await alice.move(ALICE_B)
+    assert (await second.result(timeout=30))["status"] == "succeeded"
+    await settle(recorder, "alice", 30)
+    recorder.close()
+    recorder.write(path, await client.robot_description(CELL))
+    await alice.release()
+    await bob.release()
+    return recorder

@@ -153,3 +153,32 @@ async def test_publishing_over_a_served_cell_is_refused_naming_it(tmp_path: Path
     assert run.code == 1, run.stderr
     assert "cell 'testcell' is served by a daemon (robots alive: alice, bob" in run.stderr
     assert "publishing" not in run.stderr
+
+
+async def test_urdaemon_view_shows_a_published_recording(recorded: tuple[Path, Path, Any]) -> None:
+    """The view finds the recorded robots, draws the recorded URDF, follows the recorded joint states,
+    and refuses to enable a robot, naming the recording."""
+    from urdaemon.view.app import running_view
+
+    _config, recording, original = recorded
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    command = asyncio.create_task(
+        run_cli_in_thread("replay", str(recording), "--publish", "--listen", endpoint, "--wait", timeout=120)
+    )
+    positions = {s.positions for s in original.states("alice")}
+    async with running_view(endpoint, port=0) as view:
+        assert sorted(view.feeds) == ["alice", "bob"]
+        seen = 0
+        for _ in range(300):
+            sample = view.feeds["alice"].joints()
+            if sample is not None and sample.positions in positions:
+                seen += 1
+            if seen >= 20 and view.moves > 0:
+                break
+            await view.drawn(10.0)
+        assert seen >= 20
+        assert view.moves > 0
+        assert not await view.controls["alice"].enable()
+        assert "is a recording replayed by `urdaemon replay --publish`" in view.controls["alice"].refusal
+    run = await asyncio.wait_for(command, 60)
+    assert run.code == 0, run.stderr

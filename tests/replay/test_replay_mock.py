@@ -9,65 +9,22 @@ Each daemon runs in the test's loop, the command in a thread of its own (``run_c
 from __future__ import annotations
 
 import asyncio
-import json
 import io
+import json
 from pathlib import Path
 
 import pytest
 
 from tests.helpers import run_cli_in_thread
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from tests.replay.recorder import Recorder, aligned_errors
-from urdaemon.client import Client
+from tests.replay.recorder import Recorder, aligned_errors, settle
 from urdaemon.recording.mcap_file import RecordingWriter
 
 pytestmark = pytest.mark.timeout(180)
 
 CELL = "testcell"
 HOME = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
-ALICE_A = [0.4, -1.3, 1.3, -1.4, -1.6, 0.3]
-ALICE_B = [0.1, -1.45, 1.5, -1.6, -1.5, -0.1]
-BOB_A = [-0.3, -1.7, 1.7, -1.6, -1.5, -0.2]
 TOLERANCE = 1e-6
-
-
-async def _settle(recorder: Recorder, robot: str, count: int) -> None:
-    """Until ``count`` more joint_states of ``robot`` arrived (bounded)."""
-    start = len(recorder.states(robot))
-    for _ in range(500):
-        if len(recorder.states(robot)) >= start + count:
-            return
-        await asyncio.sleep(0.01)
-    raise AssertionError(f"{robot}: fewer than {count} joint_states arrived")
-
-
-async def _record_motion(client: Client, path: Path) -> Recorder:
-    """alice: two moves with a rest between; bob: one move while alice makes her first."""
-    recorder = Recorder(client.session, CELL).start()
-    await _settle(recorder, "alice", 20)
-    alice, bob = await client.robot("alice"), await client.robot("bob")
-    first, bobs = await asyncio.gather(alice.move(ALICE_A), bob.move(BOB_A))
-    assert (await first.result(timeout=30))["status"] == "succeeded"
-    assert (await bobs.result(timeout=30))["status"] == "succeeded"
-    await _settle(recorder, "alice", 40)
-    second = await alice.move(ALICE_B)
-    assert (await second.result(timeout=30))["status"] == "succeeded"
-    await _settle(recorder, "alice", 30)
-    recorder.close()
-    recorder.write(path, await client.robot_description(CELL))
-    await alice.release()
-    await bob.release()
-    return recorder
-
-
-@pytest.fixture
-async def recorded(tmp_path: Path) -> tuple[Path, Path, Recorder]:
-    """The cell file, a recording of a motion on it, and what that recording's recorder saw."""
-    config = tmp_path / "cell.yaml"
-    config.write_text(TWO_MOCKS)
-    async with running_daemon(TWO_MOCKS) as (_daemon, client):
-        recorder = await _record_motion(client, tmp_path / "motion.mcap")
-    return config, tmp_path / "motion.mcap", recorder
 
 
 async def _replay(config: Path, recording: Path, *extra: str) -> tuple[Recorder, str, int]:
@@ -84,7 +41,7 @@ async def _replay(config: Path, recording: Path, *extra: str) -> tuple[Recorder,
             *extra,
             timeout=120,
         )
-        await _settle(recorder, "alice", 5)
+        await settle(recorder, "alice", 5)
         recorder.close()
     assert run.code == 0, f"exit {run.code}: {run.stderr}{run.stdout}"
     return recorder, run.stderr, run.code
