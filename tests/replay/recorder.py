@@ -1,5 +1,6 @@
 """A recorder for the replay tests, and the motion they record: every message a cell publishes, kept
-joint states' ``cycle``, which a recording does not keep), written into a recording on demand."""
+as it arrived (with the joint states' ``cycle``, which a recording does not keep) and written into a
+recording on demand; the comparison of a replay with its recording."""
 
 from __future__ import annotations
 
