@@ -229,3 +229,36 @@ def test_a_robot_resting_throughout_gets_no_part() -> None:
 def test_a_rate_that_is_not_a_positive_number_is_refused(rate: float) -> None:
     with pytest.raises(ValueError, match="rate must be"):
         make_plan([], rate)
+
+
+def test_at_the_recorded_speed_every_sample_as_a_point_is_refused_by_the_controller() -> None:
+    """Why ``moves`` from rate 1 up: the recorded states lie on the jerk limits' boundary, and the
+    controller's planner refuses them as points at the recorded timing."""
+    from urdaemon.errors import GoalRejected
+
+    recorded = _record(*TWO_MOVES)
+    plan = make_plan([Track("alice", P, _samples(recorded, 6))], 1.0, "samples")
+    points = [
+        TrajectoryPoint(
+            tuple(p["positions"]), p["time_from_start"], tuple(p["velocities"]), tuple(p["accelerations"])
+        )
+        for p in plan.steps[0].parts["alice"]
+    ]
+    with pytest.raises(GoalRejected, match="reaching it needs at least"):
+        plan_trajectory(list(plan.first["alice"]), ZEROS, ZEROS, points, LIMITS)
+
+
+def test_moves_below_rate_1_keep_the_rests_and_stretch_the_moves() -> None:
+    recorded = _record(*TWO_MOVES)
+    plan = make_plan([Track("alice", P, _samples(recorded, 7))], 0.5, "moves")
+    part = plan.steps[0].parts["alice"]
+    assert all(not any(p["velocities"]) for p in part)
+    fast = make_plan([Track("alice", P, _samples(recorded, 7))], 1.0)
+    assert [p["time_from_start"] for p in part] == pytest.approx(
+        [2 * p["time_from_start"] for p in fast.steps[0].parts["alice"]]
+    )
+
+
+def test_an_unknown_mode_is_refused() -> None:
+    with pytest.raises(ValueError, match="mode must be one of samples, moves"):
+        make_plan([], 1.0, "splines")

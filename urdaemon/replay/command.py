@@ -47,6 +47,13 @@ def add_parsers(sub: Any) -> None:
         "--rate", type=_rate, default=1.0, help="speed: 0.5 is half the recorded speed (default 1)"
     )
     replay.add_argument(
+        "--path",
+        choices=("samples", "moves"),
+        default=None,
+        help="samples: through every recorded sample; moves: each move re-planned between its rests "
+        "(default: samples below rate 1, else moves; docs/replay.md)",
+    )
+    replay.add_argument(
         "--robot",
         action="append",
         default=None,
@@ -98,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
 def _bad_arguments(args: argparse.Namespace) -> str | None:
     from urdaemon.client import DEFAULT_ENDPOINT
 
+    if args.publish and args.path is not None:
+        return "--path shapes the goals that drive a cell; --publish drives none"
     if args.publish and args.robot:
         return "--robot picks the robots to drive; --publish publishes the whole recording"
     if not args.publish and args.listen:
@@ -141,7 +150,8 @@ async def _drive(args: argparse.Namespace, recorded: Any) -> int:
         return 1
     async with client:
         try:
-            return await Drive(client, cell, recorded, robots, args.rate, sys.stderr, sys.stdout).run()
+            drive = Drive(client, cell, recorded, robots, args.rate, sys.stderr, sys.stdout, args.path)
+            return await drive.run()
         except GoalRejected as err:
             print(f"rejected: {err.reason}", file=sys.stderr)
             return 1

@@ -69,6 +69,8 @@ class Drive:
     rate: float
     err: TextIO
     out: TextIO
+    mode: str | None = None
+    """``samples`` or ``moves`` (plan.py); None: chosen by the rate."""
 
     async def run(self) -> int:
         """Check, plan, drive; the exit code (130 after Ctrl-C, the goal canceled first)."""
@@ -113,7 +115,7 @@ class Drive:
             Track(r, sample_period(config[r], self.cell), tuple(self.recorded.samples[r]))
             for r in self.robots
         ]
-        return make_plan(tracks, self.rate)
+        return make_plan(tracks, self.rate, self.mode)
 
     async def _drive(self, plan: Plan, current: list[Any]) -> int:
         moves = [await self._send_move(robot, first, current) for robot, first in plan.first.items()]

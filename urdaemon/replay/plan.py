@@ -38,6 +38,7 @@ __all__ = [
     "KINEMATIC_MOVE",
     "MAX_BYTES",
     "MAX_POINTS",
+    "MODES",
     "REST_VELOCITY",
     "Knot",
     "Plan",
@@ -362,11 +363,19 @@ def _thin(points: list[dict[str, Any]], keep_every: int) -> list[dict[str, Any]]
     ]
 
 
-def make_plan(tracks: Sequence[Track], rate: float) -> Plan:
-    """The replay of ``tracks`` at ``rate`` (1: recorded speed; 0.5: half)."""
+MODES = ("samples", "moves")
+"""The shapes of part (module docstring); by default ``samples`` below rate 1, else ``moves``."""
+
+
+def make_plan(tracks: Sequence[Track], rate: float, mode: str | None = None) -> Plan:
+    """The replay of ``tracks`` at ``rate`` (1: recorded speed; 0.5: half), in ``mode`` (one of
+    ``MODES``; None: chosen by the rate)."""
     if not (math.isfinite(rate) and rate > 0.0):
         raise ValueError(f"rate must be a finite number > 0, got {rate}")
-    mode = "samples" if rate < 1.0 else "moves"
+    if mode is None:
+        mode = "samples" if rate < 1.0 else "moves"
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     notes: list[str] = []
     t0 = min((t.samples[0].time_ns for t in tracks if t.samples), default=0)
     knots = {t.robot: knots_of(t, t0, mode, notes) for t in tracks if t.samples}
