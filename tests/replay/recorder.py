@@ -96,25 +96,31 @@ def aligned_errors(
     recorded: Sequence[State], replayed: Sequence[State], rate: float
 ) -> tuple[list[float], int]:
     """For each recorded sample of each move, the largest joint position error against the replayed
-    sample at the same time offset ÷ rate, offsets counted from the move's first moving sample (its
+    sample at the same time offset ÷ rate, offsets counted from the move's fastest sample (its
     k-th move in both: a rest's length in cycles is not in a recording, whose time is the host's, and
-    a cycle the mock missed makes the two differ; its first moving sample found in the replay by its
+    a cycle the mock missed makes the two differ; its fastest sample found in the replay by its
     positions), the move's offset shifted by the one of -1, 0, +1 cycle that fits best; and how many
     recorded samples had no replayed sample there (the subscriber missed them; samples after the last
     replayed one are left out)."""
     starts_r, starts_p = motion_starts(recorded), motion_starts(replayed)
-    assert len(starts_r) == len(starts_p), f"{len(starts_r)} moves recorded, {len(starts_p)} replayed"
+    # the replay's first move may be its move to the recording's start (when the robot was not there)
+    assert len(starts_p) - len(starts_r) in (0, 1), (
+        f"{len(starts_r)} moves recorded, {len(starts_p)} replayed"
+    )
+    starts_p = starts_p[len(starts_p) - len(starts_r) :]
     by_cycle = {s.cycle: s for s in replayed}
     last = replayed[-1].cycle
     errors: list[float] = []
     missing = 0
     for k, (r0, p0) in enumerate(zip(starts_r, starts_p, strict=True)):
         end = starts_r[k + 1] if k + 1 < len(starts_r) else len(recorded)
-        # the origin: the first moving sample, found in the replay by its positions (the subscriber
-        # may have missed the rest sample before it, or the first moving one)
-        first = recorded[r0 + 1]
-        window = [s for s in replayed[p0:] if s.cycle <= replayed[p0].cycle + round(20 / rate)]
-        base_r, base_p = first.cycle, min(window, key=lambda s: _error(first, s)).cycle
+        # the origin: the move's fastest sample (where a cycle moves the joints most), found in the
+        # replay by its positions (the subscriber may have missed any one sample; a fake arm creeps
+        # the last hair to where a goal starts, which makes the replay's move start earlier)
+        stop_p = starts_p[k + 1] if k + 1 < len(starts_p) else len(replayed)
+        anchor = max(recorded[r0:end], key=lambda s: max(abs(v) for v in s.velocities))
+        base_r = anchor.cycle
+        base_p = min(replayed[p0:stop_p], key=lambda s: _error(anchor, s)).cycle
         targets = [
             (state, base_p + round((state.cycle - base_r) / rate))
             for state in recorded[r0:end]

@@ -262,3 +262,24 @@ def test_moves_below_rate_1_keep_the_rests_and_stretch_the_moves() -> None:
 def test_an_unknown_mode_is_refused() -> None:
     with pytest.raises(ValueError, match="mode must be one of samples, moves"):
         make_plan([], 1.0, "splines")
+
+
+@pytest.mark.parametrize(
+    ("duration", "used"),
+    [(0.70, True), (0.50, False), (1.0, False)],
+)
+def test_a_move_is_timed_by_the_goal_that_made_it_when_it_fits(duration: float, used: bool) -> None:
+    """A measured arm's move lasts longer than it was planned: the recorded result of the goal that
+    ended it (within 20 % of the measured duration) times it instead."""
+    recorded = _record([TWO_MOVES[0][0]], [10, 10])
+    samples = _samples(recorded, 8)
+    measured = make_plan([Track("alice", P, samples)], 1.0).steps[0].parts["alice"]
+    moving = [p["time_from_start"] for p in measured]
+    ended = samples[-5].time_ns
+    timed = make_plan([Track("alice", P, samples, ((ended, duration),))], 1.0).steps[0].parts["alice"]
+    times = [p["time_from_start"] for p in timed]
+    assert times[0] == moving[0]
+    if used:
+        assert times[1] - times[0] == pytest.approx(duration)
+    else:
+        assert times == moving

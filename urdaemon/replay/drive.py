@@ -112,7 +112,12 @@ class Drive:
         """The plan of the chosen robots' motion (plan.py)."""
         config = {r.name: r for r in self.cell.robots}
         tracks = [
-            Track(r, sample_period(config[r], self.cell), tuple(self.recorded.samples[r]))
+            Track(
+                r,
+                sample_period(config[r], self.cell),
+                tuple(self.recorded.samples[r]),
+                tuple(self.recorded.goals.get(r, ())),
+            )
             for r in self.robots
         ]
         return make_plan(tracks, self.rate, self.mode)

@@ -80,6 +80,9 @@ class Track:
     robot: str
     period_s: float
     samples: tuple[Sample, ...]
+    goals: tuple[tuple[int, float], ...] = ()
+    """The robot's goals that succeeded: when the result was recorded (ns) and the trajectory time
+    they ran (s), which a move between two rests is timed by when one ended with it (``moves``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -236,8 +239,9 @@ def knots_of(track: Track, t0_ns: int, mode: str, notes: list[str]) -> list[Knot
     ktimes = [times[k] for k in kept]
     krest = [rest[k] for k in kept]
     if mode == "samples":
-        return _sample_knots(ktimes, positions, velocities, krest)
-    return _move_knots(ktimes, positions, velocities, krest)
+        return _sample_knots(ktimes, positions, velocities, krest, notes, track.robot)
+    goals = [((end - t0_ns) * _NS, duration) for end, duration in track.goals]
+    return _move_knots(ktimes, positions, velocities, krest, goals)
 
 
 def _sample_knots(
@@ -245,8 +249,17 @@ def _sample_knots(
     positions: list[tuple[float, ...]],
     velocities: list[tuple[float, ...]],
     rest: list[bool],
+    notes: list[str],
+    robot: str,
 ) -> list[Knot]:
-    accelerations = estimate_accelerations(times, positions, velocities)
+    if _velocities_fit(times, positions, velocities, rest):
+        accelerations = estimate_accelerations(times, positions, velocities)
+    else:
+        notes.append(
+            f"robot {robot!r}: its recorded velocities do not fit its positions (a measured arm's): "
+            "replayed through its positions, with velocities and accelerations taken from them"
+        )
+        velocities, accelerations = _differences(times, positions)
     zeros = (0.0,) * len(positions[0])
     knots: list[Knot] = []
     for k, t in enumerate(times):
@@ -259,14 +272,60 @@ def _sample_knots(
     return knots
 
 
+def _velocities_fit(
+    times: Sequence[float],
+    positions: Sequence[Sequence[float]],
+    velocities: Sequence[Sequence[float]],
+    rest: Sequence[bool],
+) -> bool:
+    """Whether the velocities are the positions' own: at most moving samples the intervals on either
+    side, each taken as one cubic, agree on the acceleration (as a plan sampled every cycle does,
+    but where the jerk switches; a measured arm's velocity, filtered or lagging, does not)."""
+    moving = [k for k in range(1, len(times) - 1) if not rest[k]]
+    if not moving:
+        return True
+    agree = 0
+    for k in moving:
+        left = estimate_accelerations(
+            times[k - 1 : k + 1], positions[k - 1 : k + 1], velocities[k - 1 : k + 1]
+        )
+        right = estimate_accelerations(times[k : k + 2], positions[k : k + 2], velocities[k : k + 2])
+        scale = 1.0 + max(abs(a) for a in (*left[1], *right[0]))
+        if all(abs(x - y) <= 1e-3 * scale for x, y in zip(left[1], right[0], strict=True)):
+            agree += 1
+    return agree >= len(moving) // 2
+
+
+def _differences(
+    times: Sequence[float], positions: Sequence[Sequence[float]]
+) -> tuple[list[tuple[float, ...]], list[tuple[float, ...]]]:
+    """Velocities and accelerations from the positions alone (central differences; 0 at the ends)."""
+    dof = len(positions[0])
+    velocities = [(0.0,) * dof]
+    accelerations = [(0.0,) * dof]
+    for k in range(1, len(times) - 1):
+        h1, h2 = times[k] - times[k - 1], times[k + 1] - times[k]
+        back = [(positions[k][j] - positions[k - 1][j]) / h1 for j in range(dof)]
+        ahead = [(positions[k + 1][j] - positions[k][j]) / h2 for j in range(dof)]
+        velocities.append(tuple((h2 * b + h1 * a) / (h1 + h2) for b, a in zip(back, ahead, strict=True)))
+        accelerations.append(tuple(2.0 * (a - b) / (h1 + h2) for b, a in zip(back, ahead, strict=True)))
+    if len(times) > 1:
+        velocities.append((0.0,) * dof)
+        accelerations.append((0.0,) * dof)
+    return velocities, accelerations
+
+
 def _move_knots(
     times: list[float],
     positions: list[tuple[float, ...]],
     velocities: list[tuple[float, ...]],
     rest: list[bool],
+    goals: Sequence[tuple[float, float]] = (),
 ) -> list[Knot]:
     """Rest knots only: each rest run's start (a move's end, found from its last moving sample) and
-    end (the next move's start, found from its first moving sample)."""
+    end (the next move's start, found from its first moving sample). A goal that succeeded while the
+    move ran or soon after, and lasted about as long (within 20 %), times the move instead: a measured
+    arm lags and smooths what it was commanded, so its moves last longer than they were planned."""
     zeros = (0.0,) * len(positions[0])
     knots = [Knot(times[0], positions[0], zeros, zeros)]
     k = 1
@@ -281,6 +340,9 @@ def _move_knots(
         end_at = times[stop - 1] + _until_rest(positions[stop - 1], positions[stop], velocities[stop - 1])
         start_at = min(max(start_at, times[k - 1]), times[k])
         end_at = min(max(end_at, times[stop - 1]), times[stop])
+        planned = _planned(goals, times[k], times[stop], end_at - start_at)
+        if planned is not None:
+            end_at = start_at + planned
         if start_at > knots[-1].time_s:
             knots.append(Knot(start_at, positions[k - 1], zeros, zeros))
         knots.append(Knot(max(end_at, knots[-1].time_s + 1e-6), positions[stop], zeros, zeros))
@@ -288,6 +350,22 @@ def _move_knots(
     if times[-1] > knots[-1].time_s:
         knots.append(Knot(times[-1], positions[-1], zeros, zeros))
     return knots
+
+
+GOAL_RESULT_WAIT_S = 1.0
+"""A goal's result may be recorded this long after its robot came to rest (the hold until it settles)."""
+
+
+def _planned(
+    goals: Sequence[tuple[float, float]], first_moving: float, rest: float, measured: float
+) -> float | None:
+    """The trajectory time of the goal that ended the move from ``first_moving`` to ``rest`` (its
+    result recorded in between, or up to ``GOAL_RESULT_WAIT_S`` after) when it is within 20 % of the
+    ``measured`` duration; else None."""
+    for end, duration in goals:
+        if first_moving <= end <= rest + GOAL_RESULT_WAIT_S and 0.8 * measured <= duration <= 1.25 * measured:
+            return duration
+    return None
 
 
 def _fastest(velocities: Sequence[float]) -> int:
@@ -342,6 +420,22 @@ def _part(
     origin, period = grid
     start = origin + math.floor((a - origin) / period + 1e-9) * period
     return [_point(k, start, rate) for k in track if a < k.time_s <= b and k.time_s - start > 1e-9]
+
+
+def _without_holds(part: list[dict[str, Any]], start: Sequence[float]) -> list[dict[str, Any]]:
+    """The part without the rest points at its start position before the last of them: they only
+    hold the robot where it is, and one a cycle after the start would ask a robot that rests a hair
+    off that position (a real arm, or the fake, settles so) to get there within that cycle."""
+    first = 0
+    while first + 1 < len(part) and _holds(part[first], start) and _holds(part[first + 1], start):
+        first += 1
+    return part[first:]
+
+
+def _holds(point: dict[str, Any], start: Sequence[float]) -> bool:
+    return (
+        point["positions"] == list(start) and not any(point["velocities"]) and not any(point["accelerations"])
+    )
 
 
 def _moves(part: Sequence[dict[str, Any]], first: Sequence[float]) -> bool:
@@ -419,7 +513,7 @@ def _longest_piece(
     def parts_to(b: float) -> dict[str, list[dict[str, Any]]]:
         out = {}
         for robot, track in knots.items():
-            part = _part(track, grids[robot], a, b, rate)
+            part = _without_holds(_part(track, grids[robot], a, b, rate), position[robot])
             if part and _moves(part, position[robot]):
                 out[robot] = part
         return out

@@ -30,6 +30,8 @@ class RecordedCell:
     urdf: str | None
     names: dict[str, tuple[str, ...]] = field(default_factory=dict)
     samples: dict[str, list[Sample]] = field(default_factory=dict)
+    goals: dict[str, list[tuple[int, float]]] = field(default_factory=dict)
+    """Each robot's goals that succeeded: when the result was recorded (ns), the trajectory time run."""
     topics: set[str] = field(default_factory=set)
     count: int = 0
     """Messages, the URDF's left out."""
@@ -78,6 +80,8 @@ def _collect(path: str, records: Iterable[Recorded], samples: bool) -> RecordedC
         found.count += 1
         if record.kind.name == "joint_states":
             _add_sample(found, record, samples)
+        elif record.kind.name == "goal_result" and samples:
+            _add_goal(found, record)
     return found
 
 
@@ -94,6 +98,14 @@ def _add_sample(found: RecordedCell, record: Recorded, keep: bool) -> None:
     found.samples.setdefault(robot, []).append(
         Sample(record.log_time_ns, tuple(message["position"]), tuple(float(v) for v in velocities))
     )
+
+
+def _add_goal(found: RecordedCell, record: Recorded) -> None:
+    message = record.message
+    duration = message.get("duration")
+    if message.get("status") == "succeeded" and isinstance(duration, int | float) and duration > 0:
+        robot = str(message.get("robot") or record.topic.split("/")[2])
+        found.goals.setdefault(robot, []).append((record.log_time_ns, float(duration)))
 
 
 def mismatch(
