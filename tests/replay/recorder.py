@@ -60,7 +60,8 @@ class Recorder:
         self._subs.clear()
 
     def states(self, robot: str) -> list[State]:
-        """The robot's joint_states in cycle order."""
+        """The robot's joint_states in the order they arrived (a `ur` robot's cycle count starts again
+        when its control program reconnects)."""
         with self._lock:
             received = list(self.received)
         out = []
@@ -68,7 +69,7 @@ class Recorder:
             if key == f"{self.cell}/{robot}/joint_states":
                 m = json.loads(payload)
                 out.append(State(int(m["cycle"]), tuple(m["position"]), tuple(m["velocity"])))
-        return sorted(out, key=lambda s: s.cycle)
+        return out
 
     def write(self, path: Path, urdf: str | None) -> Path:
         """Everything received, as a recording (``RecordingWriter``)."""
@@ -84,8 +85,9 @@ class Recorder:
 
 
 def motion_starts(states: Sequence[State]) -> list[int]:
-    """For each run of moving samples, the index of the rest sample just before it."""
-    starts = []
+    """For each run of moving samples, the index of the rest sample just before it (0 for a run the
+    states start with)."""
+    starts = [0] if states and any(states[0].velocities) else []
     for i in range(1, len(states)):
         if any(states[i].velocities) and not any(states[i - 1].velocities):
             starts.append(i - 1)

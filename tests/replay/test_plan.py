@@ -130,7 +130,7 @@ def test_any_sequence_of_moves_comes_back(
         return
     worst, compared = _replay_error(recorded, rate, seed)
     assert compared > 0
-    assert worst < 1e-8
+    assert worst < 1e-7  # the acceptance bound is 1e-6
 
 
 def test_ticks_follow_the_motion_not_the_host_clock() -> None:
@@ -194,7 +194,7 @@ def test_a_motion_longer_than_one_goal_is_cut_where_every_robot_rests(
         assert not any(last["accelerations"])
     assert plan.notes == []
     worst, compared = _replay_error(recorded, 0.5)
-    assert worst < 1e-8
+    assert worst < 1e-7  # the acceptance bound is 1e-6
     assert compared > len(recorded)
 
 
