@@ -18,7 +18,9 @@ Two shapes of part, chosen by the rate:
   the boundary of what the limits reach in one sample interval: the daemon's planner refuses them
   as points at the recorded timing (measured: docs/replay.md). A move that was planned
   time-optimally (or to a duration) from rest to rest is planned the same way again, so it is
-  reproduced exactly; any other path between two rests is re-planned, not reproduced.
+  reproduced exactly; any other path between two rests is re-planned, not reproduced. A recorded
+  result of the goal that made the move, when it fits, gives the move's planned length (a measured
+  arm's move lasts longer than its plan).
 
 A goal holds at most ``MAX_POINTS`` points and a cell goal ``MAX_BYTES`` of JSON (docs/keys.md
 "Goals"): a piece that would not fit is cut at an earlier common rest, and a stretch between two
