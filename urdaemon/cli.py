@@ -47,6 +47,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "urdaemon.foxglove_bridge.command",
     "urdaemon.introspect.commands",
     "urdaemon.recording.record_command",
+    "urdaemon.replay.command",
     "urdaemon.router",
 )
 """Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``
