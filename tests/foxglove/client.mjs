@@ -20,7 +20,7 @@ const args = JSON.parse(process.argv[2]);
 const { url, cell, robot, target, tolerance, timeoutMs } = args;
 const JOINTS = `/${cell}/${robot}/joint_states`;
 const TF = `/${cell}/tf`;
-const DESCRIPTION = `/${cell}/robot_description`;
+const DESCRIPTION = "/robot_description";
 const EXPECTED = {
   [JOINTS]: "sensor_msgs/msg/JointState",
   [TF]: "tf2_msgs/msg/TFMessage",

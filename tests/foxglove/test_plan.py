@@ -20,7 +20,7 @@ ROBOT_KINDS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_comm
         ("/c/bob/goal/result", "c/bob/goal/*/result", KINDS["goal_result"].schema.name),
         ("/c/goal/result", "c/goal/*/result", KINDS["cell_goal_result"].schema.name),
         ("/c/tf", "c/tf", "tf2_msgs/msg/TFMessage"),
-        ("/c/robot_description", None, "std_msgs/msg/String"),
+        ("/robot_description", None, "std_msgs/msg/String"),
     ],
 )
 def test_a_channel_of_the_plan(topic: str, key_expr: str | None, schema: str) -> None:
@@ -51,4 +51,4 @@ def test_the_plan_covers_every_recorded_key_for_every_robot_once() -> None:
 
 
 def test_a_cell_without_robots_still_has_its_tf_goal_result_and_urdf() -> None:
-    assert [p.topic for p in channel_plan("c", [])] == ["/c/goal/result", "/c/tf", "/c/robot_description"]
+    assert [p.topic for p in channel_plan("c", [])] == ["/c/goal/result", "/c/tf", "/robot_description"]

@@ -12,6 +12,7 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
+from urdaemon.recording import cdr
 from urdaemon.recording.channels import kind_of, recorded_keys
 from urdaemon.recording.mcap_file import URDF_ATTACHMENT, RecordingWriter, key_of, read_recording
 from urdaemon.recording.rosbag2 import write_bag_metadata
@@ -115,7 +116,7 @@ def test_the_mcap_reader_sees_schemas_times_and_the_urdf_attachment() -> None:
     assert encodings["/demo_cell/alice/tcp_pose"] == ("cdr", "geometry_msgs/msg/PoseStamped")
     assert encodings["/demo_cell/tf"] == ("cdr", "tf2_msgs/msg/TFMessage")
     assert encodings["/demo_cell/alice/status"] == ("json", "urdaemon/Status")
-    assert encodings["/demo_cell/robot_description"] == ("cdr", "std_msgs/msg/String")
+    assert encodings["/robot_description"] == ("cdr", "std_msgs/msg/String")
     for _schema, _channel, message in reader.iter_messages():
         assert message.publish_time == message.log_time
     attachments = list(make_reader(io.BytesIO(_write())).iter_attachments())
@@ -137,7 +138,7 @@ def test_a_ros2_only_file_is_a_bag_rosbags_reads(tmp_path: Path) -> None:
         "/demo_cell/alice/joint_states",
         "/demo_cell/alice/tcp_pose",
         "/demo_cell/tf",
-        "/demo_cell/robot_description",
+        "/robot_description",
     }
     states = seen["/demo_cell/alice/joint_states"]
     assert [t for t, _ in states] == [T0 + 2_000_000 * i for i in range(5)]
@@ -149,7 +150,7 @@ def test_a_ros2_only_file_is_a_bag_rosbags_reads(tmp_path: Path) -> None:
     assert (pose.header.frame_id, pose.pose.position.z) == ("alice_base", 4.3)
     tf = seen["/demo_cell/tf"][0][1]
     assert [t.child_frame_id for t in tf.transforms] == ["alice_base_link"]
-    assert seen["/demo_cell/robot_description"][0][1].data == URDF
+    assert seen["/robot_description"][0][1].data == URDF
 
 
 def test_a_bag_of_json_channels_is_refused_naming_the_channel(tmp_path: Path) -> None:
@@ -192,3 +193,28 @@ def test_every_recorded_key_expression_sorts_a_concrete_key() -> None:
     for expression in recorded_keys("c"):
         concrete = expression.replace("*", "x")
         assert kind_of(concrete) is not None, expression
+
+
+CHAIN = """<robot name="c">
+  <link name="world"/><link name="a_base"/><link name="a_l1"/>
+  <joint name="a_mount" type="fixed"><parent link="world"/><child link="a_base"/></joint>
+  <joint name="a_j1" type="revolute"><parent link="a_base"/><child link="a_l1"/></joint>
+</robot>"""
+
+
+def test_tf_is_written_per_urdf_joint_and_read_back_as_world_poses() -> None:
+    links = {"a_base": [0.5, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0], "a_l1": [0.5, 0.0, 0.2, 0.0, 0.0, 1.0, 0.0]}
+    buffer = io.BytesIO()
+    writer = RecordingWriter(buffer, cell="c", urdf=CHAIN)
+    message = {"frame": "world", "links": links, "host_time_ns": T0}
+    assert writer.add("c/tf", json.dumps(message).encode(), 1)
+    writer.finish()
+    reader = make_reader(io.BytesIO(buffer.getvalue()))
+    raw = [m.data for _s, c, m in reader.iter_messages() if c.topic == "/c/tf"]
+    transforms = cdr.decode_tf(raw[0])
+    assert [(t.frame_id, t.child_frame_id) for t in transforms] == [("world", "a_base"), ("a_base", "a_l1")]
+    assert transforms[1].transform == pytest.approx((0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 1.0), abs=1e-12)
+    (read,) = [r for r in read_recording(io.BytesIO(buffer.getvalue())) if r.topic == "/c/tf"]
+    assert read.message["frame"] == "world"
+    for name, pose in links.items():
+        assert read.message["links"][name] == pytest.approx(pose, abs=1e-12)

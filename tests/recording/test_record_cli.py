@@ -141,14 +141,14 @@ async def test_a_ros2_bag_reads_with_rosbags(cell: tuple[Daemon, Client, str], t
         "/testcell/bob/joint_states",
         "/testcell/bob/tcp_pose",
         "/testcell/tf",
-        "/testcell/robot_description",
+        "/robot_description",
     }
     states = seen["/testcell/bob/joint_states"]
     assert len(states) > 100  # bob publishes at 125 Hz
     assert states[0][1].name == [f"bob_{j}" for j in _UR_JOINTS]
     for timestamp, message in states:
         assert message.header.stamp.sec * 10**9 + message.header.stamp.nanosec == timestamp
-    assert "<robot" in seen["/testcell/robot_description"][0][1].data
+    assert "<robot" in seen["/robot_description"][0][1].data
 
 
 _UR_JOINTS = (

@@ -27,7 +27,7 @@ from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.foxglove_bridge.convert import description_record, records_of
 from urdaemon.foxglove_bridge.handoff import Handoff
 from urdaemon.foxglove_bridge.plan import ChannelPlan, channel_plan, description_topic
-from urdaemon.foxglove_bridge.tf_tree import joint_links
+from urdaemon.recording.tf_tree import joint_links
 
 if TYPE_CHECKING:
     from foxglove.websocket import ServerListener

@@ -1,17 +1,16 @@
 """A sample as the daemon published it → the Foxglove messages it becomes: (topic, bytes, log time).
-Every kind converts with the recorder's table (``recording/channels.py``) except tf, which goes out
-as one transform per URDF joint (``tf_tree.py``). Pure: runs on the bridge's converter thread.
+Every kind converts with the recorder's table (``recording/channels.py``); tf, like the recorder's
+file, as one transform per URDF joint (``channels.tf_record``). Pure: runs on the bridge's converter
+thread.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from typing import Any
 
-from urdaemon.foxglove_bridge.tf_tree import joint_transforms
 from urdaemon.recording import cdr
-from urdaemon.recording.channels import kind_of, time_of
+from urdaemon.recording.channels import kind_of, tf_record, time_of
 
 __all__ = ["Record", "description_record", "records_of"]
 
@@ -30,18 +29,8 @@ def records_of(key: str, payload: bytes, received_ns: int, joints: Sequence[tupl
         raise ValueError(f"{key}: the message is not a JSON object")
     log_time = time_of(message, received_ns)
     if where.kind.name == "tf":
-        return _tf_records(where.topic, message, log_time, joints)
+        return [(where.topic, tf_record(message, joints), log_time)]
     return [(where.topic, where.kind.to_record(message, key), log_time)]
-
-
-def _tf_records(
-    topic: str, message: dict[str, Any], log_time: int, joints: Sequence[tuple[str, str]]
-) -> list[Record]:
-    links = message["links"]
-    if not isinstance(links, dict):
-        raise ValueError(f"{topic}: links is not an object")
-    root = str(message.get("frame", "world"))
-    return [(topic, cdr.encode_transforms(log_time, joint_transforms(links, joints, root)), log_time)]
 
 
 def description_record(topic: str, urdf: str, now_ns: int) -> Record:

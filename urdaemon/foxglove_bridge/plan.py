@@ -8,7 +8,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from urdaemon.recording.channels import ROBOT_DESCRIPTION, Kind, Schema, kind_of, recorded_keys
+from urdaemon.recording.channels import (
+    DESCRIPTION_TOPIC,
+    ROBOT_DESCRIPTION,
+    Kind,
+    Schema,
+    kind_of,
+    recorded_keys,
+)
 
 __all__ = ["ChannelPlan", "channel_plan", "description_topic"]
 
@@ -30,8 +37,8 @@ class ChannelPlan:
 
 
 def description_topic(cell: str) -> str:
-    """The URDF's topic, as the recorder names it."""
-    return f"/{cell}/robot_description"
+    """The URDF's topic, as the recorder names it (one cell per bridge)."""
+    return DESCRIPTION_TOPIC
 
 
 def channel_plan(cell: str, robots: Sequence[str]) -> list[ChannelPlan]:

@@ -15,15 +15,17 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.recording import cdr, ros2_msgs
 from urdaemon.recording.json_schemas import JSON_SCHEMAS
+from urdaemon.recording.tf_tree import joint_transforms, world_poses
 
 __all__ = [
     "CDR_KINDS",
+    "DESCRIPTION_TOPIC",
     "KINDS",
     "ROBOT_DESCRIPTION",
     "Kind",
@@ -31,6 +33,7 @@ __all__ = [
     "Sorted",
     "kind_of",
     "recorded_keys",
+    "tf_record",
     "time_of",
 ]
 
@@ -144,16 +147,27 @@ def _tf_record(message: dict[str, Any], key: str) -> bytes:
     )
 
 
+def tf_record(message: dict[str, Any], joints: Sequence[tuple[str, str]]) -> bytes:
+    """The daemon's tf (every link's pose in ``world``) as the recorder and the Foxglove bridge store
+    it next to the URDF: one transform per URDF joint, parent → child (``tf_tree.py``: a frame with two
+    parents would fight the URDF in Foxglove's 3-D panel), in one ``tf2_msgs/msg/TFMessage``."""
+    links = message["links"]
+    if not isinstance(links, dict):
+        raise ValueError("tf: links is not an object")
+    root = str(message.get("frame", "world"))
+    return cdr.encode_transforms(time_of(message, 0), joint_transforms(links, joints, root))
+
+
 def _tf_message(data: bytes, topic: str) -> dict[str, Any]:
     transforms = cdr.decode_tf(data)
-    frame = transforms[0].frame_id if transforms else "world"
     time_ns = transforms[0].time_ns if transforms else 0
-    return {
-        "v": 1,
-        "frame": frame,
-        "links": {t.child_frame_id: list(t.transform) for t in transforms},
-        "host_time_ns": time_ns,
-    }
+    parents = {t.frame_id for t in transforms}
+    children = {t.child_frame_id for t in transforms}
+    roots = parents - children
+    frame = roots.pop() if len(roots) == 1 else "world"
+    tree = [(t.frame_id, t.child_frame_id, t.transform) for t in transforms]
+    links = world_poses(tree, frame)
+    return {"v": 1, "frame": frame, "links": {n: list(p) for n, p in links.items()}, "host_time_ns": time_ns}
 
 
 def _json_record(message: dict[str, Any], key: str) -> bytes:
@@ -190,8 +204,12 @@ KINDS: dict[str, Kind] = {
 CDR_KINDS = frozenset(name for name, kind in KINDS.items() if kind.is_ros2)
 
 ROBOT_DESCRIPTION = Schema(ros2_msgs.STRING, "ros2msg", ros2_msgs.schema_text(ros2_msgs.STRING).encode())
-"""The cell URDF's channel (``/<cell>/robot_description``, one message at the start, as
-``robot_state_publisher`` latches it), besides the file's ``robot_description.urdf`` attachment."""
+"""The cell URDF's channel's schema (one message at the start, as ``robot_state_publisher`` latches it),
+besides the file's ``robot_description.urdf`` attachment."""
+
+DESCRIPTION_TOPIC = "/robot_description"
+"""The URDF's topic: the name ROS 2 gives it, and the one topic Foxglove's 3-D panel draws a URDF from
+(a recording or a bridge serves one cell)."""
 
 _ROBOT_KEYS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_command")
 

@@ -4,7 +4,8 @@
 ``RecordingWriter`` takes each published message as it arrived (key, payload, when it arrived) and
 writes it on its kind's channel, registered on first use; log and publish time are the message's own
 ``host_time_ns``. The cell URDF goes in twice: as the ``robot_description.urdf`` attachment and as
-one ``std_msgs/msg/String`` on ``/<cell>/robot_description``. Not thread-safe: one writer thread.
+one ``std_msgs/msg/String`` on ``/robot_description``; the cell's tf goes in as one transform per
+URDF joint, as Foxglove draws it beside the URDF (``channels.tf_record``). Not thread-safe: one writer thread.
 
 ``read_recording`` reads a file back in log-time order, each message as the daemon published it.
 """
@@ -22,7 +23,17 @@ from mcap.writer import CompressionType, Writer
 
 from urdaemon import __version__
 from urdaemon.recording import cdr
-from urdaemon.recording.channels import KINDS, ROBOT_DESCRIPTION, Kind, Schema, kind_of, time_of
+from urdaemon.recording.channels import (
+    DESCRIPTION_TOPIC,
+    KINDS,
+    ROBOT_DESCRIPTION,
+    Kind,
+    Schema,
+    kind_of,
+    tf_record,
+    time_of,
+)
+from urdaemon.recording.tf_tree import joint_links
 
 __all__ = ["URDF_ATTACHMENT", "Recorded", "RecordingWriter", "key_of", "read_recording"]
 
@@ -63,6 +74,7 @@ class RecordingWriter:
         self._cell = cell
         self._urdf = urdf
         self._urdf_written = False
+        self._joints = joint_links(urdf) if urdf else ()
         self.counts = _Counts()
         info = {"urdaemon": __version__, "cell": cell or "", "created_ns": str(time.time_ns())}
         self._writer.add_metadata("urdaemon", {**info, **(metadata or {})})
@@ -78,7 +90,12 @@ class RecordingWriter:
             message = json.loads(payload)
             if not isinstance(message, dict):
                 raise ValueError("not a JSON object")
-            data = payload if where.kind.message_encoding == "json" else where.kind.to_record(message, key)
+            if where.kind.message_encoding == "json":
+                data = payload
+            elif where.kind.name == "tf" and self._joints:
+                data = tf_record(message, self._joints)
+            else:
+                data = where.kind.to_record(message, key)
         except (ValueError, KeyError, TypeError) as err:
             self.counts.malformed.setdefault(key, f"{type(err).__name__}: {err}")
             return False
@@ -102,8 +119,7 @@ class RecordingWriter:
         self._urdf_written = True
         data = self._urdf.encode()
         self._writer.add_attachment(log_time, log_time, URDF_ATTACHMENT, "application/xml", data)
-        topic = f"/{self._cell or cell}/robot_description"
-        self._write(topic, ROBOT_DESCRIPTION, "cdr", cdr.encode_string(self._urdf), log_time)
+        self._write(DESCRIPTION_TOPIC, ROBOT_DESCRIPTION, "cdr", cdr.encode_string(self._urdf), log_time)
 
     def _write(self, topic: str, schema: Schema, encoding: str, data: bytes, log_time: int) -> None:
         channel = self._channels.get(topic)

@@ -69,13 +69,13 @@ def read_cell(path: str | Path, *, samples: bool = True) -> RecordedCell:
 def _collect(path: str, records: Iterable[Recorded], samples: bool) -> RecordedCell:
     found = RecordedCell(path, "", None)
     for record in records:
+        if record.kind is None:  # the URDF's channel, which names no cell
+            found.urdf = found.urdf or str(record.message.get("urdf", ""))
+            continue
         cell = record.topic.split("/")[1]
         if found.cell and cell != found.cell:
             raise ConfigError(f"it holds two cells, {found.cell!r} and {cell!r}")
         found.cell = cell
-        if record.kind is None:
-            found.urdf = found.urdf or str(record.message.get("urdf", ""))
-            continue
         found.topics.add(record.topic)
         found.count += 1
         if record.kind.name == "joint_states":

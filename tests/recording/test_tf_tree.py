@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from urdaemon.description.kinematics import compose_poses
 from urdaemon.errors import DescriptionError
-from urdaemon.foxglove_bridge.tf_tree import inverse_pose, joint_links, joint_transforms
+from urdaemon.recording.tf_tree import inverse_pose, joint_links, joint_transforms
 
 URDF = """<robot name="r">
   <link name="world"/><link name="a_base"/><link name="a_l1"/><link name="a_l2"/><link name="a_tool"/>

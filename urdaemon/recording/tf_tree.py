@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from urdaemon.description.kinematics import compose_poses
 from urdaemon.errors import DescriptionError
 
-__all__ = ["Transform", "inverse_pose", "joint_links", "joint_transforms"]
+__all__ = ["Transform", "inverse_pose", "joint_links", "joint_transforms", "world_poses"]
 
 Transform = tuple[str, str, tuple[float, ...]]
 """(parent link, child link, the child's pose in the parent: x, y, z, qx, qy, qz, qw)."""
@@ -56,3 +56,23 @@ def joint_transforms(
             continue
         out.append((parent, child, compose_poses(inverse_pose(parent_pose), child_pose)))
     return out
+
+
+def world_poses(transforms: Sequence[Transform], root: str = "world") -> dict[str, tuple[float, ...]]:
+    """Every child's pose in ``root``, composed down the tree from parent → child transforms (what
+    ``joint_transforms`` undid); a transform whose parent never reaches ``root`` is left out."""
+    found: dict[str, tuple[float, ...]] = {}
+    todo = list(transforms)
+    while todo:
+        later = []
+        for parent, child, pose in todo:
+            if parent == root:
+                found[child] = tuple(pose)
+            elif parent in found:
+                found[child] = compose_poses(found[parent], pose)
+            else:
+                later.append((parent, child, pose))
+        if len(later) == len(todo):  # nothing resolved this round: those parents never reach root
+            break
+        todo = later
+    return found
