@@ -155,8 +155,10 @@ def _key_rows(
         chunk = str(key).rsplit("/", 1)[-1]
         rate = configured.get(chunk)
         shown = f"{rate:g} Hz" if isinstance(rate, int | float) else "when it happens"
-        if chunk == "status" or chunk == "io":
+        if chunk == "status":
             shown = f"on change, >= {rate:g} Hz" if isinstance(rate, int | float) else shown
+        elif chunk == "io":  # looked at io_rate_hz times a second, sent on change and at least each second
+            shown = f"on change (looked at {rate:g} Hz), >= 1 Hz" if isinstance(rate, int | float) else shown
         rows.append([str(key), shown, _rate_text(measured.get(str(key)))])
     return rows
 
