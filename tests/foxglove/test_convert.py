@@ -68,7 +68,7 @@ def test_tf_goes_out_as_one_message_with_each_childs_pose_in_its_parent() -> Non
 
 def test_the_urdf_is_a_string_message() -> None:
     topic, data, log_time = description_record("/robot_description", "<robot name='r'/>", 7)
-    assert (topic, log_time) == ("/c/robot_description", 7)
+    assert (topic, log_time) == ("/robot_description", 7)
     read: Any = TYPES.deserialize_cdr(data, "std_msgs/msg/String")
     assert read.data == "<robot name='r'/>"
 

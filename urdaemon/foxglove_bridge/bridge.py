@@ -22,8 +22,8 @@ from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, cast
 
+from urdaemon.cell_lookup import cell_description, served_cell
 from urdaemon.client import Client, default_holder
-from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.foxglove_bridge.convert import description_record, records_of
 from urdaemon.foxglove_bridge.handoff import Handoff
 from urdaemon.foxglove_bridge.plan import ChannelPlan, channel_plan, description_topic
@@ -38,8 +38,6 @@ log = logging.getLogger("urdaemon.foxglove")
 
 DESCRIPTION_PARAMETER = "/robot_description"
 """The parameter Foxglove's 3-D panel loads a URDF from by itself."""
-ROBOTS_WAIT_S = 10.0
-"""How long the bridge waits for the daemon's robots and its URDF."""
 TAKE_TIMEOUT_S = 0.2
 """The converter thread looks whether it should stop at least this often."""
 
@@ -86,8 +84,8 @@ async def running_bridge(
             holder = default_holder("urdaemon foxglove")
             client = await Client.connect(target, config_file=zenoh_config, holder=holder)
             stack.push_async_callback(client.close)
-        cell, robots = await _cell_robots(client, cell)
-        urdf = await _description(client, cell)
+        cell, robots = await served_cell(client, cell)
+        urdf = await cell_description(client, cell)
         joints = joint_links(urdf)
         handoff = Handoff()
         plans = channel_plan(cell, robots)
@@ -258,39 +256,6 @@ class _Listener:
 def _undeclare(sub: Any) -> None:
     with contextlib.suppress(Exception):
         sub.undeclare()
-
-
-async def _cell_robots(client: Client, cell: str | None) -> tuple[str, list[str]]:
-    """The cell to serve (the one served unless named) and its robots, waiting for them a while."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + ROBOTS_WAIT_S
-    while True:
-        served = await client.robots()
-        cells = sorted({c for c, _ in served if cell in (None, c)})
-        if len(cells) == 1:
-            return cells[0], sorted(r for c, r in served if c == cells[0])
-        if len(cells) > 1:
-            raise UrDaemonError(
-                f"several cells are served at {client.endpoint} ({', '.join(cells)}); name one"
-            )
-        if loop.time() > deadline:
-            named = f"cell {cell!r}" if cell is not None else "no robot"
-            raise UrTimeoutError(f"{named} is not served at {client.endpoint} (waited {ROBOTS_WAIT_S:g} s)")
-        await asyncio.sleep(0.1)
-
-
-async def _description(client: Client, cell: str) -> str:
-    """The cell URDF, asked again for a while: a session that has just connected may not know the
-    daemon's queryable yet."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + ROBOTS_WAIT_S
-    while True:
-        try:
-            return await client.robot_description(cell)
-        except UrTimeoutError:
-            if loop.time() > deadline:
-                raise
-        await asyncio.sleep(0.1)
 
 
 def _url_host(host: str) -> str:

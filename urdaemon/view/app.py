@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
+from urdaemon.cell_lookup import cell_description, served_cell
 from urdaemon.client import Client, default_holder
-from urdaemon.errors import UrDaemonError, UrTimeoutError
+from urdaemon.errors import UrTimeoutError
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.view.control import STREAM_PERIOD_S, RobotControl
 from urdaemon.view.feed import RobotFeed
@@ -131,8 +132,8 @@ async def _start(
     from urdaemon.description.urdf import load_urdf
 
     loop = asyncio.get_running_loop()
-    cell, robots = await _cell_robots(client, cell)
-    urdf = await loop.run_in_executor(None, load_urdf, await _description(client, cell))
+    cell, robots = await served_cell(client, cell)
+    urdf = await loop.run_in_executor(None, load_urdf, await cell_description(client, cell))
     feeds = {name: RobotFeed(name) for name in robots}
     for name, feed in feeds.items():
         feed.subscribe(client.session, RobotKeys(cell, name), loop)
@@ -157,40 +158,6 @@ async def _start(
 
     server.on_client_disconnect(on_disconnect)
     return view
-
-
-async def _cell_robots(client: Client, cell: str | None) -> tuple[str, list[str]]:
-    """The cell to view (the one served unless named) and its robots, waiting for them a while."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + ROBOTS_WAIT_S
-    while True:
-        served = await client.robots()
-        cells = sorted({c for c, _ in served if cell in (None, c)})
-        if len(cells) == 1:
-            return cells[0], [r for c, r in served if c == cells[0]]
-        if len(cells) > 1:
-            raise UrDaemonError(
-                f"several cells are served at {client.endpoint} ({', '.join(cells)}); name one"
-            )
-        if loop.time() > deadline:
-            named = f"cell {cell!r}" if cell is not None else "no robot"
-            raise UrTimeoutError(f"{named} is not served at {client.endpoint} (waited {ROBOTS_WAIT_S:g} s)")
-        await asyncio.sleep(0.1)
-
-
-async def _description(client: Client, cell: str) -> str:
-    """The cell URDF. A session that has just connected may not know the daemon's queryable yet (its
-    declaration is on its way, while the robots' liveliness tokens already answered): ask again, for
-    at most ``ROBOTS_WAIT_S``."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + ROBOTS_WAIT_S
-    while True:
-        try:
-            return await client.robot_description(cell)
-        except UrTimeoutError:
-            if loop.time() > deadline:
-                raise
-        await asyncio.sleep(0.1)
 
 
 async def _first_joint_states(feeds: dict[str, RobotFeed]) -> None:
