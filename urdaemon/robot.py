@@ -242,7 +242,8 @@ class RobotRuntime:
             return
         backend.send_command()  # the robot's frame first, then everything users see
         if state.cycle % self._decimation == 0:
-            # nothing is computed or encoded for a stream nobody subscribes to
+            # nothing is computed or encoded for a stream nobody wants (a subscriber; for joint_states
+            # also the flight recorder's ring, publish/tap.py)
             if self._joints_wanted.active:
                 self._pub_joints.put(self._encoder.encode(state))
             if self._pose_wanted.active:

@@ -134,7 +134,8 @@ class FlightProcess:
 
     def _finish(self) -> None:
         """The daemon is stopping: write the open burst now, and whatever is due."""
-        self._step(time.time_ns())  # what arrived last, and the last requests
+        while self._step(time.time_ns()):  # what arrived last, and the last requests
+            pass
         burst = self._bursts.due(sys.maxsize)
         if burst is not None:
             self._due.append(burst)

@@ -110,6 +110,7 @@ class FlightRecorder:
         self._next_id = 0
         self._last_request = -REQUEST_INTERVAL_S
         self._last_internal_error = -REQUEST_INTERVAL_S
+        self._feeding: asyncio.TimerHandle | None = None
 
     @property
     def pid(self) -> int | None:
@@ -124,7 +125,7 @@ class FlightRecorder:
         """Keep the process running until cancelled; then stop it."""
         handler = _InternalErrors(self, asyncio.get_running_loop())
         logging.getLogger("urdaemon").addHandler(handler)
-        feeding = asyncio.create_task(self._feed())
+        self._feed()  # and every FEED_INTERVAL_S from now on
         failures = 0
         try:
             while True:
@@ -136,14 +137,15 @@ class FlightRecorder:
                 await asyncio.sleep(wait)
                 self.restarts += 1
         finally:
-            feeding.cancel()
+            if self._feeding is not None:
+                self._feeding.cancel()
             logging.getLogger("urdaemon").removeHandler(handler)
             await self._stop()
 
-    async def _feed(self) -> None:
-        while True:
-            await asyncio.sleep(FEED_INTERVAL_S)
-            self._send()
+    def _feed(self) -> None:
+        """Every ``FEED_INTERVAL_S`` on the loop (a timer, not a task: the cheapest wake-up)."""
+        self._feeding = asyncio.get_running_loop().call_later(FEED_INTERVAL_S, self._feed)
+        self._send()
 
     def _send(self) -> None:
         """Send what the tap kept since the last call in one write, or drop it (never waits)."""
