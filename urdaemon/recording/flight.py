@@ -2,7 +2,7 @@
 the daemon (runtime/flight_recorder.py), never by hand.
 
 The daemon feeds it through its stdin, a binary pipe of frames (flight_frames.py): the cell URDF first,
-then every message the daemon publishes, in batches about every 20 ms, and its requests. It keeps the
+then every message the daemon publishes, in batches about every 50 ms, and its requests. It keeps the
 last seconds in a ring (flight_ring.py) and writes a burst's seconds before and after its trigger to
 ``<dir>/<cell>_<time>_<reason>.mcap`` (named ``.partial`` until complete) with the shared
 ``RecordingWriter``, on a thread of its own so the ring goes on meanwhile. It has no Zenoh session:

@@ -5,7 +5,7 @@ A frame is a 15-byte header, little endian: ``kind`` (u8), the key's length (u16
 length (u32), a time (i64, Unix ns), then the key (UTF-8) and the payload. Kinds:
 
 - ``SAMPLE`` (0): a message the daemon published: its key, its payload, and the time of the batch it
-  was sent in (one clock read per batch of about 20 ms, not one per message);
+  was sent in (one clock read per batch of about 50 ms, not one per message);
 - ``REQUEST`` (1): a request as JSON, no key: ``{"reason": "internal_error"}``, ``{"reason":
   "request", "id": "3"}``;
 - ``URDF`` (2): the cell URDF, no key, sent first each time the process starts.
