@@ -34,6 +34,7 @@ from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
 from urdaemon.publish.tap import Tap
+from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.daemon_info import DaemonInfo
@@ -179,7 +180,7 @@ class Daemon:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
-        tap = Tap() if self.cell.record is not None else None  # the flight recorder's feed
+        tap = Tap(RING_STREAMS) if self.cell.record is not None else None  # the flight recorder's feed
         self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell, tap=tap)
         restore_priority: Callable[[], None] | None = None
         try:

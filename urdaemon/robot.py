@@ -157,7 +157,7 @@ class RobotRuntime:
         """Declare this robot's publishers, queryables, subscribers and liveliness token."""
         node, keys = self.node, self.keys
         self._pub_joints = node.publisher(keys.joint_states, realtime=True)
-        self._joints_wanted = node.matching(self._pub_joints, ring=True)  # kept by the flight recorder
+        self._joints_wanted = node.matching(self._pub_joints)  # with the flight recorder: always on
         posed = self.tcp_poses.available
         self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if posed else None
         self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)

@@ -14,6 +14,21 @@ from tests.helpers import free_tcp_port
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher
+from urdaemon.recording.channels import RING_STREAMS
+
+
+@pytest.mark.parametrize(
+    ("key", "always"),
+    [
+        ("c/alice/joint_states", True),
+        ("c/alice/tcp_pose", False),
+        ("c/tf", False),
+        ("c/alice/status", False),
+        ("c/joint_states_x", False),
+    ],
+)
+def test_the_ring_wants_joint_states_whoever_subscribes(key: str, always: bool) -> None:
+    assert Tap(RING_STREAMS).always(key) is always
 
 
 def test_the_tap_hands_over_what_it_kept_once() -> None:
@@ -63,20 +78,20 @@ async def test_without_record_the_publishers_are_zenohs_own(
     assert node.tap is None
     publisher = node.publisher("c/a/joint_states", realtime=True)
     assert isinstance(publisher, zenoh.Publisher)
-    assert node.matching(publisher, ring=True).active is False, "no tap: only subscribers count"
+    assert node.matching(publisher).active is False, "no tap: only subscribers count"
 
 
-async def test_with_a_tap_the_ring_forces_only_the_streams_it_names(
+async def test_with_a_tap_only_the_ring_streams_are_always_wanted(
     options: ZenohOptions, node_factory: list[ZenohNode]
 ) -> None:
-    tap = Tap()
+    tap = Tap(RING_STREAMS)
     node = ZenohNode(options, asyncio.get_running_loop(), tap=tap)
     node_factory.append(node)
     joints = node.publisher("c/a/joint_states", realtime=True)
     pose = node.publisher("c/a/tcp_pose", realtime=True)
     assert isinstance(joints, TappedPublisher)
     assert isinstance(pose, TappedPublisher)
-    assert node.matching(joints, ring=True).active is True, "joint_states: computed for the ring"
+    assert node.matching(joints).active is True, "joint_states: computed for the ring"
     pose_wanted = node.matching(pose)
     assert pose_wanted.active is False, "tcp_pose: only for a subscriber, not for the ring"
     assert pose_wanted is pose.wanted

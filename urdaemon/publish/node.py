@@ -261,16 +261,17 @@ class ZenohNode:
             return pub
         return TappedPublisher(key, pub, self._listen(pub), self.tap.add)
 
-    def matching(self, publisher: Any, *, ring: bool = False) -> Matching:
+    def matching(self, publisher: Any) -> Matching:
         """A :class:`Matching` for ``publisher`` (undeclared with everything else on ``close``).
 
-        ``ring``: the stream is kept in the flight recorder's ring even when nobody subscribes, so
-        with the tap the flag is always active and the stream is computed every cycle (joint_states).
-        Without ``ring`` (tcp_pose, tf: derived from joint_states and the URDF, at the cost of
-        forward kinematics) it says only whether a real subscriber matches, tap or not.
+        With the flight recorder's tap, a stream the tap wants always (``Tap.always``: joint_states)
+        is always active, so it is computed every cycle for the ring; any other (tcp_pose, tf:
+        derived from joint_states and the URDF, at the cost of forward kinematics) says only
+        whether a real subscriber matches.
         """
         if isinstance(publisher, TappedPublisher):
-            return Matching(True) if ring else publisher.wanted
+            assert self.tap is not None, "a tapped publisher comes from a node with a tap"
+            return Matching(True) if self.tap.always(publisher.key) else publisher.wanted
         return self._listen(publisher)
 
     def _listen(self, publisher: Any) -> Matching:

@@ -12,7 +12,7 @@ is no tap and the publishers are Zenoh's own.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 __all__ = ["Matching", "Tap", "TappedPublisher"]
@@ -39,12 +39,22 @@ class Matching:
 
 
 class Tap:
-    """The messages published since the last ``take`` (on the loop's thread only)."""
+    """The messages published since the last ``take`` (on the loop's thread only).
 
-    __slots__ = ("_items",)
+    ``always``: the streams (a key's last chunk: ``joint_states``) computed for the tap even while no
+    subscriber wants them (recording/channels.py ``RING_STREAMS``); every other stream that is
+    computed only for subscribers (``tcp_pose``, ``tf``) reaches the tap only while one matches.
+    """
 
-    def __init__(self) -> None:
+    __slots__ = ("_always", "_items")
+
+    def __init__(self, always: Collection[str] = ()) -> None:
         self._items: list[Tapped] = []
+        self._always = frozenset(always)
+
+    def always(self, key: str) -> bool:
+        """Whether the stream on ``key`` is computed for the tap whoever subscribes."""
+        return key.rpartition("/")[2] in self._always
 
     def add(self, key: str, payload: bytes) -> None:
         """Keep one published message (the hot path: one append)."""
@@ -69,8 +79,8 @@ class TappedPublisher:
         """Whether a real subscriber matches (what the tap wants does not count)."""
         self._add = add
 
-    def put(self, payload: bytes, **options: Any) -> None:
+    def put(self, payload: bytes) -> None:
         """Publish ``payload`` to the subscribers, if any, and hand it to the tap."""
         if self.wanted.active:
-            self._publisher.put(payload, **options)
+            self._publisher.put(payload)
         self._add(self.key, payload)

@@ -25,6 +25,7 @@ from urdaemon.recording.json_schemas import JSON_SCHEMAS
 __all__ = [
     "CDR_KINDS",
     "KINDS",
+    "RING_STREAMS",
     "ROBOT_DESCRIPTION",
     "Kind",
     "Schema",
@@ -194,6 +195,14 @@ ROBOT_DESCRIPTION = Schema(ros2_msgs.STRING, "ros2msg", ros2_msgs.schema_text(ro
 ``robot_state_publisher`` latches it), besides the file's ``robot_description.urdf`` attachment."""
 
 _ROBOT_KEYS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_command")
+
+
+RING_STREAMS = frozenset({"joint_states"})
+"""The streams the daemon computes for the flight recorder's ring even while no client subscribes
+(publish/tap.py). ``tcp_pose`` and ``tf`` are not: they follow from ``joint_states`` and the URDF,
+and computing them for the ring would cost forward kinematics every cycle; they are in the ring only
+while a client subscribes to them. What is published anyway (status, io, events, goal messages,
+servo_command) always goes to the ring."""
 
 
 def recorded_keys(cell: str) -> tuple[str, ...]:
