@@ -12,8 +12,9 @@ measures these cases, each over one window of ``--window`` seconds:
 - ``idle``: nobody subscribed (the daemon skips ``tcp_pose`` and ``tf`` while nobody wants them);
 - ``record``: ``urdaemon record`` of every channel running (its own process): the daemon's CPU and
   the recorder's; then its summary line gives the messages written and dropped, and the file's size;
-- ``ring``: the same cell with ``record: {ring_s: 60}``: the daemon's CPU and its flight recorder
-  process's (and that process's resident memory at the end of the window), nobody else subscribed;
+- ``ring``: the same cell with ``record: {ring_s: 60}``: the daemon's CPU (with its tap feeding the
+  flight recorder's process through a pipe) and that process's (and its resident memory at the end
+  of the window), nobody subscribed;
 - ``both``: the ring and ``urdaemon record`` together.
 
 CPU is utime + stime from /proc/PID/stat over the window (every thread), printed as % of one core per
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib.util
+import os
 import re
 import subprocess
 import sys
@@ -228,10 +230,17 @@ def main() -> None:
     if unknown:
         parser.error(f"unknown case(s) {', '.join(unknown)}; cases: {', '.join(CASES)}")
     print(VIEW.machine())
+    print(_load("before"))
     with tempfile.TemporaryDirectory(prefix="recorder_cost_") as tmp:
         rows = run([int(n) for n in args.robots.split(",")], cases, args.window, Path(tmp))
     print()
     print(table(rows))
+    print(_load("after"))
+
+
+def _load(when: str) -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"load average {when}: {one:.2f} {five:.2f} {fifteen:.2f}"
 
 
 if __name__ == "__main__":

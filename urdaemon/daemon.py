@@ -33,6 +33,8 @@ from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.publish.tap import Tap
+from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.daemon_info import DaemonInfo
@@ -178,7 +180,8 @@ class Daemon:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
-        self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell)
+        tap = Tap(RING_STREAMS) if self.cell.record is not None else None  # the flight recorder's feed
+        self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell, tap=tap)
         restore_priority: Callable[[], None] | None = None
         try:
             if self.cell.realtime_priority:  # after Zenoh started its threads: they stay as they are
@@ -197,7 +200,7 @@ class Daemon:
             info = DaemonInfo(self.cell, self.runtimes, self.description.limits, self.listen_endpoints)
             node.cell_queryable(self.keys.daemon, info.on_query)  # also answers ``*/daemon``: every cell
             tf_pub = node.publisher(self.keys.tf)
-            self.flight_recorder = recorder = flight_recorder(self.cell, self.listen_endpoints, node)
+            self.flight_recorder = recorder = flight_recorder(self.cell, node, self.description.urdf)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
                 log.debug("%d objects of startup kept out of garbage collection", frozen)
@@ -205,7 +208,7 @@ class Daemon:
                     tasks = [group.create_task(rt.run()) for rt in self.runtimes]
                     tasks.append(group.create_task(self._publish_tf(tf_pub, node.matching(tf_pub))))
                     tasks.append(group.create_task(cell_goals.run()))
-                    if recorder is not None:  # its own process: nothing of it runs in a robot's cycle
+                    if recorder is not None:  # its own process: a robot's cycle only feeds the tap
                         tasks.append(group.create_task(recorder.run()))
                     await stop.wait()
                     for task in tasks:

@@ -157,7 +157,7 @@ class RobotRuntime:
         """Declare this robot's publishers, queryables, subscribers and liveliness token."""
         node, keys = self.node, self.keys
         self._pub_joints = node.publisher(keys.joint_states, realtime=True)
-        self._joints_wanted = node.matching(self._pub_joints)
+        self._joints_wanted = node.matching(self._pub_joints)  # with the flight recorder: always on
         posed = self.tcp_poses.available
         self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if posed else None
         self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)
@@ -242,7 +242,8 @@ class RobotRuntime:
             return
         backend.send_command()  # the robot's frame first, then everything users see
         if state.cycle % self._decimation == 0:
-            # nothing is computed or encoded for a stream nobody subscribes to
+            # nothing is computed or encoded for a stream nobody wants (a subscriber; for joint_states
+            # also the flight recorder's ring, publish/tap.py)
             if self._joints_wanted.active:
                 self._pub_joints.put(self._encoder.encode(state))
             if self._pose_wanted.active:

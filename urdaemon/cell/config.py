@@ -152,8 +152,6 @@ IDENTITY_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,31}$"
 ALL_ROBOTS = "*"
 """In a grant's ``read`` or ``command`` list: every robot of the cell, and the cell's own keys."""
 SECURE_PROTOCOLS = ("tls/", "quic/")
-RECORDER_PROTOCOLS = ("unixsock-stream/", "tcp/")
-"""Endpoints the flight recorder's process can connect to the daemon through, the first preferred."""
 """Endpoints whose links are encrypted and carry the peer's certificate."""
 
 
@@ -818,7 +816,6 @@ class Cell(_Frozen):
                 owner[port] = f"robot {robot.name!r} {role} port"
         self._one_robot_per_controller(where)
         self._zenoh_ports_free(owner)
-        self._recorder_can_connect()
         access = self.zenoh.access
         unknown = access.unknown_robots([r.name for r in self.robots]) if access is not None else None
         if unknown is not None:
@@ -859,21 +856,6 @@ class Cell(_Frozen):
                     "one controller drives one arm (its dashboard, primary and RTDE ports are fixed)"
                 )
             controllers[robot.address.lower()] = robot.name
-
-    def _recorder_can_connect(self) -> None:
-        if self.record is None:
-            return
-        if self.zenoh.tls is not None or self.zenoh.access is not None:
-            raise ValueError(
-                "record: the flight recorder subscribes to the daemon over its own plain tcp/ or "
-                "unixsock-stream/ endpoint, which zenoh.tls and zenoh.access do not allow; leave 'record' "
-                "out and record with `urdaemon record` from a client with a certificate"
-            )
-        if not any(e.startswith(RECORDER_PROTOCOLS) for e in self.zenoh.listen):
-            raise ValueError(
-                "record: the flight recorder needs a tcp/ or unixsock-stream/ endpoint in zenoh.listen "
-                "to subscribe to the daemon"
-            )
 
     def _zenoh_ports_free(self, owner: dict[int, str]) -> None:
         listening = {

@@ -37,6 +37,7 @@ import zenoh
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.publish.tap import Matching, Tap, TappedPublisher
 from urdaemon.transport_security import configure_daemon
 
 __all__ = [
@@ -212,21 +213,6 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | Non
     return conf
 
 
-class Matching:
-    """Whether a publisher has subscribers anywhere, kept up to date by a Zenoh matching listener.
-
-    The 500 Hz streams read ``active`` to skip computing and encoding what nobody would receive
-    (forward kinematics and JSON for ``tcp_pose``, the whole cell's link poses for ``tf``).
-    """
-
-    def __init__(self, active: bool) -> None:
-        self.active = active
-
-    def update(self, status: Any) -> None:
-        """The listener's callback (on a Zenoh thread: one attribute store, atomic under the GIL)."""
-        self.active = bool(status.matching)
-
-
 class ZenohNode:
     """One Zenoh session owned by the daemon; every declared entity is undeclared on ``close``."""
 
@@ -237,8 +223,12 @@ class ZenohNode:
         *,
         listen: tuple[str, ...] | None = None,
         cell: str | None = None,
+        tap: Tap | None = None,
     ) -> None:
         self._loop = loop
+        self.tap = tap
+        """The flight recorder's tap (cell file ``record``): every message published goes to it too
+        (publish/tap.py); None: publishers are Zenoh's own."""
         endpoints = options.listen if listen is None else listen
         try:
             self.session: Any = zenoh.open(serve_config(options, endpoints, cell))
@@ -258,16 +248,33 @@ class ZenohNode:
         Every publisher drops a sample rather than block when the network is congested: a stalled
         subscriber must never stall the event loop, which clocks every robot. What must not be lost
         (goal results) can also be asked for with a query.
+
+        With the flight recorder's tap, a ``TappedPublisher``: every message goes to the tap, and
+        to Zenoh only while a subscriber matches.
         """
         if realtime:
             pub = declare_state_publisher(self.session, key)
         else:
             pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP)
         self._entities.append(pub)
-        return pub
+        if self.tap is None:
+            return pub
+        return TappedPublisher(key, pub, self._listen(pub), self.tap.add)
 
     def matching(self, publisher: Any) -> Matching:
-        """A :class:`Matching` for ``publisher`` (undeclared with everything else on ``close``)."""
+        """A :class:`Matching` for ``publisher`` (undeclared with everything else on ``close``).
+
+        With the flight recorder's tap, a stream the tap wants always (``Tap.always``: joint_states)
+        is always active, so it is computed every cycle for the ring; any other (tcp_pose, tf:
+        derived from joint_states and the URDF, at the cost of forward kinematics) says only
+        whether a real subscriber matches.
+        """
+        if isinstance(publisher, TappedPublisher):
+            assert self.tap is not None, "a tapped publisher comes from a node with a tap"
+            return Matching(True) if self.tap.always(publisher.key) else publisher.wanted
+        return self._listen(publisher)
+
+    def _listen(self, publisher: Any) -> Matching:
         flag = Matching(bool(publisher.matching_status.matching))
         self._entities.append(publisher.declare_matching_listener(flag.update))
         # a subscriber may have appeared between the first read and the listener's declaration
@@ -276,7 +283,9 @@ class ZenohNode:
 
     def put(self, key: str, payload: bytes, *, attachment: bytes | None = None) -> None:
         """Publish once on ``key``, with ``attachment`` if given (a goal message's signature),
-        dropped rather than blocking when congested."""
+        dropped rather than blocking when congested; the tap, if any, gets it too."""
+        if self.tap is not None:
+            self.tap.add(key, payload)
         if not self._closed:
             self.session.put(
                 key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.DROP

@@ -27,6 +27,7 @@ __all__ = [
     "CDR_KINDS",
     "DESCRIPTION_TOPIC",
     "KINDS",
+    "RING_STREAMS",
     "ROBOT_DESCRIPTION",
     "Kind",
     "Schema",
@@ -212,6 +213,14 @@ DESCRIPTION_TOPIC = "/robot_description"
 (a recording or a bridge serves one cell)."""
 
 _ROBOT_KEYS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_command")
+
+
+RING_STREAMS = frozenset({"joint_states"})
+"""The streams the daemon computes for the flight recorder's ring even while no client subscribes
+(publish/tap.py). ``tcp_pose`` and ``tf`` are not: they follow from ``joint_states`` and the URDF,
+and computing them for the ring would cost forward kinematics every cycle; they are in the ring only
+while a client subscribes to them. What is published anyway (status, io, events, goal messages,
+servo_command) always goes to the ring."""
 
 
 def recorded_keys(cell: str) -> tuple[str, ...]:

@@ -1,17 +1,20 @@
 """The flight recorder's process: ``python -m urdaemon.recording.flight``, started and supervised by
 the daemon (runtime/flight_recorder.py), never by hand.
 
-It subscribes to everything the cell publishes (``recorded_keys``) over the daemon's own endpoint,
-keeps the last seconds in a ring (flight_ring.py) and writes a burst's seconds before and after its
-trigger to ``<dir>/<cell>_<time>_<reason>.mcap`` (named ``.partial`` until complete) with the shared
-``RecordingWriter``, on a thread of its own so the ring goes on meanwhile. The daemon's loop never
-touches the ring, the conversion or the disk: they cost this process's memory and CPU, not its.
+The daemon feeds it through its stdin, a binary pipe of frames (flight_frames.py): the cell URDF first,
+then every message the daemon publishes, in batches about every 50 ms, and its requests. It keeps the
+last seconds in a ring (flight_ring.py) and writes a burst's seconds before and after its trigger to
+``<dir>/<cell>_<time>_<reason>.mcap`` (named ``.partial`` until complete) with the shared
+``RecordingWriter``, on a thread of its own so the ring goes on meanwhile. It has no Zenoh session:
+the daemon's loop never touches the ring, the conversion or the disk, and nothing of the cell's Zenoh
+setup (mode, TLS, access control) concerns it.
 
-Its stdin takes one JSON line per request from the daemon: ``{"reason": "internal_error"}``, or
-``{"reason": "request", "id": "3"}`` for a client's query; stdin closing ends it. Its stdout says, one
-JSON line each: ``{"ready": true}`` once subscribed; ``{"written": PATH, "reasons": [...], "requests":
-[...], "messages": N}`` per file; ``{"failed": TEXT, "reasons": [...], "requests": [...]}`` when a
-file could not be written. What it logs goes to stderr (the daemon's).
+A request frame carries ``{"reason": "internal_error"}``, or ``{"reason": "request", "id": "3"}`` for
+a client's query; stdin closing ends it (exit code 0), a frame that cannot be read too (logged, exit
+code 1: only the daemon writes the pipe, so that is a bug). Its stdout says, one JSON line each:
+``{"ready": true}`` once it reads its stdin; ``{"written": PATH, "reasons": [...], "requests": [...],
+"messages": N}`` per file; ``{"failed": TEXT, "reasons": [...], "requests": [...]}`` when a file could
+not be written. What it logs goes to stderr (the daemon's).
 """
 
 from __future__ import annotations
@@ -29,10 +32,10 @@ from collections import deque
 from pathlib import Path
 from typing import IO, Any
 
-from urdaemon.recording.channels import recorded_keys
+from urdaemon.recording.flight_frames import REQUEST, SAMPLE, URDF, FrameError, FrameReader
 from urdaemon.recording.flight_ring import Burst, Bursts, Ring, Triggers, file_name
 from urdaemon.recording.mcap_file import RecordingWriter
-from urdaemon.recording.subscription import Inbox, subscribe
+from urdaemon.recording.subscription import Inbox
 
 __all__ = ["QUIET_S", "FlightProcess", "main"]
 
@@ -41,14 +44,14 @@ log = logging.getLogger("urdaemon.flight")
 QUIET_S = 10.0
 """Stream triggers this soon after a burst's last one are the same incident: no second file."""
 IDLE_WAIT_S = 0.02
-CONNECT_TIMEOUT_S = 10.0
+READ_BYTES = 1 << 20
+"""The most read from the pipe at once."""
 
 
 class FlightProcess:
-    """The ring, the triggers and the files of one cell, fed from ``session``."""
+    """The ring, the triggers and the files of one cell, fed from the daemon's pipe."""
 
-    def __init__(self, session: Any, args: argparse.Namespace, out: IO[str]) -> None:
-        self._session = session
+    def __init__(self, args: argparse.Namespace, out: IO[str]) -> None:
         self._cell: str = args.cell
         self._dir = Path(args.dir)
         self._ring_s: float = args.ring_s
@@ -60,26 +63,26 @@ class FlightProcess:
         self._due: deque[Burst] = deque()
         self._writing: threading.Thread | None = None
         self._stdin_closed = threading.Event()
+        self._broken: str | None = None
+        """Why the pipe could not be read (a frame that is none), if so."""
         self._out = out
         self._out_lock = threading.Lock()
         self._urdf: str | None = None
 
-    def run(self, stdin: IO[str]) -> None:
-        """Record until ``stdin`` closes; then write what is due and return."""
-        self._urdf = self._fetch_urdf()
-        subscribers = subscribe(self._session, recorded_keys(self._cell), self._inbox)
-        threading.Thread(target=self._read_requests, args=(stdin,), name="flight-stdin", daemon=True).start()
+    def run(self, stdin: IO[bytes]) -> int:
+        """Record until ``stdin`` closes; then write what is due. The exit code: 1 after a frame that
+        could not be read."""
+        threading.Thread(target=self._read_frames, args=(stdin,), name="flight-stdin", daemon=True).start()
         self._say({"ready": True})
         log.info("flight recorder of %r: keeping %g s in %s", self._cell, self._ring_s, self._dir)
-        try:
-            while not self._stdin_closed.is_set():
-                if not self._step(time.time_ns()):
-                    time.sleep(IDLE_WAIT_S)
-        finally:
-            for subscriber in subscribers:
-                with contextlib.suppress(Exception):
-                    subscriber.undeclare()
+        while not self._stdin_closed.is_set():
+            if not self._step(time.time_ns()):
+                time.sleep(IDLE_WAIT_S)
         self._finish()
+        if self._broken is not None:
+            log.error("flight recorder: stopped reading its pipe: %s", self._broken)
+            return 1
+        return 0
 
     def _step(self, now_ns: int) -> bool:
         items = self._inbox.take()
@@ -100,20 +103,39 @@ class FlightProcess:
             self._start_write(self._due.popleft())
         return bool(items)
 
-    def _read_requests(self, stdin: IO[str]) -> None:
-        for line in stdin:
-            try:
-                request = json.loads(line)
-                reason = str(request.get("reason") or "request")
-                ident = request.get("id")
-                self._requests.append((reason, None if ident is None else str(ident)))
-            except (ValueError, AttributeError):
-                log.warning("flight recorder: a request is not a JSON object: %.80r", line)
-        self._stdin_closed.set()
+    def _read_frames(self, stdin: IO[bytes]) -> None:
+        reader = FrameReader()
+        read = getattr(stdin, "read1", stdin.read)
+        offer = self._inbox.offer
+        try:
+            while data := read(READ_BYTES):
+                for kind, key, payload, time_ns in reader.feed(data):
+                    if kind == SAMPLE:
+                        offer(key, payload, time_ns)
+                    elif kind == REQUEST:
+                        self._request(payload)
+                    elif kind == URDF:
+                        self._urdf = payload.decode(errors="replace")
+            if reader.pending:
+                log.warning("flight recorder: the pipe ended inside a frame (%d bytes)", reader.pending)
+        except (FrameError, OSError) as err:
+            self._broken = str(err)
+        finally:
+            self._stdin_closed.set()
+
+    def _request(self, payload: bytes) -> None:
+        try:
+            request = json.loads(payload)
+            reason = str(request.get("reason") or "request")
+            ident = request.get("id")
+            self._requests.append((reason, None if ident is None else str(ident)))
+        except (ValueError, AttributeError):
+            log.warning("flight recorder: a request is not a JSON object: %.80r", payload)
 
     def _finish(self) -> None:
         """The daemon is stopping: write the open burst now, and whatever is due."""
-        self._step(time.time_ns())  # what arrived last, and the last requests
+        while self._step(time.time_ns()):  # what arrived last, and the last requests
+            pass
         burst = self._bursts.due(sys.maxsize)
         if burst is not None:
             self._due.append(burst)
@@ -132,8 +154,6 @@ class FlightProcess:
         partial = path.with_name(path.name + ".partial")
         told = {"reasons": burst.reasons, "requests": burst.requests}
         try:
-            if self._urdf is None:
-                self._urdf = self._fetch_urdf()
             self._dir.mkdir(parents=True, exist_ok=True)
             with partial.open("wb") as stream:
                 writer = RecordingWriter(stream, cell=self._cell, urdf=self._urdf, metadata=_metadata(burst))
@@ -149,15 +169,6 @@ class FlightProcess:
         written = sum(writer.counts.written.values())
         self._say({"written": str(path), "messages": written, **told})
 
-    def _fetch_urdf(self) -> str | None:
-        try:
-            for reply in self._session.get(f"{self._cell}/robot_description", timeout=5.0):
-                if reply.ok is not None:
-                    return str(reply.ok.payload.to_string())
-        except Exception as err:  # the file is still worth writing without it
-            log.warning("flight recorder: no cell URDF: %s", err)
-        return None
-
     def _say(self, message: dict[str, Any]) -> None:
         with self._out_lock:
             self._out.write(json.dumps(message) + "\n")
@@ -170,22 +181,16 @@ def _metadata(burst: Burst) -> dict[str, str]:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m urdaemon.recording.flight")
-    p.add_argument("--connect", required=True)
     p.add_argument("--cell", required=True)
     p.add_argument("--dir", required=True)
     p.add_argument("--ring-s", type=float, required=True)
     p.add_argument("--after-s", type=float, default=1.0)
     p.add_argument("--max-mb", type=int, default=512)
-    p.add_argument("--low-latency", action="store_true")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the flight recorder until stdin closes."""
-    import zenoh
-
-    from urdaemon.publish.node import zenoh_config
-
     args = _parser().parse_args(argv)
     # the daemon ends this process by closing its stdin (after it wrote what is due): a Ctrl-C or a
     # SIGTERM meant for the daemon must not cut a file short
@@ -194,26 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         stream=sys.stderr, level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
-    conf = zenoh_config("peer", [], [args.connect], low_latency=args.low_latency)
-    conf.insert_json5("connect/timeout_ms", json.dumps(int(CONNECT_TIMEOUT_S * 1000)))
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    try:
-        session = zenoh.open(conf)
-    except zenoh.ZError as err:
-        log.error("flight recorder: cannot connect to %s: %s", args.connect, err)
-        return 1
-    deadline = time.monotonic() + CONNECT_TIMEOUT_S
-    while not (list(session.info.peers_zid()) or list(session.info.routers_zid())):
-        if time.monotonic() > deadline:
-            log.error("flight recorder: nothing answered at %s within %g s", args.connect, CONNECT_TIMEOUT_S)
-            session.close()  # type: ignore[no-untyped-call]
-            return 1
-        time.sleep(0.05)
-    try:
-        FlightProcess(session, args, sys.stdout).run(sys.stdin)
-    finally:
-        session.close()  # type: ignore[no-untyped-call]
-    return 0
+    return FlightProcess(args, sys.stdout).run(sys.stdin.buffer)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,8 @@
 
 A callback runs on one of Zenoh's threads: it takes the sample's key, its payload as bytes and the
 time it arrived, appends them to the inbox and returns; converting and writing is the consumer's
-(one thread: ``urdaemon record``'s writer, the flight recorder's ring). A full inbox drops the sample
+(one thread: ``urdaemon record``'s writer). The flight recorder's process fills an ``Inbox`` too,
+from the thread that reads its pipe (recording/flight.py), for its ring. A full inbox drops the sample
 and counts it (``Inbox.dropped``), so a slow disk never backs up into Zenoh.
 """
 

@@ -1,10 +1,15 @@
 """The daemon's side of the flight recorder (cell file ``record``, docs/recording.md): start its
 process (``python -m urdaemon.recording.flight``), restart it with a backoff when it dies, stop it with
-the daemon, and pass it what the stream cannot show: an internal error the daemon logged, and a
-client's request on ``<cell>/service/flight_record`` (answered with the file's path once written).
+the daemon, feed it what the daemon publishes, and pass it what the stream cannot show: an internal
+error the daemon logged, and a client's request on ``<cell>/service/flight_record`` (answered with the
+file's path once written).
 
-The ring, the conversion and the disk are the process's: the daemon's loop only reads a line per file
-written, so the recorder never holds up a robot's cycle, and its memory is not the daemon's.
+The process is fed through its stdin (recording/flight_frames.py): the cell URDF when it starts, then
+every ``FEED_INTERVAL_S`` what the node's tap (publish/tap.py) kept of the messages published since,
+in one write that never waits. A batch is dropped, and counted, while the process is not running or
+while the pipe holds ``MAX_BUFFERED`` bytes it has not read yet: the daemon's memory stays bounded.
+The ring, the conversion and the disk are the process's: the daemon's loop only encodes a batch and
+reads a line per file written, so the recorder never holds up a robot's cycle.
 """
 
 from __future__ import annotations
@@ -16,23 +21,25 @@ import logging
 import os
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from urdaemon.cell.config import RECORDER_PROTOCOLS, Cell, RecordOptions
+from urdaemon.cell.config import Cell, RecordOptions
 from urdaemon.errors import ConfigError
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.tap import Tap
+from urdaemon.recording.flight_frames import REQUEST, URDF, encode_frame, encode_samples
 from urdaemon.runtime.queries import reply
 
 __all__ = [
+    "FEED_INTERVAL_S",
+    "MAX_BUFFERED",
     "REQUEST_INTERVAL_S",
     "REQUEST_TIMEOUT_S",
     "RESTART_BACKOFF_S",
     "FlightRecorder",
     "flight_recorder",
-    "loopback_endpoint",
 ]
 
 log = logging.getLogger(__name__)
@@ -45,30 +52,24 @@ REQUEST_TIMEOUT_S = 120.0
 """A request not answered by then is answered with a failure."""
 STOP_WAIT_S = 10.0
 """How long the process may take to write its open burst when the daemon stops."""
+FEED_INTERVAL_S = 0.05
+"""How often the tap's messages are sent to the process (one write each time). Each send wakes the
+daemon's loop and the process: measured at 1 robot, 20 ms cost the daemon about 0.3 % of a core more
+than 50 ms (docs/performance.md). A request flushes the tap first, so a file misses nothing that was
+published before it was asked for."""
+MAX_BUFFERED = 16 * 1024 * 1024
+"""Bytes the pipe may hold unread by the process; beyond, batches are dropped (counted, logged)."""
+DROP_LOG_S = 10.0
+"""Drops are logged at most this often."""
 
 
-def loopback_endpoint(listen: Sequence[str]) -> str | None:
-    """Where the recorder's process connects: the daemon's first ``unixsock-stream/`` endpoint, else its
-    first ``tcp/`` one with a wildcard address made loopback; None without either."""
-    for protocol in RECORDER_PROTOCOLS:
-        for endpoint in listen:
-            if endpoint.startswith(protocol):
-                return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
-    return None
-
-
-def flight_recorder(cell: Cell, listen: Sequence[str], node: ZenohNode) -> FlightRecorder | None:
-    """The cell's flight recorder, its queryable declared; None when the cell file has no ``record``."""
-    if cell.record is None:
+def flight_recorder(cell: Cell, node: ZenohNode, urdf: str) -> FlightRecorder | None:
+    """The cell's flight recorder, its queryable declared, fed from the node's tap; None when the
+    cell file has no ``record`` (the node then has no tap)."""
+    if cell.record is None or node.tap is None:
         return None
-    endpoint = loopback_endpoint(listen)
-    if endpoint is None:
-        raise ConfigError(
-            f"record: the flight recorder needs a tcp/ or unixsock-stream/ listen endpoint; "
-            f"the daemon listens on {', '.join(listen) or 'nothing'}"
-        )
     _check_directory(cell.record.dir)
-    recorder = FlightRecorder(cell.cell, cell.record, endpoint, node, low_latency=cell.zenoh.low_latency)
+    recorder = FlightRecorder(cell.cell, cell.record, node, node.tap, urdf)
     recorder.declare()
     return recorder
 
@@ -88,26 +89,31 @@ def _check_directory(directory: str) -> None:
 class FlightRecorder:
     """Supervises the flight recorder's process and forwards requests to it."""
 
-    def __init__(
-        self, cell: str, options: RecordOptions, endpoint: str, node: ZenohNode, *, low_latency: bool
-    ) -> None:
+    def __init__(self, cell: str, options: RecordOptions, node: ZenohNode, tap: Tap, urdf: str) -> None:
         self.cell = cell
         self.options = options
-        self.endpoint = endpoint
         self._node = node
-        self._low_latency = low_latency
+        self._tap = tap
+        self._urdf = urdf.encode()
         self.ready = asyncio.Event()
-        """Set while the process runs and is subscribed."""
+        """Set while the process runs and reads its stdin."""
         self.written: list[dict[str, Any]] = []
         """Every file the process reported (``written``, ``reasons``, ``messages``), oldest first."""
         self.file_written = asyncio.Event()
         """Set at each file written (clear it to wait for the next)."""
         self.restarts = 0
+        self.sent = 0
+        """Messages sent to the process since start."""
+        self.dropped = 0
+        """Messages dropped since start: the process not running, or its pipe full."""
+        self._dropped_logged = 0
+        self._drop_logged_at = -DROP_LOG_S
         self._proc: asyncio.subprocess.Process | None = None
         self._waiting: dict[str, list[Any]] = {}
         self._next_id = 0
         self._last_request = -REQUEST_INTERVAL_S
         self._last_internal_error = -REQUEST_INTERVAL_S
+        self._feeding: asyncio.TimerHandle | None = None
 
     @property
     def pid(self) -> int | None:
@@ -122,6 +128,7 @@ class FlightRecorder:
         """Keep the process running until cancelled; then stop it."""
         handler = _InternalErrors(self, asyncio.get_running_loop())
         logging.getLogger("urdaemon").addHandler(handler)
+        self._feed()  # and every FEED_INTERVAL_S from now on
         failures = 0
         try:
             while True:
@@ -133,8 +140,46 @@ class FlightRecorder:
                 await asyncio.sleep(wait)
                 self.restarts += 1
         finally:
+            if self._feeding is not None:
+                self._feeding.cancel()
             logging.getLogger("urdaemon").removeHandler(handler)
             await self._stop()
+
+    def _feed(self) -> None:
+        """Every ``FEED_INTERVAL_S`` on the loop (a timer, not a task: the cheapest wake-up)."""
+        self._feeding = asyncio.get_running_loop().call_later(FEED_INTERVAL_S, self._feed)
+        self._send()
+
+    def _send(self) -> None:
+        """Send what the tap kept since the last call in one write, or drop it (never waits)."""
+        items = self._tap.take()
+        if not items:
+            return
+        stdin = self._stdin()
+        if stdin is None or stdin.transport.get_write_buffer_size() > MAX_BUFFERED:
+            self.dropped += len(items)
+            now = time.monotonic()
+            if now - self._drop_logged_at >= DROP_LOG_S:
+                self._drop_logged_at = now
+                full = stdin is not None  # else it is (re)starting: its stop was logged already
+                log.log(
+                    logging.WARNING if full else logging.INFO,
+                    "flight recorder: %d messages dropped (%s; %d since start)",
+                    self.dropped - self._dropped_logged,
+                    "its pipe is full" if full else "it is not running",
+                    self.dropped,
+                )
+                self._dropped_logged = self.dropped
+            return
+        stdin.write(encode_samples(items, time.time_ns()))
+        self.sent += len(items)
+
+    def _stdin(self) -> asyncio.StreamWriter | None:
+        """The process's stdin while it runs and its pipe is open."""
+        proc = self._proc
+        if proc is None or proc.stdin is None or proc.stdin.transport.is_closing():
+            return None
+        return proc.stdin
 
     async def _run_once(self) -> None:
         options = self.options
@@ -142,10 +187,9 @@ class FlightRecorder:
             sys.executable,
             "-m",
             "urdaemon.recording.flight",
-            *("--connect", self.endpoint, "--cell", self.cell, "--dir", options.dir),
+            *("--cell", self.cell, "--dir", options.dir),
             *("--ring-s", str(options.ring_s), "--after-s", str(options.after_s)),
             *("--max-mb", str(options.max_mb)),
-            *(("--low-latency",) if self._low_latency else ()),
         ]
         try:  # in a session of its own: a terminal's Ctrl-C is the daemon's, which then closes its stdin
             proc = await asyncio.create_subprocess_exec(
@@ -158,7 +202,9 @@ class FlightRecorder:
             log.error("flight recorder not started: %s", err)
             return
         self._proc = proc
+        assert proc.stdin is not None
         assert proc.stdout is not None
+        proc.stdin.write(encode_frame(URDF, "", self._urdf, time.time_ns()))
         try:
             async for line in proc.stdout:
                 self._on_line(line)
@@ -173,6 +219,7 @@ class FlightRecorder:
             log.error("flight recorder exited with code %d", code)
 
     async def _stop(self) -> None:
+        self._send()  # what was published last
         proc, self._proc = self._proc, None
         self.ready.clear()
         if proc is None:
@@ -224,11 +271,12 @@ class FlightRecorder:
 
     def request(self, reason: str, ident: str | None = None) -> bool:
         """Ask the process for a file; False when it is not running."""
-        proc = self._proc
-        if proc is None or proc.stdin is None or not self.ready.is_set():
+        stdin = self._stdin()
+        if stdin is None or not self.ready.is_set():
             return False
-        line = {"reason": reason} if ident is None else {"reason": reason, "id": ident}
-        proc.stdin.write(json.dumps(line).encode() + b"\n")
+        self._send()  # what was published before the request goes before it
+        body = {"reason": reason} if ident is None else {"reason": reason, "id": ident}
+        stdin.write(encode_frame(REQUEST, "", json.dumps(body).encode(), time.time_ns()))
         return True
 
     def internal_error(self) -> None:
