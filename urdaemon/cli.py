@@ -26,7 +26,7 @@ from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
-from urdaemon import __version__
+from urdaemon import __version__, cli_args
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell
@@ -54,40 +54,6 @@ TOOL_MODULES: tuple[str, ...] = (
 (``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """Each stops ``serve`` and ``fake-robot`` cleanly; a repeated one while stopping is only logged."""
-
-
-def _count_arg(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {value}")
-    return value
-
-
-def _seconds_arg(allow_zero: bool) -> Any:
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-            bound = ">= 0" if allow_zero else "> 0"
-            raise argparse.ArgumentTypeError(f"must be a finite number of seconds {bound}, got {text}")
-        return value
-
-    return parse
-
-
-def _port_arg(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a port number, got {text!r}") from None
-    if not 0 < value < 65536:
-        raise argparse.ArgumentTypeError(f"must be within 1..65535, got {value}")
-    return value
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -134,7 +100,7 @@ def _add_view(sub: Any) -> None:
 
 def _view_port_arg(text: str) -> int:
     """``view --port``: 0 (any free port) or a port number."""
-    return 0 if text.strip() == "0" else _port_arg(text)
+    return 0 if text.strip() == "0" else cli_args.port(allow_zero=False)(text)
 
 
 def _add_serve(sub: Any) -> None:
@@ -169,9 +135,11 @@ def _add_fake_robot(sub: Any) -> None:
     fake.add_argument(
         "--split", action="append", default=[], metavar="SERVICE", help="split every write of a service"
     )
-    fake.add_argument("--delay", type=_seconds_arg(True), default=0.0, help="delay every write by S seconds")
     fake.add_argument(
-        "--late-start", type=_seconds_arg(True), default=0.0, help="start listening only after S seconds"
+        "--delay", type=cli_args.seconds(True), default=0.0, help="delay every write by S seconds"
+    )
+    fake.add_argument(
+        "--late-start", type=cli_args.seconds(True), default=0.0, help="start listening only after S seconds"
     )
     fake.add_argument(
         "--phases",
@@ -219,10 +187,12 @@ def _add_client_tools(sub: Any) -> None:
 
     echo = sub.add_parser("echo", help="print samples of a key expression as JSON lines")
     echo.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
-    echo.add_argument("--count", type=_count_arg, default=0, help="stop after N samples (0: until Ctrl-C)")
+    echo.add_argument(
+        "--count", type=cli_args.whole_number(0), default=0, help="stop after N samples (0: until Ctrl-C)"
+    )
     echo.add_argument(
         "--timeout",
-        type=_seconds_arg(True),
+        type=cli_args.seconds(True),
         default=None,
         help=(
             "give up after S seconds without a sample (0: never); not given: wait while something "
@@ -230,7 +200,9 @@ def _add_client_tools(sub: Any) -> None:
         ),
     )
     echo.add_argument("--field", default=None, help="print only this field, e.g. position or tcp.pose.0")
-    echo.add_argument("--rate", type=_rate_arg, default=None, help="at most HZ samples a second of each key")
+    echo.add_argument(
+        "--rate", type=cli_args.rate_hz, default=None, help="at most HZ samples a second of each key"
+    )
     _connect_arg(echo)
 
     call = sub.add_parser(
@@ -248,7 +220,7 @@ def _add_client_tools(sub: Any) -> None:
         help='request as JSON, e.g. \'{"kind": "digital", "pin": 3, "value": true}\'',
     )
     call.add_argument("--cell", default=None)
-    call.add_argument("--timeout", type=_seconds_arg(False), default=60.0, help="seconds (default 60)")
+    call.add_argument("--timeout", type=cli_args.seconds(False), default=60.0, help="seconds (default 60)")
     _connect_arg(call)
 
     board = sub.add_parser("dashboard", help="send a dashboard command to a robot and print the reply")
@@ -345,7 +317,7 @@ def _add_move(sub: Any) -> None:
         "--speed", type=float, default=None, help="with --linear: TCP speed in m/s (default: the cell's)"
     )
     move.add_argument(
-        "--duration", type=_seconds_arg(False), default=None, help="seconds (default: time-optimal)"
+        "--duration", type=cli_args.seconds(False), default=None, help="seconds (default: time-optimal)"
     )
     move.add_argument(
         "--cell", default=None, help="cell name (default: found from the robot's liveliness token)"
@@ -389,10 +361,13 @@ def _add_calibration(sub: Any) -> None:
     calibration.add_argument("--address", required=True, help="the controller's address")
     calibration.add_argument("--output", required=True, help="calibration file to write (YAML)")
     calibration.add_argument(
-        "--port", type=_port_arg, default=None, help="primary interface port (default 30001)"
+        "--port",
+        type=cli_args.port(allow_zero=False),
+        default=None,
+        help="primary interface port (default 30001)",
     )
     calibration.add_argument(
-        "--timeout", type=_seconds_arg(False), default=None, help="give up after S seconds (default 10)"
+        "--timeout", type=cli_args.seconds(False), default=None, help="give up after S seconds (default 10)"
     )
 
 
@@ -732,17 +707,6 @@ async def _echo(args: argparse.Namespace) -> int:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return await echo_command(args)
-
-
-def _rate_arg(text: str) -> float:
-    """``echo --rate``: a finite rate > 0 (Hz)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a rate in Hz, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite rate in Hz > 0, got {text}")
-    return value
 
 
 SERVICE_NAME = r"^[a-z_]{1,40}$"

@@ -14,6 +14,7 @@ import signal
 import sys
 from typing import Any
 
+from urdaemon import cli_args
 from urdaemon.errors import ConfigError, UrDaemonError
 
 __all__ = ["DEFAULT_PORT", "NEEDS_EXTRA", "add_parsers", "foxglove_main"]
@@ -39,21 +40,11 @@ def add_parsers(sub: Any) -> None:
     )
     parser.add_argument(
         "--port",
-        type=_port_arg,
+        type=cli_args.port(allow_zero=True),
         default=DEFAULT_PORT,
         help=f"port of the WebSocket server (default {DEFAULT_PORT}; 0: any free port)",
     )
     parser.set_defaults(run=foxglove_main)
-
-
-def _port_arg(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a port number, got {text!r}") from None
-    if not 0 <= value < 65536:
-        raise argparse.ArgumentTypeError(f"must be within 0..65535, got {value}")
-    return value
 
 
 def foxglove_main(args: argparse.Namespace) -> int:

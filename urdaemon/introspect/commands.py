@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import math
 from typing import Any
 
+from urdaemon import cli_args
 from urdaemon.introspect.connection import EXIT_BAD_INPUT, EXIT_OK, add_connection
 
 __all__ = ["INFO_WINDOW_S", "REPORT_PERIOD_S", "add_parsers"]
@@ -18,26 +18,6 @@ INFO_WINDOW_S = 1.0
 """How long ``info`` listens to measure each key's rate (s)."""
 REPORT_PERIOD_S = 1.0
 """How often ``hz`` prints its statistics (s), as ``ros2 topic hz`` does."""
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {value}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
-    return value
 
 
 def add_parsers(sub: Any) -> None:
@@ -52,7 +32,7 @@ def add_parsers(sub: Any) -> None:
     info.add_argument("--cell", default=None, help="the robot's cell (needed when several have it)")
     info.add_argument(
         "--window",
-        type=_seconds,
+        type=cli_args.seconds(allow_zero=False),
         default=INFO_WINDOW_S,
         help=f"seconds to measure rates (default {INFO_WINDOW_S:g})",
     )
@@ -62,13 +42,17 @@ def add_parsers(sub: Any) -> None:
 
     hz = sub.add_parser("hz", help="the rate of a key: average, min/max/std of the period, gaps")
     hz.add_argument("key", help="key expression, e.g. demo_cell/alice/joint_states")
-    hz.add_argument("--window", type=_positive_int, default=None, help="periods kept (default 10000)")
+    hz.add_argument(
+        "--window", type=cli_args.whole_number(1), default=None, help="periods kept (default 10000)"
+    )
     until = hz.add_mutually_exclusive_group()
-    until.add_argument("--count", type=_positive_int, default=None, help="stop after N messages")
-    until.add_argument("--duration", type=_seconds, default=None, help="stop after S seconds")
+    until.add_argument("--count", type=cli_args.whole_number(1), default=None, help="stop after N messages")
+    until.add_argument(
+        "--duration", type=cli_args.seconds(allow_zero=False), default=None, help="stop after S seconds"
+    )
     hz.add_argument(
         "--timeout",
-        type=_seconds,
+        type=cli_args.seconds(allow_zero=False),
         default=None,
         help="give up after S seconds without a message (default: never)",
     )

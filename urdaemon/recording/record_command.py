@@ -16,19 +16,10 @@ import os
 from pathlib import Path
 from typing import Any
 
+from urdaemon import cli_args
 from urdaemon.recording.output import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, cannot_write, error, open_output
 
 __all__ = ["add_parsers", "run"]
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
-    return value
 
 
 def add_parsers(sub: Any) -> None:
@@ -48,7 +39,12 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "-o", "--output", default=None, help="the file (default <cell>_<time>.mcap); with --ros2 the bag"
     )
-    p.add_argument("--duration", type=_seconds, default=None, help="stop after S seconds (default: Ctrl-C)")
+    p.add_argument(
+        "--duration",
+        type=cli_args.seconds(allow_zero=False),
+        default=None,
+        help="stop after S seconds (default: Ctrl-C)",
+    )
     p.add_argument(
         "--ros2",
         action="store_true",
