@@ -25,6 +25,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple, TypeGuard
 
+from urdaemon.publish.codec import rotation_vector_of_quaternion
+
 __all__ = [
     "ANGULAR_PER_LINEAR",
     "DEFAULT_SPEED",
@@ -191,15 +193,10 @@ def keys_of(chunk: str) -> list[str]:
 
 
 def rotation_vector(quaternion: Sequence[float]) -> tuple[float, float, float]:
-    """The rotation vector (rx, ry, rz; angle in [0, pi]) of a unit quaternion (x, y, z, w)."""
+    """The rotation vector (rx, ry, rz; angle in [0, pi]) of a unit quaternion (x, y, z, w), as the
+    daemon's ``tcp_pose`` gives it in ``pose``."""
     x, y, z, w = (float(v) for v in quaternion)
-    if w < 0.0:  # the same rotation; this one turns by at most pi
-        x, y, z, w = -x, -y, -z, -w
-    sine = math.sqrt(x * x + y * y + z * z)
-    if sine < 1e-12:
-        return (0.0, 0.0, 0.0)
-    scale = 2.0 * math.atan2(sine, w) / sine
-    return (x * scale, y * scale, z * scale)
+    return rotation_vector_of_quaternion(x, y, z, w)
 
 
 def status_line(robot: str, pose: Mapping[str, object] | None, keys: TeleopKeys, now: float) -> str:
