@@ -34,18 +34,32 @@ from urdaemon.runtime.queries import reply
 
 __all__ = [
     "FEED_INTERVAL_S",
+    "HEALTHY_RUN_S",
     "MAX_BUFFERED",
     "REQUEST_INTERVAL_S",
     "REQUEST_TIMEOUT_S",
     "RESTART_BACKOFF_S",
     "FlightRecorder",
     "flight_recorder",
+    "restart_wait",
 ]
 
 log = logging.getLogger(__name__)
 
 RESTART_BACKOFF_S = (1.0, 2.0, 5.0, 10.0, 30.0)
 """Waits before each restart of a process that died; a process that ran a minute starts it over."""
+HEALTHY_RUN_S = 60.0
+"""A process that ran this long before it died restarts after the first wait again."""
+
+
+def restart_wait(failures: int, ran_s: float) -> tuple[int, float]:
+    """The failures in a row counting the process that just died after ``ran_s``, and the wait before
+    the next start: a process that ran ``HEALTHY_RUN_S`` died of something new, so it counts as the
+    first again."""
+    failures = 1 if ran_s > HEALTHY_RUN_S else failures + 1
+    return failures, RESTART_BACKOFF_S[min(failures, len(RESTART_BACKOFF_S)) - 1]
+
+
 REQUEST_INTERVAL_S = 2.0
 """A new request is taken at most this often (one waiting joins the file of the one before)."""
 REQUEST_TIMEOUT_S = 120.0
@@ -134,8 +148,7 @@ class FlightRecorder:
             while True:
                 started = time.monotonic()
                 await self._run_once()
-                failures = 0 if time.monotonic() - started > 60.0 else failures + 1
-                wait = RESTART_BACKOFF_S[min(failures, len(RESTART_BACKOFF_S)) - 1]
+                failures, wait = restart_wait(failures, time.monotonic() - started)
                 log.warning("flight recorder stopped; starting it again in %g s", wait)
                 await asyncio.sleep(wait)
                 self.restarts += 1
