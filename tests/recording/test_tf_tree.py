@@ -42,6 +42,16 @@ def test_joint_links_in_the_files_order() -> None:
     )
 
 
+def test_a_transmissions_joint_is_not_a_joint_of_the_tree() -> None:
+    text = (
+        '<robot><link name="a"/><link name="b"/>'
+        '<joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>'
+        '<transmission name="t"><joint name="j"><hardwareInterface>x</hardwareInterface></joint>'
+        "</transmission></robot>"
+    )
+    assert joint_links(text) == (("a", "b"),)
+
+
 @pytest.mark.parametrize(
     ("text", "says"),
     [

@@ -32,6 +32,7 @@ from collections import deque
 from pathlib import Path
 from typing import IO, Any
 
+from urdaemon.errors import DescriptionError
 from urdaemon.recording.flight_frames import REQUEST, SAMPLE, URDF, FrameError, FrameReader
 from urdaemon.recording.flight_ring import Burst, Bursts, Ring, Triggers, file_name
 from urdaemon.recording.mcap_file import RecordingWriter
@@ -161,10 +162,10 @@ class FlightProcess:
                     writer.add(key, payload, receive_ns)
                 writer.finish()
             os.replace(partial, path)
-        except OSError as err:
+        except (OSError, DescriptionError) as err:  # a URDF the writer cannot read fails this file too
             with contextlib.suppress(OSError):
                 partial.unlink()
-            self._say({"failed": f"cannot write {path}: {err.strerror or err}", **told})
+            self._say({"failed": f"cannot write {path}: {getattr(err, 'strerror', None) or err}", **told})
             return
         written = sum(writer.counts.written.values())
         self._say({"written": str(path), "messages": written, **told})

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from urdaemon.cell_lookup import cell_description
 from urdaemon.client import Client, default_holder
 from urdaemon.errors import UrDaemonError
 from urdaemon.recording.channels import kind_of, recorded_keys
@@ -142,7 +143,7 @@ async def ask_flight_record(args: argparse.Namespace) -> int:
 
 async def _urdf(client: Client, cell: str) -> str | None:
     try:
-        return await client.robot_description(cell)
+        return await cell_description(client, cell)  # asked again while the queryable is new to us
     except UrDaemonError as err:
         print(f"warning: recording without the cell URDF: {err}", file=sys.stderr)
         return None

@@ -28,7 +28,7 @@ def joint_links(urdf: str) -> tuple[tuple[str, str], ...]:
     except ET.ParseError as err:
         raise DescriptionError(f"the cell URDF is not XML: {err}") from err
     pairs = []
-    for joint in root.iter("joint"):
+    for joint in root.findall("joint"):  # the robot's own joints, not a transmission's
         parent, child = joint.find("parent"), joint.find("child")
         if parent is None or child is None or not parent.get("link") or not child.get("link"):
             raise DescriptionError(f"URDF joint {joint.get('name')!r} names no parent or child link")
