@@ -82,7 +82,7 @@ async def _measure(args: argparse.Namespace, client: object, collector: Collecto
                     return EXIT_FAILED
         if now >= next_report and collector.total:
             print(report(collector), flush=True)
-            next_report += REPORT_S
+            next_report = now + REPORT_S  # once a period, never a burst after a silence
     elapsed = time.monotonic() - start
     print(f"{collector.total} message(s) in {elapsed:.2f} s on {args.key}")
     print(report(collector), flush=True)
