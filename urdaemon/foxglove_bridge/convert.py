@@ -10,7 +10,7 @@ import json
 from collections.abc import Sequence
 
 from urdaemon.recording import cdr
-from urdaemon.recording.channels import kind_of, tf_record, time_of
+from urdaemon.recording.channels import kind_of, record_bytes, time_of
 
 __all__ = ["Record", "description_record", "records_of"]
 
@@ -27,10 +27,9 @@ def records_of(key: str, payload: bytes, received_ns: int, joints: Sequence[tupl
     message = json.loads(payload)
     if not isinstance(message, dict):
         raise ValueError(f"{key}: the message is not a JSON object")
-    log_time = time_of(message, received_ns)
-    if where.kind.name == "tf":
-        return [(where.topic, tf_record(message, joints), log_time)]
-    return [(where.topic, where.kind.to_record(message, key), log_time)]
+    return [
+        (where.topic, record_bytes(where.kind, message, payload, key, joints), time_of(message, received_ns))
+    ]
 
 
 def description_record(topic: str, urdf: str, now_ns: int) -> Record:

@@ -33,6 +33,7 @@ __all__ = [
     "Schema",
     "Sorted",
     "kind_of",
+    "record_bytes",
     "recorded_keys",
     "tf_record",
     "time_of",
@@ -157,6 +158,20 @@ def tf_record(message: dict[str, Any], joints: Sequence[tuple[str, str]]) -> byt
         raise ValueError("tf: links is not an object")
     root = str(message.get("frame", "world"))
     return cdr.encode_transforms(time_of(message, 0), joint_transforms(links, joints, root))
+
+
+def record_bytes(
+    kind: Kind, message: dict[str, Any], payload: bytes, key: str, joints: Sequence[tuple[str, str]]
+) -> bytes:
+    """What a published message (its JSON ``payload``, decoded as ``message``) is stored as: a JSON
+    kind as it was published; tf, given the URDF's ``joints``, one transform per joint
+    (``tf_record``); any other CDR kind its ``to_record``. The recorder and the Foxglove bridge both
+    ask this."""
+    if kind.message_encoding == "json":
+        return payload
+    if kind.name == "tf" and joints:
+        return tf_record(message, joints)
+    return kind.to_record(message, key)
 
 
 def _tf_message(data: bytes, topic: str) -> dict[str, Any]:

@@ -30,7 +30,7 @@ from urdaemon.recording.channels import (
     Kind,
     Schema,
     kind_of,
-    tf_record,
+    record_bytes,
     time_of,
 )
 from urdaemon.recording.tf_tree import joint_links
@@ -90,12 +90,7 @@ class RecordingWriter:
             message = json.loads(payload)
             if not isinstance(message, dict):
                 raise ValueError("not a JSON object")
-            if where.kind.message_encoding == "json":
-                data = payload
-            elif where.kind.name == "tf" and self._joints:
-                data = tf_record(message, self._joints)
-            else:
-                data = where.kind.to_record(message, key)
+            data = record_bytes(where.kind, message, payload, key, self._joints)
         except (ValueError, KeyError, TypeError) as err:
             self.counts.malformed.setdefault(key, f"{type(err).__name__}: {err}")
             return False

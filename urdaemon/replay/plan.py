@@ -36,6 +36,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from urdaemon.publish.codec import MAX_MESSAGE_BYTES, MAX_TRAJECTORY_POINTS
+
 __all__ = [
     "KINEMATIC_MOVE",
     "MAX_BYTES",
@@ -53,9 +55,9 @@ __all__ = [
     "sample_ticks",
 ]
 
-MAX_POINTS = 5000
+MAX_POINTS = MAX_TRAJECTORY_POINTS
 """Points a trajectory goal may hold (docs/keys.md "Goals")."""
-MAX_BYTES = 2 * 1024 * 1024 - 64 * 1024
+MAX_BYTES = MAX_MESSAGE_BYTES - 64 * 1024
 """JSON bytes of a cell goal's request: the daemon's 2 MiB, less room for the envelope."""
 REST_VELOCITY = 1e-6
 """A sample whose every joint velocity is at most this (rad/s) is at rest."""
