@@ -125,17 +125,7 @@ def served(robots: int, ring: bool, logs: Path) -> Iterator[tuple[int, str]]:
             raise RuntimeError(f"urdaemon serve ended: see {logs / 'serve.log'}")
         yield proc.pid, endpoint
     finally:
-        stop(proc)
-
-
-def stop(proc: subprocess.Popen[bytes]) -> None:
-    """SIGTERM, then SIGKILL after 10 s."""
-    proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(10)
+        VIEW._stop(proc)  # SIGTERM, then SIGKILL after 10 s
 
 
 def flight_pid(daemon: int) -> int | None:
@@ -165,7 +155,11 @@ def measure(case: str, robots: int, daemon: int, endpoint: str, window: float, l
     ring_mb = resident_mb(ring) if ring is not None else None
     summary = None
     if recorder is not None:
-        recorder.wait(START_TIMEOUT_S)
+        try:
+            recorder.wait(START_TIMEOUT_S)
+        finally:  # a recorder that did not end on its --duration is not left running
+            if recorder.poll() is None:
+                VIEW._stop(recorder)
         summary = parse_summary(err.read_text(errors="replace"))
     size = out.stat().st_size if out.exists() else 0
     minutes = summary.seconds / 60 if summary else 0

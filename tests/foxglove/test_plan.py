@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from urdaemon.foxglove_bridge.plan import channel_plan, description_topic
-from urdaemon.recording.channels import KINDS, ROBOT_DESCRIPTION, kind_of, recorded_keys
+from urdaemon.foxglove_bridge.plan import channel_plan
+from urdaemon.recording.channels import DESCRIPTION_TOPIC, KINDS, ROBOT_DESCRIPTION, kind_of, recorded_keys
 
 ROBOT_KINDS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_command")
 
@@ -40,7 +40,7 @@ def test_the_plan_covers_every_recorded_key_for_every_robot_once() -> None:
     assert len(plans) == per_robot * len(robots) + cell_wide + 1  # and the URDF
     for plan in plans:
         if plan.key_expr is None:
-            assert plan.topic == description_topic("c")
+            assert plan.topic == DESCRIPTION_TOPIC
             assert plan.schema == ROBOT_DESCRIPTION
             continue
         where = kind_of(plan.key_expr.replace("*", "g1"))

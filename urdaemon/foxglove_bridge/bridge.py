@@ -26,7 +26,8 @@ from urdaemon.cell_lookup import cell_description, served_cell
 from urdaemon.client import Client, default_holder
 from urdaemon.foxglove_bridge.convert import description_record, records_of
 from urdaemon.foxglove_bridge.handoff import Handoff
-from urdaemon.foxglove_bridge.plan import ChannelPlan, channel_plan, description_topic
+from urdaemon.foxglove_bridge.plan import ChannelPlan, channel_plan
+from urdaemon.recording.channels import DESCRIPTION_TOPIC
 from urdaemon.recording.tf_tree import joint_links
 
 if TYPE_CHECKING:
@@ -102,7 +103,7 @@ async def running_bridge(
             for plan in plans
         }
         loop = asyncio.get_running_loop()
-        served = _Served(loop, client.session, plans, channels, handoff, description_topic(cell), urdf)
+        served = _Served(loop, client.session, plans, channels, handoff, DESCRIPTION_TOPIC, urdf)
         server = foxglove.start_server(
             name=f"urdaemon {cell}",
             host=host,

@@ -17,7 +17,7 @@ from urdaemon.recording.channels import (
     recorded_keys,
 )
 
-__all__ = ["ChannelPlan", "channel_plan", "description_topic"]
+__all__ = ["ChannelPlan", "channel_plan"]
 
 _ANY_ROBOT = "*"
 _ANY_GOAL = "0"
@@ -34,11 +34,6 @@ class ChannelPlan:
     message_encoding: str
     key_expr: str | None
     kind: Kind | None
-
-
-def description_topic(cell: str) -> str:
-    """The URDF's topic, as the recorder names it (one cell per bridge)."""
-    return DESCRIPTION_TOPIC
 
 
 def channel_plan(cell: str, robots: Sequence[str]) -> list[ChannelPlan]:
@@ -58,5 +53,5 @@ def channel_plan(cell: str, robots: Sequence[str]) -> list[ChannelPlan]:
             seen.add(where.topic)
             kind = where.kind
             plans.append(ChannelPlan(where.topic, kind.schema, kind.message_encoding, expr, kind))
-    plans.append(ChannelPlan(description_topic(cell), ROBOT_DESCRIPTION, "cdr", None, None))
+    plans.append(ChannelPlan(DESCRIPTION_TOPIC, ROBOT_DESCRIPTION, "cdr", None, None))
     return plans

@@ -12,12 +12,10 @@ from typing import Any
 from urdaemon import cli_args
 from urdaemon.introspect.connection import EXIT_BAD_INPUT, EXIT_OK, add_connection
 
-__all__ = ["INFO_WINDOW_S", "REPORT_PERIOD_S", "add_parsers"]
+__all__ = ["INFO_WINDOW_S", "add_parsers"]
 
 INFO_WINDOW_S = 1.0
 """How long ``info`` listens to measure each key's rate (s)."""
-REPORT_PERIOD_S = 1.0
-"""How often ``hz`` prints its statistics (s), as ``ros2 topic hz`` does."""
 
 
 def add_parsers(sub: Any) -> None:

@@ -75,7 +75,7 @@ async def survey(client: Client, *, timeout: float = SURVEY_TIMEOUT_S) -> Survey
 async def _ask(client: Client, found: Survey, timeout: float) -> None:
     """One round: the tokens and the daemons' answers, added to ``found``."""
     found.alive = sorted(set(found.alive) | set(await client.robots(timeout=timeout)))
-    replies = await client.query_replies(CellKeys("*").daemons, timeout=timeout, every_queryable=True)
+    replies = await client.query_replies(CellKeys("*").daemon, timeout=timeout, every_queryable=True)
     for reply in replies:
         try:
             data = json.loads(reply.payload)

@@ -32,11 +32,6 @@ class CellKeys:
         return f"{self.cell}/daemon"
 
     @property
-    def daemons(self) -> str:
-        """Every cell's ``daemon`` queryable (wildcard: what a client asks to find every cell)."""
-        return "*/daemon"
-
-    @property
     def any_robot(self) -> str:
         """Every key under any robot's name (the daemon answers queries on robots it does not serve)."""
         return f"{self.cell}/*/**"

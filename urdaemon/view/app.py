@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
-from urdaemon.cell_lookup import cell_description, served_cell
+from urdaemon.cell_lookup import WAIT_S, cell_description, served_cell
 from urdaemon.client import Client, default_holder
 from urdaemon.errors import UrTimeoutError
 from urdaemon.publish.keys import RobotKeys
@@ -35,8 +35,6 @@ log = logging.getLogger("urdaemon.view")
 
 DISPLAY_PERIOD_S = 1.0 / 30.0
 """The scene and the panels are updated at ~30 Hz, whatever rate the robots publish at."""
-ROBOTS_WAIT_S = 10.0
-"""How long the view waits for the daemon's robots, and for each robot's first joint_states."""
 LAST_PAGE_CLOSED = "the last page was closed"
 
 
@@ -165,7 +163,7 @@ async def _first_joint_states(feeds: dict[str, RobotFeed]) -> None:
     there. A robot that sends none in time is shown with the URDF's joints."""
     with contextlib.suppress(TimeoutError):
         await asyncio.wait_for(
-            asyncio.gather(*(feed.first_joint_states.wait() for feed in feeds.values())), ROBOTS_WAIT_S
+            asyncio.gather(*(feed.first_joint_states.wait() for feed in feeds.values())), WAIT_S
         )
 
 
