@@ -13,6 +13,7 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.backends.mock import MockBackend
 from urdaemon.backends.servo import ServoBackend
+from urdaemon.backends.servo.outputs import board_links, device_problems
 from urdaemon.cell.config import Cell, Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
@@ -116,15 +117,21 @@ def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell
             speed_scaling=options.speed_scaling if options else 1.0,
         )
     if robot.backend == "servo":
-        assert robot.servo is not None
-        publisher = node.publisher(CellKeys(cell).robot(robot.name).servo_command) if node else None
+        servo = robot.servo
+        assert servo is not None
+        problems = device_problems(servo, f"robot {robot.name!r}: servo")
+        if problems:
+            raise ConfigError("\n".join(problems), errors=problems)
+        key = CellKeys(cell).robot(robot.name).servo_command
+        publisher = node.publisher(key) if node is not None and servo.publishes else None
         return ServoBackend(
             robot.name,
             limits.names,
             robot.prefix,
-            robot.servo,
+            servo,
             initial_positions=initial,
             publish=(lambda payload: publisher.put(payload)) if publisher is not None else None,
+            links=board_links(servo),
         )
     if robot.backend == "ur":
         from urdaemon.backends.ur.backend import UrBackend

@@ -137,6 +137,11 @@ class Backend(abc.ABC):
         robot has none (mock, servo: the daemon's own clock drives it)."""
         return None if self.diagnosis is None else await self.diagnosis.gather()
 
+    def output_reports(self) -> list[dict[str, Any]] | None:
+        """Each output device's condition and counters (``servo``: its boards and serial ports), as the
+        status message's ``outputs`` carries them; None for a backend whose robot has no such outputs."""
+        return None
+
     def passthrough_problem(self) -> str | None:
         """Why a passthrough trajectory cannot start now (None when it can)."""
         return f"the {self.kind} backend has no robot-side interpolation (passthrough)"

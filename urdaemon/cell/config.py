@@ -13,14 +13,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     ValidationInfo,
     field_validator,
     model_validator,
 )
 
+from urdaemon.cell.schema_types import Finite, Frozen
+from urdaemon.cell.servo import ServoOptions
 from urdaemon.model import CELL_LEVEL_KEYS, UR_JOINTS
 from urdaemon.paths import resource_path
 from urdaemon.urscript import (
@@ -53,8 +53,6 @@ __all__ = [
     "PublishOptions",
     "RecordOptions",
     "Robot",
-    "ServoJoint",
-    "ServoOptions",
     "TlsOptions",
     "UrOptions",
     "ZenohOptions",
@@ -102,7 +100,6 @@ def endpoint_port(endpoint: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 TCP_MAX_OFFSET_M = 1.0
 """Largest TCP translation along each flange axis, in metres."""
@@ -143,10 +140,6 @@ def _resolve_file(value: str, info: ValidationInfo) -> str:
     return str(path.resolve())
 
 
-class _Frozen(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-
 IDENTITY_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,31}$"
 """Names of access-control identities in the cell file (``operator``, ``line-pc``)."""
 ALL_ROBOTS = "*"
@@ -160,7 +153,7 @@ _PEM_KEY = "-----BEGIN (RSA |EC )?PRIVATE KEY-----"
 """What Zenoh reads: PEM certificates, and unencrypted PKCS#8, RSA or EC private keys."""
 
 
-class TlsOptions(_Frozen):
+class TlsOptions(Frozen):
     """TLS for the daemon's Zenoh links (``tls/`` and ``quic/`` endpoints); docs/security.md."""
 
     root_ca: str
@@ -191,7 +184,7 @@ class TlsOptions(_Frozen):
         return path
 
 
-class Identity(_Frozen):
+class Identity(Frozen):
     """Who a connection is, for ``access``: each list given must match (common name AND interface)."""
 
     cert_common_names: tuple[Annotated[str, Field(min_length=1, max_length=64)], ...] | None = None
@@ -215,7 +208,7 @@ class Identity(_Frozen):
 RobotRef = Annotated[str, Field(pattern=rf"^(\{ALL_ROBOTS}|[a-z][a-z0-9_]{{0,30}})$")]
 
 
-class Grant(_Frozen):
+class Grant(Frozen):
     """What some identities may do: read robots' state, command robots."""
 
     identities: tuple[Annotated[str, Field(pattern=IDENTITY_PATTERN)], ...]
@@ -236,7 +229,7 @@ class Grant(_Frozen):
         return self
 
 
-class AccessOptions(_Frozen):
+class AccessOptions(Frozen):
     """Zenoh access control on the daemon's links: only what a grant allows passes (docs/security.md).
 
     ``stop`` (every robot's and the cell's) and finding the cell's robots are allowed to every
@@ -275,7 +268,7 @@ class AccessOptions(_Frozen):
         return None
 
 
-class ZenohOptions(_Frozen):
+class ZenohOptions(Frozen):
     """How the daemon joins the Zenoh network: a peer that clients dial (the default), or a client of
     a Zenoh router that several cells and their clients share (docs/scale-out.md)."""
 
@@ -356,7 +349,7 @@ class ZenohOptions(_Frozen):
                 )
 
 
-class PublishOptions(_Frozen):
+class PublishOptions(Frozen):
     """Rates of what the daemon publishes."""
 
     joint_states_decimation: Annotated[int, Field(ge=1, le=1000)] = 1
@@ -368,7 +361,7 @@ class PublishOptions(_Frozen):
     """IO is published on every change and at least at this rate."""
 
 
-class RecordOptions(_Frozen):
+class RecordOptions(Frozen):
     """The flight recorder (docs/recording.md): the last ``ring_s`` seconds of everything the cell
     publishes, kept by a process of its own and written to ``dir`` on a stop, an aborted goal, a lost
     link, an internal error, or a request on ``<cell>/service/flight_record``."""
@@ -395,7 +388,7 @@ class RecordOptions(_Frozen):
         return str(path.resolve())
 
 
-class Ports(_Frozen):
+class Ports(Frozen):
     """Host ports the robot's control program connects back to."""
 
     reverse: PortNumber
@@ -427,7 +420,7 @@ class Ports(_Frozen):
         return self
 
 
-class Pose(_Frozen):
+class Pose(Frozen):
     """Where the robot's base_link sits relative to its parent link."""
 
     parent: Annotated[str, Field(pattern=r"^[A-Za-z0-9_]+$")] = "world"
@@ -437,7 +430,7 @@ class Pose(_Frozen):
     """Roll, pitch, yaw in radians (URDF convention)."""
 
 
-class JointLimitOverride(_Frozen):
+class JointLimitOverride(Frozen):
     """Tighter (or, knowingly, other) limits for one joint; unset fields keep the model's value."""
 
     min_position: Finite | None = None
@@ -471,7 +464,7 @@ CARTESIAN_PAIRS = (
 """Each Cartesian default, the cap it must stay within, and its unit."""
 
 
-class CartesianOptions(_Frozen):
+class CartesianOptions(Frozen):
     """A robot's Cartesian motion limits (TCP point: m/s, m/s², m/s³; TCP frame: rad/s, rad/s², rad/s³).
 
     ``max_*`` are caps: no linear goal or twist may ask for more. The others are what a linear goal
@@ -512,7 +505,7 @@ class CartesianOptions(_Frozen):
         return CartesianLimits(*(getattr(self, cap) for _, cap, _ in CARTESIAN_PAIRS))
 
 
-class MotionOptions(_Frozen):
+class MotionOptions(Frozen):
     """Defaults for goal tolerances and the streaming deadman, and the Cartesian limits."""
 
     path_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.2
@@ -528,7 +521,7 @@ class MotionOptions(_Frozen):
     """Caps and defaults of Cartesian motion (linear goals, twists)."""
 
 
-class UrOptions(_Frozen):
+class UrOptions(Frozen):
     """Options of the ``ur`` backend."""
 
     startup: bool = False
@@ -562,7 +555,7 @@ class UrOptions(_Frozen):
         return self
 
 
-class MockOptions(_Frozen):
+class MockOptions(Frozen):
     """Options of the ``mock`` backend."""
 
     initial_positions: tuple[Finite, ...] | dict[str, Finite] | None = None
@@ -573,57 +566,7 @@ class MockOptions(_Frozen):
     """Cycle rate; default: the model's controller rate (500 Hz e-Series, 125 Hz CB3)."""
 
 
-class ServoJoint(_Frozen):
-    """One joint of a servo arm mapped to a PCA9685 channel."""
-
-    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_]+$")]
-    """Joint name in the robot's description, without the robot prefix."""
-    channel: Annotated[int, Field(ge=0, le=15)]
-    pulse_min_us: Annotated[float, Field(gt=0, lt=20000, allow_inf_nan=False)] = 500.0
-    pulse_max_us: Annotated[float, Field(gt=0, lt=20000, allow_inf_nan=False)] = 2500.0
-    angle_min: Finite = -math.pi / 2
-    """Joint angle (rad) that maps to ``pulse_min_us`` (before offset and direction)."""
-    angle_max: Finite = math.pi / 2
-    """Joint angle (rad) that maps to ``pulse_max_us``."""
-    offset: Finite = 0.0
-    """Added to the joint angle before mapping (rad): the servo's zero vs the joint's zero."""
-    direction: Literal[1, -1] = 1
-
-    @model_validator(mode="after")
-    def _ranges(self) -> ServoJoint:
-        if self.pulse_min_us >= self.pulse_max_us:
-            raise ValueError(
-                f"pulse_min_us {self.pulse_min_us} must be below pulse_max_us {self.pulse_max_us}"
-            )
-        if self.angle_min >= self.angle_max:
-            raise ValueError(f"angle_min {self.angle_min} must be below angle_max {self.angle_max}")
-        return self
-
-
-class ServoOptions(_Frozen):
-    """Options of the ``servo`` backend (a PCA9685 board, no feedback)."""
-
-    pwm_frequency_hz: Annotated[float, Field(ge=24, le=1526)] = 50.0
-    """PCA9685 output frequency; the datasheet's range is 24..1526 Hz."""
-    rate_hz: Annotated[float, Field(gt=0, le=500)] = 50.0
-    """Control cycle rate: how often commands are computed and published."""
-    joints: tuple[ServoJoint, ...]
-    initial_positions: dict[str, Finite] | None = None
-
-    @model_validator(mode="after")
-    def _unique(self) -> ServoOptions:
-        if not self.joints:
-            raise ValueError("'joints' must list at least one servo joint")
-        names = [j.name for j in self.joints]
-        channels = [str(j.channel) for j in self.joints]
-        for label, values in (("joint name", names), ("channel", channels)):
-            dupes = sorted({v for v in values if values.count(v) > 1})
-            if dupes:
-                raise ValueError(f"duplicate {label}: {', '.join(dupes)}")
-        return self
-
-
-class CustomDescription(_Frozen):
+class CustomDescription(Frozen):
     """A robot described by its own xacro macro, called as ``<xacro:MACRO prefix parent><origin/>``."""
 
     xacro: str
@@ -640,7 +583,7 @@ class CustomDescription(_Frozen):
         return _resolve_file(value, info)
 
 
-class Robot(_Frozen):
+class Robot(Frozen):
     """One robot of the cell."""
 
     name: Annotated[str, Field(pattern=NAME_PATTERN)]
@@ -747,7 +690,7 @@ class Robot(_Frozen):
         return self
 
 
-class Cell(_Frozen):
+class Cell(Frozen):
     """A whole work cell: its name, the Zenoh settings and the robots."""
 
     cell: Annotated[str, Field(pattern=CELL_NAME_PATTERN)]

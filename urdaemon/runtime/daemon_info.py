@@ -129,7 +129,8 @@ class DaemonInfo:
         if posed:
             rates["tcp_pose"] = state_hz
         rates |= {"status": cell.publish.status_rate_hz, "io": cell.publish.io_rate_hz}
-        if backend.kind == "servo":
+        publishes_pulses = robot.servo is not None and robot.servo.publishes
+        if publishes_pulses:
             rates["servo_command"] = backend.rate_hz
         return {
             "name": robot.name,
@@ -138,7 +139,7 @@ class DaemonInfo:
             "rate_hz": backend.rate_hz,
             "publish_rates_hz": rates,
             "keys": robot_keys(
-                runtime.keys, sorted(runtime.service_names), posed=posed, servo=backend.kind == "servo"
+                runtime.keys, sorted(runtime.service_names), posed=posed, servo=publishes_pulses
             ),
             "ports": ur_ports(robot),
             "calibration": {

@@ -100,6 +100,8 @@ class StatusPublisher:
             # UR robots: does the robot's kinematics hash match the configured calibration (None: not checked)
             "calibration_ok": getattr(backend, "calibration_ok", None),
             "lease": self.lease,
+            # servo arms: each board or serial port's condition and counters (backends/servo/writer.py)
+            "outputs": backend.output_reports(),
             # the TCP offset in the tool link's frame: the TCP's pose is the link's composed with it
             "tcp": {"link": self._tool_link, "pose": list(self._controller.tcp)},
         }

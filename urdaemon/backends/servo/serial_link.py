@@ -1,0 +1,94 @@
+"""A serial servo controller that takes SSC-32 command lines (an SSC-32 board, the Arduino bridge in
+examples/arduino/), through a pyserial-shaped port: each frame's changed channels in one command
+group (boards/ssc32.py computes the line)."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
+from urdaemon.boards import ssc32
+from urdaemon.cell.servo import SerialOutput
+
+__all__ = ["SerialLike", "Ssc32Link", "open_serial"]
+
+WRITE_TIMEOUT_S = 1.0
+"""A line the port has not taken in this time counts as a failed write (a board that stopped
+reading): the link is closed and opened again."""
+
+
+class SerialLike(Protocol):
+    """The part of ``serial.Serial`` the link uses."""
+
+    def write(self, data: bytes) -> int | None:
+        """Queue ``data`` for sending."""
+        ...
+
+    def close(self) -> None:
+        """Close the port."""
+        ...
+
+
+def open_serial(output: SerialOutput) -> SerialLike:
+    """The output's port through pyserial: 8N1 at its baud rate, no flow control."""
+    import serial
+
+    port: SerialLike = serial.Serial(output.port, output.baud, timeout=0, write_timeout=WRITE_TIMEOUT_S)
+    return port
+
+
+class Ssc32Link:
+    """One serial output."""
+
+    def __init__(
+        self,
+        output: SerialOutput,
+        channels: Sequence[int],
+        *,
+        open_port: Callable[[SerialOutput], SerialLike] = open_serial,
+    ) -> None:
+        self.label = output.label
+        self._output = output
+        self._channels = tuple(channels)
+        self._open_port = open_port
+        self._port: SerialLike | None = None
+        self._sent: dict[int, int] = {}
+        """The pulse each channel was last sent (µs; 0: off); a channel not here was not sent yet."""
+
+    def open(self) -> None:
+        """Open the port."""
+        self.close()
+        self._port = self._open_port(self._output)
+
+    def write(self, pulses: Sequence[float]) -> int:
+        """Send the changed channels' pulses, whole microseconds, as one command group; 1 line or 0."""
+        port = self._port
+        if port is None:
+            raise OSError(f"{self.label} is not open")
+        sent = self._sent
+        moves = []
+        for channel, pulse in zip(self._channels, pulses, strict=True):
+            us = int(pulse + 0.5)
+            if sent.get(channel) != us:
+                moves.append((channel, us))
+        if not moves:
+            return 0
+        port.write(ssc32.group_line(moves, self._output.move_time_ms))
+        sent.update(moves)
+        return 1
+
+    def off(self) -> None:
+        """Stop every configured channel's pulses (``P0``)."""
+        port = self._port
+        if port is not None:
+            port.write(ssc32.off_line(self._channels))
+            self._sent = dict.fromkeys(self._channels, 0)
+
+    def close(self) -> None:
+        """Close the port; what was sent is forgotten (a board may be reset before the next open)."""
+        port, self._port = self._port, None
+        self._sent = {}
+        if port is not None:
+            with contextlib.suppress(OSError):  # unplugged: nothing left to release
+                port.close()
