@@ -25,6 +25,8 @@ PURE = {
         "xacro",
     },
     "cell": {"asyncio", "socket", "threading", "time", "zenoh"},
+    # the servo boards' registers and command lines: numbers in, bytes out (boards/__init__.py)
+    "boards": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic", "os"},
     # description may lock: xacro keeps its state in module globals
     "description": {"asyncio", "socket", "time", "zenoh"},
     "model.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},

@@ -13,7 +13,7 @@ import pytest
 from urdaemon.backends import MockBackend
 from urdaemon.backends.servo import ServoBackend
 from urdaemon.backends.timing import LAG_LOG_INTERVAL_S, LagLog
-from urdaemon.cell.config import ServoOptions
+from urdaemon.cell.servo import ServoOptions
 
 JOINTS = ("a_j1", "a_j2")
 

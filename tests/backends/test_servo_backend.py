@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from urdaemon.backends import ServoBackend, ServoMapping
-from urdaemon.backends.servo import PCA9685_CHANNELS, PCA9685_RESOLUTION
 from urdaemon.cell import load_cell
-from urdaemon.cell.config import ServoJoint, ServoOptions
+from urdaemon.cell.servo import ServoJoint, ServoOptions
 from urdaemon.errors import BackendError, ConfigError
 from urdaemon.model import CommandMode
 
@@ -30,8 +30,10 @@ def joint(name: str = "j", channel: int = 0, **kw: Any) -> ServoJoint:
 
 
 def counts(pulse_us: float, freq: float = 50.0) -> int:
-    """The PCA9685 off-count for a pulse, as the datasheet defines it."""
-    return min(max(round(pulse_us * freq * PCA9685_RESOLUTION / 1e6), 0), PCA9685_RESOLUTION - 1)
+    """The PCA9685 off-count for a pulse, as the datasheet defines it: the prescale the frequency gives
+    with the 25 MHz oscillator (eq. 1), then the pulse's share of the period that prescale makes."""
+    prescale = math.floor(25e6 / (4096 * freq) + 0.5) - 1
+    return min(max(math.floor(pulse_us * 25e6 / ((prescale + 1) * 1e6) + 0.5), 0), 4095)
 
 
 # --- ServoMapping.pulse_us ---
@@ -111,32 +113,10 @@ def test_pulse_is_clamped_to_the_range(position: float, pulse: float) -> None:
     assert mapping.pulse_us(0, position) == pulse
 
 
-# --- ServoMapping.update: counts ---
+# --- ServoMapping.update: pulses ---
 
 
-@pytest.mark.parametrize(
-    ("freq", "pulse", "expected"),
-    [
-        (50.0, 1500.0, 307),  # 1500 µs × 50 Hz × 4096 / 1e6 = 307.2
-        (50.0, 500.0, 102),  # 102.4
-        (50.0, 2500.0, 512),
-        (60.0, 1000.0, 246),  # 245.76
-        (200.0, 2500.0, 2048),
-        (399.0, 2500.0, 4086),  # 4085.76: just inside the 2506 µs period
-        (1526.0, 600.0, 3750),  # 3750.3
-    ],
-)
-def test_counts_follow_the_datasheet_formula(freq: float, pulse: float, expected: int) -> None:
-    mapping = ServoMapping(
-        ("p_j",),
-        "p_",
-        options(joint(pulse_min_us=pulse - 100, pulse_max_us=pulse, angle_min=-1, angle_max=1), freq=freq),
-    )
-    channels = mapping.update([1.0])
-    assert channels[0] == expected == counts(pulse, freq)
-
-
-def test_update_fills_the_configured_channels_and_leaves_the_rest_zero() -> None:
+def test_update_gives_each_configured_joint_its_pulse_in_the_cell_files_order() -> None:
     mapping = ServoMapping(
         ("p_a", "p_b"),
         "p_",
@@ -145,13 +125,9 @@ def test_update_fills_the_configured_channels_and_leaves_the_rest_zero() -> None
             joint("a", 4, angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000),
         ),
     )
-    channels = mapping.update([1.0, -1.0])  # a = 1.0 (max), b = -1.0 (min)
-    assert len(channels) == PCA9685_CHANNELS
-    assert channels[4] == counts(2000.0)
-    assert channels[15] == counts(1000.0)
-    assert [c for i, c in enumerate(channels) if i not in (4, 15)] == [0] * 14
-    assert all(type(c) is int for c in channels)
-    assert mapping.channels is channels
+    pulses = mapping.update([1.0, -1.0])  # a = 1.0 (max), b = -1.0 (min)
+    assert pulses == [1000.0, 2000.0]  # b first, as listed
+    assert mapping.channels == (15, 4)
 
 
 def test_update_recomputes_in_place() -> None:
@@ -159,10 +135,10 @@ def test_update_recomputes_in_place() -> None:
         ("p_j",), "p_", options(joint(angle_min=-1, angle_max=1, pulse_min_us=1000, pulse_max_us=2000))
     )
     first = mapping.update([-1.0])
-    assert first[0] == counts(1000.0)
+    assert first == [1000.0]
     second = mapping.update([1.0])
     assert second is first
-    assert second[0] == counts(2000.0)
+    assert second == [2000.0]
 
 
 def test_unknown_servo_joint_is_a_config_error() -> None:
@@ -182,8 +158,8 @@ def test_description_joints_without_a_servo_channel_are_refused() -> None:
 
 @pytest.mark.parametrize(("freq", "pulse"), [(400.0, 2500.0), (1526.0, 2500.0), (1000.0, 1000.0)])
 def test_a_pulse_longer_than_the_pwm_period_is_refused(freq: float, pulse: float) -> None:
-    with pytest.raises(ConfigError, match=f"pulse_max_us {pulse} does not fit the PWM period"):
-        ServoMapping(("p_j",), "p_", options(joint(pulse_min_us=pulse - 100, pulse_max_us=pulse), freq=freq))
+    with pytest.raises(ValidationError, match=f"pulse_max_us {pulse:g} does not fit the PWM period"):
+        options(joint(pulse_min_us=pulse - 100, pulse_max_us=pulse), freq=freq)
 
 
 @st.composite
@@ -222,16 +198,13 @@ def test_mapping_properties(servo: ServoJoint, freq: float, a: float, b: float) 
         assert lo <= hi + 1e-9
     else:
         assert lo >= hi - 1e-9
-    channels = list(mapping.update([a]))
-    assert channels[servo.channel] == counts(pa, freq)
-    assert 0 <= channels[servo.channel] <= PCA9685_RESOLUTION - 1
-    assert sum(1 for i, c in enumerate(channels) if i != servo.channel and c != 0) == 0
+    assert mapping.update([a]) == [pa]
 
 
-def test_nan_position_does_not_crash_the_mapping() -> None:
+def test_a_nan_position_keeps_the_last_pulse() -> None:
     mapping = ServoMapping(("p_j",), "p_", options(joint()))
-    channels = mapping.update([math.nan])
-    assert 0 <= channels[0] <= PCA9685_RESOLUTION - 1
+    assert mapping.update([0.5]) == [mapping.pulse_us(0, 0.5)]
+    assert mapping.update([math.nan]) == [mapping.pulse_us(0, 0.5)]
 
 
 # --- ServoBackend ---
@@ -262,7 +235,15 @@ def test_servo_backend_publishes_16_ints_each_step() -> None:
     backend.step()
     assert len(published) == 1
     message = json.loads(published[0])
-    assert list(message) == ["v", "robot", "pwm_frequency_hz", "host_time_ns", "controller_time", "channels"]
+    assert list(message) == [
+        "v",
+        "robot",
+        "pwm_frequency_hz",
+        "host_time_ns",
+        "controller_time",
+        "channels",
+        "pulses_us",
+    ]
     assert (message["host_time_ns"], message["controller_time"]) == (
         backend.state.host_time_ns,
         backend.state.controller_time,
@@ -279,6 +260,9 @@ def test_servo_backend_publishes_16_ints_each_step() -> None:
     assert channels[2] == counts(1500.0)
     assert channels[3] == counts(1500.0 + 0.1 / 3.1416 * 2000.0)
     assert channels[4:] == [0] * 12
+    assert message["pulses_us"][:3] == [1500.0] * 3
+    assert message["pulses_us"][3] == pytest.approx(1500.0 + 0.1 / 1.5708 * 1000.0, abs=0.05)
+    assert message["pulses_us"][4:] == [0.0] * 12
     backend.step()
     assert len(published) == 2
 
@@ -294,7 +278,7 @@ def test_servo_backend_maps_the_mirrored_position() -> None:
     assert channels[1] == counts(500.0)  # shoulder, direction -1
     assert channels[2] == counts(600.0)  # elbow at its angle_min
     assert channels[3] == counts(500.0 + 0.1 / 3.1416 * 2000.0)  # wrist: -1.5708 + 0.1 offset
-    assert channels[:4] == backend.mapping.channels[:4]
+    assert backend.mapping.pulses == [2500.0, 500.0, 600.0, pytest.approx(500.0 + 0.1 / 3.1416 * 2000.0)]
 
 
 def test_servo_backend_velocity_mode_is_integrated_then_mapped() -> None:
@@ -318,7 +302,7 @@ def test_servo_backend_without_publisher_still_steps() -> None:
     backend.step()
     assert backend.state.cycle == 1
     assert backend.state.positions == [0.5, 0.0, 0.0, 0.0]
-    assert backend.mapping.channels[0] == counts(1500.0 + 0.5 / 3.1416 * 2000.0)
+    assert backend.mapping.pulses[0] == pytest.approx(1500.0 + 0.5 / (math.pi / 2) * 1000.0)
 
 
 def test_servo_backend_refuses_unknown_servo_joint() -> None:

@@ -316,7 +316,7 @@ BAD_CELLS: dict[str, Bad] = {
     "servo-duplicate-channels": Bad(
         servo_cell("{name: j1, channel: 3}, {name: j2, channel: 3}"),
         "robots[0] (arm).servo",
-        "duplicate channel: 3",
+        "joints j1 and j2 are both on channel 3",
     ),
     "servo-duplicate-joint-names": Bad(
         servo_cell("{name: j1, channel: 0}, {name: j1, channel: 1}"),
@@ -324,10 +324,15 @@ BAD_CELLS: dict[str, Bad] = {
         "duplicate joint name: j1",
     ),
     "servo-no-joints": Bad(servo_cell(""), "robots[0] (arm).servo", "at least one servo joint"),
-    "servo-channel-16": Bad(
-        servo_cell("{name: j1, channel: 16}"),
+    "servo-channel-beyond-the-boards": Bad(
+        servo_cell("{name: j1, channel: 16}", ", outputs: [{kind: i2c, bus: 1, address: 0x40}]"),
+        "robots[0] (arm).servo",
+        "outputs[0]: a joint is on channel 16, but 1 board(s) carry channels 0–15; list the next board",
+    ),
+    "servo-channel-beyond-any-chain": Bad(
+        servo_cell("{name: j1, channel: 1024}"),
         "robots[0] (arm).servo.joints[0] (j1).channel",
-        "less than or equal to 15",
+        "less than or equal to 1023",
     ),
     "servo-pulse-min-above-max": Bad(
         servo_cell("{name: j1, channel: 0, pulse_min_us: 2000, pulse_max_us: 1000}"),
@@ -353,6 +358,93 @@ BAD_CELLS: dict[str, Bad] = {
         servo_cell("{name: j1, channel: 0}", ", pwm_frequency_hz: 2000"),
         "robots[0] (arm).servo.pwm_frequency_hz",
         "less than or equal to 1526",
+    ),
+    "servo-pwm-frequency-too-low": Bad(
+        servo_cell("{name: j1, channel: 0}", ", pwm_frequency_hz: 20"),
+        "robots[0] (arm).servo.pwm_frequency_hz",
+        "greater than or equal to 24",
+    ),
+    "servo-pulse-longer-than-the-period": Bad(
+        servo_cell("{name: j1, channel: 0, pulse_max_us: 2600}", ", pwm_frequency_hz: 400"),
+        "robots[0] (arm).servo",
+        "joints.j1: pulse_max_us 2600 does not fit the PWM period of 2500 µs at pwm_frequency_hz 400",
+    ),
+    "servo-i2c-address-too-low": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: [{kind: i2c, address: 0x3f}]"),
+        "robots[0] (arm).servo.outputs[0].i2c.address",
+        "0x3f (63) is not a PCA9685 address: the A0–A5 jumpers give 0x40–0x7f",
+    ),
+    "servo-i2c-address-too-high": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: [{kind: i2c, address: [0x40, 0x80]}]"),
+        "robots[0] (arm).servo.outputs[0].i2c.address",
+        "0x80 (128) is not a PCA9685 address",
+    ),
+    "servo-i2c-address-twice": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: [{kind: i2c, address: [0x41, 0x41]}]"),
+        "robots[0] (arm).servo.outputs[0].i2c",
+        "address 0x41 is listed twice",
+    ),
+    "servo-i2c-board-in-two-outputs": Bad(
+        servo_cell(
+            "{name: j1, channel: 0}", ", outputs: [{kind: i2c, address: 0x40}, {kind: i2c, address: 0x40}]"
+        ),
+        "robots[0] (arm).servo",
+        "outputs[1]: board 0x40 on bus 1 is also outputs[0]",
+    ),
+    "servo-i2c-oscillator-off-the-frequency": Bad(
+        servo_cell(
+            "{name: j1, channel: 0, pulse_max_us: 600, pulse_min_us: 550}",
+            ", pwm_frequency_hz: 1526, outputs: [{kind: i2c, oscillator_hz: 21000000}]",
+        ),
+        "robots[0] (arm).servo",
+        "outputs[0].oscillator_hz: a PCA9685 at 21 MHz makes 20.0–1281.7 Hz, not 1526 Hz",
+    ),
+    "servo-unknown-output-kind": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: [{kind: spi}]"),
+        "robots[0] (arm).servo.outputs[0]",
+        "'zenoh', 'i2c', 'serial'",
+    ),
+    "servo-no-outputs": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: []"),
+        "robots[0] (arm).servo",
+        "'outputs' lists nothing",
+    ),
+    "servo-serial-without-port": Bad(
+        servo_cell("{name: j1, channel: 0}", ", outputs: [{kind: serial}]"),
+        "robots[0] (arm).servo.outputs[0].serial.port",
+        "missing",
+    ),
+    "servo-serial-port-twice": Bad(
+        servo_cell(
+            "{name: j1, channel: 0}",
+            ", outputs: [{kind: serial, port: /dev/ttyUSB0}, {kind: serial, port: /dev/ttyUSB0}]",
+        ),
+        "robots[0] (arm).servo",
+        "outputs[1]: port /dev/ttyUSB0 is also outputs[0]",
+    ),
+    "servo-serial-unknown-protocol": Bad(
+        servo_cell(
+            "{name: j1, channel: 0}", ", outputs: [{kind: serial, port: /dev/ttyUSB0, protocol: pololu}]"
+        ),
+        "robots[0] (arm).servo.outputs[0].serial.protocol",
+        "'ssc32'",
+    ),
+    "servo-ssc32-channel-32": Bad(
+        servo_cell("{name: j1, channel: 32}", ", outputs: [{kind: serial, port: /dev/ttyUSB0}]"),
+        "robots[0] (arm).servo",
+        "outputs[0]: a joint is on channel 32; an SSC-32 has channels 0–31",
+    ),
+    "servo-ssc32-pulse-range": Bad(
+        servo_cell(
+            "{name: j1, channel: 0, pulse_min_us: 400}", ", outputs: [{kind: serial, port: /dev/ttyUSB0}]"
+        ),
+        "robots[0] (arm).servo",
+        "outputs[0]: joints.j1 pulses 400–2500 µs leave the 500–2500 µs an SSC-32 makes",
+    ),
+    "servo-unknown-safe-state": Bad(
+        servo_cell("{name: j1, channel: 0}", ", safe_state: limp"),
+        "robots[0] (arm).servo.safe_state",
+        "'hold' or 'off'",
     ),
     # --- zenoh and publish ---
     "zenoh-client-without-connect": Bad(

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from urdaemon.cell import Cell, load_cell, parse_cell, summarize, ur_models
-from urdaemon.cell.config import DEFAULT_PORT_BASE, DEFAULT_PORT_STRIDE, Ports, ServoJoint
+from urdaemon.cell.config import DEFAULT_PORT_BASE, DEFAULT_PORT_STRIDE, Ports
+from urdaemon.cell.servo import ServoJoint
 from urdaemon.errors import ConfigError
 from urdaemon.model import UR_JOINTS
 
@@ -324,12 +325,23 @@ def test_summarize_shows_address_calibration_and_connect(tmp_path: Path) -> None
 def test_summarize_servo_arm() -> None:
     summary = summarize(load_cell(SERVO))
     assert summary.splitlines()[0].startswith("cell 'demo_servo': 1 robot(s); zenoh peer")
-    assert "  arm: custom backend=servo ports=50001/50002/50003/50004 " in summary
+    assert "  arm: custom backend=servo outputs=zenoh servo_command xyz=" in summary
+    assert "ports=" not in summary  # a servo arm listens on none
     assert "calibration=" not in summary
     assert " at " not in summary
 
 
 # --- default port assignment ---
+
+
+def test_summarize_names_each_servo_output() -> None:
+    text = SERVO.read_text().replace(
+        "      rate_hz: 50\n",
+        "      rate_hz: 50\n      outputs: [{kind: i2c, address: [0x40, 0x41]}, {kind: serial, port: /dev/ttyACM0}]\n",
+    )
+    path = SERVO.parent / "servo_arm.yaml"
+    summary = summarize(parse_cell(text, source=str(path), base_dir=SERVO.parent))
+    assert "outputs=i2c bus 1 (0x40, 0x41), serial /dev/ttyACM0 " in summary
 
 
 def test_ports_block_and_as_dict() -> None:

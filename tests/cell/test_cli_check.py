@@ -76,6 +76,8 @@ CLI_BAD = [
     "port-above-65535",
     "calibration-not-found",
     "servo-duplicate-channels",
+    "servo-i2c-address-too-high",
+    "servo-pulse-longer-than-the-period",
     "zenoh-client-without-connect",
     "duplicate-robot-names",
 ]

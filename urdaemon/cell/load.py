@@ -128,10 +128,12 @@ def summarize(cell: Cell) -> str:
         f"listen={list(cell.zenoh.listen)} connect={list(cell.zenoh.connect)}"
     ]
     for r in cell.robots:
-        ports = r.ports.as_dict()
-        port_text = "/".join(str(p) for p in ports.values())
         where = f" at {r.address}" if r.address else ""
+        if r.servo is not None:  # a servo arm listens on no port: what it drives is what matters
+            links = f"outputs={', '.join(o.label for o in r.servo.outputs)}"
+        else:
+            links = f"ports={'/'.join(str(p) for p in r.ports.as_dict().values())}"
         pose = f"xyz={list(r.pose.xyz)} rpy={list(r.pose.rpy)} parent={r.pose.parent}"
         extra = f" calibration={r.calibration}" if r.calibration else ""
-        lines.append(f"  {r.name}: {r.model} backend={r.backend}{where} ports={port_text} {pose}{extra}")
+        lines.append(f"  {r.name}: {r.model} backend={r.backend}{where} {links} {pose}{extra}")
     return "\n".join(lines)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from urdaemon.boards import pca9685, ssc32
 from urdaemon.cell.schema_types import Finite, Frozen
@@ -60,13 +60,15 @@ class ServoJoint(Frozen):
         return self
 
 
-I2cAddress = Annotated[int, Field(ge=I2C_ADDRESS_RANGE[0], le=I2C_ADDRESS_RANGE[1])]
-
-
 class ZenohOutput(Frozen):
     """Publish each cycle's pulses and PCA9685 counts on ``<cell>/<robot>/servo_command``."""
 
     kind: Literal["zenoh"]
+
+    @property
+    def label(self) -> str:
+        """How messages name this output."""
+        return "zenoh servo_command"
 
 
 class I2cOutput(Frozen):
@@ -75,17 +77,29 @@ class I2cOutput(Frozen):
     kind: Literal["i2c"]
     bus: Annotated[int, Field(ge=0, le=255)] = 1
     """The bus number: 1 is the 40-pin header's SDA/SCL on a Raspberry Pi."""
-    address: I2cAddress | tuple[I2cAddress, ...] = 0x40
-    """The board's address, or the chain's in channel order (channels 0–15 on the first, …)."""
+    address: tuple[int, ...] = (0x40,)
+    """The board's address, or the chain's as a list in channel order (channels 0–15 on the first, …)."""
     oscillator_hz: Annotated[float, Field(ge=20e6, le=30e6, allow_inf_nan=False)] = (
         pca9685.DEFAULT_OSCILLATOR_HZ
     )
     """The board's oscillator as measured (docs/servo.md, calibration); 25 MHz nominal."""
 
-    @property
-    def addresses(self) -> tuple[int, ...]:
-        """The boards' addresses in channel order."""
-        return self.address if isinstance(self.address, tuple) else (self.address,)
+    @field_validator("address", mode="before")
+    @classmethod
+    def _one_or_many(cls, value: object) -> object:
+        return (value,) if isinstance(value, int) and not isinstance(value, bool) else value
+
+    @field_validator("address")
+    @classmethod
+    def _on_the_chip(cls, value: tuple[int, ...]) -> tuple[int, ...]:
+        low, high = I2C_ADDRESS_RANGE
+        for address in value:
+            if not low <= address <= high:
+                raise ValueError(
+                    f"{address:#04x} ({address}) is not a PCA9685 address: the A0–A5 jumpers give "
+                    f"{low:#04x}–{high:#04x}"
+                )
+        return value
 
     @property
     def device(self) -> str:
@@ -95,13 +109,13 @@ class I2cOutput(Frozen):
     @property
     def label(self) -> str:
         """How messages name this output."""
-        return f"i2c bus {self.bus} ({', '.join(f'0x{a:02x}' for a in self.addresses)})"
+        return f"i2c bus {self.bus} ({', '.join(f'0x{a:02x}' for a in self.address)})"
 
     @model_validator(mode="after")
     def _boards(self) -> I2cOutput:
-        if not self.addresses:
+        if not self.address:
             raise ValueError("'address' lists no board")
-        twice = sorted({a for a in self.addresses if self.addresses.count(a) > 1})
+        twice = sorted({a for a in self.address if self.address.count(a) > 1})
         if twice:
             raise ValueError(f"address {', '.join(f'0x{a:02x}' for a in twice)} is listed twice")
         return self
@@ -199,13 +213,13 @@ class ServoOptions(Frozen):
         for i, output in enumerate(self.outputs):
             where = f"outputs[{i}]"
             if isinstance(output, I2cOutput):
-                for address in output.addresses:
+                for address in output.address:
                     first = seen.setdefault(("i2c", output.bus, address), i)
                     if first != i:
                         problems.append(
                             f"{where}: board 0x{address:02x} on bus {output.bus} is also outputs[{first}]"
                         )
-                boards = len(output.addresses)
+                boards = len(output.address)
                 if top >= boards * pca9685.CHANNELS:
                     problems.append(
                         f"{where}: a joint is on channel {top}, but {boards} board(s) carry channels "

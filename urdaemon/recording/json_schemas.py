@@ -39,6 +39,17 @@ _LEASE = {
     "properties": {"holder": _STRING, "fingerprint": _STRING, "since": {"type": "number"}},
 }
 
+_OUTPUT = {
+    "type": "object",
+    "description": "a servo arm's board or serial port (backends/servo/writer.py)",
+    "properties": {
+        "output": _STRING,
+        "state": {"type": "string", "enum": ["connecting", "ok", "lost", "stopped"]},
+        "error": _STRING,
+        **{name: _INT for name in ("frames", "transfers", "superseded", "failures", "reopened")},
+    },
+}
+
 _STATUS = _object(
     "urdaemon/Status",
     {
@@ -62,6 +73,7 @@ _STATUS = _object(
         "calibration_ok": {"type": ["boolean", "null"]},
         "lease": _LEASE,
         "tcp": {"type": "object", "properties": {"link": _STRING, "pose": _NUMBERS}},
+        "outputs": {"type": ["array", "null"], "items": _OUTPUT},
     },
     ("lifecycle",),
 )
@@ -98,7 +110,11 @@ _EVENT = _object(
 
 _SERVO = _object(
     "urdaemon/ServoCommand",
-    {"pwm_frequency_hz": _NUMBER, "channels": {"type": "array", "items": _INT}},
+    {
+        "pwm_frequency_hz": _NUMBER,
+        "channels": {"type": "array", "items": _INT, "description": "PCA9685 OFF counts per channel"},
+        "pulses_us": {"type": "array", "items": _NUMBER, "description": "pulse per channel (µs; 0: unused)"},
+    },
 )
 
 _FEEDBACK = _object(

@@ -52,7 +52,7 @@ class Pca9685Link:
     ) -> None:
         self.label = output.label
         self._output = output
-        self._addresses = output.addresses
+        self._addresses = output.address
         self.prescale = pca9685.prescale_for(frequency_hz, output.oscillator_hz)
         self._channels = [divmod(c, pca9685.CHANNELS) for c in channels]
         self._open_bus = open_bus

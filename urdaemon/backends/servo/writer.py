@@ -166,6 +166,7 @@ class OutputWriter:
         return True
 
     def _write(self, frame: Sequence[float]) -> bool:
+        self._last = frame  # what the board should show: written again if the output has to reopen
         try:
             transfers = self._link.write(frame)
         except OSError as err:
@@ -173,7 +174,6 @@ class OutputWriter:
             self._failed(err, self._retry[0])
             return False
         with self._lock:
-            self._last = frame
             self._frames += 1
             self._transfers += transfers
         return True
