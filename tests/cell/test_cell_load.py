@@ -337,7 +337,8 @@ def test_summarize_servo_arm() -> None:
 def test_summarize_names_each_servo_output() -> None:
     text = SERVO.read_text().replace(
         "      rate_hz: 50\n",
-        "      rate_hz: 50\n      outputs: [{kind: i2c, address: [0x40, 0x41]}, {kind: serial, port: /dev/ttyACM0}]\n",
+        "      rate_hz: 50\n"
+        "      outputs: [{kind: i2c, address: [0x40, 0x41]}, {kind: serial, port: /dev/ttyACM0}]\n",
     )
     path = SERVO.parent / "servo_arm.yaml"
     summary = summarize(parse_cell(text, source=str(path), base_dir=SERVO.parent))

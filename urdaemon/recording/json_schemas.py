@@ -46,7 +46,7 @@ _OUTPUT = {
         "output": _STRING,
         "state": {"type": "string", "enum": ["connecting", "ok", "lost", "stopped"]},
         "error": _STRING,
-        **{name: _INT for name in ("frames", "transfers", "superseded", "failures", "reopened")},
+        **dict.fromkeys(("frames", "transfers", "superseded", "failures", "reopened"), _INT),
     },
 }
 
