@@ -597,6 +597,8 @@ def _serve(path: str, listen: list[str] | None, owns_process: bool) -> int:
 
     try:
         _run_loop(run())
+    except (ConfigError, DescriptionError):
+        raise  # bad input found as the robots start (a servo arm's missing device): exit 2, as check does
     except UrDaemonError as err:
         return _fail(err)
     except OSError as err:  # e.g. a port in use: say which, no traceback

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.cell.test_cli_check import error_lines, run_check
+from tests.helpers import run_cli
 from urdaemon.backends.servo import ServoBackend
 from urdaemon.backends.servo.outputs import device_problems
 from urdaemon.cell import load_cell
@@ -241,17 +242,33 @@ def test_device_problems_pass_devices_that_are_there_and_ignore_zenoh() -> None:
     assert device_problems(options, "arm: servo", exists=lambda _: True, may_open=lambda _: True) == []
 
 
-def test_check_refuses_a_missing_bus_and_port(tmp_path: Path) -> None:
-    original = (CONFIGS / "servo_arm.yaml").read_text()
+def missing_devices_cell(tmp_path: Path) -> tuple[Path, Path]:
+    """A servo-arm cell file whose outputs name a bus and a port that do not exist; (file, port)."""
     port = tmp_path / "no-such-port"
-    text = original.replace(
-        "      rate_hz: 50\n",
-        f"      rate_hz: 50\n      outputs: [{{kind: i2c, bus: 254}}, {{kind: serial, port: {port}}}]\n",
+    text = (
+        (CONFIGS / "servo_arm.yaml")
+        .read_text()
+        .replace(
+            "      rate_hz: 50\n",
+            f"      rate_hz: 50\n      outputs: [{{kind: i2c, bus: 254}}, {{kind: serial, port: {port}}}]\n",
+        )
     )
     path = tmp_path / "servo.yaml"
-    path.write_text(
-        text.replace("servo_arm/servo_arm.urdf.xacro", str(CONFIGS / "servo_arm/servo_arm.urdf.xacro"))
-    )
+    xacro = str(CONFIGS / "servo_arm/servo_arm.urdf.xacro")
+    path.write_text(text.replace("servo_arm/servo_arm.urdf.xacro", xacro))
+    return path, port
+
+
+def test_serve_refuses_a_missing_device_at_once(tmp_path: Path) -> None:
+    path, port = missing_devices_cell(tmp_path)
+    run = run_cli("serve", "--config", str(path), "--listen", "tcp/127.0.0.1:0")
+    assert run.code == 2, run.stderr
+    assert "robot 'arm': servo.outputs[0].bus: /dev/i2c-254 does not exist" in run.stderr
+    assert f"servo.outputs[1].port: serial port {port} does not exist" in run.stderr
+
+
+def test_check_refuses_a_missing_bus_and_port(tmp_path: Path) -> None:
+    path, port = missing_devices_cell(tmp_path)
     proc = run_check(path)
     assert proc.returncode == 2, proc.stderr
     lines = error_lines(proc.stderr)
