@@ -150,11 +150,6 @@ def test_channel_bytes_are_on_l_on_h_off_l_off_h(count: int, data: bytes) -> Non
     assert channel_bytes(count) == data
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="count 0 is written as ON = OFF = 0, which §7.3.4 says must never be programmed; "
-    "Adafruit's driver writes full off for it",
-)
 def test_count_0_is_written_as_full_off() -> None:
     assert channel_bytes(0) == bytes([0, 0, 0, 0x10])
 

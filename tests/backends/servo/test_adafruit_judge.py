@@ -15,7 +15,7 @@ from types import SimpleNamespace
 from typing import Any
 from unittest import mock
 
-import adafruit_pca9685  # type: ignore[import-untyped]
+import adafruit_pca9685
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -172,11 +172,6 @@ def test_random_arms_agree_with_adafruit(
         arm.assert_pulses_within_half_a_count(angles)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a pulse under half a count is written as ON = OFF = 0 (§7.3.4: never the same values); "
-    "Adafruit writes full off",
-)
 def test_a_pulse_under_half_a_count_agrees_with_adafruit() -> None:
     arm = Arm([servo("tiny", 0, pulse_min_us=1.0, pulse_max_us=2000.0)], 50.0, 25_000_000, (0x40,))
     arm.move([-math.pi / 2])  # 1 µs: 0.2 counts
