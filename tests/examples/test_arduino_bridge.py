@@ -240,9 +240,9 @@ def test_every_pulse_gets_the_datasheet_count(bridge: Bridge, oscillator_hz: int
     assert run.dropped == 0
 
 
-def test_counts_agree_with_the_daemons_i2c_path_but_at_exact_half_counts(bridge: Bridge) -> None:
-    """The bridge rounds a half count up, exactly; pca9685.count_for rounds in floating point and
-    lands on either side of an exact half (915 µs is 187.5 counts: it gives 187)."""
+def test_counts_agree_with_the_daemons_i2c_path(bridge: Bridge) -> None:
+    """The bridge and pca9685.count_for give every whole-µs pulse the same count, exact halves
+    (915 µs is 187.5 counts) rounded up by both."""
     pulses = range(500, 2501)
     run = bridge("".join(f"#0P{us}\r" for us in pulses))
     by_bridge = {
@@ -250,10 +250,10 @@ def test_counts_agree_with_the_daemons_i2c_path_but_at_exact_half_counts(bridge:
         for us, lines in zip(pulses, run.lines, strict=True)
     }
     daemon = {us: pca9685.count_for(us, pca9685.prescale_for(50.0)) for us in pulses}
-    differ = {us for us in pulses if by_bridge[us] != daemon[us]}
+    assert by_bridge == daemon
     halves = {us for us in pulses if exact_count(us).denominator == 2}
-    assert differ <= halves
-    assert all(by_bridge[us] == math.ceil(exact_count(us)) for us in halves)
+    assert 915 in halves
+    assert all(daemon[us] == math.ceil(exact_count(us)) for us in halves)
 
 
 def test_counts_above_the_period_are_clamped_to_4095(bridge: Bridge) -> None:

@@ -104,7 +104,9 @@ def frequency_of(prescale: int, oscillator_hz: float = DEFAULT_OSCILLATOR_HZ) ->
 def count_for(pulse_us: float, prescale: int, oscillator_hz: float = DEFAULT_OSCILLATOR_HZ) -> int:
     """The OFF count of a pulse of ``pulse_us`` at that prescale: the pulse's share of the real period
     times 4096, rounded to the nearest count (datasheet §7.3.3's examples), within 0..4095."""
-    count = math.floor(pulse_us * 1e-6 * frequency_of(prescale, oscillator_hz) * RESOLUTION + 0.5)
+    # pulse × osc / ((prescale + 1) × 10⁶) in one division: exact for whole µs and Hz, so a count
+    # that is exactly x.5 rounds up as the arithmetic says (the chain through the frequency did not)
+    count = math.floor(pulse_us * oscillator_hz / ((prescale + 1) * 1_000_000) + 0.5)
     return 0 if count < 0 else RESOLUTION - 1 if count >= RESOLUTION else count
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["CHANNELS", "MOVE_TIME_RANGE_MS", "PULSE_RANGE_US", "group_line", "off_line"]
+__all__ = ["CHANNELS", "MOVE_TIME_RANGE_MS", "PULSE_RANGE_US", "VERSION_QUERY", "group_line", "off_line"]
 
 CHANNELS = 32
 """Channels of an SSC-32 (0..31)."""
@@ -18,6 +18,8 @@ PULSE_RANGE_US = (500, 2500)
 """Pulses the board makes; it clamps a number outside to the nearest end (0 means off)."""
 MOVE_TIME_RANGE_MS = (1, 65535)
 """What ``T`` takes."""
+VERSION_QUERY = b"VER\r"
+"""Asks the board for its version line (answered with a line ending in a carriage return)."""
 
 
 def group_line(pulses: Sequence[tuple[int, int]], move_time_ms: int | None = None) -> bytes:
