@@ -34,27 +34,28 @@ __all__ = [
 ]
 
 OSCILLATOR_HZ = 25_000_000.0
-"""The internal oscillator (§7.3.5: 25 MHz)."""
+"""The internal oscillator (datasheet §7.3.5: 25 MHz)."""
 COUNTS = 4096
-"""Counts per PWM period: the 12-bit counter (§7.3.3)."""
+"""Counts per PWM period: the 12-bit counter (datasheet §7.3.3)."""
 SETTLE_NS = 500_000
-"""§7.3.1 (MODE1 note 2) and §7.3.1.1: the oscillator needs up to 500 µs after SLEEP goes to 0."""
+"""The oscillator needs up to 500 µs after SLEEP goes to 0 (datasheet §7.3.1 MODE1 note 2 and datasheet §7.3.1.1)."""
 SMBUS_BLOCK_MAX = 32
 """The most data bytes one SMBus block transfer carries (smbus2 and the kernel refuse more)."""
 
-# §7.3, register summary
+# datasheet §7.3, register summary
 MODE1, MODE2 = 0x00, 0x01
 SUBADR1, SUBADR2, SUBADR3, ALLCALLADR = 0x02, 0x03, 0x04, 0x05
 LED0_ON_L, LED15_OFF_H = 0x06, 0x45
 ALL_LED_ON_L, ALL_LED_OFF_H = 0xFA, 0xFD
 PRE_SCALE, TEST_MODE = 0xFE, 0xFF
 
-# §7.3.1, MODE1 bits
+# datasheet §7.3.1, MODE1 bits
 RESTART, EXTCLK, AI, SLEEP = 0x80, 0x40, 0x20, 0x10
 SUB1, SUB2, SUB3, ALLCALL = 0x08, 0x04, 0x02, 0x01
-# §7.3.2, MODE2 bits: OCH = outputs change on ACK (1) or on STOP (0)
+# datasheet §7.3.2, MODE2 bits: OCH = outputs change on ACK (1) or on STOP (0)
 OCH = 0x08
-# §7.3.3: bit 4 of LEDn_ON_H is full on, bit 4 of LEDn_OFF_H full off; bits 7..5 read 0, not writable
+# datasheet §7.3.3: bit 4 of LEDn_ON_H is full on, bit 4 of LEDn_OFF_H full off;
+# bits 7..5 read 0 and cannot be written
 FULL = 0x10
 HIGH_MASK = 0x1F
 
@@ -69,7 +70,7 @@ POWER_ON = {
 }
 """Registers whose power-on value is not 0 (besides every LEDn_OFF_H, which starts at full off)."""
 PRESCALE_MIN = 3
-"""§7.3.5: the hardware forces PRE_SCALE values below 3 to 3."""
+"""datasheet §7.3.5: the hardware forces PRE_SCALE values below 3 to 3."""
 
 
 class DatasheetError(Exception):
@@ -105,7 +106,7 @@ def _reserved(register: int) -> bool:
 
 def _next(register: int) -> int:
     """The pointer after ``register`` with auto-increment: past LED15_OFF_H and past PRE_SCALE it rolls
-    over to MODE1 (§7.3, remark under the register summary)."""
+    over to MODE1 (datasheet §7.3, remark under the register summary)."""
     return MODE1 if register in (LED15_OFF_H, PRE_SCALE) else register + 1
 
 
@@ -195,7 +196,8 @@ class Pca9685Model:
 
     @property
     def period_us(self) -> float:
-        """The PWM period: (PRE_SCALE + 1) × 4096 oscillator cycles (§7.3.5, equation 1 turned round)."""
+        """The PWM period: (PRE_SCALE + 1) × 4096 oscillator cycles (datasheet §7.3.5, equation 1
+        turned round)."""
         return (self.prescale + 1) * COUNTS / self.oscillator_hz * 1e6
 
     def channels(self) -> list[Channel]:
@@ -204,7 +206,8 @@ class Pca9685Model:
 
     def pulse_us(self, channel: int) -> float:
         """The high time per period the output makes now (µs): 0 when full off, asleep or halted,
-        the whole period when full on, else (OFF − ON) mod 4096 counts (§7.3.3, both delay cases)."""
+        the whole period when full on, else (OFF − ON) mod 4096 counts (datasheet §7.3.3, both
+        delay cases)."""
         if not self.running or self.halted:
             return 0.0
         state = self._channel(channel)
@@ -218,7 +221,9 @@ class Pca9685Model:
 
     def _check(self, register: int) -> int:
         if _reserved(register):
-            raise DatasheetError(f"register 0x{register:02x} is reserved (§7.3); no driver may touch it")
+            raise DatasheetError(
+                f"register 0x{register:02x} is reserved (datasheet §7.3); no driver may touch it"
+            )
         return register
 
     def _channel(self, channel: int) -> Channel:
@@ -248,7 +253,7 @@ class Pca9685Model:
             return written
         elif register == PRE_SCALE and self._registers[MODE1] & SLEEP:
             self._registers[PRE_SCALE] = max(value, PRESCALE_MIN)
-        # PRE_SCALE while awake: the write is blocked (§7.3, register summary note 1)
+        # PRE_SCALE while awake: the write is blocked (datasheet §7.3, register summary note 1)
         return set()
 
     def _write_mode1(self, value: int) -> None:
@@ -260,32 +265,38 @@ class Pca9685Model:
         if not old & SLEEP and value & SLEEP:
             self._awake_since_ns = None
             if any(not state.full_off for state in self.channels()):
-                new |= RESTART  # §7.3.1.1: put to sleep with channels running
+                new |= RESTART  # datasheet §7.3.1.1: put to sleep with channels running
         elif old & SLEEP and not value & SLEEP:
             self._awake_since_ns = now
         self._registers[MODE1] = new
         if not value & RESTART:
             return  # writing 0 to RESTART has no effect
         if self._awake_since_ns is None:
-            self.violations.append("RESTART written while SLEEP is 1 (§7.3.1.1)")
+            self.violations.append("RESTART written while SLEEP is 1 (datasheet §7.3.1.1)")
         elif now - self._awake_since_ns < SETTLE_NS:
             waited = (now - self._awake_since_ns) / 1000
-            self.violations.append(f"RESTART written {waited:g} µs after SLEEP was cleared (§7.3.1.1: ≥ 500)")
+            self.violations.append(
+                f"RESTART written {waited:g} µs after SLEEP was cleared (datasheet §7.3.1.1: ≥ 500)"
+            )
         else:
             self._registers[MODE1] = new & ~RESTART
 
     def _pwm_written(self, registers: set[int]) -> None:
         """The STOP (end of a write) after PWM registers were written."""
         if self._awake_since_ns is not None and self.clock.now_ns - self._awake_since_ns < SETTLE_NS:
-            self.violations.append("PWM registers written while the oscillator settles (§7.3.1, note 2)")
+            self.violations.append(
+                "PWM registers written while the oscillator settles (datasheet §7.3.1, note 2)"
+            )
         channels = sorted({(r - LED0_ON_L) // 4 for r in registers})
         whole = [c for c in channels if all(LED0_ON_L + 4 * c + k in registers for k in range(4))]
-        if not self._registers[MODE2] & OCH or whole:  # §7.3.1.1: other actions that clear RESTART
+        if not self._registers[MODE2] & OCH or whole:  # datasheet §7.3.1.1: other actions that clear RESTART
             self._registers[MODE1] &= ~RESTART
         for channel in channels:
             state = self._channel(channel)
             if not state.full_on and not state.full_off and state.on == state.off:
-                self.violations.append(f"LED{channel}_ON == LED{channel}_OFF == {state.on} (§7.3.4: never)")
+                self.violations.append(
+                    f"LED{channel}_ON == LED{channel}_OFF == {state.on} (datasheet §7.3.4: never)"
+                )
 
 
 class Transfer(NamedTuple):

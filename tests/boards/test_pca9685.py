@@ -1,6 +1,6 @@
 """urdaemon.boards.pca9685, the pure part of the PCA9685 output: prescale and count formulas, the
 start-up writes and the block writes between two images of a board's channels. Expected numbers are
-the datasheet's (NXP PCA9685 rev. 4, §7.3.5 equation 1 and its 200 Hz example), written out here."""
+the datasheet's (NXP PCA9685 rev. 4, datasheet §7.3.5 equation 1 and its 200 Hz example), written out here."""
 
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ def running(channel: int = 0, on: int = 0, off: int = 300) -> Pca9685Model:
     return board
 
 
-# --- power-on defaults (§7.3) ---
+# --- power-on defaults (datasheet §7.3) ---
 
 DEFAULTS = [
     (0x00, 0x11),  # MODE1: SLEEP | ALLCALL
@@ -131,7 +131,7 @@ def test_auto_increment_never_reaches_a_reserved_register() -> None:
     assert registers[70:] == registers[:3] == bytes([AI, 0x04, 0xE2])
 
 
-# --- PRE_SCALE (§7.3.5) ---
+# --- PRE_SCALE (datasheet §7.3.5) ---
 
 PRESCALE_CASES = [
     # (MODE1 when written, written value, stored value)
@@ -154,7 +154,7 @@ def test_prescale_takes_writes_only_asleep_and_at_least_3(mode1: int, value: int
     assert board.prescale == stored
 
 
-# --- RESTART (§7.3.1.1) ---
+# --- RESTART (datasheet §7.3.1.1) ---
 
 
 def test_sleeping_with_a_channel_running_sets_restart_and_stops_the_output() -> None:
@@ -213,7 +213,7 @@ def test_restart_in_the_same_write_that_wakes_is_a_violation() -> None:
 def test_restart_written_while_asleep_is_a_violation() -> None:
     board = Pca9685Model()
     board.write([0x00, RESTART | SLEEP])
-    assert board.violations == ["RESTART written while SLEEP is 1 (§7.3.1.1)"]
+    assert board.violations == ["RESTART written while SLEEP is 1 (datasheet §7.3.1.1)"]
 
 
 def test_writing_0_to_restart_has_no_effect() -> None:
@@ -254,7 +254,9 @@ def test_pwm_registers_written_while_the_oscillator_settles_is_a_violation() -> 
     board.write([0x00, AI])
     board.clock.advance(100e-6)
     board.write([0x06, 0, 0, 100, 0])
-    assert board.violations == ["PWM registers written while the oscillator settles (§7.3.1, note 2)"]
+    assert board.violations == [
+        "PWM registers written while the oscillator settles (datasheet §7.3.1, note 2)"
+    ]
 
 
 def test_extclk_is_not_expected() -> None:
@@ -265,7 +267,7 @@ def test_extclk_is_not_expected() -> None:
     assert len(board.violations) == 1
 
 
-# --- ALL_LED (§7.3.4) ---
+# --- ALL_LED (datasheet §7.3.4) ---
 
 
 def test_all_led_writes_every_channel_and_reads_zero() -> None:
@@ -279,7 +281,7 @@ def test_all_led_writes_every_channel_and_reads_zero() -> None:
     assert board.led_registers == bytes([0x01, 0x02, 0x03, 0x10]) * 16
 
 
-# --- the output (§7.3.3) ---
+# --- the output (datasheet §7.3.3) ---
 
 PULSE_CASES = [
     # (ON_H full bit, OFF_H full bit, on, off, counts high) at PRE_SCALE 30 (200 Hz)
@@ -320,7 +322,7 @@ def test_on_equal_to_off_is_a_violation_and_makes_no_pulse() -> None:
     board = awake()
     board.write([0x06, 0, 0, 0, 0])
     assert board.pulse_us(0) == 0.0
-    assert board.violations == ["LED0_ON == LED0_OFF == 0 (§7.3.4: never)"]
+    assert board.violations == ["LED0_ON == LED0_OFF == 0 (datasheet §7.3.4: never)"]
 
 
 # --- the smbus2-shaped bus ---

@@ -112,7 +112,7 @@ def count_for(pulse_us: float, prescale: int, oscillator_hz: float = DEFAULT_OSC
 
 def channel_bytes(count: int) -> bytes:
     """ON_L, ON_H, OFF_L, OFF_H of one channel: ON at 0 and OFF at ``count``, or full off (also for
-    count 0: §7.3.4 forbids programming ON and OFF with the same count)."""
+    count 0: datasheet §7.3.4 forbids programming ON and OFF with the same count)."""
     if count == FULL_OFF or count == 0:
         return bytes((0, 0, 0, FULL_ON_OFF_BIT))
     return bytes((0, 0, count & 0xFF, count >> 8))
