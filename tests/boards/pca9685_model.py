@@ -38,7 +38,8 @@ OSCILLATOR_HZ = 25_000_000.0
 COUNTS = 4096
 """Counts per PWM period: the 12-bit counter (datasheet §7.3.3)."""
 SETTLE_NS = 500_000
-"""The oscillator needs up to 500 µs after SLEEP goes to 0 (datasheet §7.3.1 MODE1 note 2 and datasheet §7.3.1.1)."""
+"""The oscillator needs up to 500 µs after SLEEP goes to 0 (datasheet §7.3.1 MODE1 note 2 and
+datasheet §7.3.1.1)."""
 SMBUS_BLOCK_MAX = 32
 """The most data bytes one SMBus block transfer carries (smbus2 and the kernel refuse more)."""
 
