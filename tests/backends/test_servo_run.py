@@ -14,6 +14,7 @@ import pytest
 from tests.cell.test_cli_check import error_lines, run_check
 from tests.helpers import run_cli
 from urdaemon.backends.servo import ServoBackend
+from urdaemon.backends.servo.backend import PACE_AFTER_S, PaceWatch
 from urdaemon.backends.servo.outputs import device_problems
 from urdaemon.cell import load_cell
 from urdaemon.cell.servo import ServoOptions
@@ -51,6 +52,11 @@ class FakeLink:
         self.frames.append(tuple(pulses))
         self.wrote.set()
         return 1
+
+    def check(self) -> None:
+        self.calls.append("check")
+        if self.broken.is_set():
+            raise OSError(121, "Remote I/O error")
 
     def off(self) -> None:
         self.calls.append("off")
@@ -135,6 +141,22 @@ async def test_a_lost_output_makes_the_robot_not_ready_until_it_is_back() -> Non
         await asyncio.gather(task, return_exceptions=True)
 
 
+async def test_a_board_lost_while_the_arm_rests_is_found_without_a_motion() -> None:
+    link = FakeLink()
+    backend, notices = servo_backend(link)
+    task = asyncio.create_task(backend.run(lambda: None))
+    try:
+        await until(lambda: backend.state.ready_for_motion, "ready")
+        link.broken.set()  # nothing moves: only the writer's probe can notice
+        await until(lambda: backend.state.lifecycle is Lifecycle.DISCONNECTED, "lost at rest")
+        assert "check" in link.calls
+        assert "Remote I/O error (errno 121)" in backend.state.lifecycle_reason
+        assert [kind for kind, _ in notices] == ["servo_output_lost"]
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+
 @pytest.mark.parametrize(("safe_state", "calls"), [("off", ["off", "close"]), ("hold", ["close"])])
 async def test_the_safe_state_is_applied_when_the_run_ends(safe_state: str, calls: list[str]) -> None:
     link = FakeLink()
@@ -185,14 +207,30 @@ async def test_a_slow_output_is_told_and_its_skipped_frames_counted() -> None:
         report = backend.output_reports()
         assert report is not None
         assert report[0]["superseded"] > 0
-        backend.command.mode = CommandMode.IDLE
-        link.gate.set()
-        await until(lambda: any(kind == "servo_output_pace" for kind, _ in notices), "pace")
-        assert backend.state.lifecycle_reason == ""
     finally:
         link.gate.set()
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+
+
+def test_pace_is_told_once_slow_and_once_again_after_quiet_seconds() -> None:
+    pace = PaceWatch()
+    said = [pace.second([("a", 0), ("b", 0)])]
+    said.append(pace.second([("a", 3), ("b", 0)]))
+    assert (
+        pace.text
+        == "servo output slow: a skipped 3 frame(s) in the last second (only the newest frame is written)"
+    )
+    said.append(pace.second([("a", 0), ("b", 1)]))  # still slow: not said again, the reason follows
+    assert "b skipped 1 frame(s)" in pace.text
+    for _ in range(PACE_AFTER_S - 1):
+        said.append(pace.second([("a", 0), ("b", 0)]))
+    assert pace.text  # not yet: a quiet second now and then is not pace
+    said.append(pace.second([("a", 0), ("b", 0)]))
+    assert pace.text == ""
+    kinds = [s[0] for s in said if s is not None]
+    assert kinds == ["servo_output_slow", "servo_output_pace"]
+    assert [s is None for s in said[:3]] == [True, False, True]  # told when it began, not again
 
 
 # --- what check and serve refuse before starting ---

@@ -305,3 +305,39 @@ def test_after_close_and_open_every_channel_is_written_again() -> None:
     assert bus.count("write_block") == before + 2
     assert bus.opened == [1, 1]
     assert_clean(bus)
+
+
+# --- check: is the board still there, as it was left? ---
+
+
+def test_check_passes_boards_that_run_as_started() -> None:
+    link, bus = make([0, 17], addresses=(0x40, 0x41))
+    link.open()
+    link.write([1500.0, 1500.0])
+    link.check()
+    assert bus.count("read_byte") == 2  # MODE1 of each board, nothing written
+    assert_clean(bus)
+
+
+def test_check_finds_a_board_that_lost_power_and_open_restores_it() -> None:
+    link, bus = make([0, 17], addresses=(0x40, 0x41))
+    link.open()
+    link.write([1500.0, 1200.0])
+    bus.boards[0x41].power_on()  # a brown-out: MODE1 asleep, every channel full off
+    with pytest.raises(OSError, match=r"board 0x41 was reset \(MODE1 0x11\); starting it again"):
+        link.check()
+    link.close()
+    link.open()
+    link.write([1500.0, 1200.0])  # the writer writes its last frame again after opening
+    assert bus.boards[0x41].pulse_us(1) == pytest.approx(1200.0, abs=5.0)
+    assert bus.boards[0x40].pulse_us(0) == pytest.approx(1500.0, abs=5.0)
+    assert_clean(bus)
+
+
+def test_check_fails_when_the_board_does_not_answer() -> None:
+    link, bus = make([0])
+    link.open()
+    bus.fail(errno.EREMOTEIO)
+    with pytest.raises(OSError) as failed:
+        link.check()
+    assert failed.value.errno == errno.EREMOTEIO

@@ -23,7 +23,11 @@ from urdaemon.cell.servo import ServoOptions
 from urdaemon.errors import BackendError
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
 
-__all__ = ["ServoBackend", "output_condition"]
+__all__ = ["PACE_AFTER_S", "PaceWatch", "ServoBackend", "output_condition"]
+
+PACE_AFTER_S = 5
+"""Seconds without a skipped frame before a slow output is said to keep pace again (one skipped
+frame now and then on a busy machine must not make the events flap)."""
 
 
 def output_condition(reports: Sequence[OutputReport]) -> tuple[Lifecycle, str]:
@@ -40,6 +44,34 @@ def output_condition(reports: Sequence[OutputReport]) -> tuple[Lifecycle, str]:
                 f"opening it again in {report.retry_in_s:.1f} s"
             )
     return Lifecycle.RUNNING, ""
+
+
+class PaceWatch:
+    """Decides, once a second, whether the outputs keep pace: an output that had to skip frames makes
+    them slow at once; they keep pace again after ``PACE_AFTER_S`` seconds without a skipped frame."""
+
+    def __init__(self) -> None:
+        self.text = ""
+        """While slow: which outputs skipped how many frames (the status reason); else empty."""
+        self._clean_s = 0
+
+    def second(self, skipped: Sequence[tuple[str, int]]) -> tuple[str, str] | None:
+        """Take one second's (output, frames skipped); the (event kind, text) to tell users, if any."""
+        slow = [f"{label} skipped {count} frame(s) in the last second" for label, count in skipped if count]
+        if slow:
+            was = self.text
+            self.text, self._clean_s = (
+                f"servo output slow: {'; '.join(slow)} (only the newest frame is written)",
+                0,
+            )
+            return None if was else ("servo_output_slow", self.text)
+        if not self.text:
+            return None
+        self._clean_s += 1
+        if self._clean_s < PACE_AFTER_S:
+            return None
+        self.text = ""
+        return ("servo_output_pace", "the servo outputs keep pace again")
 
 
 class ServoBackend(MockBackend):
@@ -65,9 +97,10 @@ class ServoBackend(MockBackend):
         self._links = tuple(links)
         self._writers: list[OutputWriter] = []
         self._seen: list[int] = []
+        self._states: list[str] = []
+        self._pace = PaceWatch()
         self._superseded: list[int] = []
         self._sent: tuple[float, ...] | None = None
-        self._slow = ""
         self._publish = publish
         prescale = pca9685.prescale_for(options.pwm_frequency_hz)
         self._to_count = [(j.channel, prescale) for j in options.joints]
@@ -81,6 +114,7 @@ class ServoBackend(MockBackend):
         outputs go to the safe state (``off``: no pulses; ``hold``: the last ones) and close."""
         self._writers = [OutputWriter(link) for link in self._links]
         self._seen = [-1] * len(self._writers)
+        self._states = ["connecting"] * len(self._writers)
         self._superseded = [0] * len(self._writers)
         self._sent = None
         state = self.state
@@ -134,39 +168,36 @@ class ServoBackend(MockBackend):
         self._publish(f"{self._head}{stamp},{values}}}".encode())
 
     def _apply_condition(self) -> None:
-        """Set the lifecycle from the outputs' reports, and tell users what changed."""
+        """Set the lifecycle from the outputs' reports, and tell users which output failed or is back."""
         reports = []
         for i, writer in enumerate(self._writers):
             self._seen[i] = writer.changes
-            reports.append(writer.report())
+            report = writer.report()
+            reports.append(report)
+            was = self._states[i]
+            if report.state == "lost" and was != "lost":
+                self.notice("servo_output_lost", f"servo output {report.label} failed: {report.error}")
+            elif report.state == "ok" and was == "lost":
+                self.notice("servo_output_back", f"servo output {report.label} works again")
+            self._states[i] = report.state
         state = self.state
-        before = state.lifecycle
         lifecycle, reason = output_condition(reports)
         state.lifecycle = lifecycle
-        state.lifecycle_reason = reason or self._slow
+        state.lifecycle_reason = reason or self._pace.text
         state.program_running = lifecycle is Lifecycle.RUNNING
-        if lifecycle is Lifecycle.DISCONNECTED and before is not Lifecycle.DISCONNECTED:
-            self.notice("servo_output_lost", reason)
-        elif lifecycle is Lifecycle.RUNNING and before is Lifecycle.DISCONNECTED:
-            self.notice("servo_output_back", ", ".join(r.label for r in reports) + " working again")
 
     def _check_pace(self) -> None:
-        """Once a second: outputs that had to skip frames are slow; say so once, and when it ends."""
-        slow = []
+        """Once a second: which outputs had to skip frames, and what users should hear of it."""
+        skipped = []
         for i, writer in enumerate(self._writers):
             report = writer.report()
-            skipped = report.superseded - self._superseded[i]
+            skipped.append((report.label, report.superseded - self._superseded[i]))
             self._superseded[i] = report.superseded
-            if skipped:
-                slow.append(f"{report.label} skipped {skipped} frame(s) in the last second")
-        text = f"servo output slow: {'; '.join(slow)} (only the newest frame is written)" if slow else ""
-        if bool(text) != bool(self._slow):
-            self.notice(
-                "servo_output_slow" if text else "servo_output_pace", text or "outputs keep pace again"
-            )
-        self._slow = text
+        said = self._pace.second(skipped)
+        if said is not None:
+            self.notice(*said)
         if self.state.lifecycle is Lifecycle.RUNNING:
-            self.state.lifecycle_reason = text
+            self.state.lifecycle_reason = self._pace.text
 
     async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
         """Servo arms have no IO."""

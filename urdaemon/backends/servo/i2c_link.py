@@ -22,6 +22,10 @@ class SMBusLike(Protocol):
         """Write one register."""
         ...
 
+    def read_byte_data(self, i2c_addr: int, register: int) -> int:
+        """Read one register."""
+        ...
+
     def write_i2c_block_data(self, i2c_addr: int, register: int, data: Sequence[int]) -> None:
         """Write ``data`` from ``register`` on (at most 32 bytes)."""
         ...
@@ -93,6 +97,17 @@ class Pca9685Link:
                     board[pin] = frame[pin]
                 transfers += 1
         return transfers
+
+    def check(self) -> None:
+        """Read every board's MODE1: it must answer, awake and auto-incrementing as started; a board
+        that lost power comes back asleep (``OSError``: the writer starts it again)."""
+        bus = self._bus
+        if bus is None:
+            raise OSError(f"{self.label} is not open")
+        for address in self._output.address:
+            mode1 = bus.read_byte_data(address, pca9685.MODE1)
+            if mode1 & (pca9685.MODE1_SLEEP | pca9685.MODE1_AI) != pca9685.MODE1_AI:
+                raise OSError(f"board {address:#04x} was reset (MODE1 {mode1:#04x}); starting it again")
 
     def off(self) -> None:
         """Set "full off" on every channel of every board (one ALL_LED write per board)."""

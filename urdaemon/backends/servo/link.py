@@ -24,6 +24,11 @@ class BoardLink(Protocol):
         (channels that did not change are not written again)."""
         ...
 
+    def check(self) -> None:
+        """Ask the device whether it is still there and as it was left (the writer asks while there
+        is nothing to write); ``OSError`` when it is gone or was reset (it is opened again)."""
+        ...
+
     def off(self) -> None:
         """Stop every pulse (the servos go limp)."""
         ...

@@ -116,6 +116,18 @@ class Ssc32Link:
         sent.update(moves)
         return 1
 
+    def check(self) -> None:
+        """Read what the board sent: an unplugged port fails the read (``OSError``), and a line from a
+        board that was not asked anything means it restarted (an Arduino after a brown-out) and holds
+        no pulses: ``OSError`` too, so the writer opens it again and sends every channel."""
+        port = self._port
+        if port is None:
+            raise OSError(f"{self.label} is not open")
+        said = port.read(256)
+        if said.strip(b"\r\n\t "):
+            text = said.strip().decode("ascii", "replace")
+            raise OSError(f"{self.label} restarted (it said {text!r}); sending every channel again")
+
     def off(self) -> None:
         """Stop every configured channel's pulses (``P0``)."""
         port = self._port

@@ -13,10 +13,13 @@ from dataclasses import dataclass
 
 from urdaemon.backends.servo.link import BoardLink
 
-__all__ = ["RETRY_S", "OutputReport", "OutputWriter"]
+__all__ = ["PROBE_EVERY_S", "RETRY_S", "OutputReport", "OutputWriter"]
 
 RETRY_S = (0.1, 0.25, 0.5, 1.0, 2.0, 5.0)
 """Waits before each attempt to open a failed device again; the last repeats."""
+PROBE_EVERY_S = 1.0
+"""With no frame to write for this long, the writer asks the device whether it is still there
+(``BoardLink.check``), so a board lost while the arm rests is found before the next motion."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,11 +66,13 @@ class OutputWriter:
         link: BoardLink,
         *,
         retry_s: Sequence[float] = RETRY_S,
+        probe_every_s: float = PROBE_EVERY_S,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.label = link.label
         self._link = link
         self._retry = tuple(retry_s)
+        self._probe_every = probe_every_s
         self._clock = clock
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -136,13 +141,16 @@ class OutputWriter:
                     if not opened:
                         self._stopping.wait(self._retry[min(attempt - 1, len(self._retry) - 1)])
                     continue
-                self._wake.wait()
+                woke = self._wake.wait(self._probe_every)
                 self._wake.clear()
+                if self._stopping.is_set():
+                    break
                 with self._lock:
                     frame, self._pending = self._pending, None
-                if frame is None or self._stopping.is_set():
-                    continue
-                opened = self._write(frame)
+                if frame is not None:
+                    opened = self._attempt(self._write, frame)
+                elif not woke:  # nothing to write for a while: is the board still there?
+                    opened = self._attempt(self._probe, ())
                 if not opened:
                     attempt = 1
                     self._stopping.wait(self._retry[0])
@@ -165,24 +173,32 @@ class OutputWriter:
             self._set("ok", "")
         return True
 
-    def _write(self, frame: Sequence[float]) -> bool:
-        self._last = frame  # what the board should show: written again if the output has to reopen
+    def _attempt(self, action: Callable[[Sequence[float]], None], frame: Sequence[float]) -> bool:
+        """Run ``action``; on a device failure close the link and report it (False)."""
         try:
-            transfers = self._link.write(frame)
+            action(frame)
         except OSError as err:
             self._link.close()
             self._failed(err, self._retry[0])
             return False
+        return True
+
+    def _write(self, frame: Sequence[float]) -> None:
+        self._last = frame  # what the board should show: written again if the output has to reopen
+        transfers = self._link.write(frame)
         with self._lock:
             self._frames += 1
             self._transfers += transfers
-        return True
+
+    def _probe(self, _: Sequence[float]) -> None:
+        self._link.check()
 
     def _failed(self, err: OSError, retry_in: float) -> None:
         with self._lock:
             self._failures += 1
             self._retry_at = self._clock() + retry_in
             self._set("connecting" if self._state == "connecting" else "lost", _describe(err))
+            self.changes += 1  # each failure: the reason's "again in" changes with the backoff
 
     def _set(self, state: str, error: str) -> None:
         if (state, error) != (self._state, self._error):
