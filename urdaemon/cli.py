@@ -169,6 +169,12 @@ def _add_cell_tools(sub: Any) -> None:
     """``check`` and ``urdf``: read a cell file offline."""
     check = sub.add_parser("check", help="validate a cell file and print a summary")
     check.add_argument("--config", required=True)
+    check.add_argument(
+        "--skip-devices",
+        action="store_true",
+        help="do not look for servo arms' I²C buses and serial ports (checking on another machine "
+        "than the one that drives them); serve still refuses them when missing",
+    )
 
     urdf = sub.add_parser("urdf", help="print the cell URDF")
     urdf.add_argument("--config", required=True)
@@ -410,7 +416,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         if run is not None:
             return run(args)
         if args.command == "check":
-            return _check(args.config)
+            return _check(args.config, check_devices=not args.skip_devices)
         if args.command == "urdf":
             return _urdf(args.config)
         if args.command == "serve":
@@ -517,7 +523,7 @@ def _fake_robot(args: argparse.Namespace) -> int:
     return run_fakes(args)
 
 
-def _check(path: str) -> int:
+def _check(path: str, *, check_devices: bool = True) -> int:
     from urdaemon.cell import load_cell, summarize
     from urdaemon.daemon import describe_cell, make_backend
 
@@ -525,7 +531,7 @@ def _check(path: str) -> int:
         cell = load_cell(path)
         description = describe_cell(cell)
         for robot in cell.robots:  # what `serve` would refuse, `check` refuses too
-            make_backend(robot, description.limits[robot.name], None, cell.cell)
+            make_backend(robot, description.limits[robot.name], None, cell.cell, check_devices=check_devices)
         busy = _busy_ports(cell, path)  # serve would retry these forever
         if busy:
             raise ConfigError("\n".join(busy), errors=busy)

@@ -101,8 +101,11 @@ def _within_limits(robot: Robot, limits: JointLimits, positions: list[float]) ->
     return positions
 
 
-def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell: str) -> Backend:
-    """The backend a robot's config asks for."""
+def make_backend(
+    robot: Robot, limits: JointLimits, node: ZenohNode | None, cell: str, *, check_devices: bool = True
+) -> Backend:
+    """The backend a robot's config asks for; ``check_devices``: refuse a servo arm whose device files
+    are missing or may not be opened (``check --skip-devices`` leaves that to the machine it runs on)."""
     initial = _initial_positions(robot, limits)
     if robot.backend == "mock":
         options = robot.mock
@@ -119,20 +122,31 @@ def make_backend(robot: Robot, limits: JointLimits, node: ZenohNode | None, cell
     if robot.backend == "servo":
         servo = robot.servo
         assert servo is not None
-        problems = device_problems(servo, f"robot {robot.name!r}: servo")
-        if problems:
-            raise ConfigError("\n".join(problems), errors=problems)
+        if check_devices:
+            problems = device_problems(servo, f"robot {robot.name!r}: servo")
+            if problems:
+                raise ConfigError("\n".join(problems), errors=problems)
         key = CellKeys(cell).robot(robot.name).servo_command
         publisher = node.publisher(key) if node is not None and servo.publishes else None
-        return ServoBackend(
-            robot.name,
-            limits.names,
-            robot.prefix,
-            servo,
-            initial_positions=initial,
-            publish=(lambda payload: publisher.put(payload)) if publisher is not None else None,
-            links=board_links(servo),
-        )
+        try:
+            backend = ServoBackend(
+                robot.name,
+                limits.names,
+                robot.prefix,
+                servo,
+                initial_positions=initial,
+                publish=(lambda payload: publisher.put(payload)) if publisher is not None else None,
+                links=board_links(servo),
+            )
+        except ConfigError as err:
+            raise ConfigError(f"robot {robot.name!r}: {err}") from err
+        problems = [
+            f"robot {robot.name!r}: {p}"
+            for p in backend.mapping.uncovered(limits.min_position, limits.max_position)
+        ]
+        if problems:
+            raise ConfigError("\n".join(problems), errors=problems)
+        return backend
     if robot.backend == "ur":
         from urdaemon.backends.ur.backend import UrBackend
 

@@ -142,17 +142,40 @@ def test_update_recomputes_in_place() -> None:
 
 
 def test_unknown_servo_joint_is_a_config_error() -> None:
-    with pytest.raises(ConfigError, match="servo joints not in the robot description: p_elbow, p_zz"):
+    said = r"servo\.joints: elbow, zz not in the robot's description \(its joints: a\)"
+    with pytest.raises(ConfigError, match=said):
         ServoMapping(("p_a",), "p_", options(joint("a", 0), joint("zz", 1), joint("elbow", 2)))
 
 
 def test_servo_joint_needs_the_prefix() -> None:
-    with pytest.raises(ConfigError, match="p_a"):
+    with pytest.raises(ConfigError, match=r"servo\.joints: a not in the robot's description"):
         ServoMapping(("a",), "p_", options(joint("a", 0)))
 
 
+@pytest.mark.parametrize(
+    ("lows", "highs", "offset", "direction", "refused"),
+    [
+        ([-1.0], [1.0], 0.0, 1, False),  # the servo's range exactly
+        ([-0.5], [0.5], 0.4, 1, False),
+        ([-1.0], [1.0], 0.1, 1, True),  # the offset takes the servo past angle_max
+        ([-1.0], [0.8], 0.2, -1, True),  # mirrored: -(-1.0) + 0.2 = 1.2
+        ([-0.8], [1.0], 0.2, -1, False),  # mirrored: [-0.8, 1.0] → [-0.8, 1.0]
+        ([-1.2], [0.5], 0.0, 1, True),
+    ],
+)
+def test_joint_limits_the_servo_cannot_follow_are_named(
+    lows: list[float], highs: list[float], offset: float, direction: int, refused: bool
+) -> None:
+    servo = joint(angle_min=-1.0, angle_max=1.0, offset=offset, direction=direction)
+    problems = ServoMapping(("p_j",), "p_", options(servo)).uncovered(lows, highs)
+    assert bool(problems) is refused
+    if refused:
+        assert problems[0].startswith("servo.joints (j): the joint's limits")
+        assert "narrow the limits (joint_limits.j) or widen the servo's angle range" in problems[0]
+
+
 def test_description_joints_without_a_servo_channel_are_refused() -> None:
-    with pytest.raises(ConfigError, match="joints of the description without a servo channel: p_a"):
+    with pytest.raises(ConfigError, match=r"the description's joint\(s\) a have no servo channel"):
         ServoMapping(("p_a", "p_b"), "p_", options(joint("b", 3)))
 
 
@@ -309,7 +332,7 @@ def test_servo_backend_refuses_unknown_servo_joint() -> None:
     cell = load_cell(SERVO)
     robot = cell.robots[0]
     assert robot.servo is not None
-    with pytest.raises(ConfigError, match="arm_wrist"):
+    with pytest.raises(ConfigError, match=r"servo\.joints: wrist not in the robot's description"):
         ServoBackend("arm", ("arm_base_yaw", "arm_shoulder", "arm_elbow"), robot.prefix, robot.servo)
 
 

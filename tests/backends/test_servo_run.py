@@ -316,3 +316,10 @@ def test_check_refuses_a_missing_bus_and_port(tmp_path: Path) -> None:
     assert any(
         f"robot 'arm': servo.outputs[1].port: serial port {port} does not exist" in line for line in lines
     )
+
+
+def test_check_can_leave_the_devices_to_the_machine_that_drives_them(tmp_path: Path) -> None:
+    path, _ = missing_devices_cell(tmp_path)
+    proc = run_check(path, extra=("--skip-devices",))
+    assert proc.returncode == 0, proc.stderr
+    assert "outputs=i2c bus 254 (0x40), serial " in proc.stdout

@@ -149,14 +149,25 @@ def test_check_broken_calibration_file_exits_2(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("old", "new"),
+    ("old", "new", "said"),
     [
-        ("name: wrist, channel: 3", "name: wristx, channel: 3"),
-        ("      rate_hz: 50\n", "      rate_hz: 50\n      initial_positions: {bogus: 1.0}\n"),
+        ("name: wrist, channel: 3", "name: wristx, channel: 3", "servo.joints: wristx not in the robot's"),
+        ("      rate_hz: 50\n", "      rate_hz: 50\n      initial_positions: {bogus: 1.0}\n", "bogus"),
+        (
+            "wrist: {min_position: -1.4708, max_position: 1.4708}",
+            "wrist: {min_position: -1.6}",
+            "robot 'arm': servo.joints (wrist): the joint's limits [-1.6, 1.5708] rad take the servo to",
+        ),
     ],
-    ids=["servo-joint-not-in-description", "servo-initial-position-unknown-joint"],
+    ids=[
+        "servo-joint-not-in-description",
+        "servo-initial-position-unknown-joint",
+        "servo-joint-limits-past-the-servo",
+    ],
 )
-def test_check_refuses_servo_config_that_serve_would_refuse(tmp_path: Path, old: str, new: str) -> None:
+def test_check_refuses_servo_config_that_serve_would_refuse(
+    tmp_path: Path, old: str, new: str, said: str
+) -> None:
     shutil.copytree(CONFIGS / "servo_arm", tmp_path / "servo_arm")
     text = (CONFIGS / "servo_arm.yaml").read_text()
     assert old in text
@@ -164,3 +175,4 @@ def test_check_refuses_servo_config_that_serve_would_refuse(tmp_path: Path, old:
     path.write_text(text.replace(old, new))
     proc = run_check(path)
     assert proc.returncode == 2, proc.stdout
+    assert said in proc.stderr

@@ -186,13 +186,16 @@ class ServoOptions(Frozen):
             other = by_channel.setdefault(j.channel, j.name)
             if other != j.name:
                 board, pin = divmod(j.channel, pca9685.CHANNELS)
+                where = f" (pin {pin} of board {board} of an i2c chain, counting from 0)" if board else ""
                 return (
-                    f"joints {other} and {j.name} are both on channel {j.channel} "
-                    f"(board {board + 1}, channel {pin}); give each joint its own channel"
+                    f"joints {other} and {j.name} are both on channel {j.channel}{where}; "
+                    "give each joint its own channel"
                 )
         return ""
 
     def _period_problem(self) -> str:
+        if all(isinstance(o, SerialOutput) for o in self.outputs):
+            return ""  # a serial controller makes its own period; pwm_frequency_hz is not used
         period_us = 1e6 / self.pwm_frequency_hz
         for j in self.joints:
             if j.pulse_max_us >= period_us:
@@ -240,6 +243,7 @@ class ServoOptions(Frozen):
                     if j.pulse_min_us < low or j.pulse_max_us > high:
                         problems.append(
                             f"{where}: joints.{j.name} pulses {j.pulse_min_us:g}–{j.pulse_max_us:g} µs "
-                            f"leave the {low}–{high} µs an SSC-32 makes"
+                            f"leave the {low}–{high} µs an SSC-32 makes: keep the pulses within it "
+                            "(calibrate the angle range to match) or drive the servo from an i2c board"
                         )
         return problems

@@ -338,6 +338,6 @@ def test_check_fails_when_the_board_does_not_answer() -> None:
     link, bus = make([0])
     link.open()
     bus.fail(errno.EREMOTEIO)
-    with pytest.raises(OSError) as failed:
+    with pytest.raises(OSError, match="Remote I/O error") as failed:
         link.check()
     assert failed.value.errno == errno.EREMOTEIO
