@@ -85,6 +85,11 @@ class CountingBus:
         """Count one block write."""
         self._count(len(data))
 
+    def read_byte_data(self, i2c_addr: int, register: int) -> int:
+        """The idle probe's MODE1 read: a board awake with auto-increment, as started."""
+        self._count(1)
+        return 0x20
+
     def _count(self, size: int) -> None:
         tally = self.tally
         tally.transfers += 1
@@ -107,6 +112,10 @@ class CountingPort:
         self.tally.data_bytes += len(data)
         return len(data)
 
+    def read(self, size: int = 1) -> bytes:
+        """A board that says nothing (the link drives it once its wait for an answer has passed)."""
+        return b""
+
     def close(self) -> None:
         """Nothing to release."""
 
@@ -126,7 +135,7 @@ def i2c_link(options: ServoOptions, output: I2cOutput, tally: Tally) -> Pca9685L
 def serial_link(options: ServoOptions, output: SerialOutput, tally: Tally) -> Ssc32Link:
     """An SSC-32 link on a counting port."""
     channels = [j.channel for j in options.joints]
-    return Ssc32Link(output, channels, open_port=lambda _output: CountingPort(tally))
+    return Ssc32Link(output, channels, open_port=lambda _output: CountingPort(tally), ready_wait_s=0.0)
 
 
 # ---- (a) and (b): the cycle and the writers -------------------------------------------------------------

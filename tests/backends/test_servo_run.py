@@ -147,6 +147,7 @@ async def test_a_board_lost_while_the_arm_rests_is_found_without_a_motion() -> N
     task = asyncio.create_task(backend.run(lambda: None))
     try:
         await until(lambda: backend.state.ready_for_motion, "ready")
+        assert await asyncio.to_thread(link.wrote.wait, WAIT_S)  # the first frame is on the board
         link.broken.set()  # nothing moves: only the writer's probe can notice
         await until(lambda: backend.state.lifecycle is Lifecycle.DISCONNECTED, "lost at rest")
         assert "check" in link.calls

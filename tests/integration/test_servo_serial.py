@@ -203,6 +203,12 @@ async def move_and_rest(rig: Rig, wire: Wire) -> None:
     start = pulses_of(rig.joints, [0.0] * len(GOAL))
     await wire.until(lambda w: len(w.lines) >= 1, "the first frame")
     assert parse_line(wire.lines[0]) == (start, None), "every channel at first, no move time"
+    assert wire.port.queries >= 1, "the board was asked for its version before the first frame"
+    statuses = rig.client.subscribe(rig.arm.keys.status, 1000)
+    try:  # the output opened: the robot is ready from the next cycle on
+        await next_matching(statuses, lambda s: s["ready"], "ready once the board answered")
+    finally:
+        statuses.close()
     goal_pulses = pulses_of(rig.joints, GOAL)
     goal = await rig.arm.move(GOAL, duration=1.0)
     assert (await goal.result(timeout=WAIT_S))["status"] == "succeeded"

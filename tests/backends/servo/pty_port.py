@@ -43,31 +43,59 @@ def apply_line(board: Mapping[int, int], line: bytes) -> dict[int, int]:
     return {**board, **moves}
 
 
+VERSION = b"SSC32-V2.50USB"
+"""What the stand-in board answers to ``VER``, as an SSC-32 does."""
+
+
 class PtyPort:
     """One pseudo-terminal; ``path`` is the port to open. The test keeps a slave descriptor of its
-    own open, so the master can be read while the code under test has the port closed."""
+    own open, so the master can be read while the code under test has the port closed.
 
-    def __init__(self) -> None:
+    It answers ``VER`` as an SSC-32 does while its lines are read (``lines``, ``feed``); the queries
+    are counted in ``queries`` and are not among the lines returned."""
+
+    def __init__(self, *, answers: bool = True) -> None:
         master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no line editing, no newline translation: bytes as they are
         self.master: int | None = master
         self._slave: int | None = slave
         self.path = os.ttyname(slave)
         self._buffer = b""
+        self._ready: list[bytes] = []
+        self._answers = answers
+        self.queries = 0
+        """``VER`` lines received."""
 
     def lines(self, count: int, timeout: float = 5.0) -> list[bytes]:
-        """The next ``count`` lines (each without its ``\\r``), waiting at most ``timeout`` s for each
-        read; AssertionError if they do not come."""
+        """The next ``count`` command lines (each without its ``\\r``), waiting at most ``timeout`` s
+        for each read; AssertionError if they do not come."""
         assert self.master is not None, "the port was unplugged"
         for _ in range(_MAX_READS):
-            if self._buffer.count(b"\r") >= count:
+            *parts, self._buffer = self._buffer.split(b"\r")
+            self._ready += self._commands(parts)
+            if len(self._ready) >= count:
                 break
             ready, _, _ = select.select([self.master], [], [], timeout)
-            assert ready, f"no line within {timeout} s; received so far: {self._buffer!r}"
+            assert ready, f"no line within {timeout} s; received so far: {self._ready!r} {self._buffer!r}"
             self._buffer += os.read(self.master, _READ_SIZE)
-        *parts, self._buffer = self._buffer.split(b"\r", count)
-        assert len(parts) == count, f"{count} lines wanted, got {parts!r}"
-        return parts
+        assert len(self._ready) >= count, f"{count} lines wanted, got {self._ready!r}"
+        found, self._ready = self._ready[:count], self._ready[count:]
+        return found
+
+    def answer(self, timeout: float = 5.0) -> None:
+        """Read until a ``VER`` query came (and was answered); the command lines read meanwhile stay
+        for ``lines``."""
+        assert self.master is not None, "the port was unplugged"
+        seen = self.queries
+        for _ in range(_MAX_READS):
+            *parts, self._buffer = self._buffer.split(b"\r")
+            self._ready += self._commands(parts)
+            if self.queries > seen:
+                return
+            ready, _, _ = select.select([self.master], [], [], timeout)
+            assert ready, f"no VER within {timeout} s; received so far: {self._buffer!r}"
+            self._buffer += os.read(self.master, _READ_SIZE)
+        raise AssertionError("no VER")
 
     def line(self, timeout: float = 5.0) -> bytes:
         """The next line (without its ``\\r``)."""
@@ -76,7 +104,19 @@ class PtyPort:
     def feed(self, data: bytes) -> list[bytes]:
         """Take ``data`` read from the master elsewhere (an event loop's reader); the lines it completes."""
         *parts, self._buffer = (self._buffer + data).split(b"\r")
-        return parts
+        return self._commands(parts)
+
+    def _commands(self, lines: list[bytes]) -> list[bytes]:
+        """``lines`` without the ``VER`` queries, each answered (when this board answers)."""
+        commands = []
+        for line in lines:
+            if line == b"VER":
+                self.queries += 1
+                if self._answers and self.master is not None:
+                    os.write(self.master, VERSION + b"\r")
+            else:
+                commands.append(line)
+        return commands
 
     @property
     def partial(self) -> bytes:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import errno
+import os
 import termios
+import threading
 from collections.abc import Iterator
 
 import pytest
@@ -27,9 +29,13 @@ def pty() -> Iterator[PtyPort]:
         port.close()
 
 
-def link_on(port: PtyPort, *, move_time_ms: int | None = None, baud: int = 115200) -> Ssc32Link:
+def link_on(
+    port: PtyPort, *, move_time_ms: int | None = None, baud: int = 115200, ready_wait_s: float = 0.0
+) -> Ssc32Link:
+    """A link on the pty; by default it does not wait for the board's answer to ``VER`` (the tests
+    below of that wait answer from a thread)."""
     output = SerialOutput(kind="serial", port=port.path, baud=baud, move_time_ms=move_time_ms)
-    return Ssc32Link(output, CHANNELS)
+    return Ssc32Link(output, CHANNELS, ready_wait_s=ready_wait_s)
 
 
 def test_a_frame_is_one_command_group_of_whole_microseconds(pty: PtyPort) -> None:
@@ -174,3 +180,55 @@ def test_the_board_always_ends_up_at_the_last_frame(frames: list[tuple[float, fl
     finally:
         link.close()
         pty.close()
+
+
+def test_open_waits_for_the_boards_answer_before_the_first_frame(pty: PtyPort) -> None:
+    link = link_on(pty, ready_wait_s=30.0)
+    opening = threading.Thread(target=link.open)
+    opening.start()
+    try:
+        pty.answer()  # the board answers the first VER: open returns at once, not after 30 s
+        opening.join(10.0)
+        assert not opening.is_alive()
+        assert link.answered == "SSC32-V2.50USB"
+        assert link.write([1500.0, 1600.0, 700.0]) == 1
+        assert pty.line() == b"#0P1500#5P1600#31P700"
+    finally:
+        opening.join(10.0)
+        link.close()
+
+
+def test_a_board_that_never_answers_is_driven_after_the_wait() -> None:
+    pty = PtyPort(answers=False)
+    try:
+        link = link_on(pty, ready_wait_s=0.3)
+        link.open()  # bounded: 0.3 s of VER every 0.5 s, no answer
+        assert link.answered == ""
+        assert link.write([1500.0, 1600.0, 700.0]) == 1
+        assert pty.line() == b"#0P1500#5P1600#31P700"
+        assert pty.queries >= 1
+        link.close()
+    finally:
+        pty.close()
+
+
+def test_a_board_that_speaks_unasked_restarted_and_check_says_so(pty: PtyPort) -> None:
+    link = link_on(pty)
+    link.open()
+    try:
+        link.check()  # quiet: still there
+        assert pty.master is not None
+        os.write(pty.master, b"urdaemon-servo-bridge 1.0 boards=2\r\n")  # greeted after a brown-out
+        with pytest.raises(OSError, match=r"restarted .*urdaemon-servo-bridge 1\.0"):
+            link.check()
+    finally:
+        link.close()
+
+
+def test_check_fails_on_an_unplugged_port(pty: PtyPort) -> None:
+    link = link_on(pty)
+    link.open()
+    pty.unplug()
+    with pytest.raises(OSError, match=r"Input/output error|disconnected"):
+        link.check()
+    link.close()

@@ -32,6 +32,7 @@ class FakeLink:
         write_errors: Sequence[OSError | None] = (),
         off_error: OSError | None = None,
         always_fail_open: OSError | None = None,
+        check_errors: Sequence[Exception | None] = (),
     ) -> None:
         self.calls: list[Call] = []
         self.holds: dict[tuple[str, int], threading.Event] = {}
@@ -39,6 +40,7 @@ class FakeLink:
         self._open_errors = list(open_errors)
         self._write_errors = list(write_errors)
         self._off_error = off_error
+        self._check_errors = list(check_errors)
         self._always_fail_open = always_fail_open
         self._changed = threading.Condition()
 
@@ -88,6 +90,13 @@ class FakeLink:
             raise error
         return len(pulses)
 
+    def check(self) -> None:
+        """Say the device is there (or fail as scripted)."""
+        self._record("check")
+        error = self._check_errors.pop(0) if self._check_errors else None
+        if error is not None:
+            raise error
+
     def off(self) -> None:
         """Stop the pulses (or fail as scripted)."""
         self._record("off")
@@ -117,9 +126,12 @@ def writers() -> Iterator[list[tuple[OutputWriter, FakeLink]]]:
 
 
 def start(
-    writers: list[tuple[OutputWriter, FakeLink]], link: FakeLink, retry_s: Sequence[float] = (0.001,)
+    writers: list[tuple[OutputWriter, FakeLink]],
+    link: FakeLink,
+    retry_s: Sequence[float] = (0.001,),
+    probe_every_s: float = 60.0,
 ) -> OutputWriter:
-    writer = OutputWriter(link, retry_s=retry_s, clock=constant_clock)
+    writer = OutputWriter(link, retry_s=retry_s, probe_every_s=probe_every_s, clock=constant_clock)
     writers.append((writer, link))
     writer.start()
     return writer
@@ -160,14 +172,14 @@ def test_an_output_that_cannot_be_opened_is_connecting_until_it_opens(
     assert report.error == "Permission denied (errno 13)"
     assert report.retry_in_s == pytest.approx(0.003), "the third attempt's backoff"
     assert report.failures == 3
-    assert writer.changes == 2, "the same error twice is one change"
+    assert writer.changes == 3, "each failure is a change: the reason's \"again in\" follows the backoff"
     assert link.count("close") == 3, "a failed open leaves nothing open"
     fourth_open.set()
     writer.submit(A)
     link.wait_for(lambda calls: ("write", A) in calls, "the frame is written once open")
     report = writer.report()
     assert (report.state, report.error, report.retry_in_s) == ("ok", "", 0.0)
-    assert writer.changes == 3
+    assert writer.changes == 4, "three failures, then ok"
     assert report.reopened == 0, "the first open is no reopening"
 
 
@@ -186,7 +198,7 @@ def test_a_failed_write_closes_the_output_and_opens_it_again(
     assert report.error == "Input/output error (errno 5)"
     assert report.retry_in_s == pytest.approx(0.001)
     assert (report.failures, report.frames) == (1, 1)
-    assert writer.changes == 2, "ok, then lost"
+    assert writer.changes == 2, "ok, then lost (the failure)"
     assert link.calls[-2:] == [("close", None), ("open", None)], "closed before opening again"
     writer.submit(C)  # the arm goes on while the device is away
     second_open.set()
@@ -218,11 +230,6 @@ def test_a_reopened_output_gets_the_last_frame_again(writers: list[tuple[OutputW
     assert (report.failures, report.reopened) == (1, 1)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="writer.py keeps only the last frame written (_last): the frame whose write failed is lost, "
-    "and the board holds the one before it after reopening until the arm moves again",
-)
 def test_after_a_failed_write_the_reopened_output_gets_that_frame(
     writers: list[tuple[OutputWriter, FakeLink]],
 ) -> None:
@@ -292,3 +299,31 @@ def test_stop_while_the_device_fails_ends_without_waiting_out_the_backoff(
     assert link.calls[-1] == ("close", None)
     report = writer.report()
     assert (report.state, report.error) == ("stopped", "No such file or directory (errno 2)")
+
+
+def test_an_idle_output_is_probed_and_a_failed_probe_reopens_it_with_the_last_frame(
+    writers: list[tuple[OutputWriter, FakeLink]],
+) -> None:
+    link = FakeLink(check_errors=[None, OSError(121, "Remote I/O error")])
+    writer = start(writers, link, probe_every_s=0.01)
+    writer.submit((1500.0, 1600.0))
+    link.wait_for(lambda calls: calls.count(("open", None)) == 2, "probed, failed, opened again")
+    link.wait_for(lambda calls: calls[-1] == ("write", (1500.0, 1600.0)), "the frame written again")
+    kinds = [name for name, _ in link.calls]
+    assert kinds[:5] == ["open", "write", "check", "check", "close"]
+    report = writer.report()
+    assert (report.failures, report.reopened) == (1, 1)
+    assert report.frames == 2  # the write after reopening is a frame put on the device too
+
+
+def test_a_bug_in_a_link_is_reported_and_does_not_end_the_thread(
+    writers: list[tuple[OutputWriter, FakeLink]],
+) -> None:
+    link = FakeLink(write_errors=[ValueError("block of 36 bytes")])  # type: ignore[list-item]
+    writer = start(writers, link)
+    changes = writer.changes
+    writer.submit((1500.0,))
+    link.wait_for(lambda calls: calls.count(("open", None)) == 2, "opened again after the bug")
+    link.wait_for(lambda calls: calls[-1] == ("write", (1500.0,)), "the frame written again")
+    assert writer.changes > changes
+    assert writer.report().failures == 1

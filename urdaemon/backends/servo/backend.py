@@ -32,17 +32,20 @@ frame now and then on a busy machine must not make the events flap)."""
 
 def output_condition(reports: Sequence[OutputReport]) -> tuple[Lifecycle, str]:
     """The robot's lifecycle and its reason, from its device outputs' reports: running only while
-    every output works."""
+    every output works. An output that failed is named before one that has not opened yet."""
     for report in reports:
-        if report.state == "connecting":
-            why = f": {report.error}; trying again in {report.retry_in_s:.1f} s" if report.error else ""
-            return Lifecycle.CONNECTING, f"opening servo output {report.label}{why}"
-    for report in reports:
-        if report.state in ("lost", "stopped"):
+        if report.state == "lost":
             return Lifecycle.DISCONNECTED, (
                 f"servo output {report.label} failed: {report.error}; "
                 f"opening it again in {report.retry_in_s:.1f} s"
             )
+    for report in reports:
+        if report.state == "stopped":
+            return Lifecycle.DISCONNECTED, f"servo output {report.label} stopped"
+    for report in reports:
+        if report.state == "connecting":
+            why = f": {report.error}; trying again in {report.retry_in_s:.1f} s" if report.error else ""
+            return Lifecycle.CONNECTING, f"opening servo output {report.label}{why}"
     return Lifecycle.RUNNING, ""
 
 

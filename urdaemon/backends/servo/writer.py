@@ -93,7 +93,7 @@ class OutputWriter:
     def submit(self, pulses: Sequence[float]) -> None:
         """Make ``pulses`` the next frame to write (replacing one not yet written)."""
         with self._lock:
-            if self._pending is not None:
+            if self._pending is not None and self._state == "ok":  # a frame the device had no time for
                 self._superseded += 1
             self._pending = pulses
         self._wake.set()
@@ -160,10 +160,12 @@ class OutputWriter:
     def _open(self, attempt: int) -> bool:
         try:
             self._link.open()
-            frame = self._last
-            if frame is not None:  # hold where the arm was: the board may have been reset
-                self._link.write(frame)
-        except OSError as err:
+            with self._lock:  # the newest frame wanted: the pose the robot's state shows
+                frame = self._pending if self._pending is not None else self._last
+                self._pending = None
+            if frame is not None:  # the board may have been reset: write it whole
+                self._write(frame)
+        except Exception as err:  # OSError: the device; else a bug, told the same way
             self._link.close()
             self._failed(err, self._retry[min(attempt, len(self._retry) - 1)])
             return False
@@ -174,10 +176,12 @@ class OutputWriter:
         return True
 
     def _attempt(self, action: Callable[[Sequence[float]], None], frame: Sequence[float]) -> bool:
-        """Run ``action``; on a device failure close the link and report it (False)."""
+        """Run ``action``; when it fails close the link and report it (False). A device fails with
+        ``OSError``; anything else is a bug, reported and retried the same way rather than ending the
+        thread, so the robot is never left "ok" with nobody driving its servos."""
         try:
             action(frame)
-        except OSError as err:
+        except Exception as err:
             self._link.close()
             self._failed(err, self._retry[0])
             return False
@@ -193,12 +197,13 @@ class OutputWriter:
     def _probe(self, _: Sequence[float]) -> None:
         self._link.check()
 
-    def _failed(self, err: OSError, retry_in: float) -> None:
+    def _failed(self, err: Exception, retry_in: float) -> None:
         with self._lock:
             self._failures += 1
             self._retry_at = self._clock() + retry_in
-            self._set("connecting" if self._state == "connecting" else "lost", _describe(err))
-            self.changes += 1  # each failure: the reason's "again in" changes with the backoff
+            self._state = "connecting" if self._state == "connecting" else "lost"
+            self._error = _describe(err)
+            self.changes += 1  # every failure, even the same again: the reason's "again in" moves on
 
     def _set(self, state: str, error: str) -> None:
         if (state, error) != (self._state, self._error):
@@ -209,7 +214,7 @@ class OutputWriter:
         if opened and self._off_at_stop:
             try:
                 self._link.off()
-            except OSError as err:
+            except Exception as err:  # the link closes whatever happened
                 with self._lock:
                     self._failures += 1
                     self._error = _describe(err)
@@ -218,7 +223,10 @@ class OutputWriter:
             self._set("stopped", self._error)
 
 
-def _describe(err: OSError) -> str:
-    """An OSError as users read it: the message, and the errno's name when there is one."""
+def _describe(err: Exception) -> str:
+    """A failure as users read it: an OSError's message with its errno when there is one; anything
+    else with its type (a bug: say what it was)."""
+    if not isinstance(err, OSError):
+        return f"{type(err).__name__}: {err}"
     text = err.strerror or str(err) or type(err).__name__
     return f"{text} (errno {err.errno})" if err.errno is not None and err.strerror else text
