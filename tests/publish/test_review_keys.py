@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from urdaemon.publish.keys import CellKeys
+from urdaemon.publish.keys import CellKeys, RobotKeys
 
 
 @pytest.mark.parametrize(
@@ -43,3 +43,30 @@ def test_parse_splits_a_key_into_robot_and_rest(key: str, parsed: tuple[str, tup
 def test_service_name_of_a_parsed_key(rest: tuple[str, ...], service: str | None) -> None:
     """Reproduction: as above; which chunks name a service was known only to the daemon."""
     assert CellKeys.service_name(rest) == service
+
+
+@pytest.mark.parametrize(
+    ("key", "goal_id"),
+    [
+        ("c/alice/goal/alice-x1-3/result", "alice-x1-3"),
+        ("c/alice/goal/*/result", None),  # a wildcard query names no goal
+        ("c/alice/goal/a/b/result", None),
+        ("c/alice/goal//result", None),
+        ("c/alice/goal/g1/feedback", None),
+        ("c/bob/goal/g1/result", None),
+        ("c/goal/g1/result", None),
+    ],
+)
+def test_a_robot_result_key_names_its_goal(key: str, goal_id: str | None) -> None:
+    keys = RobotKeys("c", "alice")
+    assert keys.goal_of_result(key) == goal_id
+    if goal_id is not None:
+        assert keys.goal_result(goal_id) == key
+
+
+@pytest.mark.parametrize(
+    ("key", "goal_id"),
+    [("c/goal/cell-7/result", "cell-7"), ("c/goal/*/result", None), ("c/alice/goal/g/result", None)],
+)
+def test_a_cell_result_key_names_its_goal(key: str, goal_id: str | None) -> None:
+    assert CellKeys("c").goal_of_result(key) == goal_id

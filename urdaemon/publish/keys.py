@@ -75,6 +75,10 @@ class CellKeys:
         """Every cell goal's result (wildcard)."""
         return f"{self.cell}/goal/*/result"
 
+    def goal_of_result(self, key: str) -> str | None:
+        """The goal id a cell goal's result key names (``goal_result``'s inverse); None for another key."""
+        return _goal_of_result(key, self.cell)
+
     @property
     def goal_messages(self) -> str:
         """Every cell goal's feedback and result (wildcard: what a client follows)."""
@@ -188,6 +192,10 @@ class RobotKeys:
         """Every goal's result (wildcard)."""
         return f"{self.base}/goal/*/result"
 
+    def goal_of_result(self, key: str) -> str | None:
+        """The goal id a result key of this robot names (``goal_result``'s inverse); None for another key."""
+        return _goal_of_result(key, self.base)
+
     @property
     def command_joint_position(self) -> str:
         """Streaming joint position commands (deadman)."""
@@ -225,3 +233,12 @@ class RobotKeys:
     def service(self, name: str) -> str:
         """Queryable service ``name`` (publish/services.py lists them)."""
         return f"{self.base}/service/{name}"
+
+
+def _goal_of_result(key: str, base: str) -> str | None:
+    """The goal id in ``<base>/goal/<id>/result``; None for any other key (a wildcard included)."""
+    head, tail = f"{base}/goal/", "/result"
+    if not (key.startswith(head) and key.endswith(tail)):
+        return None
+    goal_id = key[len(head) : -len(tail)]
+    return goal_id if goal_id and "/" not in goal_id and "*" not in goal_id else None

@@ -165,10 +165,9 @@ class Goals:
 
     def on_result_query(self, query: Any) -> None:
         """Answer a query for a finished goal's result, signed (nothing while it runs or once forgotten)."""
-        parts = str(query.key_expr).split("/")
-        goal_id = parts[-2] if len(parts) >= 2 else ""
-        kept = self._results.get(goal_id)
-        if kept is not None:
+        goal_id = self._keys.goal_of_result(str(query.key_expr))
+        kept = self._results.get(goal_id) if goal_id is not None else None
+        if goal_id is not None and kept is not None:
             with contextlib.suppress(Exception):  # the querier may have timed out and gone
                 query.reply(self._keys.goal_result(goal_id), kept[0], attachment=kept[1])
         with contextlib.suppress(Exception):
