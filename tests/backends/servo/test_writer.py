@@ -172,7 +172,7 @@ def test_an_output_that_cannot_be_opened_is_connecting_until_it_opens(
     assert report.error == "Permission denied (errno 13)"
     assert report.retry_in_s == pytest.approx(0.003), "the third attempt's backoff"
     assert report.failures == 3
-    assert writer.changes == 3, "each failure is a change: the reason's \"again in\" follows the backoff"
+    assert writer.changes == 3, 'each failure is a change: the reason\'s "again in" follows the backoff'
     assert link.count("close") == 3, "a failed open leaves nothing open"
     fourth_open.set()
     writer.submit(A)
