@@ -47,6 +47,8 @@ from urdaemon.model import (
     FORCE_MODE_DAMPING,
     FORCE_MODE_GAIN_SCALING,
     FORCE_MODE_TYPE,
+    HOLDER_MAX_CHARS,
+    TOKEN_BYTES,
     CycleStatsRequest,
     DashboardRequest,
     ForceModeRequest,
@@ -54,12 +56,12 @@ from urdaemon.model import (
     SetPayloadRequest,
     SpeedSliderRequest,
     ToolVoltageRequest,
+    fingerprint,
 )
 from urdaemon.publish import codec, services, signing
 from urdaemon.publish.codec import SCHEMA_VERSION, client_text
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
-from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
 
 __all__ = [
     "DEFAULT_ENDPOINT",
@@ -623,7 +625,7 @@ class Lease:
 
     Each acquire that declares a token picks a fresh secret session id S (``secrets.token_hex(16)``):
     the liveliness token is ``<cell>/<robot>/lease/<S>`` and the daemon binds the lease to it. The
-    daemon never shows S, only its fingerprint (``urdaemon.runtime.lease.fingerprint``), so nobody
+    daemon never shows S, only its fingerprint (``urdaemon.model.fingerprint``), so nobody
     can acquire in this client's name. A refusal, a release or a lease that ended undeclares the token.
 
     A lease that ended without this client releasing it (taken over, lost, released: heard on the
