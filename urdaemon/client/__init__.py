@@ -24,20 +24,23 @@ goal's keys (or re-publish the daemon's signed feedback as a result), but what i
 and counted (``GoalHandle.forged``).
 
 The package by job: ``session.py`` (the Zenoh session: queries, subscriptions, what ends with it),
-``connect.py`` (``Client``: connecting, finding robots, the cell's stop and URDF, the leases),
+``cell_connection.py`` (``Client``: connecting, finding robots, the cell's stop and URDF, the leases),
 ``robot_client.py`` (``RobotClient``, ``GoalHandle``), ``goal_messages.py`` (each goal's signed
-messages routed to it), ``command_lease.py`` (``Lease``).
+messages routed to it), ``command_lease.py`` (``Lease``), ``cell_trajectory.py`` (a cell goal:
+``send_cell_trajectory``, ``CellGoalHandle``).
 """
 
 from __future__ import annotations
 
+from urdaemon.client.cell_connection import DEFAULT_ENDPOINT, Client, NoSuchRobot
+from urdaemon.client.cell_trajectory import CellGoalHandle, send_cell_trajectory
 from urdaemon.client.command_lease import Lease, LeaseHeld, default_holder
-from urdaemon.client.connect import DEFAULT_ENDPOINT, Client, NoSuchRobot
 from urdaemon.client.robot_client import GoalHandle, RobotClient
 from urdaemon.client.session import NoSuchService, Received, Subscription, zenoh_message
 
 __all__ = [
     "DEFAULT_ENDPOINT",
+    "CellGoalHandle",
     "Client",
     "GoalHandle",
     "Lease",
@@ -48,5 +51,6 @@ __all__ = [
     "RobotClient",
     "Subscription",
     "default_holder",
+    "send_cell_trajectory",
     "zenoh_message",
 ]

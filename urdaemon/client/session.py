@@ -2,7 +2,7 @@
 samples are delivered to the loop, and the background tasks and Zenoh declarations that end with it.
 
 ``ClientSession`` is what each part of the client works through (a robot's commands, its goals'
-messages, its lease); ``Client`` (client/connect.py) is one, opened on an endpoint. It knows nothing
+messages, its lease); ``Client`` (client/cell_connection.py) is one, opened on an endpoint. It knows nothing
 of robots.
 """
 
