@@ -9,17 +9,21 @@ in place, so the 500 Hz path allocates as little as possible. Everything else is
 from __future__ import annotations
 
 import enum
+import hashlib
 import math
 from dataclasses import dataclass, field
 
 __all__ = [
     "CELL_LEVEL_KEYS",
     "CONFIGURABLE_IO_SHIFT",
+    "FINGERPRINT_CHARS",
     "FORCE_MODE_DAMPING",
     "FORCE_MODE_GAIN_SCALING",
     "FORCE_MODE_TYPE",
+    "HOLDER_MAX_CHARS",
     "IO_SIZES",
     "STANDARD_IO_SHIFT",
+    "TOKEN_BYTES",
     "TOOL_IO_SHIFT",
     "TOOL_VOLTAGES",
     "UR_JOINTS",
@@ -39,6 +43,7 @@ __all__ = [
     "SetTcpRequest",
     "SpeedSliderRequest",
     "ToolVoltageRequest",
+    "fingerprint",
 ]
 
 UR_JOINTS: tuple[str, ...] = (
@@ -381,3 +386,19 @@ class CycleStatsRequest:
     """``cycle_stats``: whether to start a new measuring window after the reply."""
 
     reset: bool = False
+
+
+# ---- the command lease, as the daemon (runtime/lease.py) and the client (client/) both see it ----------
+
+HOLDER_MAX_CHARS = 120
+"""Longest holder text (it names the client for humans)."""
+TOKEN_BYTES = 16
+"""A lease token is this many random bytes, as 32 lowercase hex characters."""
+FINGERPRINT_CHARS = 16
+"""A lease's fingerprint is this many hex characters of sha256 of its session id."""
+
+
+def fingerprint(session: str) -> str:
+    """What the daemon shows of a lease's session id ``session`` (a secret only its holder knows):
+    the first 16 hex characters of its SHA-256, enough to tell leases apart, useless to acquire."""
+    return hashlib.sha256(session.encode("ascii")).hexdigest()[:FINGERPRINT_CHARS]

@@ -20,8 +20,7 @@ import pytest
 from tests.helpers import free_tcp_port, swing_trajectory
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.cell import parse_cell
-from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
-from urdaemon.client import Client
+from urdaemon.client import CellGoalHandle, Client, send_cell_trajectory
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected, UrDaemonError
 from urdaemon.publish import codec, signing

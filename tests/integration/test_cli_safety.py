@@ -105,7 +105,8 @@ async def test_an_unknown_service_fails_fast_and_lists_the_services(
     said = run.stdout + run.stderr  # the daemon's refusal (stdout), or the client's own (stderr)
     assert "no service 'bogus'" in said, said
     assert all(name in said for name in ("set_io", "stop", "resend_program")), said
-    nowhere = RobotClient(client, RobotKeys("nocell", "alice"))  # nothing serves its keys at all
+    keys = RobotKeys("nocell", "alice")  # nothing serves its keys at all
+    nowhere = RobotClient(client, keys, client.lease(keys))
     with pytest.raises(NoSuchService) as caught:
         await nowhere.call("stop", timeout=60.0)
     assert endpoint in str(caught.value)

@@ -30,7 +30,7 @@ from tests.helpers import LeaseGrant, acquire_lease, free_tcp_port, wait_for_lin
 from tests.integration.conftest import ROOT, TWO_MOCKS
 from urdaemon.cell import parse_cell
 from urdaemon.daemon import Daemon
-from urdaemon.runtime.lease import fingerprint
+from urdaemon.model import fingerprint
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -21,8 +21,7 @@ from typing import Any
 import pytest
 
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon.cell_client import send_cell_trajectory
-from urdaemon.client import Client, Subscription
+from urdaemon.client import Client, Subscription, send_cell_trajectory
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -95,16 +95,13 @@ class HeldLease:
 
 
 class RecordingClient:
-    """What ``RobotClient`` uses of ``Client``: records each request (and its attachment: the
-    lease's token on commanding services, none on the others) and answers ``ok``."""
+    """What ``RobotClient`` uses of its client's session: records each request (and its attachment:
+    the lease's token on commanding services, none on the others) and answers ``ok``."""
 
     def __init__(self) -> None:
         self.session = RecordingSession()
         self.requests: list[tuple[str, dict[str, Any], float]] = []
         self.attachments: list[bytes | None] = []
-
-    def lease(self, keys: RobotKeys) -> HeldLease:
-        return HeldLease()
 
     async def request(
         self, key: str, body: dict[str, Any] | None = None, *, timeout: float, attachment: bytes | None = None
@@ -143,7 +140,7 @@ def test_the_freedrive_command_goes_where_the_runtime_listens() -> None:
     """The key was built by hand in client.py and robot.py; it is one RobotKeys property now."""
     runtime, node = declared_runtime()
     client = RecordingClient()
-    RobotClient(client, runtime.keys).freedrive(True)  # type: ignore[arg-type]
+    RobotClient(client, runtime.keys, HeldLease()).freedrive(True)  # type: ignore[arg-type]
     [(key, payload)] = client.session.puts
     assert client.session.put_attachments == [TOKEN]
     assert key == runtime.keys.command_freedrive == "testcell/alice/command/freedrive"
@@ -181,7 +178,7 @@ async def test_each_named_client_call_sends_what_its_service_decodes(
 ) -> None:
     keys = RobotKeys("testcell", "alice")
     client = RecordingClient()
-    await getattr(RobotClient(client, keys), method)(*args)  # type: ignore[arg-type]
+    await getattr(RobotClient(client, keys, HeldLease()), method)(*args)  # type: ignore[arg-type]
     [(key, body, timeout)] = client.requests
     entry = services.spec(name)
     assert key == keys.service(name)

@@ -10,7 +10,8 @@ import re
 import pytest
 
 from urdaemon.errors import MessageError
-from urdaemon.runtime.lease import LeaseBook, LeaseRequest, fingerprint, parse_request
+from urdaemon.model import fingerprint
+from urdaemon.runtime.lease import LeaseBook, LeaseRequest, parse_request
 
 KEY = "cell/alice/lease"
 NOW = 1_800_000_000.0

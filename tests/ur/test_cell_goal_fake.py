@@ -21,8 +21,7 @@ import pytest
 from tests.helpers import fake_address, free_tcp_port
 from tests.integration.conftest import running_daemon
 from urdaemon.backends.ur.backend import UrBackend
-from urdaemon.cell_client import send_cell_trajectory
-from urdaemon.client import Client
+from urdaemon.client import Client, send_cell_trajectory
 from urdaemon.daemon import Daemon
 from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.controller import FakeController

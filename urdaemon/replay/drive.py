@@ -14,8 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TextIO
 
-from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
-from urdaemon.client import Client, GoalHandle
+from urdaemon.client import CellGoalHandle, Client, GoalHandle, send_cell_trajectory
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.replay.plan import Plan, Track, make_plan

@@ -16,7 +16,6 @@ constant-time compare, and never sees a half-made change.
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import re
 import secrets
@@ -25,39 +24,24 @@ from datetime import UTC, datetime
 from typing import Any
 
 from urdaemon.errors import MessageError
+from urdaemon.model import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
 from urdaemon.publish.codec import client_text, decode_message
 
 __all__ = [
-    "FINGERPRINT_CHARS",
-    "HOLDER_MAX_CHARS",
     "LEASE_BIND_TIMEOUT_S",
-    "TOKEN_BYTES",
     "Lease",
     "LeaseBook",
     "LeaseOutcome",
     "LeaseRequest",
     "LeaseView",
-    "fingerprint",
     "parse_request",
 ]
 
 LEASE_BIND_TIMEOUT_S = 2.0
 """How long an acquire waits for the client's liveliness token before it is refused."""
-HOLDER_MAX_CHARS = 120
-"""Longest holder text (it names the client for humans)."""
-TOKEN_BYTES = 16
-"""A lease token is this many random bytes, as 32 lowercase hex characters."""
-FINGERPRINT_CHARS = 16
-"""A lease's fingerprint is this many hex characters of sha256 of its session id."""
 _SESSION = re.compile(r"[A-Za-z0-9_-]{16,64}")
 _ACTIONS = ("show", "acquire", "release")
 _FIELDS = {"v", "action", "session", "holder", "force", "reason"}
-
-
-def fingerprint(session: str) -> str:
-    """What the daemon shows of a lease's session id ``session`` (a secret only its holder knows):
-    the first 16 hex characters of its SHA-256, enough to tell leases apart, useless to acquire."""
-    return hashlib.sha256(session.encode("ascii")).hexdigest()[:FINGERPRINT_CHARS]
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,9 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from urdaemon.client import QUERY_TIMEOUT_S, RESULT_POLL_S, Client, Received, Subscription
+from urdaemon.client.cell_connection import Client
+from urdaemon.client.goal_messages import RESULT_POLL_S
+from urdaemon.client.session import QUERY_TIMEOUT_S, Received, Subscription
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish import signing
 from urdaemon.publish.codec import client_text

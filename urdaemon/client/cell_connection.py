@@ -1,0 +1,213 @@
+"""``Client``: a program's connection to a urdaemon cell. It opens the Zenoh session on an endpoint,
+finds the robots served (a ``RobotClient`` each), stops a whole cell, reads its URDF, and holds this
+client's command lease on each robot, released on close.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import Sequence
+from typing import Any
+
+import zenoh
+
+from urdaemon.cell import config as cell_config
+from urdaemon.client.command_lease import Lease, default_holder, holder_text
+from urdaemon.client.robot_client import RobotClient
+from urdaemon.client.session import QUERY_TIMEOUT_S, ClientSession, zenoh_message
+from urdaemon.errors import UrDaemonError, UrTimeoutError
+from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.publish.node import zenoh_config
+
+__all__ = ["DEFAULT_ENDPOINT", "PEER_WAIT_S", "RELEASE_ON_CLOSE_S", "Client", "NoSuchRobot"]
+
+DEFAULT_ENDPOINT = cell_config.DEFAULT_ENDPOINT
+PEER_WAIT_S = 0.05
+RELEASE_ON_CLOSE_S = 2.0
+"""How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""
+
+
+class NoSuchRobot(UrDaemonError):
+    """No daemon reachable from this client serves a robot of that name; ``robots`` lists what is served."""
+
+    def __init__(self, message: str, robots: Sequence[tuple[str, str]] = ()) -> None:
+        super().__init__(message)
+        self.robots = list(robots)
+
+
+class Client(ClientSession):
+    """A Zenoh session connected to a urdaemon cell."""
+
+    def __init__(
+        self,
+        session: Any,
+        loop: asyncio.AbstractEventLoop,
+        endpoint: str = DEFAULT_ENDPOINT,
+        *,
+        holder: str | None = None,
+    ) -> None:
+        super().__init__(session, loop, endpoint, default_holder() if holder is None else holder_text(holder))
+        self._leases: dict[str, Lease] = {}
+
+    @classmethod
+    async def connect(
+        cls,
+        endpoint: str = DEFAULT_ENDPOINT,
+        *,
+        timeout: float = 5.0,
+        low_latency: bool = False,
+        holder: str | None = None,
+        config_file: str | None = None,
+    ) -> Client:
+        """Open a Zenoh session connected to ``endpoint`` (no multicast scouting); ``low_latency``
+        to match a daemon whose cell sets ``zenoh: {low_latency: true}`` (half the CPU per sample
+        for both; without it the client still works).
+
+        ``config_file``: a Zenoh JSON5 configuration to start from (TLS certificates, docs/security.md);
+        the endpoint, mode and scouting are still set as above. ``holder``: how this client's leases
+        name it (default: the program, its pid and host).
+
+        Raises ``UrDaemonError`` naming ``endpoint`` when nothing answers there within ``timeout`` s.
+        """
+        loop = asyncio.get_running_loop()
+        try:
+            conf = _session_config(endpoint, low_latency, config_file)
+            conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
+            session = await loop.run_in_executor(None, zenoh.open, conf)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot connect to {endpoint}: {zenoh_message(err)}") from err
+        deadline = loop.time() + timeout
+        while not _has_peer(session):  # a peer session opens even when nobody listens there
+            if loop.time() >= deadline:
+                await loop.run_in_executor(None, session.close)
+                raise UrDaemonError(
+                    f"cannot connect to {endpoint}: nothing answered within {timeout:g} s "
+                    "(is the daemon running and listening there?)"
+                )
+            await asyncio.sleep(PEER_WAIT_S)
+        return cls(session, loop, endpoint, holder=holder)
+
+    async def __aenter__(self) -> Client:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Release every lease this client holds, stop background tasks, undeclare subscriptions and
+        close the session."""
+        for lease in list(self._leases.values()):
+            with contextlib.suppress(UrDaemonError):
+                await lease.release(timeout=RELEASE_ON_CLOSE_S)
+        await super().close()
+
+    async def robots(self, *, timeout: float = 2.0) -> list[tuple[str, str]]:
+        """(cell, robot) of every robot served, from their liveliness tokens."""
+
+        def ask() -> list[str]:
+            return [
+                str(r.ok.key_expr)
+                for r in self.session.liveliness().get("*/*/alive", timeout=timeout)
+                if r.ok
+            ]
+
+        try:
+            keys = await self._loop.run_in_executor(None, ask)
+        except zenoh.ZError as err:
+            raise UrDaemonError(f"cannot list robots at {self.endpoint}: {zenoh_message(err)}") from err
+        found = []
+        for key in keys:
+            parts = key.split("/")
+            if len(parts) == 3:
+                found.append((parts[0], parts[1]))
+        return sorted(found)
+
+    async def robot(self, name: str, *, cell: str | None = None, timeout: float = 5.0) -> RobotClient:
+        """A handle on robot ``name``; finds its cell from the liveliness tokens unless given.
+
+        Raises ``NoSuchRobot`` (listing the robots served) when robots are served but none is
+        ``name`` (in ``cell``); waits up to ``timeout`` s only while no robot at all is served (a
+        daemon starting up).
+        """
+        deadline = self._loop.time() + timeout
+        misses = 0
+        while True:
+            served = await self.robots()
+            cells = sorted({c for c, r in served if r == name and cell in (None, c)})
+            if len(cells) == 1:
+                keys = RobotKeys(cells[0], name)
+                return RobotClient(self, keys, self.lease(keys))
+            if len(cells) > 1:
+                raise UrDaemonError(
+                    f"robot {name!r} is served in several cells ({', '.join(cells)}); name one"
+                )
+            if served:
+                misses += 1  # tokens of one daemon arrive together; allow one late arrival
+                if misses >= 3:
+                    raise NoSuchRobot(_no_such_robot(name, cell, served, self.endpoint), served)
+            if self._loop.time() > deadline:
+                if served:
+                    raise NoSuchRobot(_no_such_robot(name, cell, served, self.endpoint), served)
+                raise UrTimeoutError(
+                    f"no robot is served at {self.endpoint} (waited {timeout:g} s for {name!r})"
+                )
+            await asyncio.sleep(0.1)
+
+    async def stop_cell(self, cell: str | None = None, *, timeout: float = QUERY_TIMEOUT_S) -> dict[str, Any]:
+        """Stop every robot of ``cell`` at once (default: the one cell served); the reply names each
+        robot's outcome (``{"ok": true, "robots": {"alice": {"ok": true}, ...}}``)."""
+        if cell is None:
+            cells = sorted({c for c, _ in await self.robots()})
+            if len(cells) != 1:
+                raise UrDaemonError(
+                    f"{'no cell is' if not cells else 'several cells are'} served at {self.endpoint}"
+                    + (f" ({', '.join(cells)}); name one" if cells else "")
+                )
+            cell = cells[0]
+        return await self.request(CellKeys(cell).stop, timeout=timeout)
+
+    async def robot_description(self, cell: str, *, timeout: float = QUERY_TIMEOUT_S) -> str:
+        """The cell URDF."""
+        replies = await self.query(CellKeys(cell).robot_description, timeout=timeout)
+        if not replies:
+            raise UrTimeoutError(f"no robot_description from cell {cell!r} at {self.endpoint}")
+        return replies[0].decode()
+
+    def lease(self, keys: RobotKeys) -> Lease:
+        """This client's lease on the robot of ``keys`` (one per robot, whichever handle asks)."""
+        lease = self._leases.get(keys.base)
+        if lease is None:
+            lease = self._leases[keys.base] = Lease(self, keys)
+        return lease
+
+
+def _session_config(endpoint: str, low_latency: bool, config_file: str | None) -> Any:
+    """The client session's Zenoh config: ``config_file`` (if any) as the base, then a peer with
+    ``endpoint`` and no scouting, as ``zenoh_config`` makes it."""
+    ours = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
+    if config_file is None:
+        return ours
+    try:
+        conf = zenoh.Config.from_file(config_file)
+    except (zenoh.ZError, OSError) as err:
+        reason = zenoh_message(err) if isinstance(err, zenoh.ZError) else (err.strerror or str(err))
+        raise UrDaemonError(f"cannot read the Zenoh config {config_file}: {reason}") from err
+    keys = ["mode", "listen/endpoints", "connect/endpoints", "scouting/multicast/enabled"]
+    if low_latency:
+        keys += ["transport/unicast/lowlatency", "transport/unicast/qos/enabled"]
+    for key in keys:
+        conf.insert_json5(key, ours.get_json(key))
+    return conf
+
+
+def _has_peer(session: Any) -> bool:
+    info = session.info
+    return bool(list(info.peers_zid()) or list(info.routers_zid()))
+
+
+def _no_such_robot(name: str, cell: str | None, served: Sequence[tuple[str, str]], endpoint: str) -> str:
+    where = f"{cell}/{name}" if cell is not None else repr(name)
+    listed = ", ".join(f"{c}/{r}" for c, r in served)
+    return f"no robot {where} at {endpoint}; served: {listed}"
