@@ -19,7 +19,6 @@ MAX_MODULE_LINES = 600
 MODULES_STILL_OVER: dict[str, int] = {
     "urdaemon/cell/config.py": 824,
     "urdaemon/cli.py": 1118,
-    "urdaemon/client.py": 1354,
     "urdaemon/control/trajectory.py": 690,
     "urdaemon/description/ik.py": 672,
     "urdaemon/fakeur/motion.py": 725,
