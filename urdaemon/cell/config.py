@@ -10,7 +10,7 @@ import ipaddress
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     Field,
@@ -30,9 +30,6 @@ from urdaemon.urscript import (
     SERVOJ_GAIN_RANGE,
     SERVOJ_LOOKAHEAD_RANGE_S,
 )
-
-if TYPE_CHECKING:
-    from urdaemon.control.cartesian import CartesianLimits
 
 __all__ = [
     "ALL_ROBOTS",
@@ -491,18 +488,6 @@ class CartesianOptions(Frozen):
             if value > limit:
                 raise ValueError(f"{name} {value:g} {unit} is above {cap} {limit:g} {unit}")
         return self
-
-    def defaults(self) -> CartesianLimits:
-        """The limits a linear goal uses where it names none (and twist smoothing's)."""
-        from urdaemon.control.cartesian import CartesianLimits
-
-        return CartesianLimits(*(getattr(self, name) for name, _, _ in CARTESIAN_PAIRS))
-
-    def caps(self) -> CartesianLimits:
-        """The largest limits a linear goal or a twist may ask for."""
-        from urdaemon.control.cartesian import CartesianLimits
-
-        return CartesianLimits(*(getattr(self, cap) for _, cap, _ in CARTESIAN_PAIRS))
 
 
 class MotionOptions(Frozen):
