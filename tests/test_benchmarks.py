@@ -128,7 +128,7 @@ def test_zenoh_put_measures_the_daemons_own_state_stream_settings_first() -> Non
     import zenoh
 
     from tests.helpers import free_tcp_port
-    from urdaemon.cell.config import ZenohOptions
+    from urdaemon.cell.zenoh_options import ZenohOptions
     from urdaemon.publish.node import ZenohNode
 
     zput = _load("zenoh_put")

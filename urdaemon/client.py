@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import zenoh
 
-from urdaemon.cell import config as cell_config
+from urdaemon.cell import zenoh_options as cell_config
 from urdaemon.errors import ConnectionLostError, GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.model import (
     FORCE_MODE_DAMPING,

@@ -14,7 +14,8 @@ from urdaemon.backends.base import Backend
 from urdaemon.backends.mock import MockBackend
 from urdaemon.backends.servo import ServoBackend
 from urdaemon.backends.servo.outputs import board_links, device_problems
-from urdaemon.cell.config import Cell, Robot
+from urdaemon.cell.config import Cell
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.description import (

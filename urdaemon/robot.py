@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import PublishOptions, Robot
+from urdaemon.cell.config import PublishOptions
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.frames import frame_of_pose

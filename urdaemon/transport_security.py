@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from urdaemon.cell.config import ALL_ROBOTS, SECURE_PROTOCOLS, AccessOptions, Cell, Grant, ZenohOptions
+from urdaemon.cell.config import Cell
+from urdaemon.cell.zenoh_options import ALL_ROBOTS, SECURE_PROTOCOLS, AccessOptions, Grant, ZenohOptions
 from urdaemon.errors import ConfigError
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.services import SERVICES, STOP

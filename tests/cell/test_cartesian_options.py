@@ -10,7 +10,7 @@ from dataclasses import fields
 import pytest
 
 from urdaemon.cell import parse_cell
-from urdaemon.cell.config import CARTESIAN_PAIRS
+from urdaemon.cell.robot_options import CARTESIAN_PAIRS
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.errors import ConfigError
 

@@ -22,7 +22,7 @@ from urdaemon.description.kinematics import KinematicTree
 from urdaemon.description.urmodels import load_ur_model
 
 if TYPE_CHECKING:
-    from urdaemon.cell.config import Robot
+    from urdaemon.cell.robot_options import Robot
 
 __all__ = [
     "ArmKinematics",

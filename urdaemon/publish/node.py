@@ -34,7 +34,7 @@ from typing import Any, Protocol
 
 import zenoh
 
-from urdaemon.cell.config import ZenohOptions
+from urdaemon.cell.zenoh_options import ZenohOptions
 from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher

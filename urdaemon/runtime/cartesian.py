@@ -26,7 +26,7 @@ from collections.abc import Generator, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import CARTESIAN_PAIRS, Robot
+from urdaemon.cell.robot_options import CARTESIAN_PAIRS, Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.linear import plan_linear

@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import codec

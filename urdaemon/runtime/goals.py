@@ -30,7 +30,7 @@ from typing import Any
 import zenoh
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import GoalFeedback, GoalResult, MotionController, Tolerances
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
