@@ -27,7 +27,7 @@ from typing import Any
 
 from ruckig import InputParameter, Ruckig
 
-from urdaemon.control.trajectory import calculate
+from urdaemon.control.ruckig_calls import calculate
 from urdaemon.description.frames import Frame, Pose, compose, frame_of_pose, inverse, rotation_vector
 
 __all__ = ["SAME_POSE", "CartesianLimits", "LinePath", "LineSegment", "build_path"]
