@@ -12,7 +12,7 @@ from types import ModuleType
 import pytest
 
 from urdaemon.cell import parse_cell
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 ROOT = Path(__file__).resolve().parents[1]
 

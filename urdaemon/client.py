@@ -58,7 +58,7 @@ from urdaemon.model import (
 from urdaemon.publish import codec, services, signing
 from urdaemon.publish.codec import SCHEMA_VERSION, client_text
 from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
 
 __all__ = [

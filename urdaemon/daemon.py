@@ -34,8 +34,8 @@ from urdaemon.model import JointLimits
 from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
-from urdaemon.publish.node import Matching, ZenohNode
-from urdaemon.publish.tap import Tap
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.tap import Matching, Tap
 from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals

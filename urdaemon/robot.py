@@ -25,7 +25,8 @@ from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.tap import Matching
 from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
