@@ -82,7 +82,8 @@ class Publishers:
     def __init__(self, transport: str, robots: int, seconds: float = ZENOH_START_S + WINDOW_S + 2.0) -> None:
         import zenoh
 
-        from urdaemon.publish.node import declare_state_publisher, zenoh_config
+        from urdaemon.publish.node import declare_state_publisher
+        from urdaemon.publish.session_config import zenoh_config
 
         self.sockets = tempfile.mkdtemp(prefix="loop-floor-")
         fast = transport != TRANSPORTS[0]

@@ -218,7 +218,7 @@ def sender(endpoint: str, scale: float) -> None:
 
     import zenoh
 
-    from urdaemon.publish.node import zenoh_config
+    from urdaemon.publish.session_config import zenoh_config
 
     items = inputs(scale)
     session: Any = zenoh.open(zenoh_config("peer", [], [endpoint]))

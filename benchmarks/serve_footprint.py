@@ -28,7 +28,7 @@ from typing import Any
 import yaml
 import zenoh
 
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import zenoh
 
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 MARK = b'"host_time_ns":'
 

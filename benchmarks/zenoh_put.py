@@ -23,7 +23,7 @@ from typing import Any
 
 import zenoh
 
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 SAMPLES = 2500
 PERIOD_S = 0.002

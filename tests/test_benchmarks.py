@@ -12,7 +12,7 @@ from types import ModuleType
 import pytest
 
 from urdaemon.cell import parse_cell
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -128,7 +128,7 @@ def test_zenoh_put_measures_the_daemons_own_state_stream_settings_first() -> Non
     import zenoh
 
     from tests.helpers import free_tcp_port
-    from urdaemon.cell.config import ZenohOptions
+    from urdaemon.cell.zenoh_options import ZenohOptions
     from urdaemon.publish.node import ZenohNode
 
     zput = _load("zenoh_put")

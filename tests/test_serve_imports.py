@@ -16,8 +16,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from urdaemon.cell.config import ZenohOptions
-from urdaemon.publish.node import serve_config
+from urdaemon.cell.zenoh_options import ZenohOptions
+from urdaemon.publish.session_config import serve_config
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("yourdfpy", "trimesh", "scipy", "networkx", "numpy")
@@ -56,8 +56,9 @@ def test_building_the_cell_loads_no_geometry_libraries_nor_numpy() -> None:
 SHM_PROBE = """
 import asyncio, json, socket, sys
 import zenoh
-from urdaemon.cell.config import ZenohOptions
-from urdaemon.publish.node import ZenohNode, zenoh_config
+from urdaemon.cell.zenoh_options import ZenohOptions
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.session_config import zenoh_config
 
 def shm_resident_kib():  # KiB resident in Zenoh's shared-memory mappings (/dev/shm/*.zenoh)
     found, name = {}, None

@@ -472,7 +472,7 @@ def _bad_endpoint(endpoint: str) -> str | None:
     """Why ``endpoint`` is not a Zenoh endpoint (None when it looks like one)."""
     import re
 
-    from urdaemon.cell.config import ENDPOINT_PATTERN
+    from urdaemon.cell.zenoh_options import ENDPOINT_PATTERN
 
     if not re.match(ENDPOINT_PATTERN, endpoint):
         return f"--connect {endpoint!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"
@@ -502,7 +502,7 @@ def _bad_target(args: argparse.Namespace) -> str | None:
     """Why the endpoint, robot or cell name of a client command cannot be used (None when fine)."""
     import re
 
-    from urdaemon.cell.config import NAME_PATTERN
+    from urdaemon.cell.robot_options import NAME_PATTERN
 
     problem = _bad_connection(args)
     if problem is None and not re.match(NAME_PATTERN, args.robot):
@@ -554,7 +554,7 @@ def _busy_ports(cell: Cell, source: str) -> list[str]:
     import socket
 
     from urdaemon.backends.ur.route import listen_plan
-    from urdaemon.cell.config import UrOptions
+    from urdaemon.cell.robot_options import UrOptions
     from urdaemon.errors import BackendError
 
     wanted: list[tuple[str, str, int]] = []

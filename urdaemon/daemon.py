@@ -14,7 +14,8 @@ from urdaemon.backends.base import Backend
 from urdaemon.backends.mock import MockBackend
 from urdaemon.backends.servo import ServoBackend
 from urdaemon.backends.servo.outputs import board_links, device_problems
-from urdaemon.cell.config import Cell, Robot
+from urdaemon.cell.config import Cell
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.description import (
@@ -33,8 +34,8 @@ from urdaemon.model import JointLimits
 from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys
-from urdaemon.publish.node import Matching, ZenohNode
-from urdaemon.publish.tap import Tap
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.tap import Matching, Tap
 from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.cell_goals import CellGoals

@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import PublishOptions, Robot
+from urdaemon.cell.config import PublishOptions
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.frames import frame_of_pose
@@ -24,7 +25,8 @@ from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Matching, ZenohNode
+from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.tap import Matching
 from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate

@@ -83,7 +83,8 @@ def add_parsers(sub: Any) -> None:
 def endpoint_problem(endpoint: str) -> str | None:
     """Why ``endpoint`` cannot be listened on or dialled (None when it looks right): the protocol,
     and for ``tcp``/``udp``/``tls``/``quic``/``ws`` a host (IP address or name) and a port 0..65535."""
-    from urdaemon.cell.config import ENDPOINT_PATTERN, HOST_NAME_PATTERN
+    from urdaemon.cell.schema_types import HOST_NAME_PATTERN
+    from urdaemon.cell.zenoh_options import ENDPOINT_PATTERN
 
     example = "like tcp/127.0.0.1:7447"
     if not re.match(ENDPOINT_PATTERN, endpoint):

@@ -5,9 +5,12 @@ Reproduction: before issue 17 ``motion.cartesian`` was an unknown key of ``motio
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import pytest
 
 from urdaemon.cell import parse_cell
+from urdaemon.cell.robot_options import CARTESIAN_PAIRS
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.errors import ConfigError
 
@@ -16,8 +19,16 @@ ALICE = "cell: c\nrobots: [{name: alice, model: ur5e, backend: mock%s}]\n"
 
 def test_the_defaults_are_the_contracts() -> None:
     options = parse_cell(ALICE % "").robot("alice").motion.cartesian
-    assert options.caps() == CartesianLimits(1.0, 5.0, 50.0, 3.0, 15.0, 150.0)
-    assert options.defaults() == CartesianLimits(0.25, 1.2, 10.0, 1.0, 4.0, 40.0)
+    caps = tuple(getattr(options, cap) for _, cap, _ in CARTESIAN_PAIRS)
+    defaults = tuple(getattr(options, name) for name, _, _ in CARTESIAN_PAIRS)
+    assert caps == (1.0, 5.0, 50.0, 3.0, 15.0, 150.0)
+    assert defaults == (0.25, 1.2, 10.0, 1.0, 4.0, 40.0)
+
+
+def test_the_pairs_name_the_limits_in_their_order() -> None:
+    """A linear goal's limits are built as ``CartesianLimits(*values)`` in the pairs' order
+    (runtime/cartesian.py): each pair's default is the field at its place."""
+    assert [name for name, _, _ in CARTESIAN_PAIRS] == [field.name for field in fields(CartesianLimits)]
 
 
 def test_a_cell_file_sets_caps_and_defaults() -> None:

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from urdaemon.cell import Cell, load_cell, parse_cell, summarize, ur_models
-from urdaemon.cell.config import DEFAULT_PORT_BASE, DEFAULT_PORT_STRIDE, Ports
+from urdaemon.cell.config import DEFAULT_PORT_BASE, DEFAULT_PORT_STRIDE
+from urdaemon.cell.robot_options import Ports
 from urdaemon.cell.servo import ServoJoint
 from urdaemon.errors import ConfigError
 from urdaemon.model import UR_JOINTS

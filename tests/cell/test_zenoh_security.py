@@ -14,14 +14,9 @@ import zenoh
 from tests.helpers import run_captured
 from urdaemon.cell import load_cell
 from urdaemon.errors import ConfigError
-from urdaemon.transport_security import (
-    ANYONE,
-    access_control,
-    client_config,
-    client_config_main,
-    configure_daemon,
-    write_client_config,
-)
+from urdaemon.publish.access import ANYONE, access_control
+from urdaemon.publish.session_config import configure_daemon
+from urdaemon.transport_security import client_config, client_config_main, write_client_config
 
 TLS = "tls: {root_ca: ca.pem, certificate: daemon.pem, private_key: daemon-key.pem}"
 ACCESS = (

@@ -13,9 +13,10 @@ from collections.abc import Sequence
 import pytest
 
 from urdaemon.control import GoalStatus, TrajectoryPoint
+from urdaemon.control.move import plan_move
 from urdaemon.control.planned import PLAN_START_TOLERANCE
+from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.stopping import SETTLE_POSITION
-from urdaemon.control.trajectory import PlannedTrajectory, plan_move
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS
 

@@ -12,10 +12,10 @@ from ruckig import Result, Ruckig
 
 from urdaemon.backends import MockBackend
 from urdaemon.control import GoalStatus, MotionController, Tolerances, TrajectoryPoint
-from urdaemon.control.trajectory import (
+from urdaemon.control.ruckig_calls import (
     RUCKIG_RESULTS,
-    _new_input,
     calculate,
+    new_input,
     ruckig_failure_reason,
     ruckig_result_reason,
 )
@@ -38,7 +38,7 @@ def test_every_result_code_of_the_binding_and_of_ruckig_has_a_reason() -> None:
 def test_a_trajectory_beyond_ruckigs_time_range_is_refused_with_a_reason() -> None:
     """Reproduction: ``move`` with a tiny velocity scale was refused with ``ruckig could not plan it: -101
     is not a valid Result`` (the binding's enum has no -101, so it raised ValueError with that text)."""
-    inp = _new_input(UR10E_LIMITS, velocity_scale=1e-6)
+    inp = new_input(UR10E_LIMITS, velocity_scale=1e-6)
     inp.current_position = [0.0] * 6
     inp.target_position = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     with pytest.raises(GoalRejected) as info:

@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from ruckig import InputParameter, Ruckig, RuckigError, Trajectory
 
 from urdaemon.control import TrajectoryPoint, plan_move, plan_trajectory
-from urdaemon.control.trajectory import PlannedTrajectory, calculate, position_extrema
+from urdaemon.control.planned_trajectory import PlannedTrajectory
+from urdaemon.control.ruckig_calls import calculate, position_extrema
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
@@ -364,7 +365,7 @@ def test_position_extrema_match_dense_sampling(
 
 def test_degenerate_rest_to_rest_move_that_trips_ruckig_is_planned() -> None:
     """−1.4 → −1.5 at a = 5, j = 50 is exactly 2·a³/j²: plain ruckig 0.19.4 throws on it."""
-    from urdaemon.control.trajectory import plan_move
+    from urdaemon.control.move import plan_move
     from urdaemon.model import JointLimits
 
     limits = JointLimits(

@@ -19,8 +19,10 @@ import ur_analytic_ik
 from urdaemon.cell import ur_models
 from urdaemon.description import DhParameters, UrKinematics, load_ur_model
 from urdaemon.description.dls import singularity
-from urdaemon.description.ik import ELBOW, WRIST, Vector, frame_of_pose, pose_of_frame
+from urdaemon.description.ik import frame_of_pose, pose_of_frame
+from urdaemon.description.ik_types import Vector
 from urdaemon.description.kinematics import dh_chain, dh_joints
+from urdaemon.description.ur_closed_form import ELBOW, WRIST
 from urdaemon.errors import DescriptionError
 
 from .support import REAL_UR10E, dh_fk, quat_matrix, random_calibration
@@ -314,7 +316,8 @@ def test_each_branch_has_its_own_configuration(name: str) -> None:
 
     nearest_in asked for each branch's configuration returns that branch (calibrated arm too).
     Reproduction: before issue 17 there was no configuration_of / nearest_in."""
-    from urdaemon.description.ik import SHOULDER, configuration_of
+    from urdaemon.description.configurations import configuration_of
+    from urdaemon.description.ur_closed_form import SHOULDER
 
     model = load_ur_model(name)
     for dh in _calibrations(name)[:2]:
@@ -353,7 +356,7 @@ def _elbow_geometry(q: Vector) -> tuple[bool, float, float]:
 
 def test_configuration_names_by_the_joint_values() -> None:
     """UR's home pose is shoulder right, elbow up, wrist down; elbow names match the geometry."""
-    from urdaemon.description.ik import Configuration, configuration_of
+    from urdaemon.description.configurations import Configuration, configuration_of
 
     kinematics = UrKinematics(load_ur_model("ur10e"))
     home = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
@@ -400,7 +403,7 @@ def test_nearest_in_refuses_a_configuration_the_pose_lacks() -> None:
 
 def test_singularity_name_says_which_is_nearest() -> None:
     """q5 = 0 is a wrist singularity, q3 = 0 an elbow one, the wrist centre over the base a shoulder one."""
-    from urdaemon.description.ik import singularity_name
+    from urdaemon.description.configurations import singularity_name
 
     kinematics = UrKinematics(load_ur_model("ur10e"))
     assert kinematics.singularity_name((0.3, -1.2, 1.1, -0.4, 1e-4, 0.2)) == "wrist"

@@ -17,7 +17,7 @@ import pytest
 from numpy.typing import NDArray
 
 from urdaemon.cell import load_cell, ur_models
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.description import DhParameters, joint_origins, load_calibration, load_ur_model, ur_params
 from urdaemon.description.calibration import FLANGE_RPY
 from urdaemon.description.urmodels import LinkInertial

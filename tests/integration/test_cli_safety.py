@@ -26,7 +26,7 @@ from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client, NoSuchRobot, NoSuchService, RobotClient
 from urdaemon.daemon import Daemon
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -27,7 +27,7 @@ from tests.integration.conftest import ROOT, running_daemon
 from urdaemon.client import Client, RobotClient
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 from urdaemon.teleop_keys import rotation_vector
 
 pytestmark = pytest.mark.timeout(120)

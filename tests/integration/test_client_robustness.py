@@ -18,7 +18,7 @@ from tests.integration.conftest import ROOT, running_daemon
 from urdaemon.client import Client
 from urdaemon.errors import ConnectionLostError
 from urdaemon.publish import signing
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 pytestmark = pytest.mark.timeout(120)
 

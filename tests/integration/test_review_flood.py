@@ -23,7 +23,7 @@ from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.publish import codec
-from urdaemon.publish.node import MAX_IN_FLIGHT
+from urdaemon.publish.admission import MAX_IN_FLIGHT
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -85,7 +85,7 @@ class Node:
         return Publisher()
 
     def matching(self, publisher: Any) -> Any:
-        from urdaemon.publish.node import Matching
+        from urdaemon.publish.tap import Matching
 
         return Matching(False)
 

@@ -25,8 +25,9 @@ import zenoh
 from tests.helpers import acquire_lease, free_tcp_port, zenoh_ask
 from urdaemon.cell import Cell, parse_cell
 from urdaemon.daemon import Daemon
-from urdaemon.publish import node
-from urdaemon.transport_security import client_config, configure_daemon
+from urdaemon.publish import session_config
+from urdaemon.publish.session_config import configure_daemon
+from urdaemon.transport_security import client_config
 
 CELL = "seccell"
 START = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
@@ -76,7 +77,7 @@ def rules_for(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -
         def named(conf: Any, options: Any, cell: str | None = None) -> None:
             configure_daemon(conf, options, CELL)
 
-        monkeypatch.setattr(node, "configure_daemon", named)
+        monkeypatch.setattr(session_config, "configure_daemon", named)
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client, GoalHandle, Received, RobotClient
 from urdaemon.daemon import Daemon
 from urdaemon.errors import UrTimeoutError
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 pytestmark = pytest.mark.timeout(120)
 

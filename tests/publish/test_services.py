@@ -33,7 +33,7 @@ from urdaemon.model import (
 )
 from urdaemon.publish import codec, services
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Matching
+from urdaemon.publish.tap import Matching
 from urdaemon.robot import RobotRuntime
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,7 @@ import pytest
 import zenoh
 
 from tests.helpers import free_tcp_port
-from urdaemon.cell.config import ZenohOptions
+from urdaemon.cell.zenoh_options import ZenohOptions
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher
 from urdaemon.recording.channels import RING_STREAMS

@@ -16,7 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from urdaemon.control.goals import TrajectoryPoint
-from urdaemon.control.trajectory import plan_move, plan_trajectory
+from urdaemon.control.move import plan_move
+from urdaemon.control.trajectory import plan_trajectory
 from urdaemon.model import JointLimits
 from urdaemon.replay.plan import (
     Sample,

@@ -19,7 +19,7 @@ import zenoh
 
 from tests.helpers import free_tcp_port, run_cli_in_thread, zenoh_ask
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 from urdaemon.recording.mcap_file import RecordingWriter
 
 pytestmark = pytest.mark.timeout(120)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from urdaemon.publish.node import LivelinessWatch
+from urdaemon.publish.liveliness import LivelinessWatch
 
 
 @dataclass

@@ -11,7 +11,7 @@ import pytest
 from tests.helpers import run_cli
 from urdaemon.cell import load_cell, parse_cell
 from urdaemon.errors import ConfigError
-from urdaemon.publish.node import serve_config
+from urdaemon.publish.session_config import serve_config
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "scale_out"
 ALICE = "robots: [{name: alice, model: ur5e, backend: mock}]\n"

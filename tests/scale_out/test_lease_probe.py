@@ -16,7 +16,8 @@ from typing import Any
 import pytest
 
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon.publish.node import LivelinessWatch, ZenohNode
+from urdaemon.publish.liveliness import LivelinessWatch
+from urdaemon.publish.node import ZenohNode
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -24,9 +24,10 @@ import zenoh
 from tests.helpers import zenoh_ask
 from tests.scale_out.conftest import connected_with, serving, wait_alive
 from urdaemon.cell import Cell, parse_cell
-from urdaemon.cell.config import AccessOptions
+from urdaemon.cell.zenoh_options import AccessOptions
+from urdaemon.publish.access import access_control
 from urdaemon.router import Router, router_config
-from urdaemon.transport_security import access_control, client_config
+from urdaemon.transport_security import client_config
 
 pytestmark = pytest.mark.timeout(180)
 

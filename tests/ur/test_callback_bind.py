@@ -23,7 +23,7 @@ from tests.ur.test_links_harness import HOME, JOINTS, UrRun, program_is_running,
 from urdaemon.backends.ur import route, servers
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.backends.ur.servers import CallbackServers
-from urdaemon.cell.config import UrOptions
+from urdaemon.cell.robot_options import UrOptions
 from urdaemon.errors import BackendError, ConnectionLostError
 from urdaemon.fakeur.controller import FakeController
 

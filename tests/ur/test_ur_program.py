@@ -13,7 +13,7 @@ from urdaemon.backends.ur.program import PROGRAM_RESEND_S, ControlProgram
 from urdaemon.backends.ur.reverse_channel import RUNTIME_PLAYING, ReverseChannel
 from urdaemon.backends.ur.rtde_link import RUNTIME_PAUSED
 from urdaemon.backends.ur.servers import CallbackServers
-from urdaemon.cell.config import UrOptions
+from urdaemon.cell.robot_options import UrOptions
 from urdaemon.model import Lifecycle, RobotMode, RobotState
 
 

@@ -13,17 +13,16 @@ from typing import Any
 
 import zenoh
 
-from urdaemon.cell import config as cell_config
+from urdaemon.cell.zenoh_options import DEFAULT_ENDPOINT
 from urdaemon.client.command_lease import Lease, default_holder, holder_text
 from urdaemon.client.robot_client import RobotClient
 from urdaemon.client.session import QUERY_TIMEOUT_S, ClientSession, zenoh_message
 from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.publish.node import zenoh_config
+from urdaemon.publish.session_config import zenoh_config
 
 __all__ = ["DEFAULT_ENDPOINT", "PEER_WAIT_S", "RELEASE_ON_CLOSE_S", "Client", "NoSuchRobot"]
 
-DEFAULT_ENDPOINT = cell_config.DEFAULT_ENDPOINT
 PEER_WAIT_S = 0.05
 RELEASE_ON_CLOSE_S = 2.0
 """How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""

@@ -10,7 +10,9 @@ from urdaemon.control.limits import (
     check_velocities_within,
     reorder,
 )
-from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, plan_move, plan_trajectory
+from urdaemon.control.move import plan_move
+from urdaemon.control.planned_trajectory import PlannedTrajectory
+from urdaemon.control.trajectory import TrajectoryCheck, plan_trajectory
 
 __all__ = [
     "ControllerStatistics",

@@ -27,7 +27,7 @@ from typing import Any
 
 from ruckig import InputParameter, Ruckig
 
-from urdaemon.control.trajectory import calculate
+from urdaemon.control.ruckig_calls import calculate
 from urdaemon.description.frames import Frame, Pose, compose, frame_of_pose, inverse, rotation_vector
 
 __all__ = ["SAME_POSE", "CartesianLimits", "LinePath", "LineSegment", "build_path"]
@@ -65,19 +65,6 @@ class CartesianLimits:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"CartesianLimits.{name} must be a finite number > 0, got {value!r}")
-
-    def scaled(self, k: float) -> CartesianLimits:
-        """These limits for a motion slowed by ``k`` >= 1 in time: speed/k, acceleration/k^2, jerk/k^3."""
-        k2 = k * k
-        k3 = k2 * k
-        return CartesianLimits(
-            self.speed / k,
-            self.acceleration / k2,
-            self.jerk / k3,
-            self.angular_speed / k,
-            self.angular_acceleration / k2,
-            self.angular_jerk / k3,
-        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -48,11 +48,12 @@ from urdaemon.control.intake import GoalIntake, GoalTolerances
 from urdaemon.control.ledger import ControllerStatistics, GoalLedger
 from urdaemon.control.online import OnlineGenerator
 from urdaemon.control.planned import ReadyPlan, plan_seed
+from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.scaling import planning_limits
 from urdaemon.control.setpoint import Setpoint, write_idle
 from urdaemon.control.stopping import StopRamp
 from urdaemon.control.streams import STREAM_EXPIRED, StreamFollower
-from urdaemon.control.trajectory import PlannedTrajectory, TrajectoryCheck, TrajectoryPlanner
+from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
 from urdaemon.control.twist import TwistFollower
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.model import JointCommand, JointLimits, RobotState

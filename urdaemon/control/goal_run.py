@@ -16,8 +16,8 @@ from typing import NamedTuple
 
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus
 from urdaemon.control.intake import GoalTolerances
+from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.setpoint import Setpoint, write_idle
-from urdaemon.control.trajectory import PlannedTrajectory
 from urdaemon.model import CommandMode, JointCommand, RobotState
 
 __all__ = ["GoalEnd", "GoalRun"]

@@ -15,14 +15,10 @@ from dataclasses import dataclass, replace
 
 from urdaemon.control.goals import Tolerances, TrajectoryPoint
 from urdaemon.control.limits import apply_permutation, joint_permutation
+from urdaemon.control.move import plan_move
+from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.scaling import SLIDER_ACCELERATION_RESERVE
-from urdaemon.control.trajectory import (
-    MAX_GOAL_TIME_S,
-    PlannedTrajectory,
-    TrajectoryPlanner,
-    check_points,
-    plan_move,
-)
+from urdaemon.control.trajectory import MAX_GOAL_TIME_S, TrajectoryPlanner, check_points
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 from urdaemon.control.goal_run import GoalRun
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus
 from urdaemon.control.intake import GoalTolerances
+from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.setpoint import Setpoint
-from urdaemon.control.trajectory import PlannedTrajectory
 
 __all__ = ["RELEASE_SEGMENTS", "ControllerStatistics", "GoalLedger"]
 

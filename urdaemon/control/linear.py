@@ -459,14 +459,6 @@ class _Sampler:
                     )
 
 
-def _named(configuration: tuple[str, ...]) -> str:
-    """'shoulder right, elbow up, wrist down' for a UR configuration's values."""
-    return ", ".join(
-        f"{group} {value}"
-        for group, value in zip(("shoulder", "elbow", "wrist"), configuration, strict=False)
-    )
-
-
 def _cartesian_step(a: Frame, b: Frame) -> float:
     """The 6-vector norm of the step from frame ``a`` to ``b``: displacement (m) and rotation (rad)."""
     turn = rotation_vector(*compose(b, inverse(a))[:9])

@@ -13,8 +13,8 @@ from typing import Any
 
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, Synchronization
 
+from urdaemon.control.ruckig_calls import RUCKIG_ERRORS, run_robustly
 from urdaemon.control.setpoint import Setpoint
-from urdaemon.control.trajectory import RUCKIG_ERRORS, run_robustly
 from urdaemon.model import JointLimits
 
 __all__ = ["FINISHED", "POSITION", "VELOCITY", "WORKING", "OnlineGenerator"]

@@ -28,8 +28,8 @@ from urdaemon.control.limits import (
     stopping_distance,
 )
 from urdaemon.control.online import FINISHED, WORKING, OnlineGenerator
+from urdaemon.control.ruckig_calls import RUCKIG_ERRORS, position_extrema, run_robustly
 from urdaemon.control.setpoint import Setpoint, write_setpoint
-from urdaemon.control.trajectory import RUCKIG_ERRORS, position_extrema, run_robustly
 from urdaemon.model import JointCommand, JointLimits
 
 __all__ = ["STREAM_EXPIRED", "STREAM_FAILED", "STREAM_FOLLOWED", "StreamFollower"]

@@ -25,9 +25,9 @@ from ruckig import ControlInterface, InputParameter, OutputParameter, Ruckig
 
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.online import FINISHED, WORKING
+from urdaemon.control.ruckig_calls import RUCKIG_ERRORS, run_robustly
 from urdaemon.control.setpoint import Setpoint
 from urdaemon.control.streams import STREAM_EXPIRED, STREAM_FAILED, StreamFollower
-from urdaemon.control.trajectory import RUCKIG_ERRORS, run_robustly
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.dls import damped_velocity, singularity
 from urdaemon.description.frames import frame_of_pose, rotate

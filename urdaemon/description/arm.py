@@ -16,13 +16,14 @@ from typing import TYPE_CHECKING, Protocol
 
 from urdaemon.description._transforms import xyz_rpy
 from urdaemon.description.calibration import robot_dh
+from urdaemon.description.configurations import Configuration, configuration_of, singularity_name
 from urdaemon.description.frames import Frame, Pose, compose
-from urdaemon.description.ik import Configuration, UrKinematics, configuration_of, singularity_name
+from urdaemon.description.ik import UrKinematics
 from urdaemon.description.kinematics import KinematicTree
 from urdaemon.description.urmodels import load_ur_model
 
 if TYPE_CHECKING:
-    from urdaemon.cell.config import Robot
+    from urdaemon.cell.robot_options import Robot
 
 __all__ = [
     "ArmKinematics",

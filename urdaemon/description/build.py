@@ -20,7 +20,8 @@ from xml.dom import minidom
 import xacro
 import yaml
 
-from urdaemon.cell.config import Cell, Robot
+from urdaemon.cell.config import Cell
+from urdaemon.cell.robot_options import Robot
 from urdaemon.description._transforms import matrix_of, rot_z, rpy_of, xyz_rpy
 from urdaemon.description.calibration import joint_origins, load_calibration
 from urdaemon.description.frames import compose

@@ -35,7 +35,7 @@ from typing import Any
 
 import yaml
 
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.description._checks import BadKey, mapping, only_keys
 from urdaemon.description._transforms import (
     Matrix,

@@ -32,8 +32,8 @@ from urdaemon.description.frames import (
     inverse,
     pose_of_frame,
 )
-from urdaemon.description.ik import run_steps
 from urdaemon.description.ik import twist_error as _error
+from urdaemon.description.ik_types import run_steps
 from urdaemon.description.kinematics import KinematicTree, TreeJoint
 from urdaemon.errors import DescriptionError
 

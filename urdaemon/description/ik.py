@@ -9,9 +9,8 @@ and a rotation vector (axis times angle, rad); ``tcp`` is the flange -> TCP pose
 flange being tool0 (the DH tool frame); joint values are in rad, shoulder_pan ... wrist_3. A twist is
 ``(vx, vy, vz, wx, wy, wz)``: the TCP point's velocity and the angular velocity, both in base.
 
-Branches: bit 2 ``SHOULDER`` (q1 = phi + pi/2 - acos(d4/r) instead of + acos), bit 1 ``WRIST`` (q5 <= 0),
-bit 0 ``ELBOW`` (q3 <= 0). At a singular pose two branches coincide; a joint the pose leaves free
-(q6 with the wrist straight, q5 = 0 or pi) takes the seed's value. docs/kinematics.md has the details.
+The closed-form stage and its branches are ur_closed_form.py's; the named configurations
+configurations.py's.
 
 In slices: ``nearest_steps`` (and ``nearest_in_steps``) are generators that yield after each bounded
 chunk of work (one Newton evaluation: the calibrated chain, its error and one damped step, ~10-30 µs)
@@ -22,9 +21,10 @@ drives them between robot cycles (runtime/cartesian.py, control/linear.py).
 from __future__ import annotations
 
 import math
-from collections.abc import Generator, Sequence
-from typing import TYPE_CHECKING, NamedTuple, TypeAlias, TypeVar
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
+from urdaemon.description.configurations import Configuration, named_configuration, nearest_singularity
 from urdaemon.description.dls import damped_step6
 from urdaemon.description.frames import (
     Frame,
@@ -35,8 +35,10 @@ from urdaemon.description.frames import (
     pose_of_frame,
     rotation_vector,
 )
+from urdaemon.description.ik_types import Joints, Steps, Vector, run_steps
 from urdaemon.description.kinematics import dh_chain, dh_joints
-from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
+from urdaemon.description.ur_closed_form import UrClosedForm
+from urdaemon.description.urmodels import DhParameters, UrModel
 from urdaemon.errors import DescriptionError
 
 if TYPE_CHECKING:
@@ -44,49 +46,19 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 __all__ = [
-    "ELBOW",
-    "SHOULDER",
-    "WRIST",
-    "Configuration",
     "Frame",
     "IkSolution",
-    "Joints",
     "Pose",
     "UrKinematics",
-    "Vector",
-    "configuration_of",
     "frame_of_pose",
     "pose_of_frame",
-    "run_steps",
-    "singularity_name",
+    "twist_error",
 ]
 
-SHOULDER, WRIST, ELBOW = 4, 2, 1
-
-Joints = tuple[float, float, float, float, float, float]
-if TYPE_CHECKING:
-    Vector: TypeAlias = Sequence[float] | NDArray[np.float64]
-else:
-    Vector = Sequence[float]
-"""What the public methods accept for joints, poses and twists: any 6 numbers (list, tuple, array).
-
-numpy is imported only by ``jacobian`` and ``joint_velocity`` (the fake's numpy results): the serve
-process uses the rest and must not load it."""
-
 _TAU = 2.0 * math.pi
-_HALF_PI = 0.5 * math.pi
-_NOMINAL_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
 _ZERO_SEED: Joints = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-_REACH_SLACK = 0.05
-"""How far (cosine units) past the nominal arm's reach a pose is still tried on a calibrated arm (~5 mm)."""
-_ROUNDING = 1e-9
-"""Cosines this far past +-1 are rounding: clamped, on every arm."""
 _SLOW_STEPS = 3
 """Newton gives up after this many steps that do not halve the error (linear convergence: no solution)."""
-_NUDGE = 0.1
-"""rad off a singularity where a pose just out of the nominal arm's reach starts Newton's steps."""
-_WRIST_SINGULAR = 1e-10
-"""Below this |sin q5| the wrist is straight: joint 6's axis parallels joints 2-4; q6 takes the seed's."""
 _NEWTON_TOLERANCE = 1e-11
 """Newton stops below this (m and rad): ten times under get_inverse_kin's default maxPositionError."""
 _NEWTON_EVALUATIONS = 30
@@ -98,105 +70,12 @@ _NEARER_MARGIN = 0.05
 """Nominal branches this much (rad, joint distance) farther than the best refined one are refined too."""
 
 
-_T = TypeVar("_T")
-Steps: TypeAlias = Generator[None, None, _T]
-"""Work in bounded chunks: a generator that yields between them and returns the answer."""
-
-
-def run_steps(steps: Generator[None, None, _T]) -> _T:
-    """Run ``steps`` (``nearest_steps`` and the like) to the end at once; what it returns."""
-    while True:
-        try:
-            next(steps)
-        except StopIteration as stop:
-            return stop.value  # type: ignore[no-any-return]
-
-
 class IkSolution(NamedTuple):
-    """One inverse-kinematics solution: its branch (``SHOULDER | WRIST | ELBOW`` bits) and joints."""
+    """One inverse-kinematics solution: its branch (``SHOULDER | WRIST | ELBOW`` bits, ur_closed_form.py)
+    and joints."""
 
     branch: int
     q: Joints
-
-
-def _branch_acos(value: float, negative: bool, slack: float) -> float | None:
-    """acos of ``value``, negated for the negative branch; None when outside [-1, 1] by more than ``slack``.
-
-    Rounding past +-1 is clamped. A value further out but within ``slack`` (the nominal arm just
-    cannot reach, the calibrated one may) gives an angle ``_NUDGE`` inside the singularity rather than
-    on it, so that Newton's steps on the calibrated arm can leave it (at the singularity the missing
-    direction is not in the Jacobian)."""
-    if value > 1.0:
-        angle = 0.0 if value - 1.0 <= _ROUNDING else _NUDGE if value - 1.0 <= slack else None
-    elif value < -1.0:
-        angle = math.pi if -1.0 - value <= _ROUNDING else math.pi - _NUDGE if -1.0 - value <= slack else None
-    else:
-        angle = math.acos(value)
-    if angle is None:
-        return None
-    return -angle if negative else angle
-
-
-class Configuration(NamedTuple):
-    """A UR arm's named configuration (docs/kinematics.md): which of the eight IK branches it is on.
-
-    ``shoulder``: "right" when the wrist centre lies behind joint 2 in the arm's plane (the UR's usual
-    working side), "left" when in front. ``elbow``: "up" when sin q3 > 0 with the shoulder right, or
-    sin q3 < 0 with it left (the elbow above the shoulder -> wrist line), else "down". ``wrist``: "up"
-    when sin q5 > 0, else "down". Each changes only at its singularity (the elbow's also at the
-    shoulder's), never along a continuous motion clear of them."""
-
-    shoulder: str
-    elbow: str
-    wrist: str
-
-
-def configuration_of(q: Vector, dh: DhParameters | None = None) -> Configuration:
-    """The named configuration of joints ``q`` on an arm with DH ``dh`` (default: UR10e proportions).
-
-    The wrist is exact on every UR model; the shoulder side (and with it the elbow's name) needs the
-    arm's a2, a3 and d5 only near the shoulder singularity (``UrKinematics.configuration_of`` is exact)."""
-    a2, a3, d5 = _arm_proportions(dh)
-    return _configuration(q, a2, a3, d5)
-
-
-def singularity_name(q: Vector, dh: DhParameters | None = None) -> str:
-    """Which singularity ``q`` is nearest: "wrist" (q5 = 0, pi), "elbow" (q3 = 0, pi) or "shoulder"
-    (the wrist centre on joint 1's axis plane), by |sin q5|, |sin q3| and the wrist centre's distance
-    from the shoulder plane over the arm's reach."""
-    a2, a3, d5 = _arm_proportions(dh)
-    return _singularity_name(q, a2, a3, d5)
-
-
-def _arm_proportions(dh: DhParameters | None) -> tuple[float, float, float]:
-    """(a2, a3, d5) of ``dh``, or without one the UR10e's nominal (every UR has a2, a3 < 0 < d5)."""
-    real = load_ur_model("ur10e").dh if dh is None else dh
-    return real.a[1], real.a[2], real.d[4]
-
-
-def _singularity_name(q: Vector, a2: float, a3: float, d5: float) -> str:
-    shoulder = abs(_wrist_centre_x(q, a2, a3, d5)) / (abs(a2) + abs(a3) + abs(d5))
-    measures = {"wrist": abs(math.sin(q[4])), "elbow": abs(math.sin(q[2])), "shoulder": shoulder}
-    return min(measures, key=lambda name: measures[name])
-
-
-def _wrist_centre_x(q: Vector, a2: float, a3: float, d5: float) -> float:
-    """The wrist centre (joint 6's origin) along joint 1's x axis in the arm's plane: its shoulder side."""
-    q2, q23 = float(q[1]), float(q[1]) + float(q[2])
-    return a2 * math.cos(q2) + a3 * math.cos(q23) + d5 * math.sin(q23 + float(q[3]))
-
-
-def _configuration(q: Vector, a2: float, a3: float, d5: float) -> Configuration:
-    right = _wrist_centre_x(q, a2, a3, d5) < 0.0
-    # With a2, a3 < 0 the elbow is above the shoulder -> wrist line when sin q3 has the sign of
-    # -(wrist's x); the wrist centre's side stands for the wrist's (they differ only at the shoulder
-    # singularity), so the name cannot change while the arm moves clear of every singularity.
-    bend = math.sin(float(q[2]))
-    return Configuration(
-        "right" if right else "left",
-        "up" if (bend > 0.0 if right else bend < 0.0) else "down",
-        "up" if math.sin(float(q[4])) > 0.0 else "down",
-    )
 
 
 class _Chain(NamedTuple):
@@ -216,7 +95,7 @@ class UrKinematics:
     within them and a solution outside them is dropped, so another branch may answer. Every method
     takes ``tcp``, the flange -> TCP pose (default: none, i.e. poses are of the flange, tool0)."""
 
-    __slots__ = ("_a2", "_a3", "_calibrated", "_d1", "_d4", "_d5", "_d6", "_joints", "_lower", "_upper")
+    __slots__ = ("_a2", "_a3", "_calibrated", "_closed_form", "_d5", "_joints", "_lower", "_upper")
 
     dof: int = 6
     """Six joints, shoulder_pan ... wrist_3 (``ArmKinematics``)."""
@@ -230,23 +109,10 @@ class UrKinematics:
         bounds: tuple[Sequence[float], Sequence[float]] | None = None,
     ) -> None:
         nominal = model.dh
-        structure_ok = (
-            all(abs(t) < 1e-12 for t in nominal.theta)
-            and all(abs(nominal.a[i]) < 1e-12 for i in (0, 3, 4, 5))
-            and all(abs(nominal.d[i]) < 1e-12 for i in (1, 2))
-            and all(abs(x - y) < 1e-12 for x, y in zip(nominal.alpha, _NOMINAL_ALPHA, strict=True))
-            and nominal.a[1] != 0.0
-            and nominal.a[2] != 0.0
-            and nominal.d[3] != 0.0
-        )
-        if not structure_ok:
-            raise DescriptionError(
-                f"model {model.model!r}: the nominal DH does not have the UR arm's structure"
-            )
-        self._a2, self._a3 = nominal.a[1], nominal.a[2]
-        self._d1, self._d4, self._d5, self._d6 = nominal.d[0], nominal.d[3], nominal.d[4], nominal.d[5]
         real = nominal if dh is None else dh
         self._calibrated = real != nominal
+        self._closed_form = UrClosedForm(model, self._calibrated)
+        self._a2, self._a3, self._d5 = nominal.a[1], nominal.a[2], nominal.d[4]
         self._joints = dh_joints(real)
         self._lower = tuple(-math.inf if j.min_position is None else j.min_position for j in model.joints)
         self._upper = tuple(math.inf if j.max_position is None else j.max_position for j in model.joints)
@@ -280,7 +146,7 @@ class UrKinematics:
         seed = _ZERO_SEED if qnear is None else qnear
         target = self._flange_target(pose, tcp)
         found: list[IkSolution] = []
-        for branch, q0 in self._analytic(target, seed):
+        for branch, q0 in self._closed_form.branches(target, seed):
             q = run_steps(self._solve_branch(target, q0, seed, max_position_error, max_orientation_error))
             if q is not None:
                 found.append(IkSolution(branch, q))
@@ -311,7 +177,7 @@ class UrKinematics:
         target = self._flange_target(pose, tcp)
         ranked = sorted(
             (_distance(_shift_near(q0, qnear), qnear), branch, q0)
-            for branch, q0 in self._analytic(target, qnear)
+            for branch, q0 in self._closed_form.branches(target, qnear)
         )
         yield
         best: Joints | None = None
@@ -365,7 +231,7 @@ class UrKinematics:
         target = self._flange_target(pose, tcp)
         best: Joints | None = None
         best_distance = math.inf
-        branches = self._analytic(target, qnear)
+        branches = self._closed_form.branches(target, qnear)
         yield
         for _, q0 in branches:
             if not self._matches(q0, wanted):
@@ -377,11 +243,11 @@ class UrKinematics:
 
     def configuration_of(self, q: Vector) -> Configuration:
         """The named configuration of ``q`` on this arm (its nominal a2, a3, d5)."""
-        return _configuration(q, self._a2, self._a3, self._d5)
+        return named_configuration(q, self._a2, self._a3, self._d5)
 
     def singularity_name(self, q: Vector) -> str:
         """Which singularity ``q`` is nearest: "wrist", "elbow" or "shoulder" (on this arm's proportions)."""
-        return _singularity_name(q, self._a2, self._a3, self._d5)
+        return nearest_singularity(q, self._a2, self._a3, self._d5)
 
     def _matches(self, q: Vector, wanted: dict[str, str]) -> bool:
         configuration = self.configuration_of(q)._asdict()
@@ -484,71 +350,6 @@ class UrKinematics:
             if position + orientation > _WAYPOINT_TOLERANCE:
                 return q, math.inf, math.inf  # the branch does not reach this far: give up early
         return (yield from self._refine(target, q))
-
-    def _analytic(self, f: Frame, seed: Vector) -> list[tuple[int, list[float]]]:
-        """The closed-form solutions on the nominal DH, as (branch, joints); unreachable branches left out."""
-        r00, r01, r02, r10, r11, r12, _, _, _, px, py, _ = f
-        d4, d6 = self._d4, self._d6
-        wx, wy = px - d6 * r02, py - d6 * r12
-        radius = math.hypot(wx, wy)
-        # Joint 2's axis z1 = (sin q1, -cos q1, 0); the wrist centre lies d4 along it: w . z1 = d4.
-        if not radius > 0.0:
-            return []
-        phi = math.atan2(wy, wx) + _HALF_PI
-        slack = _REACH_SLACK if self._calibrated else 0.0
-        found: list[tuple[int, list[float]]] = []
-        for shoulder in (0, SHOULDER):
-            spread = _branch_acos(d4 / radius, shoulder != 0, slack)
-            if spread is None:
-                return []
-            q1 = phi + spread
-            s1, c1 = math.sin(q1), math.cos(q1)
-            # The tool z axis against z1 is cos q5; its x and y axes against z1 give q6.
-            c5 = min(1.0, max(-1.0, r02 * s1 - r12 * c1))
-            for wrist in (0, WRIST):
-                q5 = math.acos(c5) if wrist == 0 else -math.acos(c5)
-                s5 = math.sin(q5)
-                if abs(s5) < _WRIST_SINGULAR:
-                    q6 = float(seed[5])
-                else:
-                    q6 = math.atan2((r11 * c1 - r01 * s1) / s5, (r00 * s1 - r10 * c1) / s5)
-                self._arm_plane(found, shoulder | wrist, f, q1, q5, q6, seed)
-        return found
-
-    def _arm_plane(
-        self,
-        found: list[tuple[int, list[float]]],
-        branch: int,
-        f: Frame,
-        q1: float,
-        q5: float,
-        q6: float,
-        seed: Vector,
-    ) -> None:
-        """Joints 2-4 (parallel axes) for given q1, q5, q6: both elbow branches, appended to ``found``."""
-        r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz = f
-        a2, a3, d5, d6 = self._a2, self._a3, self._d5, self._d6
-        s1, c1 = math.sin(q1), math.cos(q1)
-        s5, c5, s6, c6 = math.sin(q5), math.cos(q5), math.sin(q6), math.cos(q6)
-        # Frame 4 from the tool: z4 = -s6 n - c6 o, x4 = c5 c6 n - c5 s6 o - s5 a (n, o, a: tool axes).
-        o4x = px - d6 * r02 + d5 * (s6 * r00 + c6 * r01)
-        o4y = py - d6 * r12 + d5 * (s6 * r10 + c6 * r11)
-        o4z = pz - d6 * r22 + d5 * (s6 * r20 + c6 * r21)
-        x4x = c5 * c6 * r00 - c5 * s6 * r01 - s5 * r02
-        x4y = c5 * c6 * r10 - c5 * s6 * r11 - s5 * r12
-        x4z = c5 * c6 * r20 - c5 * s6 * r21 - s5 * r22
-        # In joint 2's plane (x1 = (c1, s1, 0), y1 = base z, origin at height d1) joints 2-4 are planar.
-        x = c1 * o4x + s1 * o4y
-        y = o4z - self._d1
-        angle234 = math.atan2(x4z, c1 * x4x + s1 * x4y)
-        cosine = (x * x + y * y - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)
-        reach = math.atan2(y, x) if x * x + y * y > 0.0 else float(seed[1])
-        for bit in (0, ELBOW):
-            q3 = _branch_acos(cosine, bit != 0, _REACH_SLACK if self._calibrated else 0.0)
-            if q3 is None:
-                return
-            q2 = reach - math.atan2(a3 * math.sin(q3), a2 + a3 * math.cos(q3))
-            found.append((branch | bit, [q1, q2, q3, angle234 - q2 - q3, q5, q6]))
 
     def _refine(self, target: Frame, q: list[float]) -> Steps[tuple[list[float], float, float]]:
         """Levenberg-Marquardt steps on the calibrated arm from ``q`` (a nominal branch).

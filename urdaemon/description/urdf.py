@@ -11,7 +11,7 @@ import io
 import math
 from typing import TYPE_CHECKING, Any
 
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.description.build import robot_joint_names
 from urdaemon.description.urmodels import UrModel, load_ur_model
 from urdaemon.errors import DescriptionError

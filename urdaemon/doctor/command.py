@@ -58,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
 def _bad_arguments(args: argparse.Namespace) -> str | None:
     import os
 
-    from urdaemon.cell.config import CELL_NAME_PATTERN, ENDPOINT_PATTERN, NAME_PATTERN
+    from urdaemon.cell.config import CELL_NAME_PATTERN
+    from urdaemon.cell.robot_options import NAME_PATTERN
+    from urdaemon.cell.zenoh_options import ENDPOINT_PATTERN
 
     if not re.match(ENDPOINT_PATTERN, args.connect):
         return f"--connect {args.connect!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from urdaemon.cell import load_cell
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.description.calibration import load_calibration, robot_dh
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError

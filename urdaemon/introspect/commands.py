@@ -80,7 +80,8 @@ def _checked(args: argparse.Namespace) -> int:
     """EXIT_BAD_INPUT (said why) when the arguments cannot be used, else 0."""
     import re
 
-    from urdaemon.cell.config import CELL_NAME_PATTERN, NAME_PATTERN
+    from urdaemon.cell.config import CELL_NAME_PATTERN
+    from urdaemon.cell.robot_options import NAME_PATTERN
     from urdaemon.introspect.connection import bad_connection, error
 
     problem = bad_connection(args)

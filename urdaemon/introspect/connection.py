@@ -26,7 +26,7 @@ def add_connection(parser: argparse.ArgumentParser) -> None:
 
 def bad_connection(args: argparse.Namespace) -> str | None:
     """Why ``--connect`` or ``--zenoh-config`` cannot be used (None when fine)."""
-    from urdaemon.cell.config import ENDPOINT_PATTERN
+    from urdaemon.cell.zenoh_options import ENDPOINT_PATTERN
 
     if not re.match(ENDPOINT_PATTERN, args.connect):
         return f"--connect {args.connect!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"

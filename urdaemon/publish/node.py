@@ -9,145 +9,52 @@ can fill the loop's queue ahead of the robots' cycles: each queryable has at mos
 ``MAX_IN_FLIGHT`` queries handed over and not yet handled (the rest are refused, "busy", on Zenoh's
 thread), and each subscriber at most one sample: a newer sample replaces the pending one (for a
 streaming command only the newest matters) and the replaced ones are counted and reported. The
-counters are the node's own, behind a small lock; no daemon state is touched off the loop.
+counters are the node's own, behind a small lock (admission.py); no daemon state is touched off the loop.
 
 A commanding queryable or subscriber has a guard (the robot's command lease): a message whose
 attachment is not the lease holder's token is refused on Zenoh's thread too, after the wildcard and
 size checks, so a flood of them never displaces the holder's messages, and again on the loop right
 before its handler runs (with the attachment it arrived with), so a message that passed while its
 sender held the lease does not act after the lease ended. The guard's check reads one immutable
-object (runtime/lease.py). Lease holders' liveliness tokens are watched with ``liveliness_watch``:
-only the keys the daemon asked about are kept (a holder's, an acquire's), every other token's
-sample is dropped on Zenoh's thread, and the loop hears that a watched key changed.
+object (runtime/lease.py). Lease holders' liveliness tokens are watched with ``liveliness_watch``
+(liveliness.py): only the keys the daemon asked about are kept (a holder's, an acquire's), every other
+token's sample is dropped on Zenoh's thread, and the loop hears that a watched key changed. The
+session's config, TLS and access control included, is session_config.py's.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
-import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Protocol
+from typing import Any
 
 import zenoh
 
-from urdaemon.cell.config import ZenohOptions
-from urdaemon.errors import ConfigError, UrDaemonError
+from urdaemon.cell.zenoh_options import ZenohOptions
+from urdaemon.errors import UrDaemonError
+from urdaemon.publish.admission import (
+    MAX_IN_FLIGHT,
+    Guard,
+    InFlight,
+    Latest,
+    Refusals,
+    attachment_of,
+    busy_refusal,
+    replaced_refusal,
+    size_refusal,
+    wildcard_refusal,
+)
 from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.publish.liveliness import LivelinessWatch
+from urdaemon.publish.session_config import serve_config
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher
-from urdaemon.transport_security import configure_daemon
 
-__all__ = [
-    "MAX_IN_FLIGHT",
-    "Guard",
-    "LivelinessWatch",
-    "Matching",
-    "ZenohNode",
-    "attachment_of",
-    "busy_refusal",
-    "declare_state_publisher",
-    "serve_config",
-    "size_refusal",
-    "wildcard_refusal",
-    "zenoh_config",
-]
+__all__ = ["ZenohNode", "declare_state_publisher"]
 
 log = logging.getLogger(__name__)
-
-MAX_IN_FLIGHT = 4
-"""Most queries of one key handed to the loop and not yet handled. A client waits for each reply,
-so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
-4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
-of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
-
-
-class Guard(Protocol):
-    """What decides, on Zenoh's thread, whether a commanding message may reach the loop."""
-
-    def refusal(self, attachment: bytes | None) -> str | None:
-        """Why a message with this attachment is refused; None: it passes."""
-
-
-def attachment_of(message: Any, limit: int = 64) -> bytes | None:
-    """A query's or sample's attachment, or None; one longer than ``limit`` is never copied (it
-    cannot be a token) and reads as an empty one."""
-    attachment = message.attachment
-    if attachment is None:
-        return None
-    if len(attachment) > limit:
-        return b""
-    return bytes(attachment.to_bytes())
-
-
-class _InFlight:
-    """How many messages of one key are handed to the loop and not yet handled (thread-safe)."""
-
-    __slots__ = ("_count", "_lock", "cap", "refused")
-
-    def __init__(self, cap: int) -> None:
-        self.cap = cap
-        self.refused = 0
-        """Messages refused because ``cap`` were in flight."""
-        self._count = 0
-        self._lock = threading.Lock()
-
-    def enter(self) -> bool:
-        """Count one more in flight (on Zenoh's thread); ``False``, and counted as refused, at the cap."""
-        with self._lock:
-            if self._count >= self.cap:
-                self.refused += 1
-                return False
-            self._count += 1
-            return True
-
-    def leave(self) -> None:
-        """One fewer in flight (on the loop, once handled, or if it never got there)."""
-        with self._lock:
-            self._count -= 1
-
-    def log_refusals(self, key: str) -> None:
-        """Say so at the 1st, 10th, 100th, ... refusal: a flood logs a handful of lines, not one each."""
-        refused = self.refused
-        if refused > 0 and 10 ** (len(str(refused)) - 1) == refused:
-            log.warning("%s: %d requests refused as too many in flight (a client floods it)", key, refused)
-
-
-class _Latest:
-    """A subscriber's newest sample not yet handled, and how many it replaced (thread-safe).
-
-    At most one sample is pending on the loop per key; one arriving while another waits replaces it.
-    """
-
-    __slots__ = ("_lock", "_pending", "_replaced", "replaced_total")
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._pending: tuple[bytes, bytes | None] | None = None
-        self._replaced = 0
-        self.replaced_total = 0
-        """Samples replaced by a newer one before the loop handled them, since the start."""
-
-    def offer(self, payload: bytes, attachment: bytes | None = None) -> bool:
-        """Keep ``payload`` (and the ``attachment`` it came with) as the newest (on Zenoh's thread);
-        ``True`` if the loop must be told."""
-        with self._lock:
-            first = self._pending is None
-            if not first:
-                self._replaced += 1
-                self.replaced_total += 1
-            self._pending = (payload, attachment)
-            return first
-
-    def take(self) -> tuple[tuple[bytes, bytes | None] | None, int]:
-        """The newest sample (payload, attachment) and how many it replaced since the last take (on
-        the loop)."""
-        with self._lock:
-            pending, replaced = self._pending, self._replaced
-            self._pending, self._replaced = None, 0
-            return pending, replaced
 
 
 def declare_state_publisher(session: Any, key: str) -> Any:
@@ -159,58 +66,6 @@ def declare_state_publisher(session: Any, key: str) -> Any:
         priority=zenoh.Priority.REAL_TIME,
         express=True,
     )
-
-
-def zenoh_config(
-    mode: str,
-    listen: tuple[str, ...] | list[str],
-    connect: tuple[str, ...] | list[str],
-    *,
-    multicast: bool = False,
-    low_latency: bool = False,
-) -> Any:
-    """A ``zenoh.Config`` with explicit endpoints, multicast scouting and the low-latency transport
-    (which needs QoS off) as given."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
-    if low_latency:
-        conf.insert_json5("transport/unicast/lowlatency", "true")
-        conf.insert_json5("transport/unicast/qos/enabled", "false")
-    return conf
-
-
-def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | None = None) -> Any:
-    """The daemon's session: the cell file's mode, endpoints, scouting and transport, without shared
-    memory.
-
-    Zenoh's shared memory moves a payload of 3 KiB or more to a peer on the same host through a
-    16 MiB pool, mapped (and resident) from the first such message on: for the daemon, the first
-    client asking for the URDF. Its messages are small JSON, so the pool bought nothing and cost a
-    fifth of the process's memory; peers that use shared memory still connect, over the network
-    transport (docs/performance.md, "The serve process"). ``cell``: the cell the access rules
-    name (transport_security.py); without it they name any cell.
-
-    A daemon in ``client`` mode listens nowhere (the cell file refuses ``listen`` there), so a
-    ``listen`` given anyway (``urdaemon serve --listen``) is refused: ``ConfigError``.
-    """
-    if options.mode == "client" and listen:
-        raise ConfigError(
-            f"the cell's zenoh mode is 'client' (it dials {list(options.connect)}) and accepts no sessions; "
-            f"cannot listen on {list(listen)} (leave out --listen, or use mode 'peer')"
-        )
-    conf = zenoh_config(
-        options.mode,
-        listen,
-        options.connect,
-        multicast=options.multicast_scouting,
-        low_latency=options.low_latency,
-    )
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    configure_daemon(conf, options, cell)
-    return conf
 
 
 class ZenohNode:
@@ -236,10 +91,10 @@ class ZenohNode:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
         self._entities: list[Any] = []
         self._closed = False
-        self._flights: dict[str, _InFlight] = {}
+        self._flights: dict[str, InFlight] = {}
         self._asker: ThreadPoolExecutor | None = None
         """Sends liveliness queries off the loop (``liveliness_watch``)."""
-        self.latest: dict[str, _Latest] = {}
+        self.latest: dict[str, Latest] = {}
         """Each subscriber's pending sample, by key (``replaced_total``: samples replaced unhandled)."""
 
     def publisher(self, key: str, *, realtime: bool = False) -> Any:
@@ -339,19 +194,19 @@ class ZenohNode:
                 work = _rechecked(guard, attachment, handler, answer)
             if not flight.enter():
                 _refuse_query(query, busy_refusal(key), error=False, answer=answer)
-                flight.log_refusals(key)
+                _log_refusals(flight, key)
                 return
             self._to_loop_counted(flight, work, query)
 
         flight = self._flight(key)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
 
-    def in_flight(self, key: str) -> _InFlight:
+    def in_flight(self, key: str) -> InFlight:
         """The in-flight counter of a queryable declared on ``key`` (its ``refused`` count)."""
         return self._flights[key]
 
-    def _flight(self, key: str) -> _InFlight:
-        flight = self._flights[key] = _InFlight(MAX_IN_FLIGHT)
+    def _flight(self, key: str) -> InFlight:
+        flight = self._flights[key] = InFlight(MAX_IN_FLIGHT)
         return flight
 
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
@@ -391,8 +246,8 @@ class ZenohNode:
         Refusals are bounded the same way: at most one report waits for the loop, counting the
         refusals that arrived meanwhile.
         """
-        latest = _Latest()
-        pending_refusals = _Refusals()
+        latest = Latest()
+        pending_refusals = Refusals()
         handle_latest = _latest_handler(key, latest, handler, refused, guard)
 
         def report_refusals() -> None:
@@ -487,7 +342,7 @@ class ZenohNode:
             return False
         return True
 
-    def _to_loop_counted(self, flight: _InFlight, handler: Callable[[Any], None], query: Any) -> None:
+    def _to_loop_counted(self, flight: InFlight, handler: Callable[[Any], None], query: Any) -> None:
         """Hand ``query`` to ``handler`` on the loop; it leaves ``flight`` once handled."""
 
         def handle() -> None:
@@ -501,150 +356,16 @@ class ZenohNode:
             _drop(query)
 
 
-class LivelinessWatch:
-    """Whether the liveliness tokens of the keys the daemon asked about are present (thread-safe).
-
-    Interest only: the daemon ``watch``es a key (a lease holder's, an acquire's) and ``unwatch``es it
-    when done; a sample of any other key is dropped on Zenoh's thread, never stored nor handed to
-    the loop, so the state kept is bounded by the keys asked about, whatever tokens others declare.
-    A watched key is present, gone, or not heard of yet (a token declared before the key was
-    watched: ``probe`` asks Zenoh for it). At most one "changed" call waits for the loop, however
-    many watched tokens come and go meanwhile.
-    """
-
-    def __init__(self, notify: Callable[[], bool], ask: Callable[[str], None] | None = None) -> None:
-        self._lock = threading.Lock()
-        self._wanted: dict[str, int] = {}
-        """Each watched key and how many of the daemon's parts watch it."""
-        self._present: dict[str, bool] = {}
-        """What was heard of each watched key (missing: nothing yet)."""
-        self._notify = notify
-        self._ask = ask
-        self._pending = False
-        self.changed: Callable[[], None] = lambda: None
-        """Runs on the loop after a change (set by the node)."""
-        self.ignored = 0
-        """Samples of keys nobody watched, dropped (a count, nothing kept of them)."""
-
-    @property
-    def tracked(self) -> int:
-        """How many keys the watch keeps state for (only those asked about)."""
-        with self._lock:
-            return len(self._wanted)
-
-    def watch(self, key: str) -> None:
-        """Keep what is heard of ``key`` from now on (until as many ``unwatch`` calls)."""
-        with self._lock:
-            self._wanted[key] = self._wanted.get(key, 0) + 1
-
-    def unwatch(self, key: str) -> None:
-        """One part of the daemon no longer cares about ``key``; the last forgets it."""
-        with self._lock:
-            count = self._wanted.get(key, 0) - 1
-            if count > 0:
-                self._wanted[key] = count
-            else:
-                self._wanted.pop(key, None)
-                self._present.pop(key, None)
-
-    def probe(self, key: str) -> None:
-        """Ask Zenoh whether the token ``key`` (watched) is there already; the answer arrives off the
-        loop, as a sample would (``heard``)."""
-        if self._ask is not None:
-            self._ask(key)
-
-    def alive(self, key: str) -> bool:
-        """Whether the watched token ``key`` is present."""
-        with self._lock:
-            return self._present.get(key, False)
-
-    def on_sample(self, sample: Any) -> None:
-        """A token came (PUT) or went (DELETE): on Zenoh's thread."""
-        self._record(str(sample.key_expr), sample.kind != zenoh.SampleKind.DELETE, overwrite=True)
-
-    def heard(self, key: str) -> None:
-        """A liveliness query found the token ``key`` (on Zenoh's thread). It counts only if no sample
-        of the key arrived since it was watched: a DELETE after the answer was made wins."""
-        self._record(key, True, overwrite=False)
-
-    def _record(self, key: str, present: bool, *, overwrite: bool) -> None:
-        with self._lock:
-            if key not in self._wanted:
-                self.ignored += 1
-                return
-            if not overwrite and key in self._present:
-                return
-            self._present[key] = present
-            notify, self._pending = not self._pending, True
-        if notify and not self._notify():
-            with self._lock:
-                self._pending = False
-
-    def handed(self) -> None:
-        """On the loop: tell ``changed`` (changes arriving from now on ask for another call)."""
-        with self._lock:
-            self._pending = False
-        self.changed()
-
-
-def wildcard_refusal(asked: str, key: str) -> str:
-    """Why a query or put on a key expression that only covers ``key`` did nothing."""
-    return (
-        f"{client_text(asked, 80)} is not {key}: services, goals and commands act on their exact key "
-        f"only, never on a wildcard; ask {key}"
-    )
-
-
-def size_refusal(key: str, size: int, limit: int) -> str:
-    """Why a message too large to read was refused."""
-    return f"{key}: message of {size} bytes exceeds the limit of {limit} bytes for this key"
-
-
-def busy_refusal(key: str) -> str:
-    """Why a query was refused because too many on its key were waiting for the loop."""
-    return f"busy: too many requests in flight on {key} (at most {MAX_IN_FLIGHT}); ask again"
-
-
-def replaced_refusal(key: str, replaced: int) -> str:
-    """Why samples put on a streaming key were never acted on."""
-    return (
-        f"busy: {replaced} sample(s) on {key} replaced by a newer one before the daemon read them "
-        "(only the newest streaming command is acted on)"
-    )
-
-
-class _Refusals:
-    """Refusals of one subscriber waiting for the loop: the newest, and how many (thread-safe)."""
-
-    __slots__ = ("_count", "_lock", "_newest")
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._newest: tuple[str, str] | None = None
-        self._count = 0
-
-    def offer(self, put_on: str, reason: str) -> bool:
-        """Keep this refusal (on Zenoh's thread); ``True`` if the loop must be told."""
-        with self._lock:
-            first = self._newest is None
-            self._newest = (put_on, reason)
-            self._count += 1
-            return first
-
-    def take(self) -> tuple[str, str] | None:
-        """The newest refusal, saying how many arrived since the last take (on the loop)."""
-        with self._lock:
-            newest, count = self._newest, self._count
-            self._newest, self._count = None, 0
-        if newest is None:
-            return None
-        put_on, reason = newest
-        return put_on, reason if count == 1 else f"{reason} (and {count - 1} more refused like it)"
+def _log_refusals(flight: InFlight, key: str) -> None:
+    """Say so at the 1st, 10th, 100th, ... refusal: a flood logs a handful of lines, not one each."""
+    refused = flight.refused
+    if refused > 0 and 10 ** (len(str(refused)) - 1) == refused:
+        log.warning("%s: %d requests refused as too many in flight (a client floods it)", key, refused)
 
 
 def _latest_handler(
     key: str,
-    latest: _Latest,
+    latest: Latest,
     handler: Callable[[str, bytes], None],
     refused: Callable[[str, str], None] | None,
     guard: Guard | None,

@@ -16,7 +16,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
-from urdaemon.cell.config import TCP_MAX_OFFSET_M, check_tcp
+from urdaemon.cell.robot_options import TCP_MAX_OFFSET_M, check_tcp
 from urdaemon.errors import MessageError
 from urdaemon.model import (
     FORCE_MODE_DAMPING,

@@ -24,7 +24,7 @@ __all__ = ["add_parsers", "run"]
 
 def add_parsers(sub: Any) -> None:
     """``record``."""
-    from urdaemon.cell.config import DEFAULT_ENDPOINT
+    from urdaemon.cell.zenoh_options import DEFAULT_ENDPOINT
 
     p = sub.add_parser("record", help="record what a cell publishes into an MCAP file (or a rosbag2 bag)")
     p.add_argument("--cell", default=None, help="cell name (default: the one cell served)")
@@ -91,7 +91,9 @@ def run(args: argparse.Namespace) -> int:
 def _bad_args(args: argparse.Namespace) -> str | None:
     import re
 
-    from urdaemon.cell.config import CELL_NAME_PATTERN, ENDPOINT_PATTERN, NAME_PATTERN
+    from urdaemon.cell.config import CELL_NAME_PATTERN
+    from urdaemon.cell.robot_options import NAME_PATTERN
+    from urdaemon.cell.zenoh_options import ENDPOINT_PATTERN
 
     if not re.match(ENDPOINT_PATTERN, args.connect):
         return f"--connect {args.connect!r} is not a Zenoh endpoint like tcp/127.0.0.1:7447"

@@ -155,7 +155,7 @@ class Republisher:
 
 def replay_session_config(listen: Sequence[str], connect: Sequence[str]) -> Any:
     """A peer session that listens where viewers connect, and joins ``connect`` (if any)."""
-    from urdaemon.publish.node import zenoh_config
+    from urdaemon.publish.session_config import zenoh_config
 
     return zenoh_config("peer", list(listen), list(connect))
 

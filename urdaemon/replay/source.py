@@ -14,7 +14,8 @@ from urdaemon.recording.mcap_file import Recorded, read_recording
 from urdaemon.replay.plan import Sample
 
 if TYPE_CHECKING:
-    from urdaemon.cell.config import Cell, Robot
+    from urdaemon.cell.config import Cell
+    from urdaemon.cell.robot_options import Robot
 
 __all__ = ["RecordedCell", "mismatch", "read_cell", "sample_period"]
 

@@ -26,7 +26,7 @@ from collections.abc import Generator, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import CARTESIAN_PAIRS, Robot
+from urdaemon.cell.robot_options import CARTESIAN_PAIRS, Robot
 from urdaemon.control import MotionController
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.linear import plan_linear
@@ -35,8 +35,9 @@ from urdaemon.description.arm import ArmKinematics, base_in_world
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
 from urdaemon.errors import GoalRejected
 from urdaemon.publish import codec
+from urdaemon.publish.admission import Guard
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Guard, ZenohNode
+from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, payload

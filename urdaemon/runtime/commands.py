@@ -12,12 +12,13 @@ import time
 from collections.abc import Callable, Sequence
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import codec
+from urdaemon.publish.admission import Guard
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Guard, ZenohNode
+from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
 from urdaemon.runtime.queries import SHUTTING_DOWN, internal_error
 from urdaemon.runtime.status import StatusPublisher

@@ -19,7 +19,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from urdaemon import __version__
-from urdaemon.cell.config import Cell, Robot
+from urdaemon.cell.config import Cell
+from urdaemon.cell.robot_options import Robot
 from urdaemon.model import JointLimits
 from urdaemon.publish import codec
 from urdaemon.publish.keys import CellKeys, RobotKeys

@@ -30,15 +30,16 @@ from typing import Any
 import zenoh
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import Robot
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import GoalFeedback, GoalResult, MotionController, Tolerances
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import codec, signing
+from urdaemon.publish.admission import Guard
 from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Guard, ZenohNode
+from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 from urdaemon.runtime.gate import MotionGate
 from urdaemon.runtime.passthrough import Passthrough

@@ -20,8 +20,10 @@ from typing import Any, Protocol
 
 from urdaemon.cell.config import Cell
 from urdaemon.errors import MessageError
+from urdaemon.publish.admission import attachment_of
 from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.publish.node import LivelinessWatch, ZenohNode, attachment_of
+from urdaemon.publish.liveliness import LivelinessWatch
+from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.lease import LEASE_BIND_TIMEOUT_S, LeaseBook, LeaseOutcome, LeaseRequest, parse_request
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload, reply
 from urdaemon.runtime.status import StatusPublisher

@@ -17,8 +17,9 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError
+from urdaemon.publish.admission import Guard
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import Guard, ZenohNode
+from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.services import SERVICES, STOP, ServiceSpec, names
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals

@@ -17,7 +17,8 @@ import time
 from typing import Any
 
 from urdaemon.backends.base import Backend
-from urdaemon.cell.config import PublishOptions, Robot
+from urdaemon.cell.config import PublishOptions
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.publish import codec
 from urdaemon.publish.keys import RobotKeys

@@ -41,7 +41,7 @@ from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, 
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.backends.ur.services import UrServices
 from urdaemon.backends.ur.startup import StartUp
-from urdaemon.cell.config import Robot, UrOptions
+from urdaemon.cell.robot_options import Robot, UrOptions
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, UrDaemonError
 from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, SafetyMode

@@ -23,7 +23,7 @@ from urdaemon.backends.ur.readiness import ProgramFacts, not_ready_reason
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, ReverseChannel
 from urdaemon.backends.ur.route import ListenPlan
 from urdaemon.backends.ur.servers import REPLACED, CallbackServers
-from urdaemon.cell.config import Robot, UrOptions
+from urdaemon.cell.robot_options import Robot, UrOptions
 from urdaemon.model import Lifecycle, RobotMode, RobotState
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import script_sender

@@ -26,7 +26,7 @@ import ipaddress
 import socket
 from dataclasses import dataclass
 
-from urdaemon.cell.config import UrOptions
+from urdaemon.cell.robot_options import UrOptions
 from urdaemon.errors import BackendError
 
 __all__ = ["ListenPlan", "interface_toward", "is_local_address", "listen_plan", "robot_ip"]

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from urdaemon.backends.ur.route import ListenPlan, listen_plan
-from urdaemon.cell.config import UrOptions
+from urdaemon.cell.robot_options import UrOptions
 from urdaemon.errors import BackendError, ConnectionLostError
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 from urdaemon.protocols._buffer import Side

@@ -1,0 +1,169 @@
+"""What Zenoh's threads let through to the loop, and why the rest is refused (publish/node.py).
+
+A commanding message passes a ``Guard`` (the robot's command lease) on the token it carries as its
+attachment (``attachment_of``). What waits for the loop is bounded: per queryable at most
+``MAX_IN_FLIGHT`` queries (``InFlight``), per subscriber the newest sample only (``Latest``) and one
+report of the refusals meanwhile (``Refusals``); each counter behind a small lock, as Zenoh's
+threads and the loop both touch it. The refusals' texts are here too, so every refusal reads the same.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, Protocol
+
+from urdaemon.publish.codec import client_text
+
+__all__ = [
+    "MAX_IN_FLIGHT",
+    "Guard",
+    "InFlight",
+    "Latest",
+    "Refusals",
+    "attachment_of",
+    "busy_refusal",
+    "replaced_refusal",
+    "size_refusal",
+    "wildcard_refusal",
+]
+
+MAX_IN_FLIGHT = 4
+"""Most queries of one key handed to the loop and not yet handled. A client waits for each reply,
+so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
+4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
+of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
+
+
+class Guard(Protocol):
+    """What decides, on Zenoh's thread, whether a commanding message may reach the loop."""
+
+    def refusal(self, attachment: bytes | None) -> str | None:
+        """Why a message with this attachment is refused; None: it passes."""
+
+
+def attachment_of(message: Any, limit: int = 64) -> bytes | None:
+    """A query's or sample's attachment, or None; one longer than ``limit`` is never copied (it
+    cannot be a token) and reads as an empty one."""
+    attachment = message.attachment
+    if attachment is None:
+        return None
+    if len(attachment) > limit:
+        return b""
+    return bytes(attachment.to_bytes())
+
+
+class InFlight:
+    """How many messages of one key are handed to the loop and not yet handled (thread-safe)."""
+
+    __slots__ = ("_count", "_lock", "cap", "refused")
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self.refused = 0
+        """Messages refused because ``cap`` were in flight."""
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def enter(self) -> bool:
+        """Count one more in flight (on Zenoh's thread); ``False``, and counted as refused, at the cap."""
+        with self._lock:
+            if self._count >= self.cap:
+                self.refused += 1
+                return False
+            self._count += 1
+            return True
+
+    def leave(self) -> None:
+        """One fewer in flight (on the loop, once handled, or if it never got there)."""
+        with self._lock:
+            self._count -= 1
+
+
+class Latest:
+    """A subscriber's newest sample not yet handled, and how many it replaced (thread-safe).
+
+    At most one sample is pending on the loop per key; one arriving while another waits replaces it.
+    """
+
+    __slots__ = ("_lock", "_pending", "_replaced", "replaced_total")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pending: tuple[bytes, bytes | None] | None = None
+        self._replaced = 0
+        self.replaced_total = 0
+        """Samples replaced by a newer one before the loop handled them, since the start."""
+
+    def offer(self, payload: bytes, attachment: bytes | None = None) -> bool:
+        """Keep ``payload`` (and the ``attachment`` it came with) as the newest (on Zenoh's thread);
+        ``True`` if the loop must be told."""
+        with self._lock:
+            first = self._pending is None
+            if not first:
+                self._replaced += 1
+                self.replaced_total += 1
+            self._pending = (payload, attachment)
+            return first
+
+    def take(self) -> tuple[tuple[bytes, bytes | None] | None, int]:
+        """The newest sample (payload, attachment) and how many it replaced since the last take (on
+        the loop)."""
+        with self._lock:
+            pending, replaced = self._pending, self._replaced
+            self._pending, self._replaced = None, 0
+            return pending, replaced
+
+
+def wildcard_refusal(asked: str, key: str) -> str:
+    """Why a query or put on a key expression that only covers ``key`` did nothing."""
+    return (
+        f"{client_text(asked, 80)} is not {key}: services, goals and commands act on their exact key "
+        f"only, never on a wildcard; ask {key}"
+    )
+
+
+def size_refusal(key: str, size: int, limit: int) -> str:
+    """Why a message too large to read was refused."""
+    return f"{key}: message of {size} bytes exceeds the limit of {limit} bytes for this key"
+
+
+def busy_refusal(key: str) -> str:
+    """Why a query was refused because too many on its key were waiting for the loop."""
+    return f"busy: too many requests in flight on {key} (at most {MAX_IN_FLIGHT}); ask again"
+
+
+def replaced_refusal(key: str, replaced: int) -> str:
+    """Why samples put on a streaming key were never acted on."""
+    return (
+        f"busy: {replaced} sample(s) on {key} replaced by a newer one before the daemon read them "
+        "(only the newest streaming command is acted on)"
+    )
+
+
+class Refusals:
+    """Refusals of one subscriber waiting for the loop: the newest, and how many (thread-safe)."""
+
+    __slots__ = ("_count", "_lock", "_newest")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._newest: tuple[str, str] | None = None
+        self._count = 0
+
+    def offer(self, put_on: str, reason: str) -> bool:
+        """Keep this refusal (on Zenoh's thread); ``True`` if the loop must be told."""
+        with self._lock:
+            first = self._newest is None
+            self._newest = (put_on, reason)
+            self._count += 1
+            return first
+
+    def take(self) -> tuple[str, str] | None:
+        """The newest refusal, saying how many arrived since the last take (on the loop)."""
+        with self._lock:
+            newest, count = self._newest, self._count
+            self._newest, self._count = None, 0
+        if newest is None:
+            return None
+        put_on, reason = newest
+        return put_on, reason if count == 1 else f"{reason} (and {count - 1} more refused like it)"
