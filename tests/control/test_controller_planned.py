@@ -2,7 +2,7 @@
 
 A ready plan is made for the pose the robot rests at (``goal_start``), in slices while the robot
 waits; ``accept_planned`` then starts it, or refuses it when the robot is busy or no longer there.
-Plans here are control/trajectory.py's ``plan_move`` results: they have the shape every ready plan
+Plans here are control/move.py's ``plan_move`` results: they have the shape every ready plan
 has (duration, final_positions, final_velocities, segment_count, sample, release).
 """
 

@@ -1,5 +1,5 @@
 """plan.py from tables and generated motions: recorded samples made from the controller's own
-jerk-limited moves (control/trajectory.py, sampled every cycle as the mock publishes them, with the
+jerk-limited moves (control/move.py, sampled every cycle as the mock publishes them, with the
 host times jittered), planned into goals, and the goals planned again by the controller's planner:
 every recorded position comes back at its recorded time ÷ rate.
 """

@@ -1,4 +1,4 @@
-"""The watch of lease tokens (publish/node.py ``LivelinessWatch``), fed samples as Zenoh's thread
+"""The watch of lease tokens (publish/liveliness.py ``LivelinessWatch``), fed samples as Zenoh's thread
 would: it keeps only the keys asked about, and at most one call waits for the loop."""
 
 from __future__ import annotations

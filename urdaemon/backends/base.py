@@ -217,7 +217,7 @@ class Backend(abc.ABC):
     @staticmethod
     def check_tcp(pose: Sequence[float]) -> tuple[float, ...]:
         """``pose`` as six floats, or ``BackendError`` if it is not six finite numbers (the ranges are
-        the service's: cell/config.py ``check_tcp``)."""
+        the service's: cell/robot_options.py ``check_tcp``)."""
         try:
             values = tuple(float(v) for v in pose)
         except (TypeError, ValueError):

@@ -1,7 +1,7 @@
 """A plan made before it is handed to the controller, and the check that it starts where the robot rests.
 
 Owns the shape a ready plan has (``ReadyPlan``: what a goal run samples and the ledger frees, the shape
-of control/trajectory.py's ``PlannedTrajectory`` and control/sampled.py's ``SampledTrajectory``) and
+of control/planned_trajectory.py's ``PlannedTrajectory`` and control/sampled.py's ``SampledTrajectory``) and
 the check ``MotionController.accept_planned`` makes before starting one: the plan was made for the pose
 the robot rests at (a linear goal plans from ``goal_start``, in slices, while the robot waits), so a
 new goal must still start there within ``PLAN_START_TOLERANCE`` (a resting arm's noise) and the plan

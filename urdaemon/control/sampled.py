@@ -1,7 +1,7 @@
 """A goal planned as joint samples, one per robot cycle: what a linear goal runs.
 
 Owns ``SampledTrajectory`` (the plan a goal run samples on the 500 Hz path, shaped like
-control/trajectory.py's ``PlannedTrajectory``) and ``SampleWriter``, which fills one.
+control/planned_trajectory.py's ``PlannedTrajectory``) and ``SampleWriter``, which fills one.
 
 Every sample ``n`` (at trajectory time ``n * period``) holds the joint positions and their velocities:
 the central difference of the neighbouring samples (zero at the first and the last, which are at

@@ -6,7 +6,7 @@ robot of the cell gets (``arm_kinematics``) and where its base frame sits in the
 ``(x, y, z, rx, ry, rz)`` of the TCP in the robot's base frame; ``tcp`` is the flange -> TCP pose;
 joints are in the controller's joint order (docs/kinematics.md). No numpy: the serve process uses these.
 UR arms' named configurations (``Configuration``, ``configuration_of``, ``singularity_name``) live in
-ik.py and are re-exported here.
+configurations.py and are re-exported here.
 """
 
 from __future__ import annotations

@@ -217,7 +217,7 @@ async def _set_tcp(host: ServiceHost, request: SetTcpRequest) -> Reply:
 
 
 def _decode_set_tcp(payload: bytes | None) -> SetTcpRequest:
-    """The set_tcp request, its offset within the cell file's ranges (cell/config.py ``check_tcp``)."""
+    """The set_tcp request, its offset within the cell file's ranges (cell/robot_options.py ``check_tcp``)."""
     pose = codec.decode_set_tcp(payload)
     try:
         check_tcp(pose)
