@@ -15,18 +15,16 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import importlib
 import json
-import logging
 import math
-import signal
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from urdaemon import __version__, cli_args
+from urdaemon.stop_signals import end_stop_signals, stop_on_signals, stop_signal_handlers
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell
@@ -52,8 +50,6 @@ TOOL_MODULES: tuple[str, ...] = (
 )
 """Modules that add commands of their own: each has ``add_parsers(sub)``, whose parsers set ``run``
 (``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-"""Each stops ``serve`` and ``fake-robot`` cleanly; a repeated one while stopping is only logged."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -619,64 +615,6 @@ def _serve(path: str, listen: list[str] | None, owns_process: bool) -> int:
     finally:
         end_stop_signals(previous)
     return EXIT_OK
-
-
-def stop_on_signals(stop: asyncio.Event, what: str) -> None:
-    """SIGINT, SIGTERM and SIGHUP set ``stop`` (a clean stop: every goal ends with a result).
-
-    A repeated signal while stopping is logged and otherwise ignored, so it cannot cut the clean stop
-    short; the handlers stay after the loop has ended, so a signal during the process's exit is
-    ignored too (asyncio's own handlers fall back to the default, which kills the process). Call it
-    on the running loop, in the main thread (elsewhere it does nothing).
-    """
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return
-    loop = asyncio.get_running_loop()
-    log = logging.getLogger("urdaemon")
-
-    def deliver(signum: int) -> None:
-        name = signal.Signals(signum).name
-        if stop.is_set():
-            log.warning("%s: %s is already stopping cleanly (SIGKILL would skip that)", name, what)
-            return
-        log.info("%s: stopping %s", name, what)
-        stop.set()
-
-    def handler(signum: int, frame: object) -> None:
-        # RuntimeError: the loop has ended: the clean stop is done and the process exits
-        with contextlib.suppress(RuntimeError):
-            loop.call_soon_threadsafe(deliver, signum)
-
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, handler)
-
-
-def stop_signal_handlers() -> dict[signal.Signals, Any]:
-    """The stop signals' handlers now, to put back with ``end_stop_signals`` (main thread only)."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    return {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
-
-
-def end_stop_signals(previous: dict[signal.Signals, Any] | None) -> None:
-    """After a clean stop. A command that owns its process (``previous`` None: run as ``urdaemon``)
-    ignores the stop signals for the rest of the exit (Python resets its own handlers to the default,
-    fatal one while it finalizes; an ignored signal stays ignored). Run in-process (``main`` given
-    its arguments: a test, a program), the handlers ``previous`` are put back instead: an ignored
-    SIGINT would outlive the command, and every process started afterwards would inherit it
-    (Ctrl-C would no longer stop a ``urdaemon move`` started by the same test worker)."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return
-    for sig in STOP_SIGNALS:
-        handler = signal.SIG_IGN if previous is None else previous.get(sig)
-        if handler is not None:
-            signal.signal(sig, handler)
 
 
 def _run_loop(main: Coroutine[Any, Any, None]) -> None:

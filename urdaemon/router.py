@@ -246,7 +246,7 @@ async def serve_router(conf: Any, stop: asyncio.Event) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """``urdaemon router``: serve until Ctrl-C, SIGTERM or SIGHUP; the exit code."""
-    from urdaemon.cli import end_stop_signals, stop_on_signals, stop_signal_handlers
+    from urdaemon.stop_signals import end_stop_signals, stop_on_signals, stop_signal_handlers
 
     try:
         conf = router_config(args.listen, args.connect, args.zenoh_config)
