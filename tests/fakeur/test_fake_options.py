@@ -12,7 +12,7 @@ import pytest
 from tests.helpers import fake_address
 from urdaemon.cli.parser import build_parser
 from urdaemon.errors import ConfigError
-from urdaemon.fakeur.cli import build_fakes
+from urdaemon.fakeur.command import build_fakes
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import rtde

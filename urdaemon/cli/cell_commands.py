@@ -75,8 +75,8 @@ def _run_loop(main: Coroutine[Any, Any, None]) -> None:
 
 
 def fake_robot(args: argparse.Namespace) -> int:
-    """``urdaemon fake-robot``: serve the fakes until a stop signal (fakeur/cli.py); the exit code."""
-    from urdaemon.fakeur.cli import run_fakes
+    """``urdaemon fake-robot``: serve the fakes until a stop signal (fakeur/command.py); the exit code."""
+    from urdaemon.fakeur.command import run_fakes
 
     return run_fakes(args)
 
