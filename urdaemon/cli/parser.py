@@ -151,7 +151,7 @@ def _add_cell_tools(sub: Any) -> None:
     urdf = sub.add_parser("urdf", help="print the cell URDF")
     urdf.add_argument("--config", required=True)
 
-    # its arguments are transport_security's own (parsed there: see main), not loaded for every command
+    # its arguments are transport_security's own (parsed there: see entry.py), not loaded for every command
     sub.add_parser(
         "client-config",
         help="write a client's Zenoh config (TLS certificates) for a cell file; use it with --zenoh-config",
