@@ -18,7 +18,7 @@ from tests.integration.conftest import running_daemon
 from urdaemon import daemon as daemon_module
 from urdaemon.cell import parse_cell
 from urdaemon.errors import ConfigError
-from urdaemon.fakeur import cli as fake_cli
+from urdaemon.fakeur import command as fake_command
 from urdaemon.scheduling import RealtimeUnavailable, startup_objects_frozen, use_realtime_priority
 
 pytestmark = pytest.mark.timeout(60)
@@ -215,10 +215,10 @@ def test_the_fake_robot_command_serves_with_its_startup_objects_frozen(
         async def close(self) -> None:
             seen.append(gc.get_freeze_count())
 
-    monkeypatch.setattr(fake_cli, "build_fakes", lambda args: [Fake()])
-    monkeypatch.setattr(fake_cli, "share_clock", lambda fakes, phases: None)
+    monkeypatch.setattr(fake_command, "build_fakes", lambda args: [Fake()])
+    monkeypatch.setattr(fake_command, "share_clock", lambda fakes, phases: None)
     before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    assert fake_cli.run_fakes(argparse.Namespace(late_start=0.0, phases="aligned")) == 0
+    assert fake_command.run_fakes(argparse.Namespace(late_start=0.0, phases="aligned")) == 0
     assert seen[0] > 0, "frozen while serving"
     assert seen[1] == 0, "unfrozen before the fakes close"
     # called, not run as `urdaemon fake-robot`: the caller keeps its handlers (an ignored SIGINT left

@@ -17,7 +17,6 @@ MAX_FUNCTION_LINES = 60
 MAX_MODULE_LINES = 600
 
 MODULES_STILL_OVER: dict[str, int] = {
-    "urdaemon/cli.py": 1118,
     "urdaemon/fakeur/motion.py": 725,
     "urdaemon/fakeur/urscript/compiler.py": 902,
     "urdaemon/protocols/dashboard.py": 1038,

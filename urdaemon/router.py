@@ -52,7 +52,7 @@ LOCATOR_TIMEOUT_S = 2.0
 
 
 def add_parsers(sub: Any) -> None:
-    """``router``: a Zenoh router for several cells (cli.py ``TOOL_MODULES``)."""
+    """``router``: a Zenoh router for several cells (cli/parser.py ``TOOL_MODULES``)."""
     router = sub.add_parser(
         "router",
         help="run a Zenoh router that several cells' daemons (zenoh mode: client) and their clients "
@@ -247,7 +247,7 @@ async def serve_router(conf: Any, stop: asyncio.Event) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """``urdaemon router``: serve until Ctrl-C, SIGTERM or SIGHUP; the exit code."""
-    from urdaemon.cli import end_stop_signals, stop_on_signals, stop_signal_handlers
+    from urdaemon.stop_signals import end_stop_signals, stop_on_signals, stop_signal_handlers
 
     try:
         conf = router_config(args.listen, args.connect, args.zenoh_config)

@@ -144,12 +144,12 @@ def test_fake_robot_walls_from_the_command_line_reach_every_arm() -> None:
     option (f5f0e26) a user had nothing the fake arm could touch. A bad wall is refused with the reason."""
     import argparse
 
-    from urdaemon.cli import _parser
+    from urdaemon.cli.parser import build_parser
     from urdaemon.errors import ConfigError
-    from urdaemon.fakeur.cli import build_fakes, parse_wall
+    from urdaemon.fakeur.command import build_fakes, parse_wall
 
     command = ["fake-robot", "--model", "ur10e", "--wall", "0,0,0.1,0,0,1", "--wall", "0.5,0,0,-2,0,0,5000"]
-    walls = _parser().parse_args(command).wall
+    walls = build_parser().parse_args(command).wall
     args = argparse.Namespace(
         config=None,
         model="ur10e",
@@ -204,7 +204,7 @@ def test_a_urcap_fake_from_a_cell_file_fetches_where_the_daemon_listens(
     an address nothing listened on."""
     import argparse
 
-    from urdaemon.fakeur.cli import build_fakes
+    from urdaemon.fakeur.command import build_fakes
 
     robot, reverse = fake_address(), fake_address()
     options = ur_options.replace("{reverse_ip}", f"reverse_ip: {reverse}")

@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from tests.helpers import fake_address
-from urdaemon.cli import _parser
+from urdaemon.cli.parser import build_parser
 from urdaemon.errors import ConfigError
-from urdaemon.fakeur.cli import build_fakes
+from urdaemon.fakeur.command import build_fakes
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import rtde
@@ -90,7 +90,7 @@ async def test_the_fake_dashboard_refuses_a_line_it_does_not_know_as_a_controlle
 def test_fake_robot_programs_option_gives_every_fake_a_programs_directory(tmp_path: Path) -> None:
     """``urdaemon fake-robot --programs DIR`` reaches every fake; a programs path that is not a directory
     is refused before anything listens."""
-    parser = _parser()
+    parser = build_parser()
     base = ["fake-robot", "--model", "ur10e", "--address", fake_address()]
     [fake] = build_fakes(parser.parse_args([*base, "--programs", str(tmp_path)]))
     assert fake.programs_dir == tmp_path

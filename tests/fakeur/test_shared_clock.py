@@ -7,7 +7,7 @@ import asyncio
 import pytest
 
 from tests.helpers import fake_address
-from urdaemon.fakeur.cli import share_clock
+from urdaemon.fakeur.command import share_clock
 from urdaemon.fakeur.controller import FakeController, SharedClock
 
 pytestmark = pytest.mark.timeout(30)

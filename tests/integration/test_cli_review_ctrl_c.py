@@ -14,7 +14,9 @@ from typing import Any
 import pytest
 
 from tests.integration.conftest import TWO_MOCKS, running_daemon
-from urdaemon import cli
+from urdaemon.cli import move_command
+from urdaemon.cli.exit_codes import EXIT_INTERRUPTED
+from urdaemon.cli.parser import build_parser
 from urdaemon.client import Client
 
 pytestmark = pytest.mark.timeout(120)
@@ -43,7 +45,7 @@ async def test_ctrl_c_while_waiting_for_the_accept_reply_cancels_the_goal(
 
         monkeypatch.setattr(Client, "request", request)
         endpoint = daemon.listen_endpoints[0]
-        args = cli._parser().parse_args(
+        args = build_parser().parse_args(
             [
                 "move",
                 "alice",
@@ -54,7 +56,7 @@ async def test_ctrl_c_while_waiting_for_the_accept_reply_cancels_the_goal(
                 endpoint,
             ]
         )
-        command = asyncio.ensure_future(cli._move(args))
+        command = asyncio.ensure_future(move_command.move(args))
         code: int | None = None
         with contextlib.suppress(asyncio.CancelledError):  # how the command ended before the fix
             code = await asyncio.wait_for(asyncio.shield(command), 60.0)
@@ -65,6 +67,6 @@ async def test_ctrl_c_while_waiting_for_the_accept_reply_cancels_the_goal(
         result = json.loads(payload)
         assert result["status"] == "canceled", result
         assert daemon.runtimes[0].controller.active_goal_id is None
-        assert code == cli.EXIT_INTERRUPTED
+        assert code == EXIT_INTERRUPTED
         err = capsys.readouterr().err
         assert f"goal {result['goal_id']} canceled" in err, err

@@ -173,10 +173,10 @@ class _FakeGoal:
 
 
 async def test_move_progress_on_a_terminal_ends_at_100_percent(capsys: pytest.CaptureFixture[str]) -> None:
-    from urdaemon import cli
+    from urdaemon.cli import move_command
 
     tty = _Tty()
-    assert await cli._follow(_FakeGoal(), cli._ProgressBar(tty)) == 0
+    assert await move_command._follow(_FakeGoal(), move_command._ProgressBar(tty)) == 0
     shown = tty.getvalue()
     assert shown.endswith("\r  100.0 %\n"), repr(shown)
     assert json.loads(capsys.readouterr().out)["status"] == "succeeded"

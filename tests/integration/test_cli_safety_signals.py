@@ -160,7 +160,8 @@ def test_serve_called_in_process_gives_ctrl_c_back_to_its_caller(tmp_path: Path)
     ran its whole goal through Ctrl-C (test_ctrl_c_on_move_cancels_its_goal_before_exiting failed,
     exit 0 instead of 130, whenever such a test had run before it on its worker). The command run as
     ``urdaemon`` still ignores them for its own exit."""
-    from urdaemon.cli import STOP_SIGNALS, main
+    from urdaemon.cli import main
+    from urdaemon.stop_signals import STOP_SIGNALS
 
     before = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
     config = tmp_path / "cell.yaml"

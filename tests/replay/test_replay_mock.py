@@ -153,14 +153,14 @@ async def test_ctrl_c_cancels_the_running_cell_goal_and_the_robots_stop(
 ) -> None:
     """Ctrl-C is what ``asyncio.run`` does with it: a cancel of the command's task, here while the
     replay's cell goal moves alice and bob."""
-    from urdaemon import cli
+    from urdaemon.cli.parser import build_parser
     from urdaemon.replay import command as replay_command
     from urdaemon.replay.source import read_cell
 
     config, recording, _original = recorded
     async with running_daemon(TWO_MOCKS) as (daemon, client):
         results = client.subscribe(f"{CELL}/goal/*/result")
-        args = cli._parser().parse_args(
+        args = build_parser().parse_args(
             ["replay", str(recording), "--config", str(config), "--connect", client.endpoint, "--rate", "0.5"]
         )
         assert replay_command._bad_arguments(args) is None

@@ -9,20 +9,18 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
-import signal
 import sys
 from typing import Any
 
 from urdaemon import cli_args
 from urdaemon.errors import ConfigError, UrDaemonError
+from urdaemon.stop_signals import stopped_by_signals
 
 __all__ = ["DEFAULT_PORT", "NEEDS_EXTRA", "add_parsers", "foxglove_main"]
 
 NEEDS_EXTRA = "urdaemon foxglove needs the foxglove extra: pip install 'urdaemon[foxglove]'"
 DEFAULT_PORT = 8765
 """Foxglove's usual WebSocket port."""
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def add_parsers(sub: Any) -> None:
@@ -69,13 +67,7 @@ async def _serve(args: argparse.Namespace) -> int:
     from urdaemon.foxglove_bridge.bridge import running_bridge
 
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    handled = []
-    for sig in STOP_SIGNALS:
-        with contextlib.suppress(ValueError, RuntimeError):  # only the main thread may
-            loop.add_signal_handler(sig, stop.set)
-            handled.append(sig)
-    try:
+    with stopped_by_signals(stop):  # SIGINT, SIGTERM
         try:
             bridge_cm = running_bridge(
                 args.connect or DEFAULT_ENDPOINT,
@@ -91,7 +83,4 @@ async def _serve(args: argparse.Namespace) -> int:
         except RuntimeError as err:  # foxglove-sdk could not start its server (the port taken, ...)
             print(f"error: the Foxglove server did not start: {err}", file=sys.stderr)
             return 1
-    finally:
-        for sig in handled:
-            loop.remove_signal_handler(sig)
     return 0

@@ -1,6 +1,6 @@
 """``urdaemon list``, ``urdaemon info ROBOT`` and ``urdaemon hz KEY`` (docs/introspection.md).
 
-Registered through cli.py's ``TOOL_MODULES``; nothing heavy is imported until a command runs.
+Registered through cli/parser.py's ``TOOL_MODULES``; nothing heavy is imported until a command runs.
 """
 
 from __future__ import annotations

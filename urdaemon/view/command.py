@@ -10,15 +10,14 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import signal
 import sys
 
 from urdaemon.errors import ConfigError, UrDaemonError
+from urdaemon.stop_signals import stopped_by_signals
 
 __all__ = ["NEEDS_EXTRA", "view_main"]
 
 NEEDS_EXTRA = "urdaemon view needs the view extra: pip install 'urdaemon[view]'"
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def view_main(args: argparse.Namespace) -> int:
@@ -50,13 +49,7 @@ async def _view(args: argparse.Namespace) -> int:
     from urdaemon.view.mockcell import mock_cell
 
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    handled = []
-    for sig in STOP_SIGNALS:
-        with contextlib.suppress(ValueError, RuntimeError):  # only the main thread may
-            loop.add_signal_handler(sig, stop.set)
-            handled.append(sig)
-    try:
+    with stopped_by_signals(stop):  # SIGINT, SIGTERM
         async with contextlib.AsyncExitStack() as stack:
             endpoint = args.connect or DEFAULT_ENDPOINT
             if args.config is not None:
@@ -74,7 +67,4 @@ async def _view(args: argparse.Namespace) -> int:
             print(f"urdaemon view of cell {view.cell!r}: {view.url}", flush=True)
             await stop.wait()
             print("urdaemon view: stopping", file=sys.stderr)
-    finally:
-        for sig in handled:
-            loop.remove_signal_handler(sig)
     return 0

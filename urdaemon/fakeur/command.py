@@ -16,6 +16,7 @@ from urdaemon.fakeur.contact import Wall, surroundings_of
 from urdaemon.fakeur.controller import FakeController, SharedClock
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
 from urdaemon.scheduling import startup_objects_frozen
+from urdaemon.stop_signals import end_stop_signals, stop_on_signals, stop_signal_handlers
 
 __all__ = ["build_fakes", "parse_version", "parse_wall", "run_fakes"]
 
@@ -147,10 +148,8 @@ def run_fakes(args: argparse.Namespace) -> int:
     share_clock(fakes, args.phases)
 
     async def serve() -> None:
-        from urdaemon.cli import stop_on_signals  # SIGINT, SIGTERM, SIGHUP; a repeat is only logged
-
         stop = asyncio.Event()
-        stop_on_signals(stop, f"{len(fakes)} fake robot(s)")
+        stop_on_signals(stop, f"{len(fakes)} fake robot(s)")  # SIGINT, SIGTERM, SIGHUP; repeats logged
         if args.late_start > 0:
             try:
                 await asyncio.wait_for(stop.wait(), args.late_start)
@@ -168,8 +167,6 @@ def run_fakes(args: argparse.Namespace) -> int:
         finally:
             for fake in started:
                 await fake.close()
-
-    from urdaemon.cli import end_stop_signals, stop_signal_handlers
 
     # only ``urdaemon fake-robot`` itself owns its process; called otherwise, it gives the handlers back
     previous = None if getattr(args, "owns_process", False) else stop_signal_handlers()
