@@ -22,7 +22,7 @@ from typing import Any
 from urdaemon.client import QUERY_TIMEOUT_S, RESULT_POLL_S, Client, Received, Subscription
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish import signing
-from urdaemon.publish.codec import client_text
+from urdaemon.publish.envelope import client_text
 from urdaemon.publish.keys import CellKeys
 
 __all__ = ["CellGoalHandle", "send_cell_trajectory"]

@@ -56,7 +56,7 @@ from urdaemon.model import (
     ToolVoltageRequest,
 )
 from urdaemon.publish import codec, services, signing
-from urdaemon.publish.codec import SCHEMA_VERSION, client_text
+from urdaemon.publish.envelope import SCHEMA_VERSION, client_text
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
 from urdaemon.runtime.lease import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint

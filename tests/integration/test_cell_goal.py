@@ -24,7 +24,7 @@ from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected, UrDaemonError
-from urdaemon.publish import codec, signing
+from urdaemon.publish import codec, envelope, signing
 from urdaemon.publish.keys import CellKeys
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.goals import put_signed
@@ -267,7 +267,7 @@ async def test_a_session_without_leases_never_makes_the_cell_planner_busy(
                 b'{"bob": "' + b"0" * 32 + b'"}': "bob: lease: robot 'bob' needs its command lease",
                 b'{"carol": "' + b"0" * 32 + b'"}': "carol: no robot 'carol' in cell 'testcell'",
                 b'["alice"]': "lease tokens: the attachment must be a JSON object",
-                b"x" * (codec.SMALL_MESSAGE_BYTES + 1): "lease tokens: attachment of 16385 bytes exceeds",
+                b"x" * (envelope.SMALL_MESSAGE_BYTES + 1): "lease tokens: attachment of 16385 bytes exceeds",
             }
             key = CellKeys(CELL).goal_trajectory
             for attachment, reason in [item for item in wrong.items() for _ in range(3)]:  # back to back

@@ -22,7 +22,7 @@ from tests.helpers import client_lease
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
-from urdaemon.publish import codec
+from urdaemon.publish import codec, envelope
 from urdaemon.publish.node import MAX_IN_FLIGHT
 
 pytestmark = pytest.mark.timeout(120)
@@ -89,7 +89,7 @@ async def test_a_burst_of_queries_reaches_the_handler_at_most_cap_at_a_time(
     seen: list[bytes] = []
     _counting(monkeypatch, "decode_move_goal", seen)
     garbage = b"[" + b"1," * 7_500 + b"1]"
-    assert len(garbage) < codec.SMALL_MESSAGE_BYTES
+    assert len(garbage) < envelope.SMALL_MESSAGE_BYTES
     replies = _Replies()
     key = "testcell/alice/goal/move"
     lease = await client_lease(client, "alice")  # the burst is the holder's own

@@ -14,16 +14,10 @@ from hypothesis import strategies as st
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, TrajectoryPoint
 from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
-from urdaemon.publish import codec
+from urdaemon.publish import codec, envelope
 from urdaemon.publish.codec import (
-    MAX_MESSAGE_BYTES,
-    MAX_TRAJECTORY_POINTS,
-    SMALL_MESSAGE_BYTES,
-    JointStateEncoder,
     MoveGoalMessage,
     StreamMessage,
-    ToleranceMessage,
-    TrajectoryGoalMessage,
     decode_cancel,
     decode_move_goal,
     decode_set_io,
@@ -31,12 +25,19 @@ from urdaemon.publish.codec import (
     decode_speed_slider,
     decode_stream_position,
     decode_stream_velocity,
-    decode_trajectory_goal,
+)
+from urdaemon.publish.envelope import (
+    MAX_MESSAGE_BYTES,
+    SMALL_MESSAGE_BYTES,
     encode,
     encode_feedback,
     encode_result,
     state_time,
 )
+from urdaemon.publish.fields import ToleranceMessage
+from urdaemon.publish.state_encoder import JointStateEncoder
+from urdaemon.publish.trajectory_goal import MAX_TRAJECTORY_POINTS, TrajectoryGoalMessage
+from urdaemon.publish.trajectory_json import decode_trajectory_goal
 
 Decoder = Callable[[bytes | None], object]
 
@@ -163,8 +164,8 @@ def test_message_of_exactly_the_limit_is_accepted() -> None:
 
 def test_bytearray_and_memoryview_payloads() -> None:
     raw = b'{"fraction": 0.75}'
-    assert codec.decode_message(bytearray(raw), "x") == {"fraction": 0.75}
-    assert codec.decode_message(memoryview(raw), "x") == {"fraction": 0.75}
+    assert envelope.decode_message(bytearray(raw), "x") == {"fraction": 0.75}
+    assert envelope.decode_message(memoryview(raw), "x") == {"fraction": 0.75}
 
 
 def test_message_error_is_a_value_error() -> None:

@@ -15,18 +15,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urdaemon.errors import MessageError
-from urdaemon.publish import codec, services
+from urdaemon.publish import codec, envelope, services
 from urdaemon.publish.codec import (
     LINEAR_MESSAGE_BYTES,
     MAX_LINEAR_POSES,
     LinearGoalMessage,
-    ToleranceMessage,
     TwistMessage,
     decode_linear_goal,
     decode_move_goal,
     decode_set_tcp,
     decode_twist,
 )
+from urdaemon.publish.fields import ToleranceMessage
 
 POSE = [0.4, -0.1, 0.3, 3.1, 0.0, 0.0]
 
@@ -120,7 +120,7 @@ def test_the_largest_linear_goal_fits() -> None:
 def test_a_linear_goal_is_at_most_the_nodes_ordinary_message_size() -> None:
     """Its JSON is parsed in one call, like every other non-trajectory message (was 256 KiB: 5-9 ms
     of loop in one call)."""
-    assert LINEAR_MESSAGE_BYTES == codec.SMALL_MESSAGE_BYTES == 16 * 1024
+    assert LINEAR_MESSAGE_BYTES == envelope.SMALL_MESSAGE_BYTES == 16 * 1024
     assert MAX_LINEAR_POSES == 100
 
 
@@ -136,7 +136,7 @@ def test_a_too_large_linear_goal_is_refused_before_it_is_parsed(monkeypatch: pyt
         return real(data)
 
     monkeypatch.setattr(json, "loads", counted)  # the module codec parses with
-    body = b'{"poses": [' + b"[]," * (codec.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
+    body = b'{"poses": [' + b"[]," * (envelope.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
     reason = refused(codec.LinearGoalDecoder, body)
     assert reason == f"linear goal: message of {len(body)} bytes exceeds the limit of 16384 bytes"
     assert calls == 0
@@ -371,7 +371,7 @@ def test_an_oversized_linear_goal_is_refused_before_decoding() -> None:
 
 
 def test_an_oversized_twist_is_refused_before_decoding() -> None:
-    payload = b'{"linear": [' + b" " * codec.SMALL_MESSAGE_BYTES + b"]}"
+    payload = b'{"linear": [' + b" " * envelope.SMALL_MESSAGE_BYTES + b"]}"
     assert "exceeds the limit" in refused(decode_twist, payload)
 
 

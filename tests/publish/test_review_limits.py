@@ -10,11 +10,11 @@ from typing import Any
 import pytest
 
 from urdaemon.errors import MessageError
-from urdaemon.publish import codec
+from urdaemon.publish import codec, envelope, fields
 
 LONGEST_FLOAT = -1.2345678901234567e-100  # 24 characters of JSON
-NAMES = [f"j{i:02d}".ljust(codec.MAX_NAME_CHARS, "x") for i in range(codec.MAX_JOINTS)]
-VALUES = [LONGEST_FLOAT] * codec.MAX_JOINTS
+NAMES = [f"j{i:02d}".ljust(fields.MAX_NAME_CHARS, "x") for i in range(fields.MAX_JOINTS)]
+VALUES = [LONGEST_FLOAT] * fields.MAX_JOINTS
 LARGEST_MOVE = {
     "v": 1,
     "joint_names": NAMES,
@@ -39,7 +39,7 @@ def test_the_largest_valid_messages_fit_with_room(
     longest numbers), even indented, decode within the limit with at least 1.5x room."""
     for payload in (json.dumps(message).encode(), json.dumps(message, indent=2).encode()):
         decode(payload)
-        assert len(payload) * 1.5 < codec.SMALL_MESSAGE_BYTES, len(payload)
+        assert len(payload) * 1.5 < envelope.SMALL_MESSAGE_BYTES, len(payload)
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, services
+from urdaemon.publish import codec, envelope, services
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching
 from urdaemon.robot import RobotRuntime
@@ -187,7 +187,7 @@ async def test_each_named_client_call_sends_what_its_service_decodes(
     assert key == keys.service(name)
     assert timeout == entry.timeout
     assert client.attachments == [TOKEN if entry.commanding else None]
-    assert entry.decode(codec.encode(body)) == expected
+    assert entry.decode(envelope.encode(body)) == expected
 
 
 def test_every_named_service_has_a_client_call() -> None:

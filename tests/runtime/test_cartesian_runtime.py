@@ -21,7 +21,7 @@ from urdaemon.daemon import describe_cell, make_backend, twist_limits
 from urdaemon.description.arm import arm_kinematics
 from urdaemon.errors import GoalRejected
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
-from urdaemon.publish import codec
+from urdaemon.publish import codec, envelope
 from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
@@ -91,7 +91,7 @@ def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, M
 
 
 def _linear(pose: list[float], **fields: float) -> codec.LinearGoalMessage:
-    return codec.decode_linear_goal(codec.encode({"poses": [pose], **fields}))
+    return codec.decode_linear_goal(envelope.encode({"poses": [pose], **fields}))
 
 
 async def test_a_linear_goal_while_the_robot_still_decelerates_is_refused_as_moving() -> None:
@@ -154,7 +154,7 @@ async def test_a_plan_interrupted_between_slices_stops_at_once(monkeypatch: pyte
 
 
 def _move(pose: Sequence[float], **fields: object) -> codec.MoveGoalMessage:
-    return codec.decode_move_goal(codec.encode({"pose": list(pose), **fields}))
+    return codec.decode_move_goal(envelope.encode({"pose": list(pose), **fields}))
 
 
 class _Slices:

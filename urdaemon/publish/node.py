@@ -36,7 +36,7 @@ import zenoh
 
 from urdaemon.cell.config import ZenohOptions
 from urdaemon.errors import ConfigError, UrDaemonError
-from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, client_text, encode
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher
 from urdaemon.transport_security import configure_daemon
 

@@ -35,8 +35,9 @@ from urdaemon.control import GoalFeedback, GoalResult, MotionController, Toleran
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec, signing
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
+from urdaemon.publish import codec, envelope, signing
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
+from urdaemon.publish.fields import ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Guard, ZenohNode
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
@@ -61,7 +62,7 @@ ResultListener = Callable[[GoalResult, bytes], None]
 
 def _stamp(backend: Backend) -> dict[str, Any]:
     """The time fields of a goal message: the newest state's (the cycle's, in a cycle)."""
-    return codec.state_time(backend.state, time.time_ns())
+    return envelope.state_time(backend.state, time.time_ns())
 
 
 def put_signed(node: ZenohNode, key: str, payload: bytes, attachment: bytes) -> None:
@@ -138,7 +139,7 @@ class Goals:
             if isinstance(event, GoalResult):
                 self.passthrough.ended_here(event.goal_id)
             if isinstance(event, GoalFeedback):
-                message = codec.encode_feedback(self._robot.name, event, _stamp(self._backend))
+                message = envelope.encode_feedback(self._robot.name, event, _stamp(self._backend))
                 key = self._keys_of.get(event.goal_id)
                 if key is not None:  # at the feedback rate, never once per cycle
                     on = self._keys.goal_feedback(event.goal_id)
@@ -147,7 +148,7 @@ class Goals:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
-        message = codec.encode_result(self._robot.name, result, _stamp(self._backend))
+        message = envelope.encode_result(self._robot.name, result, _stamp(self._backend))
         key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
         on = self._keys.goal_result(result.goal_id)  # signed with the key it goes out on
         signature = signing.sign(key, on, message)

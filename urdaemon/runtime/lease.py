@@ -25,7 +25,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from urdaemon.errors import MessageError
-from urdaemon.publish.codec import client_text, decode_message
+from urdaemon.publish.envelope import client_text, decode_message
 
 __all__ = [
     "FINGERPRINT_CHARS",
