@@ -34,7 +34,12 @@ PURE = {
     # the messages: the envelope, the fields' checks, the decoders and the state encoder (publish/envelope.py)
     "publish/envelope.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/fields.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
-    "publish/codec.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/service_requests.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/stream_commands.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/goal_cancel.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/move_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/linear_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/cell_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/trajectory_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/state_encoder.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/keys.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},

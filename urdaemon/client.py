@@ -55,7 +55,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, services, signing
+from urdaemon.publish import service_requests, services, signing
 from urdaemon.publish.envelope import SCHEMA_VERSION, client_text
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.node import zenoh_config
@@ -1135,7 +1135,7 @@ class RobotClient(_CartesianCommands):
         model.py; None for a service without arguments), waiting the table's time unless ``timeout``."""
         entry = services.spec(name)
         wait = entry.timeout if timeout is None else timeout
-        body = codec.request_body(request)
+        body = service_requests.request_body(request)
         if _commanding(name):
             return await self._command(self.keys.service(name), body, "ok", wait)
         return await self.client.request(self.keys.service(name), body, timeout=wait)

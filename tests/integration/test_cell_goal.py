@@ -24,7 +24,7 @@ from urdaemon.cell_client import CellGoalHandle, send_cell_trajectory
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected, UrDaemonError
-from urdaemon.publish import codec, envelope, signing
+from urdaemon.publish import cell_goal, envelope, signing
 from urdaemon.publish.keys import CellKeys
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.goals import put_signed
@@ -361,7 +361,7 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
     alice = swing_trajectory(2500, HOME)
     bob = {"points": _points(BOB, 1.0), "joint_names": ["a}]", 'b\\"{['] + [f"j{i}" for i in range(4)]}
     text = json.dumps({"robots": {"alice": alice, "bob": bob}, "on_abort": "continue"}, indent=1).encode()
-    decoder = codec.CellGoalDecoder(text)
+    decoder = cell_goal.CellGoalDecoder(text)
     steps = 1
     while decoder.advance():
         steps += 1
@@ -372,7 +372,7 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
         "bob": bob,
     }
     brackets = 8 * 2500  # each point: an object and three lists
-    assert steps >= brackets // codec._SCAN_TOKENS, steps
+    assert steps >= brackets // cell_goal._SCAN_TOKENS, steps
 
 
 @pytest.mark.parametrize("bad_key", ["", "AB" * 32, "0" * 62, None])

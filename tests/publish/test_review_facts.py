@@ -7,7 +7,7 @@ import inspect
 from types import ModuleType
 
 from urdaemon.control import intake, trajectory
-from urdaemon.publish import codec, fields
+from urdaemon.publish import fields, move_goal
 
 LIMITS = {"MAX_GOAL_TIME_S": trajectory.MAX_GOAL_TIME_S, "MAX_JOINT_TOLERANCE": intake.MAX_JOINT_TOLERANCE}
 
@@ -27,7 +27,7 @@ def test_codec_takes_the_goal_time_and_tolerance_limits_from_control() -> None:
     """Reproduction: ``MAX_GOAL_TIME_S`` and ``MAX_JOINT_TOLERANCE`` were assigned in codec.py as
     well as in control/ (two definitions that could drift apart); the decoders must import control's
     (the tolerances' checks in fields.py, a move's duration in its decoder)."""
-    for module, names in ((fields, LIMITS), (codec, ("MAX_GOAL_TIME_S",))):
+    for module, names in ((fields, LIMITS), (move_goal, ("MAX_GOAL_TIME_S",))):
         assigned = _assigned(module)
         for name in names:
             assert name not in assigned, (module.__name__, name)

@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from urdaemon.errors import MessageError
-from urdaemon.publish import codec, envelope, fields
+from urdaemon.publish import envelope, fields, move_goal, service_requests, stream_commands
 
 LONGEST_FLOAT = -1.2345678901234567e-100  # 24 characters of JSON
 NAMES = [f"j{i:02d}".ljust(fields.MAX_NAME_CHARS, "x") for i in range(fields.MAX_JOINTS)]
@@ -30,7 +30,7 @@ LARGEST_STREAM = {"v": 1, "joint_names": NAMES, "positions": VALUES, "velocities
 
 @pytest.mark.parametrize(
     ("decode", "message"),
-    [(codec.decode_move_goal, LARGEST_MOVE), (codec.decode_stream_position, LARGEST_STREAM)],
+    [(move_goal.decode_move_goal, LARGEST_MOVE), (stream_commands.decode_stream_position, LARGEST_STREAM)],
 )
 def test_the_largest_valid_messages_fit_with_room(
     decode: Callable[[bytes], Any], message: dict[str, Any]
@@ -43,7 +43,8 @@ def test_the_largest_valid_messages_fit_with_room(
 
 
 @pytest.mark.parametrize(
-    "decode", [codec.decode_move_goal, codec.decode_stream_position, codec.decode_set_payload]
+    "decode",
+    [move_goal.decode_move_goal, stream_commands.decode_stream_position, service_requests.decode_set_payload],
 )
 def test_a_message_twice_the_largest_valid_one_is_refused_before_decoding(
     decode: Callable[[bytes], Any],

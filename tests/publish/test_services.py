@@ -31,7 +31,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, envelope, services
+from urdaemon.publish import envelope, service_requests, services, stream_commands
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import Matching
 from urdaemon.robot import RobotRuntime
@@ -148,7 +148,7 @@ def test_the_freedrive_command_goes_where_the_runtime_listens() -> None:
     assert client.session.put_attachments == [TOKEN]
     assert key == runtime.keys.command_freedrive == "testcell/alice/command/freedrive"
     assert key in node.subscribers
-    assert codec.decode_freedrive(payload) is True
+    assert stream_commands.decode_freedrive(payload) is True
 
 
 FORCE = ((0.0,) * 6, (0, 0, 1, 0, 0, 0), (0.0, 0.0, -5.0, 0.0, 0.0, 0.0), (0.1,) * 6)
@@ -223,11 +223,11 @@ def test_every_service_names_a_backend_method_it_needs() -> None:
 
 
 def test_a_request_is_sent_with_the_message_field_names() -> None:
-    body = codec.request_body(ForceModeRequest(*FORCE))
+    body = service_requests.request_body(ForceModeRequest(*FORCE))
     assert body["type"] == 2
     assert "force_type" not in body
     assert body["selection"] == [0, 0, 1, 0, 0, 0]
-    assert codec.request_body(None) == {}
+    assert service_requests.request_body(None) == {}
 
 
 def test_docs_list_the_services_as_the_table_declares_them() -> None:

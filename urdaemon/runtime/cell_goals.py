@@ -41,8 +41,8 @@ from typing import TYPE_CHECKING, Any
 
 from urdaemon.control import GoalResult, GoalStatus
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec, envelope, signing
-from urdaemon.publish.codec import CellGoalDecoder, CellGoalMessage
+from urdaemon.publish import cell_goal, envelope, goal_cancel, signing
+from urdaemon.publish.cell_goal import CellGoalDecoder, CellGoalMessage
 from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
@@ -132,7 +132,7 @@ class CellGoals:
         try:
             if self._closing:
                 raise GoalRejected(SHUTTING_DOWN)
-            tokens = codec.decode_lease_tokens(_attachment(query))
+            tokens = cell_goal.decode_lease_tokens(_attachment(query))
             self._check_tokens(tokens)  # before it may keep the planner busy (review 16, M3)
             if self._planning:
                 raise GoalRejected("busy: still planning another cell goal")
@@ -323,7 +323,7 @@ class CellGoals:
     def on_cancel(self, query: Any) -> None:
         """Cancel a cell goal: every part still running ends ``canceled``."""
         try:
-            goal_id = codec.decode_cell_cancel(payload(query))
+            goal_id = goal_cancel.decode_cell_cancel(payload(query))
             run = self._running.get(goal_id)
             if run is None:
                 reply(
@@ -332,7 +332,7 @@ class CellGoals:
                 )
                 return
             running = [name for name in run.parts if name not in run.results]
-            self._check_leases(running, codec.decode_lease_tokens(_attachment(query)))
+            self._check_leases(running, cell_goal.decode_lease_tokens(_attachment(query)))
         except (MessageError, GoalRejected) as err:
             reply(query, {"canceled": False, "reason": _reason(err)})
             return
