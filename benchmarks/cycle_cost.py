@@ -19,7 +19,7 @@ from urdaemon.daemon import describe_cell
 from urdaemon.description import DhKinematics, robot_dh
 from urdaemon.model import Lifecycle
 from urdaemon.paths import resources_dir
-from urdaemon.publish.codec import JointStateEncoder
+from urdaemon.publish.state_encoder import JointStateEncoder
 
 CYCLES = 5000
 

@@ -37,7 +37,7 @@ from urdaemon.cell import parse_cell
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.protocols import trajectory_point
-from urdaemon.publish.codec import SMALL_MESSAGE_BYTES
+from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]

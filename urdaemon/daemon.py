@@ -32,7 +32,7 @@ from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.model import JointLimits
 from urdaemon.protocols.kinematics_hash import kinematics_hash
-from urdaemon.publish import codec
+from urdaemon.publish import envelope
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap
@@ -309,19 +309,19 @@ class Daemon:
             service = CellKeys.service_name(rest)
             if runtime is None:
                 reason = (
-                    f"no robot {codec.client_text(name)!r} in cell {self.cell.cell!r}; "
+                    f"no robot {envelope.client_text(name)!r} in cell {self.cell.cell!r}; "
                     f"its robots: {', '.join(sorted(robots))}"
                 )
             elif service is not None and service not in runtime.service_names:
                 reason = (
-                    f"robot {name!r} has no service {codec.client_text(service)!r}; "
+                    f"robot {name!r} has no service {envelope.client_text(service)!r}; "
                     f"its services: {', '.join(sorted(runtime.service_names))}"
                 )
             else:
                 return
-            query.reply(query.key_expr, codec.encode({"ok": False, "accepted": False, "reason": reason}))
+            query.reply(query.key_expr, envelope.encode({"ok": False, "accepted": False, "reason": reason}))
         except Exception as err:  # the querier may have gone; this must never take the cell down
-            log.debug("answering %s failed: %s", codec.client_text(str(query.key_expr), 80), err)
+            log.debug("answering %s failed: %s", envelope.client_text(str(query.key_expr), 80), err)
         finally:
             with contextlib.suppress(Exception):
                 query.drop()
@@ -340,9 +340,9 @@ class Daemon:
                 for runtime in self.runtimes:
                     state = runtime.state
                     positions.update(zip(state.joint_names, state.positions, strict=True))
-                    times[runtime.robot.name] = codec.state_time(state, time.time_ns())
+                    times[runtime.robot.name] = envelope.state_time(state, time.time_ns())
                 links = {name: list(pose) for name, pose in tree.link_poses(positions)}
-                publisher.put(codec.encode(tf_message(links, times)))
+                publisher.put(envelope.encode(tf_message(links, times)))
             except Exception as err:  # tf must never take the robots down with it; say so once per cause
                 text = f"{type(err).__name__}: {err}"
                 if text != last_error:
@@ -352,7 +352,7 @@ class Daemon:
 
 def tf_message(links: dict[str, list[float]], times: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The ``tf`` message: the world poses of ``links``, computed from each robot's newest joint state,
-    whose time fields (``codec.state_time``) are ``times``, by robot. Its ``host_time_ns`` is the oldest
+    whose time fields (``envelope.state_time``) are ``times``, by robot. Its ``host_time_ns`` is the oldest
     of them (every link is at least that new); it has no ``controller_time`` of its own, as each robot
     has its own clock: ``robot_times`` gives each robot's."""
     oldest = min((t["host_time_ns"] for t in times.values()), default=None)

@@ -23,7 +23,7 @@ from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.kinematics import DhKinematics, ToolOffset, quaternion_of
 from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
-from urdaemon.publish import codec
+from urdaemon.publish import state_encoder
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
@@ -147,7 +147,7 @@ class RobotRuntime:
         """The services this robot answers (once declared)."""
         self.tcp_poses = TcpPoses(robot, kinematics, arm)
         self._decimation = publish.joint_states_decimation
-        self._encoder = codec.JointStateEncoder(robot.name, backend.state.joint_names)
+        self._encoder = state_encoder.JointStateEncoder(robot.name, backend.state.joint_names)
         self._pub_joints: Any = None
         self._pub_pose: Any = None
         self._joints_wanted = Matching(False)

@@ -25,7 +25,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple, TypeGuard
 
-from urdaemon.publish.codec import rotation_vector_of_quaternion
+from urdaemon.publish.state_encoder import rotation_vector_of_quaternion
 
 __all__ = [
     "ANGULAR_PER_LINEAR",

@@ -23,7 +23,7 @@ from urdaemon.cell import parse_cell
 from urdaemon.client import CellGoalHandle, Client, send_cell_trajectory
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected, UrDaemonError
-from urdaemon.publish import codec, signing
+from urdaemon.publish import cell_goal, envelope, signing
 from urdaemon.publish.keys import CellKeys
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.goals import put_signed
@@ -266,7 +266,7 @@ async def test_a_session_without_leases_never_makes_the_cell_planner_busy(
                 b'{"bob": "' + b"0" * 32 + b'"}': "bob: lease: robot 'bob' needs its command lease",
                 b'{"carol": "' + b"0" * 32 + b'"}': "carol: no robot 'carol' in cell 'testcell'",
                 b'["alice"]': "lease tokens: the attachment must be a JSON object",
-                b"x" * (codec.SMALL_MESSAGE_BYTES + 1): "lease tokens: attachment of 16385 bytes exceeds",
+                b"x" * (envelope.SMALL_MESSAGE_BYTES + 1): "lease tokens: attachment of 16385 bytes exceeds",
             }
             key = CellKeys(CELL).goal_trajectory
             for attachment, reason in [item for item in wrong.items() for _ in range(3)]:  # back to back
@@ -360,7 +360,7 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
     alice = swing_trajectory(2500, HOME)
     bob = {"points": _points(BOB, 1.0), "joint_names": ["a}]", 'b\\"{['] + [f"j{i}" for i in range(4)]}
     text = json.dumps({"robots": {"alice": alice, "bob": bob}, "on_abort": "continue"}, indent=1).encode()
-    decoder = codec.CellGoalDecoder(text)
+    decoder = cell_goal.CellGoalDecoder(text)
     steps = 1
     while decoder.advance():
         steps += 1
@@ -371,7 +371,7 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
         "bob": bob,
     }
     brackets = 8 * 2500  # each point: an object and three lists
-    assert steps >= brackets // codec._SCAN_TOKENS, steps
+    assert steps >= brackets // cell_goal._SCAN_TOKENS, steps
 
 
 @pytest.mark.parametrize("bad_key", ["", "AB" * 32, "0" * 62, None])

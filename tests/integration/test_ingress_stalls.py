@@ -11,7 +11,8 @@ from types import ModuleType
 
 import pytest
 
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES, decode_trajectory_goal
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES
+from urdaemon.publish.trajectory_json import decode_trajectory_goal
 
 pytestmark = pytest.mark.timeout(120)
 

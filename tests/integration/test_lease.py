@@ -371,18 +371,18 @@ async def test_a_flood_of_puts_without_the_token_never_reaches_the_loop(
     """200 joint_position commands from a session without the lease, then one from the holder: none
     of the 200 is decoded or takes the holder's place waiting for the loop (refused on Zenoh's thread,
     reported in bounded ``command_rejected`` events that count them all); the holder's is acted on."""
-    from urdaemon.publish import codec
+    from urdaemon.publish import stream_commands
 
     seen: list[bytes] = []
     decoded = asyncio.Event()
-    original = codec.decode_stream_position
+    original = stream_commands.decode_stream_position
 
     def counted(payload: bytes | None) -> Any:
         seen.append(b"" if payload is None else bytes(payload))
         decoded.set()
         return original(payload)
 
-    monkeypatch.setattr(codec, "decode_stream_position", counted)
+    monkeypatch.setattr(stream_commands, "decode_stream_position", counted)
     async with served() as (daemon, endpoint):
         holder, stranger = open_session(endpoint), open_session(endpoint)
         try:

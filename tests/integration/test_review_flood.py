@@ -13,6 +13,7 @@ import json
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
+from types import ModuleType
 from typing import Any
 
 import pytest
@@ -22,7 +23,7 @@ from tests.helpers import client_lease
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
-from urdaemon.publish import codec
+from urdaemon.publish import envelope, move_goal, stream_commands
 from urdaemon.publish.admission import MAX_IN_FLIGHT
 
 pytestmark = pytest.mark.timeout(120)
@@ -39,15 +40,15 @@ async def cell() -> AsyncIterator[tuple[Daemon, Client]]:
         yield pair
 
 
-def _counting(monkeypatch: pytest.MonkeyPatch, name: str, seen: list[bytes]) -> None:
-    """Record every payload the robots' handlers pass to ``codec.<name>`` (then decode as before)."""
-    original: Callable[[bytes | None], Any] = getattr(codec, name)
+def _counting(monkeypatch: pytest.MonkeyPatch, decoders: ModuleType, name: str, seen: list[bytes]) -> None:
+    """Record every payload the robots' handlers pass to ``<decoders>.<name>`` (then decode as before)."""
+    original: Callable[[bytes | None], Any] = getattr(decoders, name)
 
     def counted(payload: bytes | None) -> Any:
         seen.append(b"" if payload is None else bytes(payload))
         return original(payload)
 
-    monkeypatch.setattr(codec, name, counted)
+    monkeypatch.setattr(decoders, name, counted)
 
 
 class _Replies:
@@ -87,9 +88,9 @@ async def test_a_burst_of_queries_reaches_the_handler_at_most_cap_at_a_time(
     bob = await client.robot("bob")
     goal_b = await bob.move(TARGET, duration=1.0)
     seen: list[bytes] = []
-    _counting(monkeypatch, "decode_move_goal", seen)
+    _counting(monkeypatch, move_goal, "decode_move_goal", seen)
     garbage = b"[" + b"1," * 7_500 + b"1]"
-    assert len(garbage) < codec.SMALL_MESSAGE_BYTES
+    assert len(garbage) < envelope.SMALL_MESSAGE_BYTES
     replies = _Replies()
     key = "testcell/alice/goal/move"
     lease = await client_lease(client, "alice")  # the burst is the holder's own
@@ -149,7 +150,7 @@ async def test_a_burst_of_stream_commands_is_acted_on_only_by_its_newest(
     bob = await client.robot("bob")
     goal_b = await bob.move(TARGET, duration=1.0)
     seen: list[bytes] = []
-    _counting(monkeypatch, "decode_stream_position", seen)
+    _counting(monkeypatch, stream_commands, "decode_stream_position", seen)
     key = "testcell/alice/command/joint_position"
     events = client.subscribe("testcell/alice/events")
     assert daemon.node is not None

@@ -14,29 +14,23 @@ from hypothesis import strategies as st
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, TrajectoryPoint
 from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
-from urdaemon.publish import codec
-from urdaemon.publish.codec import (
+from urdaemon.publish import envelope, service_requests
+from urdaemon.publish.envelope import (
     MAX_MESSAGE_BYTES,
-    MAX_TRAJECTORY_POINTS,
     SMALL_MESSAGE_BYTES,
-    JointStateEncoder,
-    MoveGoalMessage,
-    StreamMessage,
-    ToleranceMessage,
-    TrajectoryGoalMessage,
-    decode_cancel,
-    decode_move_goal,
-    decode_set_io,
-    decode_set_payload,
-    decode_speed_slider,
-    decode_stream_position,
-    decode_stream_velocity,
-    decode_trajectory_goal,
     encode,
     encode_feedback,
     encode_result,
     state_time,
 )
+from urdaemon.publish.fields import ToleranceMessage
+from urdaemon.publish.goal_cancel import decode_cancel
+from urdaemon.publish.move_goal import MoveGoalMessage, decode_move_goal
+from urdaemon.publish.service_requests import decode_set_io, decode_set_payload, decode_speed_slider
+from urdaemon.publish.state_encoder import JointStateEncoder
+from urdaemon.publish.stream_commands import StreamMessage, decode_stream_position, decode_stream_velocity
+from urdaemon.publish.trajectory_goal import MAX_TRAJECTORY_POINTS, TrajectoryGoalMessage
+from urdaemon.publish.trajectory_json import decode_trajectory_goal
 
 Decoder = Callable[[bytes | None], object]
 
@@ -163,8 +157,8 @@ def test_message_of_exactly_the_limit_is_accepted() -> None:
 
 def test_bytearray_and_memoryview_payloads() -> None:
     raw = b'{"fraction": 0.75}'
-    assert codec.decode_message(bytearray(raw), "x") == {"fraction": 0.75}
-    assert codec.decode_message(memoryview(raw), "x") == {"fraction": 0.75}
+    assert envelope.decode_message(bytearray(raw), "x") == {"fraction": 0.75}
+    assert envelope.decode_message(memoryview(raw), "x") == {"fraction": 0.75}
 
 
 def test_message_error_is_a_value_error() -> None:
@@ -817,11 +811,11 @@ def test_joint_state_encoder_finite_values_whose_sum_overflows() -> None:
 
 
 def test_cycle_stats_request() -> None:
-    assert codec.decode_cycle_stats(None) is False
-    assert codec.decode_cycle_stats(b"") is False
-    assert codec.decode_cycle_stats(b'{"reset": true}') is True
-    assert codec.decode_cycle_stats(b"{}") is False
+    assert service_requests.decode_cycle_stats(None) is False
+    assert service_requests.decode_cycle_stats(b"") is False
+    assert service_requests.decode_cycle_stats(b'{"reset": true}') is True
+    assert service_requests.decode_cycle_stats(b"{}") is False
     with pytest.raises(MessageError, match="unknown field"):
-        codec.decode_cycle_stats(b'{"reste": true}')
+        service_requests.decode_cycle_stats(b'{"reste": true}')
     with pytest.raises(MessageError, match="expected a JSON object"):
-        codec.decode_cycle_stats(b"[1]")
+        service_requests.decode_cycle_stats(b"[1]")

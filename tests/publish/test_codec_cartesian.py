@@ -15,18 +15,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urdaemon.errors import MessageError
-from urdaemon.publish import codec, services
-from urdaemon.publish.codec import (
+from urdaemon.publish import envelope, linear_goal, services
+from urdaemon.publish.fields import ToleranceMessage
+from urdaemon.publish.linear_goal import (
     LINEAR_MESSAGE_BYTES,
     MAX_LINEAR_POSES,
     LinearGoalMessage,
-    ToleranceMessage,
-    TwistMessage,
     decode_linear_goal,
-    decode_move_goal,
-    decode_set_tcp,
-    decode_twist,
 )
+from urdaemon.publish.move_goal import decode_move_goal
+from urdaemon.publish.service_requests import decode_set_tcp
+from urdaemon.publish.stream_commands import TwistMessage, decode_twist
 
 POSE = [0.4, -0.1, 0.3, 3.1, 0.0, 0.0]
 
@@ -104,7 +103,7 @@ def test_the_largest_linear_goal_fits() -> None:
         1.2345678901234568,
         -1.2345678901234568,
     ]
-    limits = dict.fromkeys(codec.LINEAR_LIMITS, 0.12345678901234568)
+    limits = dict.fromkeys(linear_goal.LINEAR_LIMITS, 0.12345678901234568)
     message = {
         "poses": [pose] * MAX_LINEAR_POSES,
         "blend_radii": [0.012345678901234568] * (MAX_LINEAR_POSES - 1),
@@ -120,7 +119,7 @@ def test_the_largest_linear_goal_fits() -> None:
 def test_a_linear_goal_is_at_most_the_nodes_ordinary_message_size() -> None:
     """Its JSON is parsed in one call, like every other non-trajectory message (was 256 KiB: 5-9 ms
     of loop in one call)."""
-    assert LINEAR_MESSAGE_BYTES == codec.SMALL_MESSAGE_BYTES == 16 * 1024
+    assert LINEAR_MESSAGE_BYTES == envelope.SMALL_MESSAGE_BYTES == 16 * 1024
     assert MAX_LINEAR_POSES == 100
 
 
@@ -136,12 +135,12 @@ def test_a_too_large_linear_goal_is_refused_before_it_is_parsed(monkeypatch: pyt
         return real(data)
 
     monkeypatch.setattr(json, "loads", counted)  # the module codec parses with
-    body = b'{"poses": [' + b"[]," * (codec.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
-    reason = refused(codec.LinearGoalDecoder, body)
+    body = b'{"poses": [' + b"[]," * (envelope.SMALL_MESSAGE_BYTES // 3) + b"[]]}"
+    reason = refused(linear_goal.LinearGoalDecoder, body)
     assert reason == f"linear goal: message of {len(body)} bytes exceeds the limit of 16384 bytes"
     assert calls == 0
     small = dumps({"poses": [POSE]})
-    codec.LinearGoalDecoder(small)
+    linear_goal.LinearGoalDecoder(small)
     assert calls == 1
 
 
@@ -371,7 +370,7 @@ def test_an_oversized_linear_goal_is_refused_before_decoding() -> None:
 
 
 def test_an_oversized_twist_is_refused_before_decoding() -> None:
-    payload = b'{"linear": [' + b" " * codec.SMALL_MESSAGE_BYTES + b"]}"
+    payload = b'{"linear": [' + b" " * envelope.SMALL_MESSAGE_BYTES + b"]}"
     assert "exceeds the limit" in refused(decode_twist, payload)
 
 

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urdaemon.errors import MessageError
-from urdaemon.publish.codec import client_text, decode_trajectory_goal
-from urdaemon.publish.trajectory_json import POINT_CHARS, TrajectoryGoalDecoder
+from urdaemon.publish.envelope import client_text
+from urdaemon.publish.trajectory_json import POINT_CHARS, TrajectoryGoalDecoder, decode_trajectory_goal
 
 
 def _goal(points: int) -> bytes:

@@ -10,11 +10,11 @@ from typing import Any
 import pytest
 
 from urdaemon.errors import MessageError
-from urdaemon.publish import codec
+from urdaemon.publish import envelope, fields, move_goal, service_requests, stream_commands
 
 LONGEST_FLOAT = -1.2345678901234567e-100  # 24 characters of JSON
-NAMES = [f"j{i:02d}".ljust(codec.MAX_NAME_CHARS, "x") for i in range(codec.MAX_JOINTS)]
-VALUES = [LONGEST_FLOAT] * codec.MAX_JOINTS
+NAMES = [f"j{i:02d}".ljust(fields.MAX_NAME_CHARS, "x") for i in range(fields.MAX_JOINTS)]
+VALUES = [LONGEST_FLOAT] * fields.MAX_JOINTS
 LARGEST_MOVE = {
     "v": 1,
     "joint_names": NAMES,
@@ -30,7 +30,7 @@ LARGEST_STREAM = {"v": 1, "joint_names": NAMES, "positions": VALUES, "velocities
 
 @pytest.mark.parametrize(
     ("decode", "message"),
-    [(codec.decode_move_goal, LARGEST_MOVE), (codec.decode_stream_position, LARGEST_STREAM)],
+    [(move_goal.decode_move_goal, LARGEST_MOVE), (stream_commands.decode_stream_position, LARGEST_STREAM)],
 )
 def test_the_largest_valid_messages_fit_with_room(
     decode: Callable[[bytes], Any], message: dict[str, Any]
@@ -39,11 +39,12 @@ def test_the_largest_valid_messages_fit_with_room(
     longest numbers), even indented, decode within the limit with at least 1.5x room."""
     for payload in (json.dumps(message).encode(), json.dumps(message, indent=2).encode()):
         decode(payload)
-        assert len(payload) * 1.5 < codec.SMALL_MESSAGE_BYTES, len(payload)
+        assert len(payload) * 1.5 < envelope.SMALL_MESSAGE_BYTES, len(payload)
 
 
 @pytest.mark.parametrize(
-    "decode", [codec.decode_move_goal, codec.decode_stream_position, codec.decode_set_payload]
+    "decode",
+    [move_goal.decode_move_goal, stream_commands.decode_stream_position, service_requests.decode_set_payload],
 )
 def test_a_message_twice_the_largest_valid_one_is_refused_before_decoding(
     decode: Callable[[bytes], Any],

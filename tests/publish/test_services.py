@@ -31,7 +31,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, services
+from urdaemon.publish import envelope, service_requests, services, stream_commands
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.tap import Matching
 from urdaemon.robot import RobotRuntime
@@ -145,7 +145,7 @@ def test_the_freedrive_command_goes_where_the_runtime_listens() -> None:
     assert client.session.put_attachments == [TOKEN]
     assert key == runtime.keys.command_freedrive == "testcell/alice/command/freedrive"
     assert key in node.subscribers
-    assert codec.decode_freedrive(payload) is True
+    assert stream_commands.decode_freedrive(payload) is True
 
 
 FORCE = ((0.0,) * 6, (0, 0, 1, 0, 0, 0), (0.0, 0.0, -5.0, 0.0, 0.0, 0.0), (0.1,) * 6)
@@ -184,7 +184,7 @@ async def test_each_named_client_call_sends_what_its_service_decodes(
     assert key == keys.service(name)
     assert timeout == entry.timeout
     assert client.attachments == [TOKEN if entry.commanding else None]
-    assert entry.decode(codec.encode(body)) == expected
+    assert entry.decode(envelope.encode(body)) == expected
 
 
 def test_every_named_service_has_a_client_call() -> None:
@@ -220,11 +220,11 @@ def test_every_service_names_a_backend_method_it_needs() -> None:
 
 
 def test_a_request_is_sent_with_the_message_field_names() -> None:
-    body = codec.request_body(ForceModeRequest(*FORCE))
+    body = service_requests.request_body(ForceModeRequest(*FORCE))
     assert body["type"] == 2
     assert "force_type" not in body
     assert body["selection"] == [0, 0, 1, 0, 0, 0]
-    assert codec.request_body(None) == {}
+    assert service_requests.request_body(None) == {}
 
 
 def test_docs_list_the_services_as_the_table_declares_them() -> None:

@@ -20,12 +20,9 @@ from urdaemon.daemon import tf_message
 from urdaemon.description.frames import Frame, frame_of_pose, pose_of_frame
 from urdaemon.description.kinematics import quaternion_of
 from urdaemon.model import RobotState
-from urdaemon.publish.codec import (
-    JointStateEncoder,
-    decode_move_goal,
-    rotation_vector_of_quaternion,
-    state_time,
-)
+from urdaemon.publish.envelope import state_time
+from urdaemon.publish.move_goal import decode_move_goal
+from urdaemon.publish.state_encoder import JointStateEncoder, rotation_vector_of_quaternion
 from urdaemon.runtime.status import io_signature
 
 PI = math.pi

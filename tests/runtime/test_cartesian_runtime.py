@@ -21,7 +21,7 @@ from urdaemon.daemon import describe_cell, make_backend, twist_limits
 from urdaemon.description.arm import arm_kinematics
 from urdaemon.errors import GoalRejected
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
-from urdaemon.publish import codec
+from urdaemon.publish import envelope, linear_goal, move_goal
 from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
@@ -50,11 +50,11 @@ class _Goals:
 
     def __init__(self, gate: MotionGate, requests: Requests) -> None:
         self._gate, self._requests = gate, requests  # what the real plan_in_task uses
-        self.pose_goal: Callable[[object, codec.MoveGoalMessage], None] | None = None
+        self.pose_goal: Callable[[object, move_goal.MoveGoalMessage], None] | None = None
         self.answers: list[tuple[str, object]] = []
         self.started: list[tuple[float, ...]] = []
 
-    def start_move(self, goal: codec.MoveGoalMessage, positions: Sequence[float]) -> tuple[str, float]:
+    def start_move(self, goal: move_goal.MoveGoalMessage, positions: Sequence[float]) -> tuple[str, float]:
         self.started.append(tuple(positions))
         return "g1", 1.0
 
@@ -90,8 +90,8 @@ def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, M
     return cartesian, controller, backend, gate
 
 
-def _linear(pose: list[float], **fields: float) -> codec.LinearGoalMessage:
-    return codec.decode_linear_goal(codec.encode({"poses": [pose], **fields}))
+def _linear(pose: list[float], **fields: float) -> linear_goal.LinearGoalMessage:
+    return linear_goal.decode_linear_goal(envelope.encode({"poses": [pose], **fields}))
 
 
 async def test_a_linear_goal_while_the_robot_still_decelerates_is_refused_as_moving() -> None:
@@ -153,8 +153,8 @@ async def test_a_plan_interrupted_between_slices_stops_at_once(monkeypatch: pyte
     assert slices == []
 
 
-def _move(pose: Sequence[float], **fields: object) -> codec.MoveGoalMessage:
-    return codec.decode_move_goal(codec.encode({"pose": list(pose), **fields}))
+def _move(pose: Sequence[float], **fields: object) -> move_goal.MoveGoalMessage:
+    return move_goal.decode_move_goal(envelope.encode({"pose": list(pose), **fields}))
 
 
 class _Slices:
@@ -174,7 +174,7 @@ class _Slices:
             await asyncio.sleep(0)
 
 
-async def _answered(cartesian: Cartesian, goal: codec.MoveGoalMessage) -> list[tuple[str, object]]:
+async def _answered(cartesian: Cartesian, goal: move_goal.MoveGoalMessage) -> list[tuple[str, object]]:
     goals = _fake(cartesian)
     assert goals.pose_goal is not None
     goals.pose_goal(object(), goal)

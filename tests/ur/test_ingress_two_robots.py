@@ -26,7 +26,7 @@ from tests.helpers import acquire_lease, fake_address, free_tcp_port, swing_traj
 from tests.integration.conftest import running_daemon
 from urdaemon.client import Client
 from urdaemon.fakeur.controller import FakeController
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES
 
 pytestmark = pytest.mark.timeout(180)
 

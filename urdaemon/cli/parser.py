@@ -225,7 +225,7 @@ def _fields(request: type) -> str:
     """A request type's fields as the message names them, optional ones with their default."""
     import dataclasses
 
-    from urdaemon.publish.codec import WIRE_NAMES
+    from urdaemon.publish.service_requests import WIRE_NAMES
 
     shown = []
     for item in dataclasses.fields(request):

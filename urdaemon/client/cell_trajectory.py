@@ -24,7 +24,7 @@ from urdaemon.client.goal_messages import RESULT_POLL_S
 from urdaemon.client.session import QUERY_TIMEOUT_S, Received, Subscription
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish import signing
-from urdaemon.publish.codec import client_text
+from urdaemon.publish.envelope import client_text
 from urdaemon.publish.keys import CellKeys
 
 __all__ = ["CellGoalHandle", "send_cell_trajectory"]

@@ -23,7 +23,7 @@ import zenoh
 from urdaemon.client.session import QUERY_TIMEOUT_S, ClientSession, NoSuchService, zenoh_message
 from urdaemon.errors import GoalRejected, UrDaemonError
 from urdaemon.model import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
-from urdaemon.publish.codec import client_text
+from urdaemon.publish.envelope import client_text
 from urdaemon.publish.keys import RobotKeys
 
 __all__ = ["LEASE_SESSION_BYTES", "Lease", "LeaseHeld", "default_holder", "holder_text"]

@@ -22,7 +22,7 @@ import zenoh
 from urdaemon.client.session import ClientSession, Subscription
 from urdaemon.errors import ConnectionLostError, UrDaemonError
 from urdaemon.publish import signing
-from urdaemon.publish.codec import client_text
+from urdaemon.publish.envelope import client_text
 from urdaemon.publish.keys import RobotKeys
 
 __all__ = [

@@ -39,7 +39,7 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
-from urdaemon.publish import codec, services
+from urdaemon.publish import service_requests, services
 from urdaemon.publish.keys import RobotKeys
 
 __all__ = ["GoalHandle", "RobotClient"]
@@ -322,7 +322,7 @@ class RobotClient:
         model.py; None for a service without arguments), waiting the table's time unless ``timeout``."""
         entry = services.spec(name)
         wait = entry.timeout if timeout is None else timeout
-        body = codec.request_body(request)
+        body = service_requests.request_body(request)
         if _commanding(name):
             return await self._command(self.keys.service(name), body, "ok", wait)
         return await self.client.request(self.keys.service(name), body, timeout=wait)

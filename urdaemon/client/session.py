@@ -19,7 +19,7 @@ import zenoh
 
 from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.publish import services
-from urdaemon.publish.codec import SCHEMA_VERSION
+from urdaemon.publish.envelope import SCHEMA_VERSION
 
 __all__ = [
     "QUERY_TIMEOUT_S",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 from typing import Any, Protocol
 
-from urdaemon.publish.codec import client_text
+from urdaemon.publish.envelope import client_text
 
 __all__ = [
     "MAX_IN_FLIGHT",

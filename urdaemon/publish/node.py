@@ -47,7 +47,7 @@ from urdaemon.publish.admission import (
     size_refusal,
     wildcard_refusal,
 )
-from urdaemon.publish.codec import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, client_text, encode
 from urdaemon.publish.liveliness import LivelinessWatch
 from urdaemon.publish.session_config import serve_config
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher

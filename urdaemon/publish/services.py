@@ -34,8 +34,8 @@ from urdaemon.model import (
     ToolVoltageRequest,
 )
 from urdaemon.protocols.dashboard_refusal import REFUSAL_PREFIXES
-from urdaemon.publish import codec
-from urdaemon.publish.codec import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
+from urdaemon.publish import service_requests
+from urdaemon.publish.service_requests import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
 
 if TYPE_CHECKING:
     from urdaemon.backends.base import Backend
@@ -119,7 +119,7 @@ def _without_arguments(name: str) -> Callable[[bytes | None], None]:
     """The decoder of a service without arguments: garbage is refused, so it never acts."""
 
     def decode(payload: bytes | None) -> None:
-        codec.decode_empty(payload, name)
+        service_requests.decode_empty(payload, name)
 
     return decode
 
@@ -218,7 +218,7 @@ async def _set_tcp(host: ServiceHost, request: SetTcpRequest) -> Reply:
 
 def _decode_set_tcp(payload: bytes | None) -> SetTcpRequest:
     """The set_tcp request, its offset within the cell file's ranges (cell/robot_options.py ``check_tcp``)."""
-    pose = codec.decode_set_tcp(payload)
+    pose = service_requests.decode_set_tcp(payload)
     try:
         check_tcp(pose)
     except ValueError as err:
@@ -227,7 +227,7 @@ def _decode_set_tcp(payload: bytes | None) -> SetTcpRequest:
 
 
 def _force_mode(payload: bytes | None) -> ForceModeRequest:
-    return ForceModeRequest(**codec.decode_force_mode(payload))
+    return ForceModeRequest(**service_requests.decode_force_mode(payload))
 
 
 _AS_ABOVE = "as above"
@@ -237,7 +237,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "set_io",
         "set one output (digital, configurable, tool, analog)",
         SetIoRequest,
-        lambda payload: SetIoRequest(*codec.decode_set_io(payload)),
+        lambda payload: SetIoRequest(*service_requests.decode_set_io(payload)),
         _set_io,
         needs="set_io",
         request_doc=(
@@ -250,7 +250,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "set_payload",
         "set the payload's mass and centre of gravity",
         SetPayloadRequest,
-        lambda payload: SetPayloadRequest(*codec.decode_set_payload(payload)),
+        lambda payload: SetPayloadRequest(*service_requests.decode_set_payload(payload)),
         _set_payload,
         needs="set_payload",
         request_doc=f"`mass` (kg, 0..{MAX_PAYLOAD_KG:g}), `cog` [x, y, z] (m, each within ±{MAX_COG_M:g})",
@@ -260,7 +260,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "set_speed_slider",
         "set the speed slider (0..1)",
         SpeedSliderRequest,
-        lambda payload: SpeedSliderRequest(codec.decode_speed_slider(payload)),
+        lambda payload: SpeedSliderRequest(service_requests.decode_speed_slider(payload)),
         _set_speed_slider,
         needs="set_speed_slider",
         request_doc="`fraction` (0..1)",
@@ -270,7 +270,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "dashboard",
         "send one dashboard command line and return the robot's reply",
         DashboardRequest,
-        lambda payload: DashboardRequest(codec.decode_dashboard(payload)),
+        lambda payload: DashboardRequest(service_requests.decode_dashboard(payload)),
         _dashboard,
         needs="dashboard",
         request_doc=(
@@ -341,7 +341,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "set_tool_voltage",
         "set the tool voltage (0, 12 or 24 V)",
         ToolVoltageRequest,
-        lambda payload: ToolVoltageRequest(codec.decode_tool_voltage(payload)),
+        lambda payload: ToolVoltageRequest(service_requests.decode_tool_voltage(payload)),
         _set_tool_voltage,
         needs="set_tool_voltage",
         request_doc=f"`volts` ({', '.join(map(str, TOOL_VOLTAGES))})",
@@ -397,7 +397,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "cycle_stats",
         "cycle counters and the turnaround since the last reset",
         CycleStatsRequest,
-        lambda payload: CycleStatsRequest(codec.decode_cycle_stats(payload)),
+        lambda payload: CycleStatsRequest(service_requests.decode_cycle_stats(payload)),
         _cycle_stats,
         needs=None,
         commanding=False,  # reads counters only: anyone may ask

@@ -6,13 +6,15 @@ taken apart by hand at its top level and in its ``points`` array, and every valu
 ``json.JSONDecoder.raw_decode`` on a bounded window of the text, so no single step costs more than
 decoding that window: one point (at most ``POINT_CHARS``), or one other field (at most
 ``FIELD_CHARS``). ``step(deadline)`` works until the deadline and returns whether work is left,
-like ``TrajectoryPlanner.plan_next``; the caller yields to the loop in between.
+like ``TrajectoryPlanner.plan_next``; the caller yields to the loop in between. The values read are
+checked and the goal built by trajectory_goal.py; ``decode_trajectory_goal`` decodes one at once.
 """
 
 from __future__ import annotations
 
 import codecs
 import json
+import math
 import re
 import time
 from collections.abc import Generator, Iterator
@@ -20,16 +22,15 @@ from typing import Any
 
 from urdaemon.control.goals import TrajectoryPoint
 from urdaemon.errors import MessageError
-from urdaemon.publish.codec import (
-    MAX_MESSAGE_BYTES,
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, client_text
+from urdaemon.publish.trajectory_goal import (
     MAX_TRAJECTORY_POINTS,
     TrajectoryGoalMessage,
-    client_text,
     trajectory_goal,
     trajectory_point,
 )
 
-__all__ = ["FIELD_CHARS", "POINT_CHARS", "TrajectoryGoalDecoder"]
+__all__ = ["FIELD_CHARS", "POINT_CHARS", "TrajectoryGoalDecoder", "decode_trajectory_goal"]
 
 POINT_CHARS = 16 * 1024
 """Longest text of one point (three lists of 64 long numbers fit; a 6-joint point is ~0.4 KiB)."""
@@ -43,6 +44,14 @@ WHITESPACE_CHARS = 4096
 """Longest run of whitespace between two tokens."""
 _WHAT = "trajectory goal"
 _WHITESPACE = re.compile(r"[ \t\n\r]*")
+
+
+def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
+    """Decode a trajectory goal at once (the daemon uses ``TrajectoryGoalDecoder``, in slices)."""
+    decoder = TrajectoryGoalDecoder(payload)
+    while decoder.step(math.inf):
+        pass
+    return decoder.result()
 
 
 class TrajectoryGoalDecoder:

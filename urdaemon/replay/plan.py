@@ -36,7 +36,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, MAX_TRAJECTORY_POINTS
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
+from urdaemon.publish.trajectory_goal import MAX_TRAJECTORY_POINTS
 
 __all__ = [
     "KINEMATIC_MOVE",

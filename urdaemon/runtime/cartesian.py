@@ -34,7 +34,7 @@ from urdaemon.control.planned import ReadyPlan
 from urdaemon.description.arm import ArmKinematics, base_in_world
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
 from urdaemon.errors import GoalRejected
-from urdaemon.publish import codec
+from urdaemon.publish import linear_goal, move_goal
 from urdaemon.publish.admission import Guard
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
@@ -81,7 +81,7 @@ class Cartesian:
         node.queryable(
             keys.goal_linear,
             self.on_linear_goal,
-            max_bytes=codec.LINEAR_MESSAGE_BYTES,
+            max_bytes=linear_goal.LINEAR_MESSAGE_BYTES,
             answer="accepted",
             guard=guard,
         )
@@ -106,11 +106,11 @@ class Cartesian:
 
     # ---- pose move goals -----------------------------------------------------------------------
 
-    def on_pose_goal(self, query: Any, goal: codec.MoveGoalMessage) -> None:
+    def on_pose_goal(self, query: Any, goal: move_goal.MoveGoalMessage) -> None:
         """A pose move goal (decoded, free to move), solved in slices in a task (``plan_in_task``)."""
         self._goals.plan_in_task(query, "move", "pose move goal", lambda g: self._pose_goal(query, goal, g))
 
-    async def _pose_goal(self, query: Any, goal: codec.MoveGoalMessage, generation: int) -> None:
+    async def _pose_goal(self, query: Any, goal: move_goal.MoveGoalMessage, generation: int) -> None:
         try:
             positions = await self.pose_target(goal, generation)
             self._gate.check_still_wanted(generation)  # nothing ended motion while it was solved
@@ -122,7 +122,7 @@ class Cartesian:
             self._gate.planning = None
         self._goals.accept(query, "pose move", goal_id, duration, {"positions": list(positions)})
 
-    async def pose_target(self, goal: codec.MoveGoalMessage, generation: int) -> tuple[float, ...]:
+    async def pose_target(self, goal: move_goal.MoveGoalMessage, generation: int) -> tuple[float, ...]:
         """The joints of a pose move goal, solved in slices: IK nearest the joints the goal starts
         from (of its named configuration, if any); refused naming the pose when there is none, and
         when something ends motion (``generation``) while it is solved."""
@@ -178,7 +178,7 @@ class Cartesian:
 
     # ---- linear goals --------------------------------------------------------------------------
 
-    def limits(self, goal: codec.LinearGoalMessage) -> CartesianLimits:
+    def limits(self, goal: linear_goal.LinearGoalMessage) -> CartesianLimits:
         """The goal's Cartesian limits: those it names (each at most the cell's cap), the cell's
         defaults for the rest."""
         options = self._robot.motion.cartesian
@@ -204,7 +204,7 @@ class Cartesian:
 
     async def _linear_goal(self, query: Any, generation: int) -> None:
         try:
-            decoder = codec.LinearGoalDecoder(payload(query))
+            decoder = linear_goal.LinearGoalDecoder(payload(query))
             await sliced(lambda deadline: decoder.step(deadline, time.perf_counter))
             goal = decoder.result()
             plan = await self._plan(goal, generation)
@@ -218,7 +218,7 @@ class Cartesian:
             self._gate.planning = None
         self._goals.accept(query, "linear", goal_id, duration)
 
-    async def _plan(self, goal: codec.LinearGoalMessage, generation: int) -> ReadyPlan:
+    async def _plan(self, goal: linear_goal.LinearGoalMessage, generation: int) -> ReadyPlan:
         """Check and plan a linear goal from where the robot rests, in slices between robot cycles."""
         what = "linear goal"
         kin = self._arm(what)

@@ -41,8 +41,9 @@ from typing import TYPE_CHECKING, Any
 
 from urdaemon.control import GoalResult, GoalStatus
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec, signing
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, CellGoalDecoder, CellGoalMessage
+from urdaemon.publish import cell_goal, envelope, goal_cancel, signing
+from urdaemon.publish.cell_goal import CellGoalDecoder, CellGoalMessage
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.goals import KEPT_RESULTS, PlannedGoal, put_signed
@@ -131,7 +132,7 @@ class CellGoals:
         try:
             if self._closing:
                 raise GoalRejected(SHUTTING_DOWN)
-            tokens = codec.decode_lease_tokens(_attachment(query))
+            tokens = cell_goal.decode_lease_tokens(_attachment(query))
             self._check_tokens(tokens)  # before it may keep the planner busy (review 16, M3)
             if self._planning:
                 raise GoalRejected("busy: still planning another cell goal")
@@ -193,7 +194,7 @@ class CellGoals:
         runtime = self._robots.get(name)
         if runtime is None:
             raise GoalRejected(
-                f"{codec.client_text(name)}: no robot {codec.client_text(name)!r} in cell "
+                f"{envelope.client_text(name)}: no robot {envelope.client_text(name)!r} in cell "
                 f"{self._keys.cell!r}; its robots: {', '.join(sorted(self._robots))}"
             )
         return runtime
@@ -297,7 +298,7 @@ class CellGoals:
             "robots": run.results,
             "reason": reason,
         }
-        message = codec.encode(body)
+        message = envelope.encode(body)
         on = self._keys.goal_result(run.goal_id)  # signed with the key it goes out on
         signature = signing.sign(run.key, on, message)
         self._results[run.goal_id] = (message, signature)
@@ -321,7 +322,7 @@ class CellGoals:
     def on_cancel(self, query: Any) -> None:
         """Cancel a cell goal: every part still running ends ``canceled``."""
         try:
-            goal_id = codec.decode_cell_cancel(payload(query))
+            goal_id = goal_cancel.decode_cell_cancel(payload(query))
             run = self._running.get(goal_id)
             if run is None:
                 reply(
@@ -330,7 +331,7 @@ class CellGoals:
                 )
                 return
             running = [name for name in run.parts if name not in run.results]
-            self._check_leases(running, codec.decode_lease_tokens(_attachment(query)))
+            self._check_leases(running, cell_goal.decode_lease_tokens(_attachment(query)))
         except (MessageError, GoalRejected) as err:
             reply(query, {"canceled": False, "reason": _reason(err)})
             return
@@ -351,7 +352,7 @@ def _attachment(query: Any) -> bytes | None:
     attachment = query.attachment
     if attachment is None:
         return None
-    limit = codec.SMALL_MESSAGE_BYTES
+    limit = envelope.SMALL_MESSAGE_BYTES
     if len(attachment) > limit:  # refused by its size, never copied
         raise MessageError(f"lease tokens: attachment of {len(attachment)} bytes exceeds {limit} bytes")
     return bytes(attachment.to_bytes())

@@ -15,7 +15,7 @@ from urdaemon.backends.base import Backend
 from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec
+from urdaemon.publish import stream_commands
 from urdaemon.publish.admission import Guard
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
@@ -75,7 +75,7 @@ class Commands:
             self.reject(key, GoalRejected(internal_error(err)))
 
     def _stream_position(self, payload: bytes) -> None:
-        message = codec.decode_stream_position(payload)
+        message = stream_commands.decode_stream_position(payload)
         self._gate.check_accepting()
         assert message.positions is not None
         self._controller.stream_positions(
@@ -87,7 +87,7 @@ class Commands:
         )
 
     def _stream_velocity(self, payload: bytes) -> None:
-        message = codec.decode_stream_velocity(payload)
+        message = stream_commands.decode_stream_velocity(payload)
         self._gate.check_accepting()
         assert message.velocities is not None
         self._controller.stream_velocities(
@@ -100,7 +100,7 @@ class Commands:
         self._follow(key, payload, self._twist)
 
     def _twist(self, payload: bytes) -> None:
-        message = codec.decode_twist(payload)
+        message = stream_commands.decode_twist(payload)
         self._gate.check_accepting()
         caps = self._robot.motion.cartesian
         for field, vector, cap, name, unit in (
@@ -135,7 +135,7 @@ class Commands:
     def on_freedrive(self, key: str, payload: bytes) -> None:
         """Keep freedrive on for one deadman period (it starts only at rest), or end it."""
         try:
-            active = codec.decode_freedrive(payload)
+            active = stream_commands.decode_freedrive(payload)
             if active:
                 self._check_freedrive_can_start()
                 self._gate.generation += 1  # a trajectory planned from now on was planned before freedrive

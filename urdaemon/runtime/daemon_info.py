@@ -22,7 +22,7 @@ from urdaemon import __version__
 from urdaemon.cell.config import Cell
 from urdaemon.cell.robot_options import Robot
 from urdaemon.model import JointLimits
-from urdaemon.publish import codec
+from urdaemon.publish import envelope
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.robot import RobotRuntime
 
@@ -175,7 +175,7 @@ class DaemonInfo:
         try:
             asked = str(query.key_expr)
             if asked == self._keys.daemon or _intersects(asked, self._keys.daemon):
-                query.reply(self._keys.daemon, codec.encode(self.message()))
+                query.reply(self._keys.daemon, envelope.encode(self.message()))
         except Exception as err:  # the querier may have gone; this must never take the cell down
             log.debug("answering %s failed: %s", self._keys.daemon, err)
         finally:

@@ -35,10 +35,12 @@ from urdaemon.control import GoalFeedback, GoalResult, MotionController, Toleran
 from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
-from urdaemon.publish import codec, signing
+from urdaemon.publish import envelope, goal_cancel, move_goal, signing
 from urdaemon.publish.admission import Guard
-from urdaemon.publish.codec import MAX_MESSAGE_BYTES, ToleranceMessage
+from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
+from urdaemon.publish.fields import ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.move_goal import MoveGoalMessage
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 from urdaemon.runtime.gate import MotionGate
@@ -52,7 +54,7 @@ __all__ = ["KEPT_RESULTS", "Goals", "PlannedGoal", "PoseGoal", "ResultListener",
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries (each with its signature)."""
 
-PoseGoal = Callable[[Any, codec.MoveGoalMessage], None]
+PoseGoal = Callable[[Any, MoveGoalMessage], None]
 """Takes a decoded pose move goal and its query: solves its IK in slices, then starts it as a joint
 move goal (``start_move``) or refuses it, answering the query once (runtime/cartesian.py)."""
 
@@ -62,7 +64,7 @@ ResultListener = Callable[[GoalResult, bytes], None]
 
 def _stamp(backend: Backend) -> dict[str, Any]:
     """The time fields of a goal message: the newest state's (the cycle's, in a cycle)."""
-    return codec.state_time(backend.state, time.time_ns())
+    return envelope.state_time(backend.state, time.time_ns())
 
 
 def put_signed(node: ZenohNode, key: str, payload: bytes, attachment: bytes) -> None:
@@ -139,7 +141,7 @@ class Goals:
             if isinstance(event, GoalResult):
                 self.passthrough.ended_here(event.goal_id)
             if isinstance(event, GoalFeedback):
-                message = codec.encode_feedback(self._robot.name, event, _stamp(self._backend))
+                message = envelope.encode_feedback(self._robot.name, event, _stamp(self._backend))
                 key = self._keys_of.get(event.goal_id)
                 if key is not None:  # at the feedback rate, never once per cycle
                     on = self._keys.goal_feedback(event.goal_id)
@@ -148,7 +150,7 @@ class Goals:
                 self._publish_result(event)
 
     def _publish_result(self, result: GoalResult) -> None:
-        message = codec.encode_result(self._robot.name, result, _stamp(self._backend))
+        message = envelope.encode_result(self._robot.name, result, _stamp(self._backend))
         key = self._keys_of.pop(result.goal_id, None) or signing.new_key()  # every goal has one
         on = self._keys.goal_result(result.goal_id)  # signed with the key it goes out on
         signature = signing.sign(key, on, message)
@@ -402,7 +404,7 @@ class Goals:
         try:
             if self._gate.closing:
                 raise GoalRejected(SHUTTING_DOWN)
-            goal = codec.decode_move_goal(payload(query))
+            goal = move_goal.decode_move_goal(payload(query))
             self._gate.check_free_to_move()
             self._gate.check_not_planning_from_rest()
             if goal.pose is not None:
@@ -417,7 +419,7 @@ class Goals:
         self.accept(query, "move", goal_id, duration)
 
     def start_move(
-        self, goal: codec.MoveGoalMessage, positions: Sequence[float] | None = None
+        self, goal: MoveGoalMessage, positions: Sequence[float] | None = None
     ) -> tuple[str, float]:
         """Start a move goal now, to its ``positions`` (a pose goal's: the IK's ``positions``); its id
         and duration. Raises ``GoalRejected``."""
@@ -441,7 +443,7 @@ class Goals:
             raise
 
     def _accept_move(
-        self, goal_id: str, goal: codec.MoveGoalMessage, names: tuple[str, ...], tolerances: Tolerances | None
+        self, goal_id: str, goal: MoveGoalMessage, names: tuple[str, ...], tolerances: Tolerances | None
     ) -> float:
         try:
             return self._controller.accept_move(
@@ -463,7 +465,7 @@ class Goals:
     def on_cancel(self, query: Any) -> None:
         """Cancel a goal (default: the active one, and a trajectory being planned)."""
         try:
-            goal_id = codec.decode_cancel(payload(query))
+            goal_id = goal_cancel.decode_cancel(payload(query))
         except MessageError as err:
             reply(query, {"canceled": False, "reason": str(err)})
             return

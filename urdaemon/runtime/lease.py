@@ -25,7 +25,7 @@ from typing import Any
 
 from urdaemon.errors import MessageError
 from urdaemon.model import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
-from urdaemon.publish.codec import client_text, decode_message
+from urdaemon.publish.envelope import client_text, decode_message
 
 __all__ = [
     "LEASE_BIND_TIMEOUT_S",

@@ -7,7 +7,7 @@ import contextlib
 from collections.abc import Coroutine
 from typing import Any
 
-from urdaemon.publish import codec
+from urdaemon.publish import envelope
 
 __all__ = ["SHUTTING_DOWN", "Requests", "internal_error", "payload", "reply"]
 
@@ -24,7 +24,7 @@ def payload(query: Any) -> bytes | None:
 def reply(query: Any, body: dict[str, Any]) -> None:
     """Answer ``query`` with ``body`` and end it; a querier that timed out and went is no error."""
     with contextlib.suppress(Exception):
-        query.reply(query.key_expr, codec.encode(body))
+        query.reply(query.key_expr, envelope.encode(body))
     with contextlib.suppress(Exception):
         query.drop()
 

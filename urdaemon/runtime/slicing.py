@@ -13,7 +13,7 @@ import weakref
 from collections.abc import Callable
 
 from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
-from urdaemon.publish.codec import TrajectoryGoalMessage
+from urdaemon.publish.trajectory_goal import TrajectoryGoalMessage
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 
 __all__ = [

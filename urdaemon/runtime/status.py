@@ -20,7 +20,7 @@ from urdaemon.backends.base import Backend
 from urdaemon.cell.config import PublishOptions
 from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
-from urdaemon.publish import codec
+from urdaemon.publish import envelope
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 
@@ -79,7 +79,7 @@ class StatusPublisher:
         return {
             "robot": self._robot.name,
             # the state it reports: the modes, scaling and program are that state's
-            **codec.state_time(state, time.time_ns()),
+            **envelope.state_time(state, time.time_ns()),
             "backend": backend.kind,
             "model": self._robot.model,
             "lifecycle": state.lifecycle.value,
@@ -112,7 +112,7 @@ class StatusPublisher:
         s = self._backend.state
         return {
             "robot": self._robot.name,
-            **codec.state_time(s, time.time_ns()),
+            **envelope.state_time(s, time.time_ns()),
             "digital_out": list(s.digital_out),
             "configurable_out": list(s.configurable_out),
             "tool_out": list(s.tool_out),
@@ -149,21 +149,21 @@ class StatusPublisher:
         """Publish the status now."""
         self._signature = self._key()
         if self._pub_status is not None:
-            self._pub_status.put(codec.encode(self.message()))
+            self._pub_status.put(envelope.encode(self.message()))
 
     def publish_io(self) -> None:
         """Publish the IO message now."""
         message = self.io_message()
         self._io_signature = io_signature(message)
         if self._pub_io is not None:
-            self._pub_io.put(codec.encode(message))
+            self._pub_io.put(envelope.encode(message))
 
     def event(self, body: dict[str, Any]) -> None:
         """Publish an event (``kind`` and what it says) of this robot."""
         if self._pub_events is not None:
             # when it happened: now (a notice, a refusal, a lease's change is news as it is published)
             stamped = {"robot": self._robot.name, "host_time_ns": time.time_ns(), **body}
-            self._pub_events.put(codec.encode(stamped))
+            self._pub_events.put(envelope.encode(stamped))
 
     async def run(self) -> None:
         """Publish the status every status period and the IO when it changed (or each second)."""
