@@ -6,7 +6,7 @@ import itertools
 import struct
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -1080,7 +1080,7 @@ def feed_chunks(conn: RtdeConnection, data: bytes, cuts: list[int]) -> None:
             with pytest.raises(RemoteProtocolError):
                 conn.receive_data(data[hi:])
             return
-        assert all(type(event).__module__ == "urdaemon.protocols.rtde" for event in events)
+        assert all(isinstance(event, get_args(Event)) for event in events)
 
 
 @settings(max_examples=300)

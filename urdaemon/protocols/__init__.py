@@ -1,6 +1,9 @@
 """UR's network protocols as sans-IO codecs: bytes in, events out; no asyncio, no sockets, no clock.
 
-Every protocol module follows one shape (h11/aioquic style):
+Every protocol follows one shape (h11/aioquic style). A small one is a module (``reverse.py`` is the
+model); the three large ones, ``rtde/``, ``primary/`` and ``dashboard/``, are packages cut by job as h11
+is: ``_wire`` (port, limits, type bytes), the message and event types, their encoding, each side's
+logic and ``_connection``; each package's ``__init__`` states its public API. All of them have:
 
 * a ``<Name>Connection(side, ...)`` object per TCP connection, for either party (``Side.DAEMON``
   or ``Side.ROBOT``: the fake controller uses the robot side of the same codecs);
