@@ -1168,3 +1168,12 @@ def test_receive_output_declines_before_the_stream_started() -> None:
     assert pair.daemon.receive_output(wire) is None
     with pytest.raises(RemoteProtocolError, match="before outputs were started"):
         pair.daemon.receive_data(wire)
+
+
+def test_the_base_codecs_errors_name_rtde() -> None:
+    """Data fed after EOF fails naming RTDE, as every error of ours does (the base codec said "codec")."""
+    connection = RtdeConnection(Side.DAEMON)
+    connection.receive_eof()
+    with pytest.raises(LocalProtocolError, match="^rtde: data fed after receive_eof") as failed:
+        connection.receive_data(b"\x00\x03V")
+    assert failed.value.protocol == "rtde"

@@ -31,6 +31,7 @@ from urdaemon.protocols.rtde._wire import (
     KIND_DATA,
     MAX_PACKAGE_BYTES,
     MAX_TEXT_FIELD_BYTES,
+    PROTOCOL,
     SUPPORTED_PROTOCOL_VERSIONS,
     U8,
     Buf,
@@ -44,6 +45,9 @@ __all__ = ["RtdeCore"]
 
 class RtdeCore(Codec[Message, Event]):
     """The job both parties share: state, framing, the feed loop, text messages; see RtdeConnection."""
+
+    PROTOCOL = PROTOCOL
+    """Names RTDE in the base codec's own errors (a failed connection, data after EOF), as in ours."""
 
     _handlers: dict[int, Callable[[Buf, int, int], Event]]
     """Package type -> decoder of a received package, for this side."""
