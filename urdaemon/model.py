@@ -311,8 +311,8 @@ class JointCommand:
 
 
 # ---- the requests of the robot services ------------------------------------------------------------
-# Each is what a service's JSON request decodes to (publish/service_requests.py checks shape and ranges with the
-# reasons clients see) and what the client sends; the field names are the message's, but for
+# Each is what a service's JSON request decodes to (publish/service_requests.py checks shape and
+# ranges with the reasons clients see) and what the client sends; the field names are the message's, but for
 # ``ForceModeRequest.force_type`` (``type`` on the wire).
 
 FORCE_MODE_TYPE = 2

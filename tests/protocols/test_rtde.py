@@ -1174,6 +1174,6 @@ def test_the_base_codecs_errors_name_rtde() -> None:
     """Data fed after EOF fails naming RTDE, as every error of ours does (the base codec said "codec")."""
     connection = RtdeConnection(Side.DAEMON)
     connection.receive_eof()
-    with pytest.raises(LocalProtocolError, match="^rtde: data fed after receive_eof") as failed:
+    with pytest.raises(LocalProtocolError, match=r"^rtde: data fed after receive_eof") as failed:
         connection.receive_data(b"\x00\x03V")
     assert failed.value.protocol == "rtde"
