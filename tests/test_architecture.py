@@ -40,6 +40,7 @@ PURE = {
     # the fake's pure parts: the arm, its motions and surroundings, what it reports, program translation
     "fakeur/arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/life.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/playback.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/pose.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/contact.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},

@@ -12,13 +12,13 @@ from hypothesis import strategies as st
 from urdaemon.fakeur.motion import (
     JointMove,
     LinearStop,
-    ScalingRamp,
     ServoFilter,
     SpeedRamp,
     joint_move,
     leading_stop_time,
     profile,
 )
+from urdaemon.fakeur.playback import ScalingRamp
 
 START = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0]
 

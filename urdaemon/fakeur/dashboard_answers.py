@@ -19,11 +19,10 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from urdaemon.fakeur.arm import RuntimeState
 from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpProgram, UrpRefused, translate
-from urdaemon.model import SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
+from urdaemon.protocols.rtde_variables import RuntimeState
 
 if TYPE_CHECKING:
     from urdaemon.fakeur.controller import FakeController
@@ -74,7 +73,7 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
     """The answer to a command that changes the arm or the program; None for any other command."""
     arm = fake.arm
     if isinstance(command, dash.PowerOn):
-        return "Powering on" if arm.power_on() is None else "Failed to execute: power on"
+        return "Powering on" if arm.life.power_on(arm.timestamp) is None else "Failed to execute: power on"
     if isinstance(command, dash.PowerOff):
         fake._stop_program()
         arm.power_off()
@@ -98,8 +97,7 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
     if isinstance(command, dash.RestartSafety):
         fake._stop_program()
         arm.power_off()
-        if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
-            arm.life.safety_mode = SafetyMode.NORMAL
+        arm.life.restart_safety()
         return "Restarting safety"
     if isinstance(command, dash.Pause):
         if arm.runtime_state is not RuntimeState.PLAYING:
@@ -227,7 +225,7 @@ def play(fake: FakeController) -> str | None:
         except (OSError, UnicodeDecodeError) as err:
             arm.stop_program()
             return str(err)
-    arm.life.runtime_state = RuntimeState.STOPPED
+    arm.life.wait_for_script()
     fake._start_program(_basename(program) or program, text)
     return None
 

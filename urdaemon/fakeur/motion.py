@@ -19,8 +19,6 @@ lists of 6 floats (hot path: no numpy).
 * ``ArcMove`` (movec): the TCP on the circle through three points.
 * ``CartesianMove`` (movel, movep): the TCP on a straight line (position interpolated, orientation
   slerped) with a trapezoidal profile along it, each sample solved by inverse kinematics near the last.
-* ``ScalingRamp``: the controller's own speed scaling while it pauses (ramped to 0) and resumes
-  (ramped back to 1) a program; it multiplies the program time a motion advances per cycle.
 """
 
 from __future__ import annotations
@@ -41,7 +39,6 @@ __all__ = [
     "LinearStop",
     "Motion",
     "Profile",
-    "ScalingRamp",
     "ServoFilter",
     "ServoModes",
     "SpeedRamp",
@@ -415,59 +412,6 @@ class LinearStop:
             return [0.0] * JOINTS
         scale = 1.0 - max(t, 0.0) / total
         return [v * scale for v in self._v0]
-
-
-class ScalingRamp:
-    """A speed scaling ramped linearly between 1 and 0 (pause and resume) in controller time.
-
-    The ramp's time is chosen from the joint velocities the arm has (pausing) or will have (resuming)
-    at full scale: the scaling's own change then (de)celerates each joint by at most ``share`` of its
-    acceleration limit, so the arm slows down and speeds up along its path within the joint limits."""
-
-    __slots__ = ("_rate", "_target", "scale")
-
-    def __init__(self) -> None:
-        self.scale = 1.0
-        self._target = 1.0
-        self._rate = 0.0
-        """Scale per second of controller time, toward ``_target``."""
-
-    @property
-    def settled(self) -> bool:
-        """True when the scale is where the last ramp goes."""
-        return self.scale == self._target
-
-    def set(self, scale: float) -> None:
-        """Jump to ``scale`` at once (no ramp)."""
-        self.scale = self._target = scale
-        self._rate = 0.0
-
-    def ramp_to(
-        self,
-        target: float,
-        velocity: Sequence[float],
-        max_acceleration: Sequence[float],
-        share: float,
-        dt: float,
-    ) -> None:
-        """Ramp to ``target`` (0 or 1): from full scale to none in the time the joints at ``velocity``
-        need to stop at ``share`` of ``max_acceleration``; at once if that is within one cycle ``dt``."""
-        duration = max(abs(v) / (share * a) for v, a in zip(velocity, max_acceleration, strict=True))
-        if duration <= dt:
-            self.set(target)
-            return
-        self._target = target
-        self._rate = 1.0 / duration
-
-    def step(self, dt: float) -> float:
-        """Advance one cycle of ``dt`` seconds; the scale for this cycle."""
-        scale, target = self.scale, self._target
-        if scale < target:
-            scale = min(target, scale + self._rate * dt)
-        elif scale > target:
-            scale = max(target, scale - self._rate * dt)
-        self.scale = scale
-        return scale
 
 
 def leading_stop_time(velocity: Sequence[float], deceleration: float) -> float:

@@ -26,7 +26,8 @@ from collections.abc import Callable, Generator, Sequence
 from typing import Any, Final
 
 from urdaemon.description.frames import compose, frame_of_pose, inverse, pose_of_frame
-from urdaemon.fakeur.arm import PROTECTIVE_STOP_DECELERATION, FakeArm
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.life import PROTECTIVE_STOP_DECELERATION
 from urdaemon.fakeur.motion import (
     TIME_EPSILON_S,
     ArcMove,

@@ -212,7 +212,7 @@ def get_actual_joint_positions_history(host: ScriptHost, steps: Any) -> UrList:
         raise ScriptRuntimeError(
             f"get_actual_joint_positions_history: steps must be an integer >= 0, got {steps!r}"
         )
-    return UrList(host.arm.history(steps))
+    return UrList(host.arm.history.ago(steps))
 
 
 @builtin("is_steady")
