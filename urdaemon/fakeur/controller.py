@@ -411,7 +411,7 @@ class FakeController:
             self._stop_program()
             arm.power_off()
         elif line == prim.ControllerCommand.BRAKE_RELEASE:
-            self._brake_release()
+            self.brake_release()
         elif line == prim.ControllerCommand.UNLOCK_PROTECTIVE_STOP:
             arm.unlock_protective_stop()
         elif line == prim.ControllerCommand.STOP_PROGRAM:
@@ -446,7 +446,7 @@ class FakeController:
     def _input_owner(self) -> dict[str, Any]:
         return self.rtde.input_owner
 
-    def _brake_release(self) -> str | None:
+    def brake_release(self) -> str | None:
         """Release the brakes; from POWER_OFF power on first, then release once IDLE (as URSim does)."""
         arm = self.arm
         if arm.robot_mode in (RobotMode.POWER_OFF, RobotMode.BOOTING):
@@ -455,6 +455,12 @@ class FakeController:
                 self._release_when_idle = True
             return reason
         return arm.life.brake_release(arm.timestamp)
+
+    def play_urcap(self) -> None:
+        """What the External Control program does on play: fetch the script from the daemon's script
+        sender (``urcap``), then run it; nothing without a script sender."""
+        if self.urcap is not None:
+            self.connections.spawn(self.programs.play_urcap(self.urcap, self._start_program))
 
     # ---- dashboard (29999) ------------------------------------------------------------------------------
 
