@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from urdaemon.fakeur.motion import (
+from urdaemon.fakeur.joint_motion import (
     JointMove,
     LinearStop,
     ServoFilter,

@@ -1,11 +1,12 @@
 """The fake controller's robot: joint motion, speed slider, IO, and its life (power, brakes, safety stops).
 
 Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller cycle; every
-command is a method that returns a refusal reason (or None) the way the real controller would
-refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
-(servoj target, speedj velocity, a ``Motion`` of fakeur/motion.py played on the program's time, or a
-stop with a given deceleration), always within the model's joint velocity limits; a command outside
-the joint position limits triggers a protective stop as on a real arm.
+command (of the arm or of its life) returns a refusal reason (or None) the way the real controller
+would refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
+(servoj target, speedj velocity, a ``Motion`` of fakeur/joint_motion.py or fakeur/tcp_motion.py
+played on the program's time, or a stop with a given deceleration), always within the model's joint
+velocity limits; a command outside the joint position limits triggers a protective stop as on a real
+arm.
 
 A played motion is its ``playback`` (``Playback``, fakeur/playback.py): it advances
 ``dt × speed slider × speed scaling`` of program time per cycle (nothing while the arm cannot move),
@@ -46,6 +47,7 @@ from typing import TYPE_CHECKING
 from urdaemon.description.frames import Pose
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.fakeur.joint_motion import Motion
 from urdaemon.fakeur.life import (
     EMERGENCY_STOP_DECELERATION,
     PROTECTIVE_STOP_DECELERATION,
@@ -53,7 +55,6 @@ from urdaemon.fakeur.life import (
     Do,
     LifeStep,
 )
-from urdaemon.fakeur.motion import Motion
 from urdaemon.fakeur.playback import Playback
 from urdaemon.fakeur.pose import TcpPoses
 from urdaemon.model import RobotMode, SafetyMode

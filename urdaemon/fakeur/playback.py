@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from urdaemon.fakeur.motion import TIME_EPSILON_S, LinearStop, Motion, leading_stop_time
+from urdaemon.fakeur.joint_motion import TIME_EPSILON_S, LinearStop, Motion, leading_stop_time
 
 __all__ = ["ACCELERATION_STEP_S", "PAUSE_ACCELERATION_SHARE", "Playback", "ScalingRamp"]
 

@@ -11,7 +11,7 @@ import pytest
 
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.motion import ServoFilter
+from urdaemon.fakeur.joint_motion import ServoFilter
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
