@@ -48,6 +48,10 @@ PURE = {
     "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/faults.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/urp.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    # the URScript compiler: the controller's checks, then Python source (fakeur/urscript/compiler.py)
+    "fakeur/urscript/compiler.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/urscript/checker.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/urscript/codegen.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     # what a recording holds and its CDR: messages in, bytes out (recording/channels.py)
     "recording/cdr.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
     "recording/channels.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
