@@ -1,4 +1,4 @@
-"""The fake arm's pure motion primitives (fakeur/motion.py)."""
+"""The fake arm's joint motions (fakeur/joint_motion.py) and the pause's time scaling (playback.py)."""
 
 from __future__ import annotations
 
