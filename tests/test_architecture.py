@@ -50,12 +50,18 @@ PURE = {
     # the fake's pure parts: the arm, its motions and surroundings, what it reports, program translation
     "fakeur/arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/life.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/playback.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/pose.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
-    "fakeur/motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/joint_motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/tcp_motion.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/contact.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/reports.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/faults.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/urp.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    # the URScript compiler: the controller's checks, then Python source (fakeur/urscript/compiler.py)
+    "fakeur/urscript/compiler.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/urscript/checker.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/urscript/codegen.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     # what a recording holds and its CDR: messages in, bytes out (recording/channels.py)
     "recording/cdr.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},
     "recording/channels.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging", "pydantic"},

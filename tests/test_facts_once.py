@@ -94,7 +94,7 @@ def test_the_speedj_acceleration_is_rendered_from_urscript_py() -> None:
 
 
 def test_the_joint_count_is_model_pys() -> None:
-    from urdaemon.fakeur import motion
+    from urdaemon.fakeur import joint_motion as motion
 
     assert len(model.UR_JOINTS) == model.UR_JOINT_COUNT
     assert reverse.JOINTS == trajectory_point.JOINTS == kinematics_hash.DH_JOINT_COUNT == motion.JOINTS

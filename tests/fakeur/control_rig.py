@@ -20,7 +20,7 @@ from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any, Final
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRun
@@ -33,6 +33,7 @@ from urdaemon.protocols.reverse import (
     TrajectoryAction,
     TrajectoryControl,
 )
+from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.protocols.trajectory_point import (
     TrajectoryPoint,
     TrajectoryPointConnection,

@@ -9,9 +9,11 @@ import pytest
 
 from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, HISTORY_STEPS, FakeArm, RuntimeState
-from urdaemon.fakeur.motion import JointMove, SpeedRamp, joint_move
+from urdaemon.fakeur.arm import HISTORY_STEPS, FakeArm
+from urdaemon.fakeur.joint_motion import JointMove, SpeedRamp, joint_move
+from urdaemon.fakeur.life import BOOT_TIME_S, BRAKE_RELEASE_TIME_S
 from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.protocols.rtde_variables import RuntimeState
 
 DT = 0.002
 
@@ -42,12 +44,12 @@ def _run(arm: FakeArm, seconds: float) -> None:
 def test_power_on_boots_to_idle_and_brake_release_to_running() -> None:
     arm = _arm()
     assert arm.robot_mode is RobotMode.POWER_OFF
-    assert arm.brake_release() == "robot is POWER_OFF, not IDLE"
-    assert arm.power_on() is None
+    assert arm.life.brake_release(arm.timestamp) == "robot is POWER_OFF, not IDLE"
+    assert arm.life.power_on(arm.timestamp) is None
     assert _mode(arm) is RobotMode.BOOTING
     _run(arm, BOOT_TIME_S + 0.01)
     assert _mode(arm) is RobotMode.IDLE
-    assert arm.brake_release() is None
+    assert arm.life.brake_release(arm.timestamp) is None
     _run(arm, BRAKE_RELEASE_TIME_S + 0.01)
     assert _mode(arm) is RobotMode.RUNNING
     assert arm.life.robot_status_bits & 1 == 1
@@ -140,10 +142,10 @@ def test_emergency_stop_powers_off_and_power_on_is_refused_until_released() -> N
     arm.emergency_stop()
     assert arm.robot_mode is RobotMode.POWER_OFF
     assert arm.runtime_state is RuntimeState.STOPPED
-    assert arm.power_on() == "emergency stop active"
-    arm.release_emergency_stop()
+    assert arm.life.power_on(arm.timestamp) == "emergency stop active"
+    arm.life.release_emergency_stop()
     assert arm.safety_mode is SafetyMode.NORMAL
-    assert arm.power_on() is None
+    assert arm.life.power_on(arm.timestamp) is None
 
 
 def test_tcp_pose_is_the_dh_forward_kinematics_as_a_rotation_vector() -> None:
@@ -191,10 +193,10 @@ def test_history_keeps_the_positions_of_past_cycles() -> None:
     for _ in range(HISTORY_STEPS + 10):
         arm.step(DT)
         seen.append(list(arm.q))
-    assert arm.history(0) == seen[-1]
-    assert arm.history(5) == seen[-6]
-    assert arm.history(HISTORY_STEPS - 1) == seen[-HISTORY_STEPS]
-    assert arm.history(HISTORY_STEPS + 100) == seen[-HISTORY_STEPS]
+    assert arm.history.ago(0) == seen[-1]
+    assert arm.history.ago(5) == seen[-6]
+    assert arm.history.ago(HISTORY_STEPS - 1) == seen[-HISTORY_STEPS]
+    assert arm.history.ago(HISTORY_STEPS + 100) == seen[-HISTORY_STEPS]
 
 
 def test_actual_tcp_pose_applies_the_tcp_offset() -> None:

@@ -191,8 +191,8 @@ def test_tool_contact_counts_back_to_just_before_the_force_rose() -> None:
     assert steps > 1, "the force had to rise past the threshold over a few cycles"
     assert arm.tcp_force[2] > TOOL_CONTACT_THRESHOLD_N
     assert wall.depth(_xyz(arm)) > 0
-    touched = arm.history(steps)
-    inside = arm.history(steps - 1)
+    touched = arm.history.ago(steps)
+    inside = arm.history.ago(steps - 1)
     assert wall.depth(arm.kinematics.tool_pose(touched)[:3]) == 0.0, "just before the contact"
     assert wall.depth(arm.kinematics.tool_pose(inside)[:3]) > 0.0, "the first cycle of the contact"
     # a contact from a direction the tool does not move in is not one; any direction when none is given
@@ -245,7 +245,7 @@ def test_tool_contact_counts_from_the_touch_not_from_a_steady_force_felt_before(
     wall = _wall_below(arm, 0.001)
     steps = _approach_until_contact(host, [0.0, 0.0, -0.05, 0.0, 0.0, 0.0])
     assert 1 < steps < 20
-    touched, inside = arm.history(steps), arm.history(steps - 1)
+    touched, inside = arm.history.ago(steps), arm.history.ago(steps - 1)
     assert wall.depth(arm.kinematics.tool_pose(touched)[:3]) == 0.0, "just before the contact"
     assert wall.depth(arm.kinematics.tool_pose(inside)[:3]) > 0.0, "the first cycle of the contact"
 

@@ -34,7 +34,6 @@ from tests.fakeur.control_rig import (
     start_rig,
     v0,
 )
-from urdaemon.fakeur.arm import RuntimeState
 from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
 from urdaemon.paths import resource_path
 from urdaemon.protocols import script_command as sc
@@ -50,6 +49,7 @@ from urdaemon.protocols.reverse import (
     TrajectoryAction,
     TrajectoryControl,
 )
+from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.protocols.trajectory_point import MotionPoint, MotionType, SplinePoint, TrajectoryResultCode
 
 CONNECT_ATTEMPTS = 5

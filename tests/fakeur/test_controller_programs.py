@@ -16,13 +16,13 @@ import pytest
 import urdaemon.fakeur.urscript as urscript
 from tests.fakeur.test_controller import Link
 from tests.fakeur.test_controller_life import ManualClock, _ask, _dashboard, manual_fake
-from urdaemon.fakeur.arm import RuntimeState
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.fakeur.reports import robot_state
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.rtde_variables import RuntimeState
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -1,4 +1,4 @@
-"""The fake arm's pure motion primitives (fakeur/motion.py)."""
+"""The fake arm's joint motions (fakeur/joint_motion.py) and the pause's time scaling (playback.py)."""
 
 from __future__ import annotations
 
@@ -9,16 +9,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from urdaemon.fakeur.motion import (
+from urdaemon.fakeur.joint_motion import (
     JointMove,
     LinearStop,
-    ScalingRamp,
     ServoFilter,
     SpeedRamp,
     joint_move,
     leading_stop_time,
     profile,
 )
+from urdaemon.fakeur.playback import ScalingRamp
 
 START = [0.0, -1.5, 1.5, -1.5, -1.5, 0.0]
 

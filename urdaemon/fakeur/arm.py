@@ -1,15 +1,18 @@
 """The fake controller's robot: joint motion, speed slider, IO, and its life (power, brakes, safety stops).
 
 Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller cycle; every
-command is a method that returns a refusal reason (or None) the way the real controller would
-refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
-(servoj target, speedj velocity, a ``Motion`` of fakeur/motion.py played on the program's time, or a
-stop with a given deceleration), always within the model's joint velocity limits; a command outside
-the joint position limits triggers a protective stop as on a real arm.
+command (of the arm or of its life) returns a refusal reason (or None) the way the real controller
+would refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
+(servoj target, speedj velocity, a ``Motion`` of fakeur/joint_motion.py or fakeur/tcp_motion.py
+played on the program's time, or a stop with a given deceleration), always within the model's joint
+velocity limits; a command outside the joint position limits triggers a protective stop as on a real
+arm.
 
-A played motion advances ``dt × speed slider × speed scaling`` of program time per cycle (nothing while
-the arm cannot move): the controller's time scaling. When it is over and no new motion replaced it, the
-arm stops with the motion's deceleration (a speedj or servoj that is not renewed decelerates to rest).
+A played motion is its ``playback`` (``Playback``, fakeur/playback.py): it advances
+``dt × speed slider × speed scaling`` of program time per cycle (nothing while the arm cannot move),
+and says where the joints head; the arm moves them there within their velocity limits. When it is
+over and no new motion replaced it, the arm stops with the motion's deceleration (a speedj or servoj
+that is not renewed decelerates to rest).
 
 Pausing a program (PLAYING → PAUSING → PAUSED) ramps the speed scaling to 0: the motion being played
 goes on along its path with time slowed to a stop, decelerating within the joint limits. Resuming
@@ -17,16 +20,20 @@ goes on along its path with time slowed to a stop, decelerating within the joint
 or pauses, never while it is PAUSED.
 
 What the arm touches (walls, a push on the tool: ``surroundings``, fakeur/contact.py) is stepped after
-the motion: it makes ``tcp_force``, moves the compliant axes in force mode and the free ones in
-freedrive, and protective-stops the arm when a wall pushes back harder than the force limit. Without
+the motion and says what it does to the arm: the wrench the arm measures (``tcp_force``), a protective
+stop when a wall pushes back harder than the force limit, and the TCP twist the compliant axes (force
+mode) or the free ones (freedrive) move at, which the arm turns into joint motion. Without
 surroundings (None) the arm moves in free air and the step costs one attribute check.
 
 The arm's life (power, brakes, safety stops, the program's run state and the status bits) is its
-``life`` (``ArmLife``, fakeur/life.py). Its modes and commands are on the arm too, as every user of
-the arm calls them (``arm.robot_mode``, ``arm.power_on()``); the arm halts or stops its motion when
-the life says it cannot move, and offers the life the motion side of each change (``halt``,
-``set_time_scaling``, ``slow_to_rest``, ``speed_up``). Its flange and TCP poses come from
-fakeur/pose.py (``TcpPoses``).
+``life`` (``ArmLife``, fakeur/life.py), a pure decider: the arm is the one writer of its motion.
+What only changes the life is asked of the life (``arm.life.power_on(arm.timestamp)``); what moves
+the arm too is asked of the arm (``power_off``, ``protective_stop``, ``emergency_stop``,
+``unlock_protective_stop`` and the program's ``start_program``, ``pause_program``,
+``resume_program``, ``stop_program``), which asks its life and does what the life's answer says
+(``life.Do``). The arm halts or stops its motion when the life says it cannot move. Its modes are
+readable on the arm too (``arm.robot_mode``). Its flange and TCP poses come from fakeur/pose.py
+(``TcpPoses``).
 """
 
 from __future__ import annotations
@@ -40,23 +47,18 @@ from typing import TYPE_CHECKING
 from urdaemon.description.frames import Pose
 from urdaemon.description.kinematics import DhKinematics
 from urdaemon.description.urmodels import DhParameters, UrModel
+from urdaemon.fakeur.joint_motion import Motion
 from urdaemon.fakeur.life import (
-    BOOT_TIME_S,
-    BRAKE_RELEASE_TIME_S,
     EMERGENCY_STOP_DECELERATION,
     PROTECTIVE_STOP_DECELERATION,
     ArmLife,
-    RuntimeState,
+    Do,
+    LifeStep,
 )
-from urdaemon.fakeur.motion import (
-    TIME_EPSILON_S,
-    LinearStop,
-    Motion,
-    ScalingRamp,
-    leading_stop_time,
-)
+from urdaemon.fakeur.playback import Playback
 from urdaemon.fakeur.pose import TcpPoses
 from urdaemon.model import RobotMode, SafetyMode
+from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.urscript import SPEEDJ_ACCELERATION
 
 if TYPE_CHECKING:
@@ -64,28 +66,18 @@ if TYPE_CHECKING:
     from urdaemon.fakeur.contact import Surroundings
 
 __all__ = [
-    "BOOT_TIME_S",
-    "BRAKE_RELEASE_TIME_S",
-    "EMERGENCY_STOP_DECELERATION",
     "HISTORY_STEPS",
-    "PAUSE_ACCELERATION_SHARE",
-    "PROTECTIVE_STOP_DECELERATION",
-    "ArmLife",
     "FakeArm",
     "IoState",
+    "JointHistory",
     "MotionMode",
-    "RuntimeState",
+    "RuntimeState",  # defined in protocols/rtde_variables.py, kept importable here
 ]
 
 HISTORY_STEPS = 1000
 """Cycles of actual joint positions kept for ``get_actual_joint_positions_history``."""
-ACCELERATION_STEP_S = 1e-5
-"""s of program time: the backward difference over which a motion's acceleration at its end is taken."""
 _HOME = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0)
 """rad: the joints of an arm made without initial positions."""
-PAUSE_ACCELERATION_SHARE = 0.5
-"""The share of each joint's acceleration limit that the speed scaling's ramp may use when the
-controller pauses or resumes a program (the motion's own acceleration comes on top, scaled down)."""
 
 
 class MotionMode(enum.Enum):
@@ -116,6 +108,27 @@ class IoState:
     registers_bit: dict[int, bool] = field(default_factory=dict)
     flags: int = 0
     """The 32 program flags (``set_flag``): internal outputs that keep their value between programs."""
+
+
+class JointHistory:
+    """The actual joint positions of the last ``HISTORY_STEPS`` cycles (a ring, one row per cycle)."""
+
+    __slots__ = ("_at", "_rows")
+
+    def __init__(self, q: Sequence[float]) -> None:
+        self._rows = [list(q) for _ in range(HISTORY_STEPS)]
+        self._at = 0
+
+    def record(self, q: Sequence[float]) -> None:
+        """This cycle's joint positions."""
+        at = (self._at + 1) % HISTORY_STEPS
+        self._rows[at][:] = q
+        self._at = at
+
+    def ago(self, steps: int) -> list[float]:
+        """rad: the actual joint positions ``steps`` cycles ago (0 = now), at most HISTORY_STEPS - 1."""
+        steps = max(0, min(int(steps), HISTORY_STEPS - 1))
+        return list(self._rows[(self._at - steps) % HISTORY_STEPS])
 
 
 class FakeArm:
@@ -165,20 +178,8 @@ class FakeArm:
         """Walls and a push on the tool (fakeur/contact.py), stepped after the motion; None: free air."""
         self.remote_control = True
         self._init_motion()
-        life = self.life = ArmLife(self, powered=powered)
-        """Power, brakes, safety stops and the program's run state (fakeur/life.py)."""
-        # the life's commands, called on the arm as its users always have
-        self.power_on = life.power_on
-        self.power_off = life.power_off
-        self.brake_release = life.brake_release
-        self.protective_stop = life.protective_stop
-        self.unlock_protective_stop = life.unlock_protective_stop
-        self.emergency_stop = life.emergency_stop
-        self.release_emergency_stop = life.release_emergency_stop
-        self.start_program = life.start_program
-        self.pause_program = life.pause_program
-        self.resume_program = life.resume_program
-        self.stop_program = life.stop_program
+        self.life = ArmLife(powered=powered)
+        """Power, brakes, safety stops and the program's run state (fakeur/life.py): a pure decider."""
 
     @property
     def robot_mode(self) -> RobotMode:
@@ -203,27 +204,17 @@ class FakeArm:
     def _init_motion(self) -> None:
         """The motion state at boot: holding still at ``q``, no motion played, a full history."""
         self._mode = MotionMode.HOLD
-        self._scaling = ScalingRamp()
-        """The time scaling of played motions that pausing and resuming ramp."""
+        self.playback = Playback(self.q, PROTECTIVE_STOP_DECELERATION)
+        """The motion a program plays, on its time, and its time scaling (fakeur/playback.py)."""
         self._servo_target: list[float] | None = None
         self._speed_target = [0.0] * 6
         self._acceleration = PROTECTIVE_STOP_DECELERATION
         """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
-        self._motion: Motion | None = None
-        self._played: Motion | None = None
         self._ik: UrKinematics | None = None
-        self._motion_time = 0.0
-        self._motion_stop = PROTECTIVE_STOP_DECELERATION
-        self._target_q = list(self.q)
-        self._target_qd = [0.0] * 6
-        self._program_qd = [0.0] * 6
-        """rad/s of program time: the played motion's velocity before the speed slider's scaling."""
-        self._history = [list(self.q) for _ in range(HISTORY_STEPS)]
-        self._history_at = 0
+        self.history = JointHistory(self.q)
+        """The actual joint positions of the last ``HISTORY_STEPS`` cycles."""
         self._last_dt = 0.002
         """s: the last cycle's time (a pause or resume ramp shorter than one cycle happens at once)."""
-        self._carry = 0.0
-        """s of program time: how far the last cycle went on past the end of the motion it ended."""
 
     # ---- motion commands -------------------------------------------------------------------------
 
@@ -249,9 +240,7 @@ class FakeArm:
         self._speed_target = [0.0] * 6
         self._acceleration = max(float(deceleration), 1e-6)
         self._servo_target = None
-        self._motion = None
-        self._played = None
-        self._carry = 0.0
+        self.playback.drop()
 
     def play(self, motion: Motion, stop_deceleration: float) -> bool:
         """Follow ``motion`` from its start on the program's time; False (ignored) if the arm cannot move.
@@ -261,33 +250,30 @@ class FakeArm:
         if not self.life.can_move:
             return False
         self._mode = MotionMode.PLAY
-        self._motion = self._played = motion
-        self._motion_time = self._carry  # program time the arm already went on past the last motion
-        self._carry = 0.0
-        self._motion_stop = max(float(stop_deceleration), 1e-6)
+        self.playback.start(motion, stop_deceleration)
         self._servo_target = None
         return True
 
     @property
     def motion(self) -> Motion | None:
         """The motion being played (None when the arm holds, stops, or follows servoj/speedj)."""
-        return self._motion if self._mode is MotionMode.PLAY else None
+        return self.playback.motion if self._mode is MotionMode.PLAY else None
 
     @property
     def played(self) -> Motion | None:
         """The last motion given to ``play``, until a stop took the arm (it stays once played out)."""
-        return self._played
+        return self.playback.played
 
     @property
     def motion_time(self) -> float:
         """s: program time played of ``motion``."""
-        return self._motion_time
+        return self.playback.time
 
     @property
     def commanded_velocity(self) -> list[float]:
         """rad/s of program time: the velocity the arm is driven at (a new motion starts from it)."""
         if self._mode is MotionMode.PLAY:
-            return list(self._program_qd)
+            return list(self.playback.program_qd)
         if self._mode is MotionMode.HOLD:
             return [0.0] * 6
         return list(self.qd)
@@ -295,61 +281,100 @@ class FakeArm:
     @property
     def target_q(self) -> list[float]:
         """rad: the joint positions being commanded (the actual ones unless a motion is played)."""
-        return self._target_q if self._mode is MotionMode.PLAY else self.q
+        return self.playback.target_q if self._mode is MotionMode.PLAY else self.q
 
     @property
     def target_qd(self) -> list[float]:
         """rad/s: the joint velocities being commanded."""
-        return self._target_qd if self._mode is MotionMode.PLAY else self.qd
+        return self.playback.target_qd if self._mode is MotionMode.PLAY else self.qd
 
     @property
     def steady(self) -> bool:
         """True when the arm is fully at rest and nothing commands motion (``is_steady()``)."""
         return self._mode is MotionMode.HOLD and not any(self.qd)
 
-    def history(self, steps: int) -> list[float]:
-        """rad: the actual joint positions ``steps`` cycles ago (0 = now), at most HISTORY_STEPS - 1."""
-        steps = max(0, min(int(steps), HISTORY_STEPS - 1))
-        return list(self._history[(self._history_at - steps) % HISTORY_STEPS])
+    # ---- the life's commands that move the arm (fakeur/life.py) ------------------------------------
 
-    def hold(self) -> None:
-        """Stand still (no motion thread)."""
-        self.stop(PROTECTIVE_STOP_DECELERATION)
+    def power_off(self) -> None:
+        """Cut arm power: the arm halts (the brakes hold the joints), the program stops."""
+        self._obey(self.life.power_off())
 
-    # ---- the motion side of the life's changes (fakeur/life.py) -----------------------------------
+    def protective_stop(self) -> None:
+        """Trigger a protective stop: motion decelerates to rest, the program pauses."""
+        self._obey(self.life.protective_stop())
 
-    def halt(self) -> None:
+    def unlock_protective_stop(self) -> str | None:
+        """Clear a protective stop; a reason if there is none to clear or the arm still moves."""
+        return self.life.unlock_protective_stop(moving=any(abs(v) > 1e-9 for v in self.qd))
+
+    def emergency_stop(self) -> None:
+        """Press the emergency stop: the arm stops, the program is stopped, power is off."""
+        self._obey(self.life.emergency_stop())
+
+    def start_program(self) -> str | None:
+        """The program starts playing; a reason if it cannot."""
+        return self._obey(self.life.start_program())
+
+    def pause_program(self) -> None:
+        """Pause the program: a played motion slows down along its path (PAUSING) to rest (PAUSED).
+
+        Any other motion (a stop, a legacy servo or speed target) stops at once as a protective stop
+        does, and the program is PAUSED."""
+        self._obey(self.life.pause_program())
+
+    def resume_program(self) -> str | None:
+        """Resume a paused program: PLAYING, the paused motion speeding up along its path."""
+        return self._obey(self.life.resume_program())
+
+    def stop_program(self) -> None:
+        """Stop the program (motion stops). Every program stop comes through here."""
+        self._obey(self.life.stop_program())
+
+    def _obey(self, step: LifeStep) -> str | None:
+        """Do what the life's answer says the motion does, in order; the answer's refusal reason."""
+        for do in step.then:
+            if do is Do.HALT:
+                self._halt()
+            elif do is Do.PROTECTIVE_STOP:
+                self.stop(PROTECTIVE_STOP_DECELERATION)
+            elif do is Do.EMERGENCY_STOP:
+                self.stop(EMERGENCY_STOP_DECELERATION)
+            elif do is Do.STOP_PROGRAM:
+                self.stop_program()
+            elif do is Do.FREEZE_TIME or do is Do.FULL_TIME:
+                self.playback.scaling.set(0.0 if do is Do.FREEZE_TIME else 1.0)
+            elif do is Do.SLOW_TO_REST:
+                if not self._slow_to_rest():
+                    self.life.came_to_rest()
+            elif do is Do.SPEED_UP:
+                self._speed_up()
+        return step.refused
+
+    def _halt(self) -> None:
         """Stand still at once, nothing played (power is cut: the brakes hold the joints)."""
         self._mode = MotionMode.HOLD
         self._servo_target = None
-        self._motion = self._played = None
+        self.playback.forget()
         self.qd = [0.0] * 6
         self.qdd = [0.0] * 6
 
-    def set_time_scaling(self, scale: float) -> None:
-        """Set the played motions' time scaling to ``scale`` at once (a program starts or stops)."""
-        self._scaling.set(scale)
-
-    def slow_to_rest(self) -> bool:
+    def _slow_to_rest(self) -> bool:
         """Slow down for a pause; True while a played motion still slows down along its path.
 
         A played motion's time scaling ramps to 0 within ``PAUSE_ACCELERATION_SHARE`` of the joints'
-        acceleration limits; any other motion stops at once as a protective stop does."""
+        acceleration limits (``Playback.pause``); any other motion stops at once as a protective stop
+        does."""
         if self._mode is MotionMode.PLAY:
-            self._scaling.ramp_to(
-                0.0, self.qd, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt
-            )
-            return self._scaling.scale != 0.0
+            return self.playback.pause(self.qd, self.max_acceleration, self._last_dt)
         if self._mode is not MotionMode.HOLD:
             self.stop(PROTECTIVE_STOP_DECELERATION)
-        self._scaling.set(0.0)
+        self.playback.scaling.set(0.0)
         return False
 
-    def speed_up(self) -> None:
+    def _speed_up(self) -> None:
         """Resume: a paused motion's time scaling ramps back to 1 the way it came down."""
-        slider = self.speed_slider
-        velocity = [v * slider for v in self._program_qd] if self._mode is MotionMode.PLAY else [0.0] * 6
-        self._scaling.ramp_to(1.0, velocity, self.max_acceleration, PAUSE_ACCELERATION_SHARE, self._last_dt)
+        playing = self._mode is MotionMode.PLAY
+        self.playback.resume(self.speed_slider, self.max_acceleration, self._last_dt, playing=playing)
 
     # ---- simulation ------------------------------------------------------------------------------
 
@@ -357,11 +382,12 @@ class FakeArm:
         """Advance one controller cycle of ``dt`` seconds."""
         self.timestamp += dt
         self._last_dt = dt
-        self._carry = 0.0
+        playback = self.playback
+        playback.next_cycle()
         life = self.life
         life.advance(self.timestamp)
         if life.robot_mode is not RobotMode.RUNNING and self._mode is not MotionMode.STOP:
-            self.halt()
+            self._halt()
         if (
             life.safety_mode is not SafetyMode.NORMAL
             and life.safety_mode is not SafetyMode.REDUCED
@@ -369,7 +395,7 @@ class FakeArm:
         ):
             self.stop(PROTECTIVE_STOP_DECELERATION)
         runtime = life.runtime_state
-        scaling = self._scaling
+        scaling = playback.scaling
         scale = scaling.scale if scaling.settled else scaling.step(dt)
         playing = runtime is RuntimeState.PLAYING or runtime is RuntimeState.PAUSING
         self.speed_scaling = scale if playing else 0.0
@@ -389,66 +415,28 @@ class FakeArm:
             life.came_to_rest()  # the scaling has come to 0: at rest on the path
         surroundings = self.surroundings
         if surroundings is not None:
-            surroundings.step(self, dt)
+            self._feel(surroundings, dt)
         self._check_limits()
-        at = (self._history_at + 1) % HISTORY_STEPS
-        self._history[at][:] = self.q
-        self._history_at = at
+        self.history.record(self.q)
 
     def _step_play(self, dt: float, scale: float) -> None:
-        motion = self._motion
-        if motion is None:
+        playback = self.playback
+        if playback.motion is None:
             return
-        elapsed = self._motion_time
-        if elapsed >= motion.duration - TIME_EPSILON_S:
-            # over, and nothing replaced it: stop along the path from the commanded velocity
-            velocity = self._program_qd
-            self._motion = LinearStop(self.q, velocity, leading_stop_time(velocity, self._motion_stop))
-            self._motion_time = elapsed = 0.0
-            motion = self._motion
-            if motion.duration <= 0:
-                self._mode = MotionMode.HOLD
-                self._motion = None
-                self._target_qd = [0.0] * 6
-                self._program_qd = [0.0] * 6
-                self.qd = [0.0] * 6
-                self.qdd = [0.0] * 6
-                return
         slider = self.speed_slider * scale
-        budget = dt * slider
-        wanted = elapsed + budget
-        elapsed = min(wanted, motion.duration)
-        self._motion_time = elapsed
-        target = motion.position(elapsed)
-        self._target_q = target
-        velocity = self._program_qd = motion.velocity(elapsed)
-        self._target_qd = [v * slider for v in velocity]
-        goal = target
-        carry = wanted - elapsed
-        if carry > TIME_EPSILON_S and any(velocity):
-            # the motion ended within this cycle (its time is not a whole number of cycles at this
-            # scaling): the arm goes on at its end velocity for the rest of the cycle, and a motion
-            # played next starts that far into its own time (``play``), so a stream of short motions
-            # (one speedj per cycle) moves smoothly at any scaling. The target stays the motion's end.
-            self._carry = carry
-            goal = _went_on(motion, target, velocity, carry)
+        goal = playback.advance(dt, slider, self.q)
+        if goal is None:  # over, and its stop takes no time: the arm holds
+            self._mode = MotionMode.HOLD
+            self.qd = [0.0] * 6
+            self.qdd = [0.0] * 6
+            return
         if self._step_servo(dt, goal):
-            # the motion asks more than the joints can do: what is commanded is what the arm does
-            # (the controller's target speeds never exceed the joint limits), and a following
-            # motion or stop starts from that
-            self._target_q = list(self.q)
-            self._target_qd = list(self.qd)
-            if slider > 0:
-                self._program_qd = [v / slider for v in self.qd]
-            velocity = self._program_qd
-        if elapsed >= motion.duration - TIME_EPSILON_S and not any(velocity):
-            q = self.q
-            if all(abs(q[i] - target[i]) < 1e-9 for i in range(6)):
-                # played out at rest: the arm stands on its target from here on
-                q[:] = target
-                self._mode = MotionMode.HOLD
-                self._motion = None
-                self.qd = [0.0] * 6
+            playback.held_back(self.q, self.qd, slider)
+        end = playback.played_out(self.q)
+        if end is not None:  # played out at rest: the arm stands on its target from here on
+            self.q[:] = end
+            self._mode = MotionMode.HOLD
+            self.qd = [0.0] * 6
 
     def _step_servo(self, dt: float, target: list[float]) -> bool:
         """Move towards ``target`` within the velocity limits; True if a limit held a joint back."""
@@ -481,6 +469,38 @@ class FakeArm:
             q[i] += 0.5 * (qd[i] + new_v) * dt
             qd[i] = new_v
 
+    def _feel(self, surroundings: Surroundings, dt: float) -> None:
+        """One cycle of what the arm touches, and what it does to the arm (fakeur/contact.py)."""
+        felt = surroundings.step(
+            dt,
+            self.actual_tcp_pose() if surroundings.walls else None,
+            can_move=self.life.can_move,
+            force_mode=self.force_mode,
+            freedrive=self.freedrive,
+        )
+        if felt is None:
+            return
+        self.tcp_force = felt.force
+        if felt.stop:
+            self.protective_stop()
+        if felt.twist is not None:
+            self._comply(felt.twist, dt)
+
+    def _comply(self, twist: Sequence[float], dt: float) -> None:
+        """Drive the joints at the velocities that give the TCP ``twist`` (base frame), scaled down
+        together into the joint velocity limits, on top of this cycle's motion."""
+        qd = self.ik.joint_velocity(self.q, twist, self.tcp_offset)
+        vmax = self.max_velocity
+        scale = 1.0
+        for i in range(6):
+            if abs(qd[i]) * scale > vmax[i]:
+                scale = vmax[i] / abs(qd[i])
+        q, actual = self.q, self.qd
+        for i in range(6):
+            v = qd[i] * scale
+            q[i] += v * dt
+            actual[i] += v
+
     def _check_limits(self) -> None:
         for i in range(6):
             if not self.min_position[i] <= self.q[i] <= self.max_position[i]:
@@ -507,22 +527,3 @@ class FakeArm:
     def actual_tcp_pose(self) -> Pose:
         """The TCP pose (the flange pose with ``tcp_offset`` applied), as RTDE ``actual_TCP_pose``."""
         return self._poses.tcp(self.q, self.tcp_offset)
-
-
-def _went_on(motion: Motion, end: list[float], velocity: list[float], carry: float) -> list[float]:
-    """Where a motion that ended at ``end`` with ``velocity`` goes on to in ``carry`` s of program time:
-    at its end velocity, and a joint that was slowing down keeps slowing down (to rest at the most), so
-    the arm does not run past where a path that ends in a slow-down is heading."""
-    duration = motion.duration
-    h = min(duration, ACCELERATION_STEP_S)
-    before = motion.velocity(duration - h) if h > 0 else velocity
-    goal = []
-    for q, v, w in zip(end, velocity, before, strict=True):
-        a = (v - w) / h if h > 0 else 0.0
-        if a * v >= 0.0:  # cruising or speeding up: on at the end velocity
-            goal.append(q + v * carry)
-        elif v * (v + a * carry) <= 0.0:  # at rest before the carry is over
-            goal.append(q - v * v / (2.0 * a))
-        else:
-            goal.append(q + v * carry + 0.5 * a * carry * carry)
-    return goal

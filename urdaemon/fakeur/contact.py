@@ -1,8 +1,11 @@
 """What the fake arm touches: walls and a hand's push, the wrench they put on the TCP, and how force
 mode, freedrive and ``tool_contact`` answer it.
 
-Pure (time passed in, no I/O). A :class:`Surroundings` is stepped once per controller cycle by
-``FakeArm.step`` after the arm's own motion, when the arm has one (``arm.surroundings``):
+Pure (time passed in, no I/O), and a decider: it holds no arm and calls nothing back. A
+:class:`Surroundings` is stepped once per controller cycle by ``FakeArm.step`` after the arm's own
+motion, when the arm has one (``arm.surroundings``), with what it needs of the arm (the TCP pose,
+whether the arm can move, force mode and freedrive on or off); it answers what it does to the arm
+(:class:`Felt`: the measured wrench, a protective stop, the TCP twist to move at), which the arm does:
 
 - a **wall** is a plane in the base frame (a point and an outward normal) with a stiffness: a TCP on
   the wrong side by ``d`` metres feels ``stiffness * d`` newtons along the normal. The fake does not
@@ -11,8 +14,8 @@ Pure (time passed in, no I/O). A :class:`Surroundings` is stepped once per contr
   protective-stops;
 - a **push** is a constant wrench at the TCP in the base frame (N, N·m), like a hand on the tool.
 
-Their sum is the external wrench on the TCP; ``arm.tcp_force`` is it minus the offset that
-``zero_ftsensor`` took (:meth:`Surroundings.zero`). The sign is the controller's: the force the
+Their sum is the external wrench on the TCP; ``arm.tcp_force`` (``Felt.force``) is it minus the offset
+that ``zero_ftsensor`` took (:meth:`Surroundings.zero`). The sign is the controller's: the force the
 surroundings put on the tool (a wall below the tool pushes it up: +z).
 
 **Force mode** (a model, after the URScript manual's description): along each compliant axis of the
@@ -21,8 +24,8 @@ task frame (type 2: the frame as given) the TCP is driven at an admittance speed
 surroundings, so it balances where the measured force equals the commanded one and opposes it),
 capped by ``limits`` and reached through a first-order lag whose time constant shrinks as the damping
 grows (damping 1: the speed follows the force error almost at once; 0: the speed lingers). The
-non-compliant axes get no motion from the model: they follow the program's motion. The twist goes
-to joint velocities through the arm's Jacobian. The compliant motion is added to the joints after the
+non-compliant axes get no motion from the model: they follow the program's motion. The arm turns the
+twist into joint velocities through its Jacobian. The compliant motion is added to the joints after the
 program's motion: a program that drives the joints to a target at the same time (servoj, a move)
 pulls the compliant axes back to it; force mode in our control script runs with the arm holding.
 
@@ -54,12 +57,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final
+from typing import Final, Protocol
 
-from urdaemon.description.frames import IDENTITY, Frame, frame_of_pose, rotate
-
-if TYPE_CHECKING:
-    from urdaemon.fakeur.arm import FakeArm
+from urdaemon.description.frames import IDENTITY, Frame, Pose, frame_of_pose, rotate
 
 __all__ = [
     "CONTACT_ONSET_N",
@@ -70,7 +70,9 @@ __all__ = [
     "FREEDRIVE_ADMITTANCE",
     "FREEDRIVE_TORQUE_ADMITTANCE",
     "TOOL_CONTACT_THRESHOLD_N",
+    "Felt",
     "ForceModeSettings",
+    "Surrounded",
     "Surroundings",
     "Wall",
     "surroundings_of",
@@ -149,6 +151,19 @@ class ForceModeSettings:
     gain_scaling: float
 
 
+@dataclass(frozen=True, slots=True)
+class Felt:
+    """What one cycle of the surroundings does to the arm (``Surroundings.step``)."""
+
+    force: list[float]
+    """N, N·m in the base frame: the wrench the arm measures at the TCP (``arm.tcp_force``)."""
+    stop: bool
+    """A wall pushes back harder than :data:`FORCE_LIMIT_N`: the arm protective-stops."""
+    twist: list[float] | None
+    """m/s, rad/s in the base frame: the TCP twist force mode or freedrive moves the arm at this cycle,
+    on top of its own motion (None: no such motion)."""
+
+
 @dataclass(slots=True)
 class Surroundings:
     """The walls and the push around one arm, and what they do to it (see the module)."""
@@ -175,19 +190,22 @@ class Surroundings:
     _twist: list[float] = field(default_factory=lambda: [0.0] * 6)
     """Force mode's TCP twist in the task frame (the lag's state)."""
 
-    def step(self, arm: FakeArm, dt: float) -> None:
-        """One controller cycle, after the arm's own motion: the wrench, the safety limit, force mode or
-        freedrive motion, and ``arm.tcp_force``. With nothing around the arm, no mode on and nothing
-        changed since the last step, it only counts the cycle."""
+    def step(
+        self, dt: float, pose: Pose | None, *, can_move: bool, force_mode: bool, freedrive: bool
+    ) -> Felt | None:
+        """One controller cycle, after the arm's own motion: the wrench the arm measures, the safety
+        limit, force mode or freedrive motion. ``pose``: the arm's TCP pose (needed only while there
+        are walls); ``can_move``: the arm's life lets it move. With nothing around the arm, no mode on
+        and nothing changed since the last step, it only counts the cycle (None: nothing changes)."""
         self.cycle += 1
         walls, push = self.walls, self.push
-        if self._quiet and not walls and not arm.force_mode and not arm.freedrive and not any(push):
-            return
+        if self._quiet and not walls and not force_mode and not freedrive and not any(push):
+            return None
         fx, fy, fz = push[0], push[1], push[2]
         pressing = walled = 0.0
         depths: list[float] = []
         if walls:
-            pose = arm.actual_tcp_pose()
+            assert pose is not None, "walls need the TCP pose"
             for wall in walls:
                 depth = wall.signed_depth(pose)
                 depths.append(depth)
@@ -198,17 +216,21 @@ class Surroundings:
                     fx, fy, fz = fx + f * wall.normal[0], fy + f * wall.normal[1], fz + f * wall.normal[2]
         wrench = self.wrench = (fx, fy, fz, push[3], push[4], push[5])
         offset = self.offset
-        felt = arm.tcp_force = [wrench[i] - offset[i] for i in range(6)]
+        felt = [wrench[i] - offset[i] for i in range(6)]
         self._track_contact(felt, walled)
-        self._quiet = not walls and not arm.force_mode and not arm.freedrive and not any(push)
-        if pressing > FORCE_LIMIT_N and arm.life.can_move:
-            arm.protective_stop()
-        if arm.life.can_move and arm.force_mode and self.force is not None:
-            self._move(arm, self._force_twist(felt, depths, dt), dt)
-        elif arm.life.can_move and arm.freedrive:
-            self._move(arm, self._free_twist(felt, depths, dt), dt)
+        self._quiet = not walls and not force_mode and not freedrive and not any(push)
+        stop = pressing > FORCE_LIMIT_N and can_move
+        moving = can_move and not stop  # a protective stop ends what the arm may do this cycle
+        twist = None
+        if moving and force_mode and self.force is not None:
+            twist = self._force_twist(felt, depths, dt)
+        elif moving and freedrive:
+            twist = self._free_twist(felt, depths, dt)
         elif any(self._twist):
             self._twist[:] = _ZERO6
+        if twist is not None and max(abs(v) for v in twist) < _STILL:
+            twist = None  # the round-off of balanced forces: no motion
+        return Felt(felt, stop, twist)
 
     def _track_contact(self, felt: Sequence[float], walled: float) -> None:
         """Where ``tool_contact`` counts from (``walled``: the walls' force now): a wall starting to push,
@@ -330,24 +352,6 @@ class Surroundings:
                 speed = law.solve(target, None)
         return speed
 
-    @staticmethod
-    def _move(arm: FakeArm, twist: Sequence[float], dt: float) -> None:
-        """Drive the joints at the velocities that give the TCP ``twist``, scaled into the joint limits;
-        a twist below :data:`_STILL` (round-off where the forces balance) moves nothing."""
-        if max(abs(v) for v in twist) < _STILL:
-            return
-        qd = arm.ik.joint_velocity(arm.q, twist, arm.tcp_offset)
-        vmax = arm.max_velocity
-        scale = 1.0
-        for i in range(6):
-            if abs(qd[i]) * scale > vmax[i]:
-                scale = vmax[i] / abs(qd[i])
-        q, actual = arm.q, arm.qd
-        for i in range(6):
-            v = qd[i] * scale
-            q[i] += v * dt
-            actual[i] += v
-
 
 _UNBOUNDED: Final = (math.inf, math.inf, math.inf)
 _STILL: Final = 1e-9
@@ -435,7 +439,13 @@ def _unrotate(frame: Frame, x: float, y: float, z: float) -> tuple[float, float,
     )
 
 
-def surroundings_of(arm: FakeArm) -> Surroundings:
+class Surrounded(Protocol):
+    """An arm that may have surroundings (``FakeArm``)."""
+
+    surroundings: Surroundings | None
+
+
+def surroundings_of(arm: Surrounded) -> Surroundings:
     """The arm's surroundings, made (empty) on first use."""
     model = arm.surroundings
     if model is None:

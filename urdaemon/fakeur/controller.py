@@ -243,7 +243,7 @@ class FakeController:
 
     def release_emergency_stop(self) -> None:
         """Release the emergency stop button."""
-        self.arm.release_emergency_stop()
+        self.arm.life.release_emergency_stop()
 
     def set_speed_slider(self, fraction: float) -> None:
         """Move the teach pendant's speed slider."""
@@ -313,7 +313,7 @@ class FakeController:
             programs.step()
         if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:
             self._release_when_idle = False
-            arm.brake_release()
+            arm.life.brake_release(arm.timestamp)
         arm.step(dt)
         self.cycles += 1
         self.rtde.after_cycle()
@@ -406,12 +406,12 @@ class FakeController:
     def _controller_command(self, line: str) -> None:
         arm = self.arm
         if line == prim.ControllerCommand.POWER_ON:
-            arm.power_on()
+            arm.life.power_on(arm.timestamp)
         elif line == prim.ControllerCommand.POWER_OFF:
             self._stop_program()
             arm.power_off()
         elif line == prim.ControllerCommand.BRAKE_RELEASE:
-            self._brake_release()
+            self.brake_release()
         elif line == prim.ControllerCommand.UNLOCK_PROTECTIVE_STOP:
             arm.unlock_protective_stop()
         elif line == prim.ControllerCommand.STOP_PROGRAM:
@@ -446,15 +446,21 @@ class FakeController:
     def _input_owner(self) -> dict[str, Any]:
         return self.rtde.input_owner
 
-    def _brake_release(self) -> str | None:
+    def brake_release(self) -> str | None:
         """Release the brakes; from POWER_OFF power on first, then release once IDLE (as URSim does)."""
         arm = self.arm
         if arm.robot_mode in (RobotMode.POWER_OFF, RobotMode.BOOTING):
-            reason = arm.power_on()
+            reason = arm.life.power_on(arm.timestamp)
             if reason is None:
                 self._release_when_idle = True
             return reason
-        return arm.brake_release()
+        return arm.life.brake_release(arm.timestamp)
+
+    def play_urcap(self) -> None:
+        """What the External Control program does on play: fetch the script from the daemon's script
+        sender (``urcap``), then run it; nothing without a script sender."""
+        if self.urcap is not None:
+            self.connections.spawn(self.programs.play_urcap(self.urcap, self._start_program))
 
     # ---- dashboard (29999) ------------------------------------------------------------------------------
 

@@ -11,28 +11,34 @@ is refused meanwhile: it neither resumes it nor starts the loaded program anew.
 compiler thread (up to ~12 ms of pure Python within the file's bounds): that connection's reply waits
 for it, every fake's clock and every other connection go on. ``dashboard_reply`` still translates on
 the calling thread, for callers that cannot wait.
+
+The answers see the controller through :class:`DashboardController`: its arm, the programs it runs,
+the loaded program, what it is, and its two commands that are more than one collaborator's (brake
+release, which powers on first; the External Control program's play). ``FakeController`` is one.
 """
 
 from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
-from urdaemon.fakeur.arm import RuntimeState
 from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpProgram, UrpRefused, translate
-from urdaemon.model import SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
+from urdaemon.protocols.rtde_variables import RuntimeState
 
 if TYPE_CHECKING:
-    from urdaemon.fakeur.controller import FakeController
+    from urdaemon.description.urmodels import UrModel
+    from urdaemon.fakeur.arm import FakeArm
+    from urdaemon.fakeur.programs import Programs
 
 __all__ = [
     "PROGRAMS_DIR",
     "REMOTE_CONTROL_SINCE",
     "SCRIPT_SUFFIXES",
     "URP_SUFFIX",
+    "DashboardController",
     "dashboard_answer",
     "dashboard_reply",
     "play",
@@ -59,7 +65,32 @@ _PROGRAM_STATES = {
 }
 
 
-def dashboard_reply(fake: FakeController, command: Any) -> str:
+class DashboardController(Protocol):
+    """What the dashboard's answers need of a controller (``FakeController`` is one)."""
+
+    arm: FakeArm
+    programs: Programs
+    """The programs it runs: started, stopped, compiled, the loaded ``.urp``, its robot messages."""
+    loaded_program: str | None
+    """The program ``load`` loaded (and ``play`` plays); None: none."""
+    address: str
+    model: UrModel
+    controller_version: tuple[int, int, int, int]
+    programs_dir: Path | None
+    """Where ``load`` finds program files; None: URSim's default directory."""
+    default_program: str
+    """The External Control program, which always exists."""
+
+    def brake_release(self) -> str | None:
+        """Release the brakes (powering on first from POWER_OFF); a reason if refused."""
+        ...
+
+    def play_urcap(self) -> None:
+        """What the External Control program does on play: fetch the script from the daemon, run it."""
+        ...
+
+
+def dashboard_reply(fake: DashboardController, command: Any) -> str:
     """The dashboard's answer to ``command`` (and what it does to ``fake``)."""
     reply = _action_reply(fake, command)
     if reply is None:
@@ -70,17 +101,17 @@ def dashboard_reply(fake: FakeController, command: Any) -> str:
     return success if isinstance(success, str) else dash.unknown_command_text(getattr(command, "line", ""))
 
 
-def _action_reply(fake: FakeController, command: Any) -> str | None:
+def _action_reply(fake: DashboardController, command: Any) -> str | None:
     """The answer to a command that changes the arm or the program; None for any other command."""
     arm = fake.arm
     if isinstance(command, dash.PowerOn):
-        return "Powering on" if arm.power_on() is None else "Failed to execute: power on"
+        return "Powering on" if arm.life.power_on(arm.timestamp) is None else "Failed to execute: power on"
     if isinstance(command, dash.PowerOff):
-        fake._stop_program()
+        fake.programs.stop()
         arm.power_off()
         return "Powering off"
     if isinstance(command, dash.BrakeRelease):
-        return "Brake releasing" if fake._brake_release() is None else "Failed to execute: brake release"
+        return "Brake releasing" if fake.brake_release() is None else "Failed to execute: brake release"
     if isinstance(command, dash.UnlockProtectiveStop):
         return (
             "Protective stop releasing"
@@ -96,10 +127,9 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
     if isinstance(command, dash.Play):
         return "Starting program" if play(fake) is None else "Failed to execute: play"
     if isinstance(command, dash.RestartSafety):
-        fake._stop_program()
+        fake.programs.stop()
         arm.power_off()
-        if arm.safety_mode not in (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP):
-            arm.life.safety_mode = SafetyMode.NORMAL
+        arm.life.restart_safety()
         return "Restarting safety"
     if isinstance(command, dash.Pause):
         if arm.runtime_state is not RuntimeState.PLAYING:
@@ -109,7 +139,7 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
     if isinstance(command, dash.Stop):
         if arm.runtime_state is RuntimeState.STOPPED and not fake.programs.busy:
             return "Failed to execute: stop"
-        fake._stop_program()
+        fake.programs.stop()
         return "Stopped"
     if isinstance(command, dash.Quit):
         return "Disconnected"
@@ -119,7 +149,7 @@ def _action_reply(fake: FakeController, command: Any) -> str | None:
     return None
 
 
-def _query_reply(fake: FakeController, command: Any) -> str | None:
+def _query_reply(fake: DashboardController, command: Any) -> str | None:
     """The answer to a command that only reads the fake's state; None for any other command."""
     arm = fake.arm
     program = fake.loaded_program
@@ -157,7 +187,7 @@ def _query_reply(fake: FakeController, command: Any) -> str | None:
     return None
 
 
-async def dashboard_answer(fake: FakeController, command: Any) -> str:
+async def dashboard_answer(fake: DashboardController, command: Any) -> str:
     """The dashboard's answer to ``command``, as :func:`dashboard_reply`, but ``load`` reads and
     translates a ``.urp`` off the event loop (in the compiler thread): the reply waits for it, every
     fake's clock and every other connection do not."""
@@ -169,23 +199,23 @@ async def dashboard_answer(fake: FakeController, command: Any) -> str:
     return dashboard_reply(fake, command)
 
 
-def _is_urp(fake: FakeController, path: str) -> bool:
+def _is_urp(fake: DashboardController, path: str) -> bool:
     return path != fake.default_program and path.endswith(URP_SUFFIX)
 
 
-def _load(fake: FakeController, path: str, translated: UrpProgram | None) -> str:
+def _load(fake: DashboardController, path: str, translated: UrpProgram | None) -> str:
     """``load`` of ``path`` once read: refused if it is a ``.urp`` the fake could not translate
     (``translated`` None), else the loaded program, the running one stopped."""
     if _is_urp(fake, path):
         if translated is None:
             return f"Error while loading program: {path}"
         fake.programs.loaded_urp = (path, translated)
-    fake._stop_program()
+    fake.programs.stop()
     fake.loaded_program = path
     return f"Loading program: {path}"
 
 
-def program_path(fake: FakeController, name: str) -> str | None:
+def program_path(fake: DashboardController, name: str) -> str | None:
     """The program file ``name`` stands for (relative names under the programs directory), or None
     if there is no such file. The default External Control program always exists."""
     base = str(fake.programs_dir) if fake.programs_dir is not None else PROGRAMS_DIR
@@ -197,7 +227,7 @@ def program_path(fake: FakeController, name: str) -> str | None:
     return path
 
 
-def play(fake: FakeController) -> str | None:
+def play(fake: DashboardController) -> str | None:
     """``play``: resume a paused program, or start the loaded one; a reason if it cannot."""
     arm, program = fake.arm, fake.loaded_program
     if program is None:  # a headless program (sent, not loaded) cannot be played, not even resumed
@@ -215,9 +245,7 @@ def play(fake: FakeController) -> str | None:
     if reason is not None:
         return reason
     if program == fake.default_program or (urp is not None and urp.external_control):
-        if fake.urcap is None:
-            return None
-        fake.connections.spawn(fake.programs.play_urcap(fake.urcap, fake._start_program))
+        fake.play_urcap()
         return None
     if urp is not None:
         text = urp.script or ""
@@ -227,12 +255,12 @@ def play(fake: FakeController) -> str | None:
         except (OSError, UnicodeDecodeError) as err:
             arm.stop_program()
             return str(err)
-    arm.life.runtime_state = RuntimeState.STOPPED
-    fake._start_program(_basename(program) or program, text)
+    arm.life.wait_for_script()
+    fake.programs.submit(_basename(program) or program, text)
     return None
 
 
-def _read_urp(fake: FakeController, path: str) -> UrpProgram | None:
+def _read_urp(fake: DashboardController, path: str) -> UrpProgram | None:
     """The program a ``.urp`` file holds, or None (the reason logged and sent as a robot message, as
     PolyScope shows why it could not load a program). Read on the event loop: :func:`dashboard_answer`
     reads off it."""
@@ -251,7 +279,7 @@ def _read_and_translate(path: str) -> UrpProgram | str:
         return err.reason
 
 
-def _refused(fake: FakeController, path: str, read: UrpProgram | str) -> UrpProgram | None:
+def _refused(fake: DashboardController, path: str, read: UrpProgram | str) -> UrpProgram | None:
     """The program read, or None once the reason it was not is logged and sent as a robot message."""
     if isinstance(read, UrpProgram):
         return read
@@ -260,7 +288,7 @@ def _refused(fake: FakeController, path: str, read: UrpProgram | str) -> UrpProg
     return None
 
 
-def _loaded_urp(fake: FakeController, program: str) -> UrpProgram | None:
+def _loaded_urp(fake: DashboardController, program: str) -> UrpProgram | None:
     """The translation of the loaded ``.urp`` program (None for other files)."""
     if not program.endswith(URP_SUFFIX):
         return None

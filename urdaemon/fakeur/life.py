@@ -3,11 +3,15 @@
 One ``ArmLife`` per ``FakeArm`` (fakeur/arm.py), which holds it as ``arm.life``. It owns the robot mode,
 the safety mode, the RTDE ``runtime_state``, the timed transitions (booting, releasing the brakes)
 and the status bits RTDE reports, and it answers each command with a refusal reason (or None) the way
-a real controller refuses it (e.g. brake release while powered off). What a change of life does to the
-motion (stop, halt, slow a played motion down for a pause) it asks of the arm; the arm advances the
-transitions at the start of each cycle (``advance``) and enforces the modes on its motion.
+a real controller refuses it (e.g. brake release while powered off).
 
-Pure: no asyncio, no clock; the transitions' times are the arm's controller time (``arm.timestamp``).
+Pure, and a decider like backends/ur/reverse_channel.py: it holds no arm and calls nothing back. A
+command that only changes the life (power on, brake release, releasing the emergency stop button) is
+called on the life itself, time passed in. A command that changes the arm's motion too (a stop, the
+program playing, pausing or stopping) returns a :class:`LifeStep`: the refusal reason and what the
+motion does (:class:`Do`, in order), which the arm, the one writer of its motion, carries out
+(``FakeArm.power_off`` and the others). The arm advances the timed transitions at the start of each
+cycle (``advance``) and enforces the modes on its motion.
 
 State machine (robot mode, §6.1 of docs/protocols.md), as a real e-Series controller behaves:
 POWER_OFF --power on--> BOOTING (power-up delay) --> IDLE --brake release--> RUNNING.
@@ -17,13 +21,11 @@ unlocked; an emergency stop powers the arm off until released.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import enum
+from dataclasses import dataclass
 
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols.rtde_variables import POWER_ON_BIT, PROGRAM_RUNNING_BIT, RuntimeState
-
-if TYPE_CHECKING:
-    from urdaemon.fakeur.arm import FakeArm
 
 __all__ = [
     "BOOT_TIME_S",
@@ -31,6 +33,8 @@ __all__ = [
     "EMERGENCY_STOP_DECELERATION",
     "PROTECTIVE_STOP_DECELERATION",
     "ArmLife",
+    "Do",
+    "LifeStep",
     "RuntimeState",  # defined in protocols/rtde_variables.py, kept importable here
 ]
 
@@ -50,11 +54,34 @@ _POWERED = (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON, RobotMode.BAC
 """The robot modes RTDE reports as powered on (``robot_status_bits`` bit 0)."""
 
 
+class Do(enum.Enum):
+    """What the arm's motion does for a change of its life (``LifeStep.then``, done in order)."""
+
+    HALT = "stand still at once, nothing played: power is cut, the brakes hold the joints"
+    PROTECTIVE_STOP = "decelerate every joint to rest at PROTECTIVE_STOP_DECELERATION"
+    EMERGENCY_STOP = "decelerate every joint to rest at EMERGENCY_STOP_DECELERATION"
+    STOP_PROGRAM = "stop the program through the arm's stop_program, where its users see every stop"
+    FREEZE_TIME = "the played motions' time scaling to 0 at once"
+    FULL_TIME = "the played motions' time scaling to 1 at once"
+    SLOW_TO_REST = "ramp the time scaling to 0: a played motion slows along its path, then came_to_rest"
+    SPEED_UP = "ramp the time scaling back to 1 the way it came down"
+
+
+@dataclass(frozen=True, slots=True)
+class LifeStep:
+    """A command's outcome: why it was refused (None: done), and what the arm's motion does."""
+
+    refused: str | None = None
+    then: tuple[Do, ...] = ()
+
+
+_DONE = LifeStep()
+
+
 class ArmLife:
     """Power, brakes, safety stops and the program's run state of one fake arm."""
 
-    def __init__(self, arm: FakeArm, *, powered: bool = False) -> None:
-        self._arm = arm
+    def __init__(self, *, powered: bool = False) -> None:
         self.robot_mode = RobotMode.RUNNING if powered else RobotMode.POWER_OFF
         self.safety_mode = SafetyMode.NORMAL
         self.runtime_state = RuntimeState.STOPPED
@@ -63,24 +90,23 @@ class ArmLife:
 
     # ---- power, brakes, safety -----------------------------------------------------------------
 
-    def power_on(self) -> str | None:
-        """Start powering on; a reason if refused."""
+    def power_on(self, now: float) -> str | None:
+        """Start powering on at controller time ``now``; a reason if refused."""
         if self.safety_mode in _EMERGENCY:
             return "emergency stop active"
         if self.robot_mode is RobotMode.POWER_OFF:
             self.robot_mode = RobotMode.BOOTING
-            self._transition_at = self._arm.timestamp + BOOT_TIME_S
+            self._transition_at = now + BOOT_TIME_S
         return None
 
-    def power_off(self) -> None:
-        """Cut arm power (brakes engage, program stops)."""
-        self._arm.halt()
+    def power_off(self) -> LifeStep:
+        """Cut arm power: the arm halts (brakes engage), then the program stops."""
         self.robot_mode = RobotMode.POWER_OFF
         self._transition_at = None
-        self._arm.stop_program()  # through the arm, where its users see every program stop
+        return LifeStep(then=(Do.HALT, Do.STOP_PROGRAM))
 
-    def brake_release(self) -> str | None:
-        """Release the brakes; refused unless powered (IDLE)."""
+    def brake_release(self, now: float) -> str | None:
+        """Release the brakes at controller time ``now``; refused unless powered (IDLE)."""
         if self.robot_mode is RobotMode.RUNNING:
             return None
         if self.robot_mode is not RobotMode.IDLE:
@@ -88,38 +114,44 @@ class ArmLife:
         if self.safety_mode is not SafetyMode.NORMAL:
             return f"safety mode is {self.safety_mode.name}"
         self.robot_mode = RobotMode.POWER_ON  # releasing
-        self._transition_at = self._arm.timestamp + BRAKE_RELEASE_TIME_S
+        self._transition_at = now + BRAKE_RELEASE_TIME_S
         return None
 
-    def protective_stop(self) -> None:
-        """Trigger a protective stop: motion decelerates to rest, the program pauses."""
-        if self.safety_mode in _MOVING_SAFETY:
-            self.safety_mode = SafetyMode.PROTECTIVE_STOP
-            self._arm.stop(PROTECTIVE_STOP_DECELERATION)
-            if self.runtime_state in (RuntimeState.PLAYING, RuntimeState.PAUSING):
-                self.runtime_state = RuntimeState.PAUSED
-                self._arm.set_time_scaling(0.0)
+    def protective_stop(self) -> LifeStep:
+        """A protective stop: motion decelerates to rest, a playing or pausing program is PAUSED."""
+        if self.safety_mode not in _MOVING_SAFETY:
+            return _DONE
+        self.safety_mode = SafetyMode.PROTECTIVE_STOP
+        if self.runtime_state not in (RuntimeState.PLAYING, RuntimeState.PAUSING):
+            return LifeStep(then=(Do.PROTECTIVE_STOP,))
+        self.runtime_state = RuntimeState.PAUSED
+        return LifeStep(then=(Do.PROTECTIVE_STOP, Do.FREEZE_TIME))
 
-    def unlock_protective_stop(self) -> str | None:
-        """Clear a protective stop; a reason if there is none to clear or it is too early."""
+    def unlock_protective_stop(self, *, moving: bool) -> str | None:
+        """Clear a protective stop; a reason if there is none to clear or the arm is still ``moving``."""
         if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
             return f"safety mode is {self.safety_mode.name}, not PROTECTIVE_STOP"
-        if any(abs(v) > 1e-9 for v in self._arm.qd):
+        if moving:
             return "robot still moving"
         self.safety_mode = SafetyMode.NORMAL
         return None
 
-    def emergency_stop(self) -> None:
-        """Press the emergency stop: stop, power off, program stopped."""
+    def emergency_stop(self) -> LifeStep:
+        """Press the emergency stop: the arm stops, the program is stopped, power is off."""
         self.safety_mode = SafetyMode.ROBOT_EMERGENCY_STOP
-        self._arm.stop(EMERGENCY_STOP_DECELERATION)
-        self._arm.stop_program()
         self.robot_mode = RobotMode.POWER_OFF
         self._transition_at = None
+        return LifeStep(then=(Do.EMERGENCY_STOP, Do.STOP_PROGRAM))
 
     def release_emergency_stop(self) -> None:
         """Release the emergency stop button; the arm stays powered off."""
         if self.safety_mode in _EMERGENCY:
+            self.safety_mode = SafetyMode.NORMAL
+
+    def restart_safety(self) -> None:
+        """The dashboard's ``restart safety`` (the arm powered off first): a safety stop other than an
+        emergency stop is cleared."""
+        if self.safety_mode not in _EMERGENCY:
             self.safety_mode = SafetyMode.NORMAL
 
     @property
@@ -139,42 +171,44 @@ class ArmLife:
 
     # ---- program state (driven by the program executor and the dashboard) ------------------------
 
-    def start_program(self) -> str | None:
-        """The program starts playing; a reason if it cannot."""
+    def start_program(self) -> LifeStep:
+        """The program starts playing, its motions at full time scaling; a reason if it cannot."""
         reason = self._why_not_playing()
         if reason is not None:
-            return reason
+            return LifeStep(reason)
         self.runtime_state = RuntimeState.PLAYING
-        self._arm.set_time_scaling(1.0)
-        return None
+        return LifeStep(then=(Do.FULL_TIME,))
 
-    def pause_program(self) -> None:
-        """Pause the program: a played motion slows down along its path (PAUSING) to rest (PAUSED).
+    def wait_for_script(self) -> None:
+        """The program ``play`` started hands over to the script it runs, compiled first: STOPPED until
+        that script starts (``start_program``), the motion and the time scaling left as they are."""
+        self.runtime_state = RuntimeState.STOPPED
 
-        Any other motion (a stop, a legacy servo or speed target) stops at once as a protective stop
-        does, and the program is PAUSED."""
+    def pause_program(self) -> LifeStep:
+        """Pause the program: PAUSING while a played motion slows down along its path to rest
+        (``came_to_rest``: PAUSED). Any other motion stops at once as a protective stop does, and the
+        arm says so at once (``came_to_rest``)."""
         if self.runtime_state is not RuntimeState.PLAYING:
-            return
-        slowing = self._arm.slow_to_rest()
-        self.runtime_state = RuntimeState.PAUSING if slowing else RuntimeState.PAUSED
+            return _DONE
+        self.runtime_state = RuntimeState.PAUSING
+        return LifeStep(then=(Do.SLOW_TO_REST,))
 
-    def resume_program(self) -> str | None:
+    def resume_program(self) -> LifeStep:
         """Resume a paused program: PLAYING, the paused motion speeding up along its path."""
         if self.runtime_state is not RuntimeState.PAUSED:
-            return "no paused program"
+            return LifeStep("no paused program")
         reason = self._why_not_playing()
         if reason is not None:
-            return reason
+            return LifeStep(reason)
         self.runtime_state = RuntimeState.PLAYING
-        self._arm.speed_up()
-        return None
+        return LifeStep(then=(Do.SPEED_UP,))
 
-    def stop_program(self) -> None:
-        """Stop the program (motion stops)."""
-        if self.runtime_state is not RuntimeState.STOPPED:
-            self._arm.stop(PROTECTIVE_STOP_DECELERATION)
-            self.runtime_state = RuntimeState.STOPPED
-        self._arm.set_time_scaling(1.0)
+    def stop_program(self) -> LifeStep:
+        """Stop the program (motion stops); the time scaling is full again for the next one."""
+        if self.runtime_state is RuntimeState.STOPPED:
+            return LifeStep(then=(Do.FULL_TIME,))
+        self.runtime_state = RuntimeState.STOPPED
+        return LifeStep(then=(Do.PROTECTIVE_STOP, Do.FULL_TIME))
 
     def came_to_rest(self) -> None:
         """A pausing program's played motion has slowed to rest on its path: the program is PAUSED."""

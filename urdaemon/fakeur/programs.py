@@ -26,13 +26,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.errors import ProtocolError, UrDaemonError
-from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urp import UrpProgram
 from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.fakeur.urscript.lib_io import apply_runstate_outputs
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import script_sender
 from urdaemon.protocols._buffer import Side
+from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.shell import Shell, connect
 
 __all__ = ["MAX_PENDING_SCRIPTS", "Programs", "RunningScript"]
@@ -369,7 +370,7 @@ class Programs:
             return
         finally:
             fetch.close()
-        self.arm.life.runtime_state = RuntimeState.STOPPED
+        self.arm.life.wait_for_script()
         start("externalControl", text)
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.motion import ServoFilter
+from urdaemon.fakeur.joint_motion import ServoFilter
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
@@ -285,7 +285,7 @@ def test_killing_the_commanding_thread_stops_the_arm() -> None:
     for _ in range(300):
         arm.step(DT)
     assert arm.qd == [0.0] * 6
-    assert arm.q[0] < arm.history(0)[0] + 1e-12
+    assert arm.q[0] < arm.history.ago(0)[0] + 1e-12
 
 
 def test_a_speedj_stream_under_a_reduced_slider_stays_smooth_at_the_scaled_speed() -> None:

@@ -8,10 +8,11 @@ import pytest
 
 from tests.fakeur.urscript.library_host import DT, make_host, run_script
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm, RuntimeState
+from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_settings import pause_on_error_of, settings_of
 from urdaemon.model import RobotMode
+from urdaemon.protocols.rtde_variables import RuntimeState
 
 
 def _host() -> ScriptHost:

@@ -126,7 +126,7 @@ def test_history_goes_back_cycle_by_cycle() -> None:
         seen.append(list(arm.q))
     for steps in (0, 1, 7, 20):
         assert lib_state.get_actual_joint_positions_history(host, steps) == seen[-1 - steps]
-    assert lib_state.get_actual_joint_positions_history(host, 10 * HISTORY_STEPS) == arm.history(
+    assert lib_state.get_actual_joint_positions_history(host, 10 * HISTORY_STEPS) == arm.history.ago(
         HISTORY_STEPS - 1
     )
     with pytest.raises(ScriptRuntimeError):

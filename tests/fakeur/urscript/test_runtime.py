@@ -11,7 +11,7 @@ import pytest
 
 from tests.fakeur.urscript.test_compiler import STUB_TABLE, compile_stub
 from urdaemon.fakeur.urscript import compile_program
-from urdaemon.fakeur.urscript.compiler import MAX_OPS_PER_CYCLE
+from urdaemon.fakeur.urscript.codegen import MAX_OPS_PER_CYCLE
 from urdaemon.fakeur.urscript.lib_core import sleep, sync, textmsg
 from urdaemon.fakeur.urscript.runtime import TOO_LONG, Builtin, ScriptRun, ScriptRuntimeError, UrList
 from urdaemon.fakeur.urscript.signatures import Param, Signature

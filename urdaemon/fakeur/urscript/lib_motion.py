@@ -1,7 +1,8 @@
 """URScript motion builtins: servoj, speedj, speedl, movej, movel, movep, stopj, stopl.
 
-Each builtin hands the fake arm a ``Motion`` (fakeur/motion.py) and blocks its thread, cycle by cycle,
-until the arm has played it (``FakeArm.play``: ``dt × speed slider`` of program time per cycle).
+Each builtin hands the fake arm a ``Motion`` (fakeur/joint_motion.py, fakeur/tcp_motion.py) and
+blocks its thread, cycle by cycle, until the arm has played it (``FakeArm.play``: ``dt × speed
+slider`` of program time per cycle).
 A motion starts from what the arm is commanded to do (position and velocity), so a command that
 follows one still moving (a blend, a servoj or speedj stream) continues smoothly.
 
@@ -26,20 +27,19 @@ from collections.abc import Callable, Generator, Sequence
 from typing import Any, Final
 
 from urdaemon.description.frames import compose, frame_of_pose, inverse, pose_of_frame
-from urdaemon.fakeur.arm import PROTECTIVE_STOP_DECELERATION, FakeArm
-from urdaemon.fakeur.motion import (
+from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.joint_motion import (
     TIME_EPSILON_S,
-    ArcMove,
-    CartesianMove,
     LinearStop,
     Motion,
     ServoFilter,
     SpeedRamp,
-    ToolSpeedRamp,
     joint_move,
     leading_stop_time,
     profile,
 )
+from urdaemon.fakeur.life import PROTECTIVE_STOP_DECELERATION
+from urdaemon.fakeur.tcp_motion import ArcMove, CartesianMove, ToolSpeedRamp
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
 from urdaemon.fakeur.urscript.signatures import Computed

@@ -32,7 +32,7 @@ import struct
 from collections.abc import Generator
 from typing import Any, Final
 
-from urdaemon.fakeur.urscript.compiler import DEFAULT_SOCKET
+from urdaemon.fakeur.urscript.checker import DEFAULT_SOCKET
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_core import text as printed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, builtin

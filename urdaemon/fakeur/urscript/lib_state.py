@@ -14,7 +14,8 @@ from typing import Any, Final
 
 from urdaemon.description.frames import frame_of_pose, inverse, rotate
 from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.motion import CartesianMove, JointMove, ServoFilter
+from urdaemon.fakeur.joint_motion import JointMove, ServoFilter
+from urdaemon.fakeur.tcp_motion import CartesianMove
 from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import flange_pose, inverse_near, tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
@@ -212,7 +213,7 @@ def get_actual_joint_positions_history(host: ScriptHost, steps: Any) -> UrList:
         raise ScriptRuntimeError(
             f"get_actual_joint_positions_history: steps must be an integer >= 0, got {steps!r}"
         )
-    return UrList(host.arm.history(steps))
+    return UrList(host.arm.history.ago(steps))
 
 
 @builtin("is_steady")
