@@ -8,7 +8,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, TrajectoryPoint
@@ -774,6 +774,7 @@ def test_encode_pose_layout() -> None:
     }
 
 
+@example(pose=[0.0, 0.0, 0.0, 0.0, 0.0, 5e-324, 0.0])  # a turn of pi about z, the axis denormal
 @settings(max_examples=200, deadline=None)
 @given(pose=st.lists(FLOATS, min_size=7, max_size=7))
 def test_encode_pose_round_trips_and_maps_non_finite_to_null(pose: list[float]) -> None:

@@ -97,8 +97,9 @@ def rotation_vector_of_quaternion(qx: float, qy: float, qz: float, qw: float) ->
         qx, qy, qz, qw = -qx, -qy, -qz, -qw
     elif qw == 0.0 and _largest_negative(qx, qy, qz):
         qx, qy, qz = -qx, -qy, -qz
-    k = 2.0 * math.atan2(s, qw) / s
-    return (qx * k, qy * k, qz * k)
+    angle = 2.0 * math.atan2(s, qw)
+    # the axis first (each part at most 1): angle / s overflows to inf for a tiny s (5e-324)
+    return (qx / s * angle, qy / s * angle, qz / s * angle)
 
 
 def _largest_negative(x: float, y: float, z: float) -> bool:
