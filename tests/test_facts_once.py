@@ -63,7 +63,7 @@ def test_every_port_is_its_protocol_modules() -> None:
 
 
 def test_the_io_layout_and_voltages_are_model_pys() -> None:
-    from urdaemon.backends.ur import services
+    from urdaemon.backends.ur import robot_commands as services
     from urdaemon.fakeur.urscript import lib_io
 
     assert services.UR_IO_SIZES is model.IO_SIZES

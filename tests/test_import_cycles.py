@@ -22,7 +22,7 @@ STILL_CYCLIC: list[frozenset[str]] = [
         {
             "urdaemon.backends.ur.backend",
             "urdaemon.backends.ur.diagnosis",
-            "urdaemon.backends.ur.services",
+            "urdaemon.backends.ur.robot_commands",
             "urdaemon.backends.ur.startup",
         }
     ),

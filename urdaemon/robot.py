@@ -27,12 +27,12 @@ from urdaemon.publish import state_encoder
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
-from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.lease import LeaseBook
 from urdaemon.runtime.lease_keeper import LeaseKeeper
+from urdaemon.runtime.pose_goals import Cartesian
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.service_runner import ServiceRunner
 from urdaemon.runtime.status import StatusPublisher, tool_link

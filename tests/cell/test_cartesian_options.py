@@ -27,7 +27,7 @@ def test_the_defaults_are_the_contracts() -> None:
 
 def test_the_pairs_name_the_limits_in_their_order() -> None:
     """A linear goal's limits are built as ``CartesianLimits(*values)`` in the pairs' order
-    (runtime/cartesian.py): each pair's default is the field at its place."""
+    (runtime/pose_goals.py): each pair's default is the field at its place."""
     assert [name for name, _, _ in CARTESIAN_PAIRS] == [field.name for field in fields(CartesianLimits)]
 
 

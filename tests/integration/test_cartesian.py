@@ -524,11 +524,11 @@ def _frame_of(xyzq: Sequence[float]) -> Frame:
 async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuses_it(
     served: Served, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A linear goal's planning is held before its first slice (runtime/cartesian.py's ``sliced``,
+    """A linear goal's planning is held before its first slice (runtime/pose_goals.py's ``sliced``,
     its second use: the first decodes it); while it waits, another goal is refused as busy, set_tcp
     too (the plan is made for the TCP it started with), and a cancel refuses it (the cancel's reply
     names it); let go, it is refused before it ever moves the robot."""
-    from urdaemon.runtime import cartesian, slicing
+    from urdaemon.runtime import pose_goals, slicing
 
     await _home(served)
     real = slicing.sliced
@@ -542,7 +542,7 @@ async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuse
             await go.wait()
         await real(step)
 
-    monkeypatch.setattr(cartesian, "sliced", held)
+    monkeypatch.setattr(pose_goals, "sliced", held)
     gate = served.daemon.runtimes[0].gate
     before = served.positions
     end = _shifted(served.kin.forward(before), dz=0.1)

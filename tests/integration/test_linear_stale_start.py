@@ -55,7 +55,7 @@ async def test_nothing_moves_the_robot_while_a_linear_goal_is_planned(
     served: Served,  # noqa: F811
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import cartesian, slicing
+    from urdaemon.runtime import pose_goals, slicing
 
     await _home(served)
     real = slicing.sliced
@@ -69,7 +69,7 @@ async def test_nothing_moves_the_robot_while_a_linear_goal_is_planned(
             await go.wait()
         await real(step)
 
-    monkeypatch.setattr(cartesian, "sliced", held)
+    monkeypatch.setattr(pose_goals, "sliced", held)
     before = served.positions
     end = _shifted(served.kin.forward(before), dz=0.05)
     states = served.alice.joint_states(100_000)

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, TrajectoryPoint
+from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus, TrajectoryPoint
 from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
 from urdaemon.publish import envelope, service_requests

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from urdaemon.control.goals import TrajectoryPoint
+from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.control.move import plan_move
 from urdaemon.control.trajectory import plan_trajectory
 from urdaemon.model import JointLimits

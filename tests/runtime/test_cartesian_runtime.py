@@ -1,6 +1,6 @@
-"""runtime/cartesian.py without Zenoh: the mock robot stepped by hand, the controller ticked by hand.
+"""runtime/pose_goals.py without Zenoh: the mock robot stepped by hand, the controller ticked by hand.
 
-Reproduction: before issue 17 runtime/cartesian.py did not exist (ImportError), so every test fails;
+Reproduction: before issue 17 runtime/pose_goals.py did not exist (ImportError), so every test fails;
 before pose goals were solved in slices, Cartesian had no pose goal handler (the pose goal tests fail).
 """
 
@@ -22,9 +22,9 @@ from urdaemon.description.arm import arm_kinematics
 from urdaemon.errors import GoalRejected
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
 from urdaemon.publish import envelope, linear_goal, move_goal
-from urdaemon.runtime.cartesian import Cartesian
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
+from urdaemon.runtime.pose_goals import Cartesian
 from urdaemon.runtime.queries import Requests
 
 CELL = """
@@ -135,7 +135,7 @@ async def test_a_plan_interrupted_between_slices_stops_at_once(monkeypatch: pyte
     """What ends motion while a linear goal is planned (stop, cancel, freedrive) refuses it at its
     next slice, not after the whole plan: here a stop comes between the planning's start and its
     first slice."""
-    from urdaemon.runtime import cartesian as module
+    from urdaemon.runtime import pose_goals as module
 
     cartesian, _, backend, gate = _parts()
     pose = list(controller_tcp_pose(cartesian, backend.state.positions))
@@ -199,7 +199,7 @@ async def test_a_pose_goal_out_of_reach_is_solved_in_slices_and_refused_naming_i
     """The IK of a pose out of reach (a custom robot's nine numeric starts: 2-4 ms at once) runs one
     Newton evaluation per slice, between robot cycles; the refusal is the one it always was.
     Reproduction: before, the IK ran at once inside ``goal/move``'s handler (no ``pose_goal``)."""
-    from urdaemon.runtime import cartesian as module
+    from urdaemon.runtime import pose_goals as module
 
     slices = _Slices()
     monkeypatch.setattr(module, "sliced", slices)
@@ -215,7 +215,7 @@ async def test_a_pose_goal_out_of_reach_is_solved_in_slices_and_refused_naming_i
 async def test_a_pose_goal_is_answered_with_the_joints_nearest_ik_gives(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import cartesian as module
+    from urdaemon.runtime import pose_goals as module
 
     monkeypatch.setattr(module, "sliced", _Slices())
     cartesian, controller, backend, _ = _parts("carol")
@@ -233,7 +233,7 @@ async def test_a_pose_goal_is_answered_with_the_joints_nearest_ik_gives(
 async def test_a_pose_goal_being_solved_makes_goals_busy_and_a_stop_refuses_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import cartesian as module
+    from urdaemon.runtime import pose_goals as module
 
     slices = _Slices()
     slices.hold = asyncio.Event()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from urdaemon.control.controller import ControllerStatistics, MotionController
-from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
+from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
 from urdaemon.control.limits import (
     check_finite,
     check_positions_within,

@@ -43,7 +43,7 @@ from urdaemon.control.busy import (
 )
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.goal_run import GoalRun
-from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
+from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
 from urdaemon.control.intake import GoalIntake, GoalTolerances
 from urdaemon.control.ledger import ControllerStatistics, GoalLedger
 from urdaemon.control.online import OnlineGenerator

@@ -14,7 +14,7 @@ import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus
+from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus
 from urdaemon.control.intake import GoalTolerances
 from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.setpoint import Setpoint, write_idle

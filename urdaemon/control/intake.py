@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, replace
 
-from urdaemon.control.goals import Tolerances, TrajectoryPoint
+from urdaemon.control.goal_types import Tolerances, TrajectoryPoint
 from urdaemon.control.limits import apply_permutation, joint_permutation
 from urdaemon.control.move import plan_move
 from urdaemon.control.planned_trajectory import PlannedTrajectory

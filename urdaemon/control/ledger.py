@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from urdaemon.control.goal_run import GoalRun
-from urdaemon.control.goals import GoalFeedback, GoalResult, GoalStatus
+from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus
 from urdaemon.control.intake import GoalTolerances
 from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.setpoint import Setpoint

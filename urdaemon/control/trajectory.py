@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 
 from ruckig import Ruckig
 
-from urdaemon.control.goals import TrajectoryPoint
+from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.control.limits import (
     check_accelerations_within,
     check_finite,

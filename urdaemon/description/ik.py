@@ -15,7 +15,7 @@ configurations.py's.
 In slices: ``nearest_steps`` (and ``nearest_in_steps``) are generators that yield after each bounded
 chunk of work (one Newton evaluation: the calibrated chain, its error and one damped step, ~10-30 µs)
 and return what ``nearest`` returns; ``nearest`` runs one to the end (``run_steps``). The event loop
-drives them between robot cycles (runtime/cartesian.py, control/linear.py).
+drives them between robot cycles (runtime/pose_goals.py, control/linear.py).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ import json
 import math
 from typing import Any
 
-from urdaemon.control.goals import GoalFeedback, GoalResult
+from urdaemon.control.goal_types import GoalFeedback, GoalResult
 from urdaemon.errors import MessageError
 from urdaemon.model import RobotState
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from urdaemon.control.goals import TrajectoryPoint
+from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
 from urdaemon.publish.envelope import check_version

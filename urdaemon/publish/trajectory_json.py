@@ -20,7 +20,7 @@ import time
 from collections.abc import Generator, Iterator
 from typing import Any
 
-from urdaemon.control.goals import TrajectoryPoint
+from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.errors import MessageError
 from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, client_text
 from urdaemon.publish.trajectory_goal import (

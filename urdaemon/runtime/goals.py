@@ -56,7 +56,7 @@ KEPT_RESULTS = 256
 
 PoseGoal = Callable[[Any, MoveGoalMessage], None]
 """Takes a decoded pose move goal and its query: solves its IK in slices, then starts it as a joint
-move goal (``start_move``) or refuses it, answering the query once (runtime/cartesian.py)."""
+move goal (``start_move``) or refuses it, answering the query once (runtime/pose_goals.py)."""
 
 ResultListener = Callable[[GoalResult, bytes], None]
 """Told a goal's result (and its message as published) once it is published: a cell goal's part."""
@@ -116,7 +116,7 @@ class Goals:
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
         self.pose_goal: PoseGoal | None = None
-        """Handles pose move goals (IK in slices: runtime/cartesian.py); None: no arm kinematics."""
+        """Handles pose move goals (IK in slices: runtime/pose_goals.py); None: no arm kinematics."""
 
     def declare(self, guard: Guard | None = None) -> None:
         """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and

@@ -29,17 +29,17 @@ from typing import Any
 from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.diagnosis import Diagnosis
-from urdaemon.backends.ur.frames import (
-    ReverseWriter,
-    encode_passthrough_point,
-)
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
+from urdaemon.backends.ur.reverse_writer import (
+    ReverseWriter,
+    encode_passthrough_point,
+)
+from urdaemon.backends.ur.robot_commands import UrServices
 from urdaemon.backends.ur.robot_messages import RobotMessages
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
 from urdaemon.backends.ur.servers import CallbackServers
-from urdaemon.backends.ur.services import UrServices
 from urdaemon.backends.ur.startup import StartUp
 from urdaemon.cell.robot_options import Robot, UrOptions
 from urdaemon.description.urmodels import load_ur_model
