@@ -103,10 +103,11 @@ class ServoBackend(MockBackend):
         self._states: list[str] = []
         self._pace = PaceWatch()
         self._superseded: list[int] = []
-        self._sent: tuple[float, ...] | None = None
+        self._sent: list[float] = []
+        """The pulses last handed to the writers (compared each cycle; copied only when they change)."""
         self._publish = publish
         prescale = pca9685.prescale_for(options.pwm_frequency_hz)
-        self._to_count = [(j.channel, prescale) for j in options.joints]
+        self._prescale = prescale
         width = pca9685.CHANNELS * (max(j.channel for j in options.joints) // pca9685.CHANNELS + 1)
         self._counts = [0] * width
         self._pulses = [0.0] * width
@@ -119,7 +120,7 @@ class ServoBackend(MockBackend):
         self._seen = [-1] * len(self._writers)
         self._states = ["connecting"] * len(self._writers)
         self._superseded = [0] * len(self._writers)
-        self._sent = None
+        self._sent = []
         state = self.state
         state.robot_mode = RobotMode.RUNNING
         state.safety_mode = SafetyMode.NORMAL
@@ -142,9 +143,9 @@ class ServoBackend(MockBackend):
         pulses = self.mapping.update(self.state.positions)
         if self._publish is not None:
             self._publish_pulses(pulses)
-        frame = tuple(pulses)
-        if frame != self._sent:
-            self._sent = frame
+        if pulses != self._sent:  # at rest nothing is copied and no writer is woken
+            self._sent = list(pulses)
+            frame = tuple(pulses)
             for writer in self._writers:
                 writer.submit(frame)
         seen = self._seen
@@ -161,7 +162,8 @@ class ServoBackend(MockBackend):
 
     def _publish_pulses(self, pulses: Sequence[float]) -> None:
         counts, widths = self._counts, self._pulses
-        for (channel, prescale), pulse in zip(self._to_count, pulses, strict=True):
+        prescale = self._prescale
+        for channel, pulse in zip(self.mapping.channels, pulses, strict=True):
             counts[channel] = pca9685.count_for(pulse, prescale)
             widths[channel] = round(pulse, 1)
         state = self.state  # stamped as joint_states: the state the pulses were computed from
