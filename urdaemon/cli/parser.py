@@ -16,7 +16,7 @@ from urdaemon import __version__, cli_args
 __all__ = ["TOOL_MODULES", "build_parser"]
 
 TOOL_MODULES: tuple[str, ...] = (
-    "urdaemon.doctor.command",
+    "urdaemon.introspect.doctor_command",
     "urdaemon.foxglove_bridge.command",
     "urdaemon.introspect.commands",
     "urdaemon.recording.record_command",

@@ -20,7 +20,7 @@ __all__ = ["add_parsers", "format_table", "run"]
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 HOST_CHECKS = ("kernel", "realtime_priority")
-"""The checks of the daemon's host (``checks.host_checks``), the same for every robot of a cell."""
+"""The checks of the daemon's host (doctor/checks.py ``host_checks``), the same for every robot of a cell."""
 
 
 def add_parsers(sub: Any) -> None:
