@@ -33,6 +33,7 @@ from urdaemon.errors import ConfigError, UrDaemonError
 from urdaemon.model import JointLimits
 from urdaemon.protocols.kinematics_hash import kinematics_hash
 from urdaemon.publish import envelope
+from urdaemon.publish.endpoints import CELL, ROBOT, Endpoint, declare_endpoints
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap
@@ -127,8 +128,8 @@ def make_backend(
             problems = device_problems(servo, f"robot {robot.name!r}: servo")
             if problems:
                 raise ConfigError("\n".join(problems), errors=problems)
-        key = CellKeys(cell).robot(robot.name).servo_command
-        publisher = node.publisher(key) if node is not None and servo.publishes else None
+        keys = CellKeys(cell).robot(robot.name)
+        publisher = ROBOT.servo_command.declare(node, keys) if node is not None and servo.publishes else None
         try:
             backend = ServoBackend(
                 robot.name,
@@ -215,14 +216,18 @@ class Daemon:
             self._build(node)
             watch_lease_holders(node, self.cell, self.runtimes)  # leases: checked or not; end with the holder
             cell_goals = CellGoals(node, self.keys, self.runtimes)  # trajectories started together
-            cell_goals.declare()
-            node.queryable(self.keys.robot_description, self._on_description, max_bytes=None)
-            node.cell_queryable(self.keys.any_robot, self._on_any_robot)
-            node.queryable(self.keys.stop, self._on_cell_stop, max_bytes=None)  # never refused: any payload
             info = DaemonInfo(self.cell, self.runtimes, self.description.limits, self.listen_endpoints)
-            node.cell_queryable(self.keys.daemon, info.on_query)  # also answers ``*/daemon``: every cell
-            tf_pub = node.publisher(self.keys.tf)
             self.flight_recorder = recorder = flight_recorder(self.cell, node, self.description.urdf)
+            served: dict[Endpoint, Any] = {
+                CELL.tf: None,
+                CELL.robot_description: self._on_description,
+                CELL.daemon: info.on_query,  # also answers ``*/daemon``: every cell
+                CELL.any_robot: self._on_any_robot,
+                CELL.stop: self._on_cell_stop,  # never refused: any payload
+                **cell_goals.endpoints(),
+                **(recorder.endpoints() if recorder is not None else {}),
+            }
+            tf_pub = declare_endpoints(node, self.keys, served)[CELL.tf]  # the cell's rows of the table
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
                 log.debug("%d objects of startup kept out of garbage collection", frozen)

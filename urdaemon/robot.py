@@ -24,6 +24,7 @@ from urdaemon.description.kinematics import DhKinematics, ToolOffset, quaternion
 from urdaemon.errors import BackendError, UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import state_encoder
+from urdaemon.publish.endpoints import ROBOT, Endpoint, declare_endpoints, read_only_reason
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
@@ -156,26 +157,32 @@ class RobotRuntime:
     # ---- lifecycle -----------------------------------------------------------------------------
 
     def declare(self) -> None:
-        """Declare this robot's publishers, queryables, subscribers and liveliness token."""
-        node, keys = self.node, self.keys
-        self._pub_joints = node.publisher(keys.joint_states, realtime=True)
-        self._joints_wanted = node.matching(self._pub_joints)  # with the flight recorder: always on
-        posed = self.tcp_poses.available
-        self._pub_pose = node.publisher(keys.tcp_pose, realtime=True) if posed else None
-        self._pose_wanted = node.matching(self._pub_pose) if self._pub_pose is not None else Matching(False)
-        self.status.declare(node, keys)
-        # every queryable and subscriber acts on its exact key only and refuses oversized messages
-        # before reading them, and a commanding one what does not carry the lease holder's token
-        # (publish/node.py)
-        guard = self.lease.book
-        self.goals.declare(guard)
-        self.cartesian.declare(node, keys, guard)
-        self.service_names = self.services.declare(node, keys, guard)
+        """Declare this robot's endpoints by walking the table (publish/endpoints.py): every row its
+        parts serve, each with its row's key, size limit, reply field and checks (the command lease on
+        a leased row; on a read-only robot, the refusal of every row that would command it); the
+        liveliness token last. Its servo_command publisher is the backend's (daemon.py)."""
+        served: dict[Endpoint, Any] = dict.fromkeys((ROBOT.joint_states, *self.status.ENDPOINTS, ROBOT.alive))
+        if self.tcp_poses.available:
+            served[ROBOT.tcp_pose] = None
+        for part in (self.goals, self.cartesian, self.services, self.lease):
+            served.update(part.endpoints())
+        served.update(self.commands.endpoints())
         self.backend.on_notice = self._publish_notice
         self.backend.on_change = self.status.publish
-        self.commands.declare(node, keys, guard)
-        self.lease.declare(node)
-        node.liveliness_token(keys.alive)
+        declared = declare_endpoints(
+            self.node,
+            self.keys,
+            served,
+            guard=self.lease.book,
+            read_only=read_only_reason(self.robot),
+            refused=self.commands.on_refused,
+        )
+        self._pub_joints = declared[ROBOT.joint_states]
+        self._joints_wanted = self.node.matching(self._pub_joints)  # with the flight recorder: always on
+        self._pub_pose = declared.get(ROBOT.tcp_pose)
+        self._pose_wanted = Matching(False) if self._pub_pose is None else self.node.matching(self._pub_pose)
+        self.status.take_publishers(declared)
+        self.service_names = frozenset(row.service.name for row in declared if row.service is not None)
 
     async def run(self) -> None:
         """Run the backend, restarting it with backoff after any failure; also the status/IO timers."""

@@ -18,7 +18,7 @@ from urdaemon.client.command_lease import Lease, default_holder, holder_text
 from urdaemon.client.robot_client import RobotClient
 from urdaemon.client.session import QUERY_TIMEOUT_S, ClientSession, zenoh_message
 from urdaemon.errors import UrDaemonError, UrTimeoutError
-from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.publish.keys import ALIVE_ANYWHERE, CellKeys, RobotKeys
 from urdaemon.publish.session_config import zenoh_config
 
 __all__ = ["DEFAULT_ENDPOINT", "PEER_WAIT_S", "RELEASE_ON_CLOSE_S", "Client", "NoSuchRobot"]
@@ -108,7 +108,7 @@ class Client(ClientSession):
         def ask() -> list[str]:
             return [
                 str(r.ok.key_expr)
-                for r in self.session.liveliness().get("*/*/alive", timeout=timeout)
+                for r in self.session.liveliness().get(ALIVE_ANYWHERE, timeout=timeout)
                 if r.ok
             ]
 
@@ -116,12 +116,7 @@ class Client(ClientSession):
             keys = await self._loop.run_in_executor(None, ask)
         except zenoh.ZError as err:
             raise UrDaemonError(f"cannot list robots at {self.endpoint}: {zenoh_message(err)}") from err
-        found = []
-        for key in keys:
-            parts = key.split("/")
-            if len(parts) == 3:
-                found.append((parts[0], parts[1]))
-        return sorted(found)
+        return sorted(found for found in map(CellKeys.of_alive, keys) if found is not None)
 
     async def robot(self, name: str, *, cell: str | None = None, timeout: float = 5.0) -> RobotClient:
         """A handle on robot ``name``; finds its cell from the liveliness tokens unless given.

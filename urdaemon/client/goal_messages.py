@@ -23,7 +23,7 @@ from urdaemon.client.session import ClientSession, Subscription
 from urdaemon.errors import ConnectionLostError, UrDaemonError
 from urdaemon.publish import signing
 from urdaemon.publish.envelope import client_text
-from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.keys import CellKeys, RobotKeys
 
 __all__ = [
     "LOST_GRACE_S",
@@ -211,11 +211,14 @@ class RobotGoals:
                 self._forget(inbox.goal_id)
 
     async def _pump_goals(self, sub: Subscription) -> None:
+        cell = CellKeys(self.keys.cell)
         async for key, payload, attachment in sub.samples():
-            parts = key.split("/")
-            if len(parts) < 2 or parts[-1] not in ("feedback", "result"):
+            parsed = cell.parse(key)  # <cell>/<robot>/goal/<id>/<kind>, this robot's only
+            mine = parsed is not None and parsed[0] == self.keys.robot
+            message = CellKeys.goal_message(parsed[1]) if parsed is not None and mine else None
+            if message is None:
                 continue
-            goal_id = parts[-2]
+            goal_id = message[0]
             inbox = self._goals.get(goal_id)
             if inbox is not None:
                 # the inbox keeps its result; the robot need not track it further

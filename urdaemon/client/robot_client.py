@@ -36,11 +36,14 @@ from urdaemon.model import (
     ForceModeRequest,
     SetIoRequest,
     SetPayloadRequest,
+    SetTcpRequest,
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
 from urdaemon.publish import service_requests, services
+from urdaemon.publish.envelope import message_body
 from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.stream_commands import StreamMessage, TwistMessage
 
 __all__ = ["GoalHandle", "RobotClient"]
 
@@ -289,7 +292,7 @@ class RobotClient:
         timeout, as with joint streams: when twists stop coming the robot stops; a zero twist
         decelerates it. Needs the lease held, as ``stream_positions``; the daemon's refusals (over its
         speed caps, no kinematics) are ``command_rejected`` events on the robot's events."""
-        body = {"linear": list(linear), "angular": list(angular), "frame": frame}
+        body = message_body(TwistMessage(_three(linear), _three(angular), frame))
         attachment = self._stream_attachment()
         self.client.session.put(self.keys.command_twist, encode_body(body), attachment=attachment)
 
@@ -298,7 +301,7 @@ class RobotClient:
         ``tcp_pose``, every later Cartesian command and, on a UR robot, the controller's TCP.
         Raises ``GoalRejected`` with the daemon's reason (the robot moves, a value out of range),
         ``LeaseHeld`` when another client holds the lease."""
-        reply = await self._command(self.keys.service("set_tcp"), {"pose": list(pose)}, "ok", timeout)
+        reply = await self.service("set_tcp", SetTcpRequest(_six(pose)), timeout=timeout)
         if reply.get("ok") is not True:
             raise GoalRejected(str(reply.get("reason") or f"set_tcp: refused ({reply})"))
 
@@ -390,9 +393,8 @@ class RobotClient:
         acquire it. A command the daemon refuses is reported as a ``command_rejected`` event on the
         robot's events.
         """
-        body: dict[str, Any] = {"positions": list(positions)}
-        if velocities is not None:
-            body["velocities"] = list(velocities)
+        velocities = None if velocities is None else tuple(velocities)
+        body = message_body(StreamMessage(None, tuple(positions), velocities))
         attachment = self._stream_attachment()
         self.client.session.put(self.keys.command_joint_position, encode_body(body), attachment=attachment)
 
@@ -443,7 +445,7 @@ class RobotClient:
         """Publish one streaming velocity command (repeat faster than the deadman timeout). Needs
         the lease held, as ``stream_positions``."""
         attachment = self._stream_attachment()
-        body = encode_body({"velocities": list(velocities)})
+        body = encode_body(message_body(StreamMessage(None, None, tuple(velocities))))
         self.client.session.put(self.keys.command_joint_velocity, body, attachment=attachment)
 
     async def _send_goal(self, key: str, body: dict[str, Any]) -> GoalHandle:
@@ -454,6 +456,11 @@ class RobotClient:
         goal_id, duration = str(reply["goal_id"]), float(reply.get("duration", 0.0))
         result_key = accepted_result_key(reply, self.name, unsigned=self.lease.unchecked)
         return GoalHandle(self, self._goals.add(goal_id, result_key), duration)
+
+
+def _six(values: Sequence[float]) -> tuple[float, float, float, float, float, float]:
+    """A pose as sent: the daemon refuses one that is not six numbers, naming it."""
+    return tuple(values)  # type: ignore[return-value]
 
 
 def _three(values: Sequence[float]) -> tuple[float, float, float]:

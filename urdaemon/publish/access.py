@@ -1,5 +1,6 @@
-"""The cell file's access grants as Zenoh's ``access_control`` rules on the exact keys of keys.py and the
-services of services.py: default deny, both flows, one subject per identity (docs/security.md).
+"""The cell file's access grants as Zenoh's ``access_control`` rules, derived from the endpoint table
+(endpoints.py): each row's ``audience`` says which grants reach its key, its ``kind`` what a client
+does there. Default deny, both flows, one subject per identity (docs/security.md).
 
 The access-control promise: the daemon's session drops every message no grant allows, in both
 directions, on its own links; ``stop`` and finding the cell's robots pass for every connection,
@@ -15,10 +16,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.cell.zenoh_options import ALL_ROBOTS, AccessOptions, Grant
-from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.publish.services import SERVICES, STOP
+from urdaemon.publish.endpoints import CELL_ENDPOINTS, ROBOT_ENDPOINTS, Audience, Endpoint, Kind
+from urdaemon.publish.keys import ALIVE_ANYWHERE, CellKeys, RobotKeys
 
-__all__ = ["ANYONE", "ANY_CELL", "access_control"]
+__all__ = ["ACTIONS", "ANYONE", "ANY_CELL", "access_control", "grant_key"]
 
 ANYONE = "urdaemon:anyone"
 """The Zenoh ACL subject every connection matches: it may stop robots and find the cell's robots (the
@@ -27,20 +28,20 @@ ANY_CELL = "*"
 """The cell chunk of the access rules when the caller does not name the cell (session_config.py
 ``configure_daemon``)."""
 
-_SUBSCRIBE = (("ingress", "declare_subscriber"), ("egress", "put"))
-"""A client subscribes to keys the daemon publishes on."""
-_GET = (("ingress", "query"), ("egress", "reply"), ("egress", "declare_queryable"))
-"""A client asks a queryable of the daemon."""
-_PUT = (("ingress", "put"), ("egress", "declare_subscriber"))
-"""A client publishes on keys the daemon subscribes to."""
-_WATCH = (
-    ("ingress", "declare_liveliness_subscriber"),
-    ("ingress", "liveliness_query"),
-    ("egress", "liveliness_token"),
-)
-"""A client watches or asks for the daemon's liveliness tokens."""
-_HOLD = (("ingress", "liveliness_token"),)
-"""A client declares a liveliness token (the lease holder's)."""
+ACTIONS: dict[Kind, tuple[tuple[str, str], ...]] = {
+    Kind.PUBLICATION: (("ingress", "declare_subscriber"), ("egress", "put")),
+    Kind.QUERYABLE: (("ingress", "query"), ("egress", "reply"), ("egress", "declare_queryable")),
+    Kind.SUBSCRIBER: (("ingress", "put"), ("egress", "declare_subscriber")),
+    Kind.LIVELINESS: (
+        ("ingress", "declare_liveliness_subscriber"),
+        ("ingress", "liveliness_query"),
+        ("egress", "liveliness_token"),
+    ),
+    Kind.TOKEN: (("ingress", "liveliness_token"),),
+}
+"""What a client does on a key of each kind, as Zenoh's (flow, message) pairs: it subscribes to a
+publication, asks a queryable, puts on a subscriber, watches or asks for the daemon's liveliness
+token, declares its own (the lease holder's)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,76 +103,52 @@ def _entry_ids(rules: Sequence[_Rule]) -> list[str]:
 
 
 def _anyone_rules(cell: str) -> list[_Rule]:
-    """Every connection may stop any robot or the cell, and find the cell's robots (their names)."""
-    any_robot = RobotKeys(cell, "*")
-    return [
-        _Rule("stop", _GET, (any_robot.service(STOP.name), CellKeys(cell).stop)),
-        # the client's discovery asks ``*/*/alive`` (client.py): the daemon has only its own tokens
-        _Rule("find robots", _WATCH, ("*/*/alive",)),
-    ]
+    """Every connection may use the rows for anyone (``stop``: the robots' and the cell's), and find
+    the cell's robots (their liveliness tokens, in any cell: what the client's discovery asks)."""
+    any_robot, whole = RobotKeys(cell, "*"), CellKeys(cell)
+    rules = _rules("anyone", ROBOT_ENDPOINTS, any_robot, Audience.ANYONE)
+    rules += _rules("anyone: cell", CELL_ENDPOINTS, whole, Audience.ANYONE)
+    # the daemon has only its own tokens: finding the robots shows nothing but their names
+    rules.append(_Rule("find robots", ACTIONS[Kind.LIVELINESS], (ALIVE_ANYWHERE,)))
+    return rules
 
 
 def _grant_rules(grant: Grant, cell: str) -> list[_Rule]:
     """What one grant allows: reading its ``read`` and ``command`` robots, commanding its ``command``
     robots (a commander follows its goals, so it reads what it commands)."""
     rules: list[_Rule] = []
-    for robot in dict.fromkeys(grant.read + grant.command):
-        rules += _read_rules(cell, robot)
+    whole = CellKeys(cell)
+    readers = dict.fromkeys(grant.read + grant.command)
+    for robot in readers:
+        rules += _rules(f"read {robot}", ROBOT_ENDPOINTS, RobotKeys(cell, robot), Audience.READER)
+    if readers:  # the cell's description and the daemon's, what any reader needs to draw its robots
+        rules += _rules("read cell", CELL_ENDPOINTS, whole, Audience.READER)
+    if ALL_ROBOTS in readers:  # every robot: the cell's tf (every link pose) and the cell goals' messages
+        rules += _rules("read cell: every robot", CELL_ENDPOINTS, whole, Audience.CELL_READER)
     for robot in grant.command:
-        rules += _command_rules(cell, robot)
+        rules += _rules(f"command {robot}", ROBOT_ENDPOINTS, RobotKeys(cell, robot), Audience.COMMANDER)
+    if ALL_ROBOTS in grant.command:  # every robot: the cell goals
+        rules += _rules("command cell", CELL_ENDPOINTS, whole, Audience.COMMANDER)
     return rules
 
 
-def _read_rules(cell: str, robot: str) -> list[_Rule]:
-    """Subscribing to a robot's state, events and goal messages; asking for goal results, the
-    services that only read (``cycle_stats``, ``doctor``), the cell's description (static: what any
-    reader needs to draw the robot) and the daemon's description of itself (``daemon``: what
-    ``urdaemon list`` and ``info`` read). ``*``: every robot, the cell's tf (every robot's link poses)
-    and the cell goals' messages."""
-    keys, whole = RobotKeys(cell, robot), CellKeys(cell)
-    readable = tuple(keys.service(s.name) for s in SERVICES if not s.commanding and s is not STOP)
-    state = (keys.joint_states, keys.tcp_pose, keys.status, keys.io, keys.events, keys.servo_command)
-    rules = [
-        _Rule(f"read {robot}: state", _SUBSCRIBE, (*state, keys.goal_messages)),
-        _Rule(
-            f"read {robot}: queries",
-            _GET,
-            (keys.goal_results, *readable, whole.robot_description, whole.daemon),
-        ),
-        _Rule(f"read {robot}: alive", _WATCH, (keys.alive,)),
+def _rules(
+    name: str, rows: Sequence[Endpoint], keys: RobotKeys | CellKeys, audience: Audience
+) -> list[_Rule]:
+    """One rule per kind of the rows for ``audience``: the actions a client takes on such a key."""
+    keys_by_kind: dict[Kind, list[str]] = {}
+    for row in rows:
+        if row.audience is audience:
+            keys_by_kind.setdefault(row.kind, []).append(grant_key(row, keys))
+    return [
+        _Rule(f"{name}: {kind}", ACTIONS[kind], tuple(dict.fromkeys(found)))
+        for kind, found in keys_by_kind.items()
     ]
-    if robot == ALL_ROBOTS:
-        rules += [
-            _Rule("read cell: state", _SUBSCRIBE, (whole.tf, whole.goal_messages)),
-            _Rule("read cell: queries", _GET, (whole.goal_results,)),
-        ]
-    return rules
 
 
-def _command_rules(cell: str, robot: str) -> list[_Rule]:
-    """Everything a commander of ``robot`` sends: goals, cancel, every service, the lease and its
-    liveliness token, the command streams. ``*``: every robot, and cell goals."""
-    keys = RobotKeys(cell, robot)
-    queries = (
-        keys.goal_trajectory,
-        keys.goal_move,
-        keys.goal_linear,
-        keys.goal_cancel,
-        keys.service("*"),
-        keys.lease,
-    )
-    streams = (
-        keys.command_joint_position,
-        keys.command_joint_velocity,
-        keys.command_twist,
-        keys.command_freedrive,
-    )
-    rules = [
-        _Rule(f"command {robot}: queries", _GET, queries),
-        _Rule(f"command {robot}: streams", _PUT, streams),
-        _Rule(f"command {robot}: lease token", _HOLD, (keys.lease_holder("*"),)),
-    ]
-    if robot == ALL_ROBOTS:
-        whole = CellKeys(cell)
-        rules.append(_Rule("command cell: goals", _GET, (whole.goal_trajectory, whole.goal_cancel)))
-    return rules
+def grant_key(row: Endpoint, keys: RobotKeys | CellKeys) -> str:
+    """The key a grant allows for ``row``: its own, but a commanding service's is every service
+    (``service/*``): a commander may ask one the robot lacks, and hear which it has."""
+    if row.service is not None and row.commanding and isinstance(keys, RobotKeys):
+        return keys.service("*")
+    return row.key(keys)

@@ -9,10 +9,11 @@ threads and the loop both touch it. The refusals' texts are here too, so every r
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from typing import Any, Protocol
 
-from urdaemon.publish.envelope import client_text
+from urdaemon.publish.envelope import client_text, encode
 
 __all__ = [
     "MAX_IN_FLIGHT",
@@ -22,6 +23,7 @@ __all__ = [
     "Refusals",
     "attachment_of",
     "busy_refusal",
+    "refuse_query",
     "replaced_refusal",
     "size_refusal",
     "wildcard_refusal",
@@ -167,3 +169,16 @@ class Refusals:
             return None
         put_on, reason = newest
         return put_on, reason if count == 1 else f"{reason} (and {count - 1} more refused like it)"
+
+
+def refuse_query(query: Any, reason: str, *, answer: str, error: bool = False) -> None:
+    """Answer ``query`` with ``{answer: false, "reason": reason}`` and end it: an error reply (no key,
+    so it can never pass for a real answer) for a wildcard, else a normal reply on the query's key."""
+    body = encode({answer: False, "reason": reason})
+    with contextlib.suppress(Exception):  # the querier may have timed out and gone
+        if error:
+            query.reply_err(body)
+        else:
+            query.reply(query.key_expr, body)
+    with contextlib.suppress(Exception):
+        query.drop()

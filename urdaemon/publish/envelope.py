@@ -1,7 +1,8 @@
 """The one message encoding: UTF-8 JSON objects carrying ``"v": 1`` (docs/keys.md).
 
 The envelope every message shares, in and out: the schema version, the size limits, a client's
-message parsed into a JSON object (``decode_message``), a message encoded (``encode``), a client's
+message parsed into a JSON object (``decode_message``), a message encoded (``encode``), a decoded
+message type as the fields a client sends (``message_body``, the decoders' inverse), a client's
 text made safe to echo (``client_text``); and the replies built on it: a message's time fields
 (``state_time``) and a goal's feedback and result. The decoders of each request are modules of their
 own (fields.py holds the checks they share); the hot-path state messages are state_encoder.py's.
@@ -9,8 +10,10 @@ own (fields.py holds the checks they share); the hot-path state messages are sta
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from urdaemon.control.goal_types import GoalFeedback, GoalResult
@@ -28,6 +31,7 @@ __all__ = [
     "encode",
     "encode_feedback",
     "encode_result",
+    "message_body",
     "state_time",
 ]
 
@@ -52,6 +56,19 @@ def encode(message: dict[str, Any]) -> bytes:
         return json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
     except ValueError:  # a non-finite float somewhere: JSON has no such numbers
         return json.dumps(_finite_or_null(body), separators=(",", ":"), allow_nan=False).encode()
+
+
+def message_body(message: object, renamed: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """A message type (a dataclass of model.py or publish/ that a decoder returns) as the fields a
+    client sends: tuples as lists, a None field left out (the daemon's default), a field whose name
+    on the wire differs as ``renamed`` says."""
+    body: dict[str, Any] = {}
+    for item in dataclasses.fields(message):  # type: ignore[arg-type]
+        value = getattr(message, item.name)
+        if value is not None:
+            name = item.name if renamed is None else renamed.get(item.name, item.name)
+            body[name] = list(value) if isinstance(value, tuple) else value
+    return body
 
 
 def _finite_or_null(value: Any) -> Any:

@@ -6,7 +6,11 @@ from dataclasses import dataclass
 
 from urdaemon.model import CELL_LEVEL_KEYS
 
-__all__ = ["CellKeys", "RobotKeys"]
+__all__ = ["ALIVE_ANYWHERE", "CellKeys", "RobotKeys"]
+
+ALIVE_ANYWHERE = "*/*/alive"
+"""Every robot's liveliness token in every cell: what a client asks to find the robots served
+(``CellKeys.of_alive`` reads each answer)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,6 +108,24 @@ class CellKeys:
         if not robot or robot in self.cell_level:
             return None
         return robot, tuple(rest)
+
+    @staticmethod
+    def of_alive(key: str) -> tuple[str, str] | None:
+        """The cell and robot a robot's liveliness token names (``RobotKeys.alive``'s inverse,
+        ``<cell>/alice/alive`` → ``("<cell>", "alice")``); None for any other key."""
+        chunks = key.split("/")
+        if len(chunks) != 3 or chunks[2] != "alive" or not all(chunks[:2]) or "*" in key:
+            return None
+        return chunks[0], chunks[1]
+
+    @staticmethod
+    def goal_message(rest: tuple[str, ...]) -> tuple[str, str] | None:
+        """The goal id and message kind (``feedback``, ``result``) a robot's goal message key names,
+        from the chunks :meth:`parse` returns after the robot's name (``("goal", "g1", "result")``
+        → ``("g1", "result")``); None for any other key."""
+        if len(rest) == 3 and rest[0] == "goal" and rest[1] and rest[2] in ("feedback", "result"):
+            return rest[1], rest[2]
+        return None
 
     @staticmethod
     def service_name(rest: tuple[str, ...]) -> str | None:

@@ -43,11 +43,12 @@ from urdaemon.publish.admission import (
     Refusals,
     attachment_of,
     busy_refusal,
+    refuse_query,
     replaced_refusal,
     size_refusal,
     wildcard_refusal,
 )
-from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, client_text, encode
+from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, client_text
 from urdaemon.publish.liveliness import LivelinessWatch
 from urdaemon.publish.session_config import serve_config
 from urdaemon.publish.tap import Matching, Tap, TappedPublisher
@@ -174,14 +175,14 @@ class ZenohNode:
             asked = str(query.key_expr)
             if asked != key and (not any_id or "*" in asked):
                 if not any_id:
-                    _refuse_query(query, wildcard_refusal(asked, key), error=True, answer=answer)
+                    refuse_query(query, wildcard_refusal(asked, key), error=True, answer=answer)
                 else:
                     _drop(query)
                 return
             payload = query.payload
             size = 0 if payload is None else len(payload)
             if max_bytes is not None and size > max_bytes:
-                _refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
+                refuse_query(query, size_refusal(key, size, max_bytes), error=False, answer=answer)
                 return
             if guard is None:
                 work = handler
@@ -189,11 +190,11 @@ class ZenohNode:
                 attachment = attachment_of(query)
                 refusal = guard.refusal(attachment)
                 if refusal is not None:
-                    _refuse_query(query, refusal, error=False, answer=answer)
+                    refuse_query(query, refusal, error=False, answer=answer)
                     return
                 work = _rechecked(guard, attachment, handler, answer)
             if not flight.enter():
-                _refuse_query(query, busy_refusal(key), error=False, answer=answer)
+                refuse_query(query, busy_refusal(key), error=False, answer=answer)
                 _log_refusals(flight, key)
                 return
             self._to_loop_counted(flight, work, query)
@@ -400,21 +401,9 @@ def _rechecked(
         if refusal is None:
             handler(query)
         else:
-            _refuse_query(query, refusal, error=False, answer=answer)
+            refuse_query(query, refusal, error=False, answer=answer)
 
     return handle
-
-
-def _refuse_query(query: Any, reason: str, *, error: bool, answer: str) -> None:
-    """Answer ``query`` with a refusal on Zenoh's thread: an error reply (no key, so it can never
-    pass for a real answer) for a wildcard, else a normal reply on the query's key."""
-    body = encode({answer: False, "reason": reason})
-    with contextlib.suppress(Exception):  # the querier may have timed out and gone
-        if error:
-            query.reply_err(body)
-        else:
-            query.reply(query.key_expr, body)
-    _drop(query)
 
 
 def _drop(query: Any) -> None:

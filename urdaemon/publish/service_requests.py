@@ -7,7 +7,6 @@ the message's fields (the client's side).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -20,7 +19,7 @@ from urdaemon.model import (
     TOOL_VOLTAGES,
 )
 from urdaemon.publish import fields
-from urdaemon.publish.envelope import decode_message
+from urdaemon.publish.envelope import decode_message, message_body
 from urdaemon.publish.fields import Pose6
 
 __all__ = [
@@ -188,10 +187,4 @@ def decode_cycle_stats(payload: bytes | None) -> bool:
 
 def request_body(request: object | None) -> dict[str, Any]:
     """A service request (a dataclass of model.py, or None: no arguments) as the message's fields."""
-    if request is None:
-        return {}
-    body: dict[str, Any] = {}
-    for item in dataclasses.fields(request):  # type: ignore[arg-type]
-        value = getattr(request, item.name)
-        body[WIRE_NAMES.get(item.name, item.name)] = list(value) if isinstance(value, tuple) else value
-    return body
+    return {} if request is None else message_body(request, WIRE_NAMES)

@@ -33,8 +33,10 @@ from urdaemon.model import (
     SpeedSliderRequest,
     ToolVoltageRequest,
 )
+from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols.dashboard_refusal import REFUSAL_PREFIXES
 from urdaemon.publish import service_requests
+from urdaemon.publish.envelope import client_text
 from urdaemon.publish.service_requests import MAX_COG_M, MAX_FORCE_MODE, MAX_PAYLOAD_KG
 
 if TYPE_CHECKING:
@@ -42,12 +44,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CLIENT_TIMEOUT_S",
+    "READ_ONLY_DASHBOARD",
     "SERVICES",
     "STOP",
     "ServiceHost",
     "ServiceSpec",
     "markdown_rows",
     "names",
+    "read_only_words",
     "spec",
 ]
 
@@ -108,6 +112,10 @@ class ServiceSpec:
     commanding: bool = True
     """Whether only the command lease's holder may call it (its token as the query's attachment);
     ``stop`` never needs the lease, whatever this says."""
+    read_only_refusal: Callable[[Any], str | None] | None = None
+    """For a commanding service a read-only robot answers in part: why a read-only robot refuses
+    this decoded request (None: it only reads, so it is served). Without it a read-only robot refuses
+    a commanding service whole (publish/endpoints.py)."""
 
     @property
     def payloadless(self) -> bool:
@@ -148,6 +156,43 @@ async def _set_speed_slider(host: ServiceHost, request: SpeedSliderRequest) -> R
 async def _dashboard(host: ServiceHost, request: DashboardRequest) -> Reply:
     ok, text = await host.backend.dashboard(request.command)
     return {"ok": ok, "reply": text}
+
+
+READ_ONLY_DASHBOARD: tuple[type, ...] = (
+    dash.GetRobotMode,
+    dash.GetSafetyMode,
+    dash.GetSafetyStatus,
+    dash.GetProgramState,
+    dash.IsRunning,
+    dash.GetLoadedProgram,
+    dash.IsProgramSaved,
+    dash.IsInRemoteControl,
+    dash.GetPolyscopeVersion,
+    dash.GetVersion,
+    dash.GetRobotModel,
+    dash.GetSerialNumber,
+    dash.GetOperationalMode,
+    dash.GetUserRole,
+)
+"""The dashboard lines a read-only robot answers: the server's queries (docs/protocols.md §3.2), which
+only ask. Every other line (power, brakes, load, play, pause, stop, popups, the log, the operational
+mode, user role, quit, shutdown) changes the robot or its controller, and so does a line the server
+would not understand."""
+
+
+def read_only_words() -> list[str]:
+    """The dashboard lines a read-only robot answers, as the server reads them."""
+    return [kind().line for kind in READ_ONLY_DASHBOARD]
+
+
+def _dashboard_read_only_refusal(request: DashboardRequest) -> str | None:
+    """Why a read-only robot refuses this dashboard line (None: the line only asks)."""
+    if isinstance(dash.parse_command(request.command), READ_ONLY_DASHBOARD):
+        return None
+    return (
+        f"read-only robot (ur.read_only: true): dashboard line {client_text(request.command)!r} is "
+        f"refused, a read-only robot answers only the lines that ask: {', '.join(read_only_words())}"
+    )
 
 
 async def _set_tool_voltage(host: ServiceHost, request: ToolVoltageRequest) -> Reply:
@@ -280,9 +325,12 @@ SERVICES: tuple[ServiceSpec, ...] = (
             '`{"ok": bool, "reply": the robot\'s answer}` (UR only); `ok` is false when the controller '
             "refused the line (its answer starts "
             + ", ".join(f"`{prefix}`" for prefix in REFUSAL_PREFIXES[:-1])
-            + f" or `{REFUSAL_PREFIXES[-1]}`)"
+            + f" or `{REFUSAL_PREFIXES[-1]}`). A read-only robot answers only the lines that ask ("
+            + ", ".join(f"`{word}`" for word in read_only_words())
+            + ") and refuses every other, naming the line"
         ),
         timeout=30.0,
+        read_only_refusal=_dashboard_read_only_refusal,
     ),
     _payloadless(
         "startup",

@@ -35,7 +35,7 @@ import logging
 import secrets
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -43,7 +43,7 @@ from urdaemon.control import GoalResult, GoalStatus
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import cell_goal, envelope, goal_cancel, signing
 from urdaemon.publish.cell_goal import CellGoalDecoder, CellGoalMessage
-from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
+from urdaemon.publish.endpoints import CELL, Endpoint
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.goals import KEPT_RESULTS, PlannedGoal, put_signed
@@ -110,12 +110,14 @@ class CellGoals:
         self._ids = itertools.count(1)
         self._salt = secrets.token_hex(2)
 
-    def declare(self) -> None:
-        """Declare the cell goal's queryables (each on its exact key, bounded: publish/node.py)."""
-        node, keys = self._node, self._keys
-        node.queryable(keys.goal_trajectory, self.on_goal, max_bytes=MAX_MESSAGE_BYTES, answer="accepted")
-        node.queryable(keys.goal_cancel, self.on_cancel, answer="canceled")
-        node.queryable(keys.goal_results, self.on_result_query, any_id=True)
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The rows of the endpoint table this part answers (the cell goal's), and their handlers
+        (daemon.py declares them: publish/endpoints.py says each one's size limit and reply field)."""
+        return {
+            CELL.goal_trajectory: self.on_goal,
+            CELL.goal_cancel: self.on_cancel,
+            CELL.goal_results: self.on_result_query,
+        }
 
     async def run(self) -> None:
         """Serve until cancelled; then every request in progress is answered ``SHUTTING_DOWN``."""

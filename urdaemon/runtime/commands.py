@@ -16,9 +16,7 @@ from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import stream_commands
-from urdaemon.publish.admission import Guard
-from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
 from urdaemon.runtime.queries import SHUTTING_DOWN, internal_error
 from urdaemon.runtime.status import StatusPublisher
@@ -45,16 +43,15 @@ class Commands:
         self._joint_names = joint_names
         self._log = log
 
-    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> None:
-        """Subscribe to the command keys (a put on a wildcard, too large, or without the command lease
-        holder's token when there is a ``guard``, is refused)."""
-        for key, handler in (
-            (keys.command_joint_position, self.on_stream_position),
-            (keys.command_joint_velocity, self.on_stream_velocity),
-            (keys.command_twist, self.on_twist),
-            (keys.command_freedrive, self.on_freedrive),
-        ):
-            node.subscriber(key, handler, refused=self.on_refused, guard=guard)
+    def endpoints(self) -> dict[Endpoint, Callable[[str, bytes], None]]:
+        """The rows of the endpoint table this part subscribes to (the command streams), and their
+        handlers; a refused sample goes to ``on_refused``."""
+        return {
+            ROBOT.command_joint_position: self.on_stream_position,
+            ROBOT.command_joint_velocity: self.on_stream_velocity,
+            ROBOT.command_twist: self.on_twist,
+            ROBOT.command_freedrive: self.on_freedrive,
+        }
 
     def on_stream_position(self, key: str, payload: bytes) -> None:
         """A joint position command: the controller follows it until the deadman times out."""

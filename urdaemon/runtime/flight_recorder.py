@@ -21,12 +21,13 @@ import logging
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from urdaemon.cell.config import Cell, RecordOptions
 from urdaemon.errors import ConfigError
-from urdaemon.publish.keys import CellKeys
+from urdaemon.publish.endpoints import CELL, Endpoint
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Tap
 from urdaemon.recording.flight_frames import REQUEST, URDF, encode_frame, encode_samples
@@ -78,14 +79,12 @@ DROP_LOG_S = 10.0
 
 
 def flight_recorder(cell: Cell, node: ZenohNode, urdf: str) -> FlightRecorder | None:
-    """The cell's flight recorder, its queryable declared, fed from the node's tap; None when the
-    cell file has no ``record`` (the node then has no tap)."""
+    """The cell's flight recorder, fed from the node's tap (its queryable is declared with the cell's
+    other keys: ``endpoints``); None when the cell file has no ``record`` (the node then has no tap)."""
     if cell.record is None or node.tap is None:
         return None
     _check_directory(cell.record.dir)
-    recorder = FlightRecorder(cell.cell, cell.record, node, node.tap, urdf)
-    recorder.declare()
-    return recorder
+    return FlightRecorder(cell.cell, cell.record, node, node.tap, urdf)
 
 
 def _check_directory(directory: str) -> None:
@@ -134,9 +133,9 @@ class FlightRecorder:
         """The process's id while it runs."""
         return None if self._proc is None else self._proc.pid
 
-    def declare(self) -> None:
-        """Serve ``<cell>/service/flight_record``."""
-        self._node.queryable(CellKeys(self.cell).flight_record, self._on_query)
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The row of the endpoint table this part answers (``<cell>/service/flight_record``)."""
+        return {CELL.flight_record: self._on_query}
 
     async def run(self) -> None:
         """Keep the process running until cancelled; then stop it."""

@@ -36,8 +36,7 @@ from urdaemon.control.planned import ReadyPlan
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import envelope, goal_cancel, move_goal, signing
-from urdaemon.publish.admission import Guard
-from urdaemon.publish.envelope import MAX_MESSAGE_BYTES
+from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.publish.fields import ToleranceMessage
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.move_goal import MoveGoalMessage
@@ -118,20 +117,15 @@ class Goals:
         self.pose_goal: PoseGoal | None = None
         """Handles pose move goals (IK in slices: runtime/pose_goals.py); None: no arm kinematics."""
 
-    def declare(self, guard: Guard | None = None) -> None:
-        """Declare the goal queryables (each acts on its exact key only: publish/node.py); goals and
-        cancel need the command lease holder's token (``guard``), results are open to all."""
-        node, keys = self._node, self._keys
-        node.queryable(
-            keys.goal_trajectory,
-            self.on_trajectory_goal,
-            max_bytes=MAX_MESSAGE_BYTES,
-            answer="accepted",
-            guard=guard,
-        )
-        node.queryable(keys.goal_move, self.on_move_goal, answer="accepted", guard=guard)
-        node.queryable(keys.goal_cancel, self.on_cancel, answer="canceled", guard=guard)
-        node.queryable(keys.goal_results, self.on_result_query, any_id=True)
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The rows of the endpoint table this part answers, and their handlers (robot.py declares
+        them: publish/endpoints.py says each one's key, size limit, reply field and lease)."""
+        return {
+            ROBOT.goal_trajectory: self.on_trajectory_goal,
+            ROBOT.goal_move: self.on_move_goal,
+            ROBOT.goal_cancel: self.on_cancel,
+            ROBOT.goal_results: self.on_result_query,
+        }
 
     # ---- events and results ----------------------------------------------------------------------
 

@@ -21,6 +21,7 @@ from typing import Any, Protocol
 from urdaemon.cell.config import Cell
 from urdaemon.errors import MessageError
 from urdaemon.publish.admission import attachment_of
+from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.liveliness import LivelinessWatch
 from urdaemon.publish.node import ZenohNode
@@ -58,9 +59,9 @@ class LeaseKeeper:
         self._holder_key: str | None = None
         """The holder's token key, watched while it holds the lease."""
 
-    def declare(self, node: ZenohNode) -> None:
-        """Declare the lease queryable (it never needs a lease itself)."""
-        node.queryable(self._keys.lease, self.on_query)
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The rows of the endpoint table this part answers (the lease, which needs no lease itself)."""
+        return {ROBOT.lease: self.on_query}
 
     @property
     def watch(self) -> LivelinessWatch | None:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Generator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -35,9 +35,7 @@ from urdaemon.description.arm import ArmKinematics, base_in_world
 from urdaemon.description.frames import Frame, compose, frame_of_pose, inverse, pose_of_frame
 from urdaemon.errors import GoalRejected
 from urdaemon.publish import linear_goal, move_goal
-from urdaemon.publish.admission import Guard
-from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, payload
@@ -76,15 +74,9 @@ class Cartesian:
         """base -> world, to bring a world pose into base (None: the robot is not mounted on world)."""
         goals.pose_goal = self.on_pose_goal
 
-    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> None:
-        """Declare the linear goal's queryable (its exact key only; the command lease holder's token)."""
-        node.queryable(
-            keys.goal_linear,
-            self.on_linear_goal,
-            max_bytes=linear_goal.LINEAR_MESSAGE_BYTES,
-            answer="accepted",
-            guard=guard,
-        )
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The rows of the endpoint table this part answers (the linear goal), and their handlers."""
+        return {ROBOT.goal_linear: self.on_linear_goal}
 
     # ---- frames --------------------------------------------------------------------------------
 

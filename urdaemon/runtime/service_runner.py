@@ -17,10 +17,8 @@ from typing import Any
 from urdaemon.backends.base import Backend
 from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError
-from urdaemon.publish.admission import Guard
-from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
-from urdaemon.publish.services import SERVICES, STOP, ServiceSpec, names
+from urdaemon.publish.endpoints import ROBOT, Endpoint
+from urdaemon.publish.services import SERVICES, STOP, ServiceSpec
 from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
@@ -53,18 +51,12 @@ class ServiceRunner:
         """The robot's backend."""
         return self._backend
 
-    def declare(self, node: ZenohNode, keys: RobotKeys, guard: Guard | None = None) -> frozenset[str]:
-        """Declare a queryable for every service; the names of the services this robot answers.
-
-        A commanding service is refused without the command lease holder's token (``guard``);
-        ``stop`` never is, neither for its payload nor for the lease.
-        """
-        node.queryable(keys.service(STOP.name), self.on_stop, max_bytes=None)
-        for spec in SERVICES:
-            node.queryable(
-                keys.service(spec.name), self._handler(spec), guard=guard if spec.commanding else None
-            )
-        return frozenset(names())
+    def endpoints(self) -> dict[Endpoint, Callable[[Any], None]]:
+        """The rows of the endpoint table this part answers, every service's, and their handlers
+        (a commanding service's row needs the lease; ``stop``'s never, nor reads its payload)."""
+        handlers = {ROBOT.service(spec.name): self._handler(spec) for spec in SERVICES}
+        handlers[ROBOT.service(STOP.name)] = self.on_stop
+        return handlers
 
     def _handler(self, spec: ServiceSpec) -> Callable[[Any], None]:
         def handle(query: Any) -> None:

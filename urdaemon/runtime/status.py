@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections.abc import Mapping
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -21,8 +22,7 @@ from urdaemon.cell.config import PublishOptions
 from urdaemon.cell.robot_options import Robot
 from urdaemon.control import MotionController
 from urdaemon.publish import envelope
-from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.node import ZenohNode
+from urdaemon.publish.endpoints import ROBOT, Endpoint
 
 __all__ = ["StatusPublisher", "io_signature", "tool_link"]
 
@@ -65,11 +65,14 @@ class StatusPublisher:
         """Who holds the command lease (``holder``, ``fingerprint``, ``since``; never its session id),
         None: nobody (runtime/lease_keeper.py)."""
 
-    def declare(self, node: ZenohNode, keys: RobotKeys) -> None:
-        """Declare the status, IO and events publishers."""
-        self._pub_status = node.publisher(keys.status)
-        self._pub_io = node.publisher(keys.io)
-        self._pub_events = node.publisher(keys.events)
+    ENDPOINTS = (ROBOT.status, ROBOT.io, ROBOT.events)
+    """The rows of the endpoint table this part publishes on."""
+
+    def take_publishers(self, declared: Mapping[Endpoint, Any]) -> None:
+        """Publish on the status, IO and events publishers the table declared (robot.py)."""
+        self._pub_status = declared[ROBOT.status]
+        self._pub_io = declared[ROBOT.io]
+        self._pub_events = declared[ROBOT.events]
 
     def message(self) -> dict[str, Any]:
         """The status message body."""
