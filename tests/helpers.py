@@ -16,10 +16,10 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO, TypeVar
+from typing import Any, Generic, TextIO, TypeVar
 
 T = TypeVar("T")
 
@@ -27,6 +27,7 @@ __all__ = [
     "UR_PORTS",
     "CliRun",
     "LeaseGrant",
+    "Stepped",
     "acquire_lease",
     "client_lease",
     "drain_in_background",
@@ -457,3 +458,41 @@ async def client_lease(client: Any, robot: str) -> LeaseGrant:
     a second lease on the same session would be another holder, with a secret of its own)."""
     token = await (await client.robot(robot)).ensure_lease()
     return LeaseGrant(token.encode(), None, {})
+
+
+class Stepped(Generic[T]):
+    """Stepped work (a generator of steps, runtime/motion.py) driven by hand, a counted number of steps
+    at a time: ``step(count)`` until it returns False, then ``result()``."""
+
+    def __init__(self, steps: Generator[None, None, T]) -> None:
+        self._steps: Generator[None, None, T] | None = steps
+        self._done = False
+        self._result: T | None = None
+
+    def step(self, count: int = 1) -> bool:
+        """Run up to ``count`` steps; True while more remain (a refusal raises, then it is over)."""
+        steps = self._steps
+        if steps is None:
+            return False
+        try:
+            for _ in range(count):
+                next(steps)
+        except StopIteration as stop:
+            self._result, self._done, self._steps = stop.value, True, None
+            return False
+        except BaseException:
+            self._steps = None
+            raise
+        return True
+
+    def result(self) -> T:
+        """What the finished work returned."""
+        if not self._done:
+            raise RuntimeError("the work has not finished")
+        return self._result  # type: ignore[return-value]
+
+    def close(self) -> None:
+        """Abandon the work."""
+        if self._steps is not None:
+            self._steps.close()
+            self._steps = None

@@ -21,7 +21,7 @@ from urdaemon.control import MotionController
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.kinematics import DhKinematics, ToolOffset, quaternion_of
-from urdaemon.errors import BackendError, UrDaemonError
+from urdaemon.errors import UrDaemonError
 from urdaemon.model import Lifecycle, RobotState
 from urdaemon.publish import state_encoder
 from urdaemon.publish.endpoints import ROBOT, Endpoint, declare_endpoints, read_only_reason
@@ -29,10 +29,11 @@ from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
 from urdaemon.runtime.commands import Commands
-from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
+from urdaemon.runtime.goal_events import GoalEvents
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.lease import LeaseBook
 from urdaemon.runtime.lease_keeper import LeaseKeeper
+from urdaemon.runtime.motion import TOOL_CONTACT_REASON, How, RobotMotion
 from urdaemon.runtime.pose_goals import Cartesian
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.service_runner import ServiceRunner
@@ -120,30 +121,14 @@ class RobotRuntime:
         self.node = node
         self.keys = RobotKeys(cell, robot.name)
         self.log = _RobotLog(logging.getLogger("urdaemon.robot"), {"robot": robot.name})
-        self.gate = MotionGate(backend)
+        log = self.log
         self.requests = Requests()
-        self.status = StatusPublisher(robot, backend, controller, publish, self.log)
-        self.goals = Goals(
-            robot, backend, controller, node, self.keys, (self.gate, self.requests, self.status), self.log
+        self.status = status = StatusPublisher(robot, backend, controller, publish, log)
+        events = GoalEvents(robot=robot, backend=backend, node=node, keys=self.keys, log=log)
+        self.motion = RobotMotion(
+            backend=backend, controller=controller, status=status, events=events, log=log
         )
-        self.commands = Commands(
-            robot, backend, controller, (self.gate, self.status), self.goals.joint_names, self.log
-        )
-        self.services = ServiceRunner(
-            backend,
-            controller,
-            (self.gate, self.requests, self.status, self.goals),
-            self.log,
-            on_tcp=self._use_tcp,
-        )
-        self.cartesian = Cartesian(robot, backend, controller, self.goals, self.gate, arm, self.log)
-        self.lease = LeaseKeeper(
-            self.keys,
-            LeaseBook(robot.name, self.keys.lease),  # checked unless the cell says not (daemon.py)
-            self._lease_ended,
-            (self.requests, self.status),
-            self.log,
-        )
+        self._compose(robot, events, arm)
         self.service_names: frozenset[str] = frozenset()
         """The services this robot answers (once declared)."""
         self.tcp_poses = TcpPoses(robot, kinematics, arm)
@@ -153,6 +138,54 @@ class RobotRuntime:
         self._pub_pose: Any = None
         self._joints_wanted = Matching(False)
         self._pose_wanted = Matching(False)
+
+    def _compose(self, robot: Robot, events: GoalEvents, arm: ArmKinematics | None) -> None:
+        """The runtime's parts, each given the collaborators it uses by name."""
+        backend, controller, node, log = self.backend, self.controller, self.node, self.log
+        motion, status = self.motion, self.status
+        cartesian = (
+            None
+            if arm is None
+            else Cartesian(robot=robot, backend=backend, controller=controller, kinematics=arm, log=log)
+        )
+        self.goals = Goals(
+            robot=robot,
+            backend=backend,
+            controller=controller,
+            node=node,
+            keys=self.keys,
+            motion=motion,
+            events=events,
+            requests=self.requests,
+            cartesian=cartesian,
+            log=log,
+        )
+        self.commands = Commands(
+            robot=robot,
+            backend=backend,
+            controller=controller,
+            motion=motion,
+            status=status,
+            joint_names=self.goals.joint_names,
+            log=log,
+        )
+        self.services = ServiceRunner(
+            backend=backend,
+            controller=controller,
+            motion=motion,
+            requests=self.requests,
+            status=status,
+            log=log,
+            on_tcp=self._use_tcp,
+        )
+        self.lease = LeaseKeeper(
+            keys=self.keys,
+            book=LeaseBook(robot.name, self.keys.lease),  # checked unless the cell says not (daemon.py)
+            motion=motion,
+            requests=self.requests,
+            status=status,
+            log=log,
+        )
 
     # ---- lifecycle -----------------------------------------------------------------------------
 
@@ -164,7 +197,7 @@ class RobotRuntime:
         served: dict[Endpoint, Any] = dict.fromkeys((ROBOT.joint_states, *self.status.ENDPOINTS, ROBOT.alive))
         if self.tcp_poses.available:
             served[ROBOT.tcp_pose] = None
-        for part in (self.goals, self.cartesian, self.services, self.lease):
+        for part in (self.goals, self.services, self.lease):
             served.update(part.endpoints())
         served.update(self.commands.endpoints())
         self.backend.on_notice = self._publish_notice
@@ -193,7 +226,7 @@ class RobotRuntime:
         finally:
             # from now on every request answers "shutting down" (the daemon closes the backends after
             # this: nothing may be accepted that no cycle would end); requests in progress answer it too
-            self.gate.closing = True
+            self.motion.close()
             await self.requests.cancel_all()
 
     async def _supervise(self) -> None:
@@ -204,14 +237,14 @@ class RobotRuntime:
                 await self.backend.run(self._on_cycle)
                 reason = "backend stopped"
             except asyncio.CancelledError:
-                self.gate.closing = True  # before anything else: no request may start motion from now on
-                self._end_motion(SHUTTING_DOWN)
+                # shutting down first: no request may start motion from now on
+                self.motion.end(SHUTTING_DOWN, How.ABORT, closing=True)
                 raise
             except Exception as err:  # any failure of one robot is contained here
                 reason = f"backend failed: {type(err).__name__}: {err}"
                 self.log.error("%s", reason, exc_info=not isinstance(err, UrDaemonError))
             self.status.restarts += 1
-            self._end_motion(reason)
+            self.motion.end(reason, How.ABORT)  # a restarted control script has no contact to rest in
             state = self.backend.state
             state.lifecycle = Lifecycle.DISCONNECTED
             state.lifecycle_reason = reason
@@ -222,24 +255,6 @@ class RobotRuntime:
             attempt += 1
             self.log.info("restarting backend in %.1f s", delay)
             await asyncio.sleep(delay)
-
-    def _end_motion(self, reason: str) -> None:
-        self.gate.in_contact = False  # a restarted control script has no contact to rest in
-        self.controller.abort(reason)
-        self.backend.state.program_running = False
-        self.goals.publish_events()
-        self.status.publish()
-
-    def _lease_ended(self, reason: str) -> None:
-        """The command lease ended or passed on: stop whatever moves the robot, as ``stop`` does, and
-        end freedrive (nobody may keep it on now)."""
-        self.services.stop(reason)
-        if self.backend.freedrive_active:
-            try:
-                self.backend.freedrive(False, 0.0)
-            except BackendError as err:
-                self.log.warning("ending freedrive as the lease ended failed: %s", err)
-        self.status.publish()
 
     # ---- the cycle (hot path) --------------------------------------------------------------------
 
@@ -260,7 +275,7 @@ class RobotRuntime:
                 pose = poses.pose(state.positions)
                 self._pub_pose.put(self._encoder.encode_pose(state, poses.frame, poses.child, pose))
         if self.controller.has_events:
-            self.goals.publish_events()
+            self.motion.publish_events()
         self.status.publish_if_changed()
 
     def _use_tcp(self, tcp: Sequence[float]) -> None:
@@ -273,11 +288,7 @@ class RobotRuntime:
         if kind == "tool_contact" and text == "contact":
             # the robot stopped on its own and goes back to where the tool touched: what we were sending
             # is over now, not when the goal's time runs out, and nothing moves it until end_tool_contact
-            self.gate.in_contact = True
-            self.gate.interrupt_planning()
-            self.controller.abort(TOOL_CONTACT_REASON)
-            self.goals.publish_events()
-            self.status.publish()
+            self.motion.end(TOOL_CONTACT_REASON, How.CONTACT)
         self.status.event({"kind": kind, "text": text})
 
     def status_message(self) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -21,13 +21,13 @@ import pytest
 from tests.control.sim import SimRobot
 from tests.description.support import REAL_UR10E, dh_fk, random_calibration
 from tests.description.test_chain import SIX, _custom
+from tests.helpers import Stepped
 from urdaemon.control import GoalStatus
 from urdaemon.control.cartesian import CartesianLimits
 from urdaemon.control.linear import (
     JOINT_NOISE,
     LIMIT_TOLERANCE,
     MAX_SLOWDOWN,
-    LinearCheck,
     plan_linear,
 )
 from urdaemon.control.sampled import SampledTrajectory
@@ -36,6 +36,7 @@ from urdaemon.daemon import describe_cell
 from urdaemon.description import DhParameters, UrKinematics, load_ur_model
 from urdaemon.description.chain import ChainKinematics
 from urdaemon.description.frames import compose, frame_of_pose, rotation_vector
+from urdaemon.description.ik_types import run_steps
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS, JointLimits
 
@@ -111,9 +112,11 @@ def _plan(
     kin: Any, start: Sequence[float], poses: Any, blends: Sequence[float] = (), **kw: Any
 ) -> SampledTrajectory:
     limits = kw.pop("limits", None)
-    return plan_linear(
-        kin, start, poses, blends, kw.pop("tcp", TCP), kw.pop("cartesian", CARTESIAN), limits, PERIOD
-    ).run()
+    return run_steps(
+        plan_linear(
+            kin, start, poses, blends, kw.pop("tcp", TCP), kw.pop("cartesian", CARTESIAN), limits, PERIOD
+        )
+    )
 
 
 def _distance_to_line(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -255,8 +258,9 @@ def test_a_zero_radius_stops_at_the_pose() -> None:
     assert step < 1e-4  # at rest there (m/s)
 
 
-def _refusal(check: LinearCheck) -> tuple[str, int]:
-    """The reason a check refuses and the steps it took."""
+def _refusal(plan: Generator[None, None, SampledTrajectory]) -> tuple[str, int]:
+    """The reason a plan refuses and the steps it took."""
+    check = Stepped(plan)
     for steps in range(100_000):
         try:
             more = check.step(1)
@@ -478,7 +482,7 @@ def test_a_long_path_plans_in_bounded_steps() -> None:
     p2 = _offset(p1, 0.0, 0.5, 0.0)
     p3 = _offset(p2, -0.5, 0.0, 0.0)
     p4 = _offset(p3, 0.0, -0.5, 0.0)
-    check = plan_linear(arm, q, [p1, p2, p3, p4], [0.05, 0.05, 0.05], TCP, CARTESIAN, limits, PERIOD)
+    check = Stepped(plan_linear(arm, q, [p1, p2, p3, p4], [0.05, 0.05, 0.05], TCP, CARTESIAN, limits, PERIOD))
     steps = 0
     most = 0
     more = True
@@ -569,7 +573,9 @@ def test_a_custom_robots_pose_out_of_reach_is_checked_one_evaluation_per_step(
     monkeypatch.setattr(ChainKinematics, "_walk", counted)
     q0 = [0.1] * kin.dof
     for poses in ([(5.0, 0.0, 0.0, 0.0, 0.0, 0.0)], [kin.forward(q0), (5.0, 0.0, 0.0, 0.0, 0.0, 0.0)]):
-        check = plan_linear(kin, q0, poses, [0.0] * (len(poses) - 1), (0.0,) * 6, CARTESIAN, limits, PERIOD)
+        check = Stepped(
+            plan_linear(kin, q0, poses, [0.0] * (len(poses) - 1), (0.0,) * 6, CARTESIAN, limits, PERIOD)
+        )
         most, steps, reason = 0, 0, ""
         while not reason and steps < 100_000:
             before = walks[0]

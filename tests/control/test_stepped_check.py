@@ -17,9 +17,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.helpers import Stepped
 from urdaemon.control import GoalStatus, MotionController, PlannedTrajectory, TrajectoryPoint
 from urdaemon.control.ledger import RELEASE_SEGMENTS
-from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
+from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import GoalRejected
 from urdaemon.model import UR_JOINTS
 from urdaemon.runtime import slicing
@@ -38,7 +39,7 @@ def _outcome(run: Any) -> tuple[Any, ...]:
     return ("planned", planner.points, planner.velocities)
 
 
-def _stepped(check: TrajectoryCheck, sizes: list[int]) -> tuple[TrajectoryPlanner, int]:
+def _stepped(check: Stepped[TrajectoryPlanner], sizes: list[int]) -> tuple[TrajectoryPlanner, int]:
     """Run ``check`` with step sizes taken round-robin from ``sizes``; the planner and the calls made."""
     for calls in range(1, 100_000):
         if not check.step(sizes[calls % len(sizes)]):
@@ -102,7 +103,7 @@ def test_the_stepped_check_ends_as_the_one_shot_check_does(
     controller = MotionController(THREE_LIMITS, period=PERIOD)
     state = ready_state(NAMES, [0.1, -0.2, 0.3])
     one_shot = _outcome(lambda: controller.prepare_trajectory(names, points, state))
-    stepped = _outcome(lambda: _stepped(controller.check_trajectory(names, points, state), sizes)[0])
+    stepped = _outcome(lambda: _stepped(Stepped(controller.check_trajectory(names, points, state)), sizes)[0])
     assert stepped == one_shot
 
 
@@ -133,11 +134,11 @@ def test_the_check_takes_a_step_per_point_and_finds_a_late_fault_late() -> None:
     Old code: one ``prepare_trajectory`` call checked every point at once."""
     controller = MotionController(UR10E_LIMITS, period=PERIOD)
     state = ready_state(UR_JOINTS, START)
-    planner, calls = _stepped(controller.check_trajectory(UR_JOINTS, _ur_points(500), state), [1])
+    planner, calls = _stepped(Stepped(controller.check_trajectory(UR_JOINTS, _ur_points(500), state)), [1])
     assert calls > 500
     assert len(planner.points) == 500
 
-    check = controller.check_trajectory(UR_JOINTS, _ur_points(500, fault_at=499), state)
+    check = Stepped(controller.check_trajectory(UR_JOINTS, _ur_points(500, fault_at=499), state))
     for _ in range(499):  # mapping the points into the controller's order, then the checks
         assert check.step(1)
     with pytest.raises(GoalRejected, match="point 499 positions"):
@@ -151,7 +152,7 @@ def test_an_abandoned_check_stops_and_has_no_result() -> None:
     """Old code: a check abandoned mid-way was a worker thread ended at its next function call."""
     controller = MotionController(UR10E_LIMITS, period=PERIOD)
     state = ready_state(UR_JOINTS, START)
-    check = controller.check_trajectory(UR_JOINTS, _ur_points(50), state)
+    check = Stepped(controller.check_trajectory(UR_JOINTS, _ur_points(50), state))
     assert check.step(10)
     check.close()
     assert not check.step(10)
@@ -163,7 +164,7 @@ def _planned_tail(count: int) -> TrajectoryPlanner:
     controller = MotionController(UR10E_LIMITS, period=PERIOD)
     state = ready_state(UR_JOINTS, START)
     planner = controller.prepare_trajectory(UR_JOINTS, _ur_points(count), state)
-    while planner.plan_next():
+    for _ in planner.tail_steps():
         pass
     return planner
 
@@ -273,11 +274,11 @@ async def test_the_runtime_checks_a_long_trajectory_over_many_turns_of_the_loop(
     state = ready_state(UR_JOINTS, START)
     task = asyncio.ensure_future(probe())
     await asyncio.sleep(0)
-    planner = await slicing.check_sliced(controller.check_trajectory(UR_JOINTS, _ur_points(400), state))
+    planner = await slicing.sliced(controller.check_trajectory(UR_JOINTS, _ur_points(400), state))
     stop.set()
     await task
     assert len(planner.points) == 400
-    assert turns >= 400 // slicing.CHECK_STEPS
+    assert turns >= 400  # a step (about a point) per slice
 
 
 async def test_the_runtime_frees_a_goals_points_over_many_turns_of_the_loop(

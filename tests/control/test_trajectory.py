@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from ruckig import InputParameter, Ruckig, RuckigError, Trajectory
 
+from tests.helpers import Stepped
 from urdaemon.control import TrajectoryPoint, plan_move, plan_trajectory
 from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.ruckig_calls import calculate, position_extrema
@@ -411,14 +412,15 @@ def test_stepwise_planning_equals_one_shot_planning() -> None:
     start_a = [0.0] * 6
     whole = plan_trajectory([0.0] * 6, start_v, start_a, points, UR10E_LIMITS)
     planner = TrajectoryPlanner(points, UR10E_LIMITS, [0.0] * 6)
+    tail = Stepped(planner.tail_steps())
     steps = 0
     for _ in range(len(points) + 1):
         steps += 1
-        if not planner.plan_next():
+        if not tail.step():
             break
     assert planner.tail_done
-    assert steps == len(points) - 1, "one plan_next per tail segment"
-    assert planner.plan_next() is False
+    assert steps == len(points) - 1, "one step per tail segment"
+    assert tail.step() is False
     stepped = planner.finish([0.0] * 6, start_v, start_a)
     assert stepped.duration == pytest.approx(whole.duration, abs=1e-12)
     assert stepped.segment_count == whole.segment_count == len(points)
@@ -437,9 +439,8 @@ def test_a_prepared_tail_joins_a_start_that_moved_while_it_was_planned() -> None
         for pt in _dense_points(20)
     ]
     planner = TrajectoryPlanner(points, UR10E_LIMITS, [0.0] * 6)
-    for _ in range(len(points)):
-        if not planner.plan_next():
-            break
+    for _ in planner.tail_steps():
+        pass
     # the robot drifted a little (a preempted motion went on) before the goal was committed
     start = [0.001 * (j + 1) for j in range(6)]
     plan = planner.finish(start, [0.01] * 6, [0.0] * 6)
@@ -458,4 +459,4 @@ def test_infeasible_tail_segment_is_rejected_while_planning_the_tail() -> None:
     ]
     planner = TrajectoryPlanner(points, THREE_LIMITS, [0.0] * 3)
     with pytest.raises(GoalRejected, match="point 1: reaching it needs at least"):
-        planner.plan_next()
+        next(planner.tail_steps())

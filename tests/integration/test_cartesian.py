@@ -524,26 +524,26 @@ def _frame_of(xyzq: Sequence[float]) -> Frame:
 async def test_a_linear_goal_being_planned_makes_others_busy_and_a_cancel_refuses_it(
     served: Served, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A linear goal's planning is held before its first slice (runtime/pose_goals.py's ``sliced``,
-    its second use: the first decodes it); while it waits, another goal is refused as busy, set_tcp
+    """A linear goal's planning is held before its first slice (runtime/slicing.py's ``sliced``, its
+    second use: the first decodes it); while it waits, another goal is refused as busy, set_tcp
     too (the plan is made for the TCP it started with), and a cancel refuses it (the cancel's reply
     names it); let go, it is refused before it ever moves the robot."""
-    from urdaemon.runtime import pose_goals, slicing
+    from urdaemon.runtime import slicing
 
     await _home(served)
     real = slicing.sliced
     uses = 0
     go = asyncio.Event()
 
-    async def held(step: Any) -> None:
+    async def held(steps: Any, check: Any = None) -> Any:
         nonlocal uses
         uses += 1
         if uses == 2:
             await go.wait()
-        await real(step)
+        return await real(steps, check)
 
-    monkeypatch.setattr(pose_goals, "sliced", held)
-    gate = served.daemon.runtimes[0].gate
+    monkeypatch.setattr(slicing, "sliced", held)
+    gate = served.daemon.runtimes[0].motion
     before = served.positions
     end = _shifted(served.kin.forward(before), dz=0.1)
     planning = asyncio.create_task(served.ask("goal/linear", {"poses": [end]}))

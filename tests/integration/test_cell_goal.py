@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import free_tcp_port, swing_trajectory
+from tests.helpers import Stepped, free_tcp_port, swing_trajectory
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.cell import parse_cell
 from urdaemon.client import CellGoalHandle, Client, send_cell_trajectory
@@ -26,7 +26,7 @@ from urdaemon.errors import GoalRejected, UrDaemonError
 from urdaemon.publish import cell_goal, envelope, signing
 from urdaemon.publish.keys import CellKeys
 from urdaemon.runtime.cell_goals import CellGoals
-from urdaemon.runtime.goals import put_signed
+from urdaemon.runtime.goal_events import put_signed
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -336,7 +336,7 @@ async def test_a_cell_goal_being_planned_at_shutdown_is_answered_once_and_starts
             # once per joint-state sample, the whole planning fitted between two under load)
             async with asyncio.timeout(20.0):
                 for _ in range(10_000_000):
-                    if all(rt.gate.planning is not None for rt in daemon.runtimes) or asked.done():
+                    if all(rt.motion.planning is not None for rt in daemon.runtimes) or asked.done():
                         break
                     await asyncio.sleep(0)
             assert not asked.done(), asked.result()
@@ -360,9 +360,9 @@ def test_a_big_cell_goal_is_split_a_bounded_piece_at_a_time() -> None:
     alice = swing_trajectory(2500, HOME)
     bob = {"points": _points(BOB, 1.0), "joint_names": ["a}]", 'b\\"{['] + [f"j{i}" for i in range(4)]}
     text = json.dumps({"robots": {"alice": alice, "bob": bob}, "on_abort": "continue"}, indent=1).encode()
-    decoder = cell_goal.CellGoalDecoder(text)
+    decoder = Stepped(cell_goal.CellGoalDecoder(text).steps())
     steps = 1
-    while decoder.advance():
+    while decoder.step():
         steps += 1
     split = decoder.result()
     assert split.on_abort == "continue"

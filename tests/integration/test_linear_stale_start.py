@@ -55,21 +55,21 @@ async def test_nothing_moves_the_robot_while_a_linear_goal_is_planned(
     served: Served,  # noqa: F811
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import pose_goals, slicing
+    from urdaemon.runtime import slicing
 
     await _home(served)
     real = slicing.sliced
     uses = 0
     go = asyncio.Event()
 
-    async def held(step: Any) -> None:
+    async def held(steps: Any, check: Any = None) -> Any:
         nonlocal uses
         uses += 1
         if uses == 2:  # the first use decodes the goal, the second plans it: held before its first slice
             await go.wait()
-        await real(step)
+        return await real(steps, check)
 
-    monkeypatch.setattr(pose_goals, "sliced", held)
+    monkeypatch.setattr(slicing, "sliced", held)
     before = served.positions
     end = _shifted(served.kin.forward(before), dz=0.05)
     states = served.alice.joint_states(100_000)

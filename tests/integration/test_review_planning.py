@@ -217,7 +217,7 @@ def trajectory(points: int, *, passthrough: bool = False, last_segment: float = 
 
 def planning(cell: Cell) -> bool:
     """True once the goal is past decoding (its points are being checked or planned)."""
-    return (cell.runtime.gate.planning or "").startswith("trajectory of ")
+    return (cell.runtime.motion.planning or "").startswith("trajectory of ")
 
 
 async def test_stop_while_a_trajectory_is_planned_refuses_it() -> None:
@@ -266,7 +266,7 @@ async def test_stop_while_a_trajectory_is_decoded_refuses_it() -> None:
         goal = Query(cell.key("goal/trajectory"), trajectory(3000))
         cell.runtime.goals.on_trajectory_goal(goal)
         await asyncio.sleep(0)  # its first decoding slice ran; thousands of points are left
-        assert cell.runtime.gate.planning == "trajectory being decoded"
+        assert cell.runtime.motion.planning == "trajectory being decoded"
         cell.runtime.services.on_stop(Query(cell.key("service/stop")))
         answer = await goal.answer()
         assert answer["accepted"] is False

@@ -11,12 +11,13 @@ import asyncio
 import json
 import sys
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Generator
+from typing import Any
 
 import pytest
 
 from tests.integration.test_review_planning import Query, alice, trajectory
-from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
+from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.publish.services import spec
 from urdaemon.publish.trajectory_json import TrajectoryGoalDecoder
 from urdaemon.runtime import slicing
@@ -44,32 +45,41 @@ def turn_counter() -> tuple[Callable[[], int], Callable[[], None]]:
     return (lambda: turns), stop
 
 
+def _recorded(
+    steps: Generator[None, None, Any], turn: Callable[[], int], record: list[tuple[int, int]]
+) -> Generator[None, None, Any]:
+    """``steps``, each recorded with the turn of the loop it ran in and whose work it is."""
+    owner = id(steps)
+    while True:
+        record.append((turn(), owner))
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value
+        yield
+
+
 async def test_two_goals_decoded_at_once_run_one_slice_per_turn(monkeypatch: pytest.MonkeyPatch) -> None:
     """Reproduction: the slice budget was per task: two robots decoding big goals at once each ran a
     slice in the same turn of the loop (N robots: N × 0.25 ms per turn)."""
     turn, stop = turn_counter()
-    slices: list[tuple[int, int]] = []
-    step = TrajectoryGoalDecoder.step
-
-    def counted(self: TrajectoryGoalDecoder, deadline: float) -> bool:
-        slices.append((turn(), id(self)))
-        return step(self, deadline)
-
-    monkeypatch.setattr(TrajectoryGoalDecoder, "step", counted)
+    steps: list[tuple[int, int]] = []
     payload = json.dumps(trajectory(3000)).encode()
     try:
         goals = await asyncio.gather(
-            slicing.decode_sliced(TrajectoryGoalDecoder(payload)),
-            slicing.decode_sliced(TrajectoryGoalDecoder(payload)),
+            slicing.sliced(_recorded(TrajectoryGoalDecoder(payload).steps(), turn, steps)),
+            slicing.sliced(_recorded(TrajectoryGoalDecoder(payload).steps(), turn, steps)),
         )
     finally:
         stop()
     assert [len(goal.points) for goal in goals] == [3000, 3000]
-    per_decoder = Counter(owner for _, owner in slices)
-    assert len(per_decoder) == 2, per_decoder
-    assert min(per_decoder.values()) > 2, per_decoder  # both were sliced
-    per_turn = Counter(t for t, _ in slices)
-    assert max(per_turn.values()) == 1, [t for t, n in per_turn.items() if n > 1][:10]
+    turns_of: dict[int, set[int]] = {}
+    for t, owner in steps:
+        turns_of.setdefault(owner, set()).add(t)
+    assert len(turns_of) == 2, turns_of.keys()
+    assert min(len(turns) for turns in turns_of.values()) > 2  # both were sliced
+    owners_per_turn = Counter(t for t, _ in set(steps))
+    assert max(owners_per_turn.values()) == 1, [t for t, n in owners_per_turn.items() if n > 1][:10]
 
 
 async def test_two_robots_planning_at_once_never_slice_in_the_same_turn(
@@ -79,18 +89,12 @@ async def test_two_robots_planning_at_once_never_slice_in_the_same_turn(
     side, both in the same turns of the loop."""
     slices: list[tuple[int, int]] = []
     turn, stop = turn_counter()
-    decode, check = TrajectoryGoalDecoder.step, TrajectoryCheck.step
+    sliced = slicing.sliced
 
-    def decoding(self: TrajectoryGoalDecoder, deadline: float) -> bool:
-        slices.append((turn(), id(self)))
-        return decode(self, deadline)
+    async def recording(steps: Generator[None, None, Any], check: Any = None) -> Any:
+        return await sliced(_recorded(steps, turn, slices), check)
 
-    def checking(self: TrajectoryCheck, steps: int) -> bool:
-        slices.append((turn(), id(self)))
-        return check(self, steps)
-
-    monkeypatch.setattr(TrajectoryGoalDecoder, "step", decoding)
-    monkeypatch.setattr(TrajectoryCheck, "step", checking)
+    monkeypatch.setattr(slicing, "sliced", recording)
     try:
         async with alice() as first, alice() as second:
             goals = [Query(c.key("goal/trajectory"), trajectory(3000)) for c in (first, second)]

@@ -1,4 +1,5 @@
-"""runtime/pose_goals.py without Zenoh: the mock robot stepped by hand, the controller ticked by hand.
+"""runtime/pose_goals.py without Zenoh: the mock robot stepped by hand, the controller ticked by hand;
+pose move goals through the runtime's goals (runtime/goals.py), on a fake node with fake queries.
 
 Reproduction: before issue 17 runtime/pose_goals.py did not exist (ImportError), so every test fails;
 before pose goals were solved in slices, Cartesian had no pose goal handler (the pose goal tests fail).
@@ -8,12 +9,13 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Sequence
-from typing import cast
+from collections.abc import Generator, Sequence
+from typing import Any
 
 import pytest
 
 from tests.integration.conftest import ROOT
+from tests.integration.test_review_planning import Node, Query
 from urdaemon.backends.base import Backend
 from urdaemon.cell import parse_cell
 from urdaemon.control import MotionController
@@ -22,10 +24,10 @@ from urdaemon.description.arm import arm_kinematics
 from urdaemon.errors import GoalRejected
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
 from urdaemon.publish import envelope, linear_goal, move_goal
-from urdaemon.runtime.gate import STOPPED_WHILE_PLANNING, MotionGate
-from urdaemon.runtime.goals import Goals
+from urdaemon.robot import RobotRuntime
+from urdaemon.runtime import slicing
+from urdaemon.runtime.motion import STOPPED_WHILE_PLANNING, How, RobotMotion
 from urdaemon.runtime.pose_goals import Cartesian
-from urdaemon.runtime.queries import Requests
 
 CELL = """
 cell: unit
@@ -45,29 +47,9 @@ robots:
 """
 
 
-class _Goals:
-    """What Cartesian uses of the robot's goals: the pose goal handler, start_move and the answers."""
-
-    def __init__(self, gate: MotionGate, requests: Requests) -> None:
-        self._gate, self._requests = gate, requests  # what the real plan_in_task uses
-        self.pose_goal: Callable[[object, move_goal.MoveGoalMessage], None] | None = None
-        self.answers: list[tuple[str, object]] = []
-        self.started: list[tuple[float, ...]] = []
-
-    def start_move(self, goal: move_goal.MoveGoalMessage, positions: Sequence[float]) -> tuple[str, float]:
-        self.started.append(tuple(positions))
-        return "g1", 1.0
-
-    def refuse(self, query: object, kind: str, err: Exception) -> None:
-        self.answers.append(("refused", err.reason if isinstance(err, GoalRejected) else repr(err)))
-
-    def accept(self, query: object, kind: str, goal_id: str, duration: float, extra: object = None) -> None:
-        self.answers.append(("accepted", extra))
-
-    plan_in_task = Goals.plan_in_task  # the real one, on this stub's gate, requests and answers
-
-
-def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, MotionGate]:
+def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, RobotRuntime]:
+    """``name``'s Cartesian goals' work, its controller and mock backend (ready), and its runtime
+    (declared on a fake node, not running: its cycles are stepped by hand)."""
     cell = parse_cell(CELL, base_dir=ROOT / "configs")
     robot = cell.robot(name)
     description = describe_cell(cell)
@@ -83,11 +65,12 @@ def _parts(name: str = "alice") -> tuple[Cartesian, MotionController, Backend, M
     controller = MotionController(limits, period=backend.period)
     kin = arm_kinematics(robot, description.tree, limits.names, (limits.min_position, limits.max_position))
     controller.set_arm(kin, twist_limits(robot))
-    gate, requests = MotionGate(backend), Requests()
     log = logging.LoggerAdapter(logging.getLogger("test"), {})
-    goals = _Goals(gate, requests)
-    cartesian = Cartesian(robot, backend, controller, goals, gate, kin, log)  # type: ignore[arg-type]
-    return cartesian, controller, backend, gate
+    cartesian = Cartesian(robot=robot, backend=backend, controller=controller, kinematics=kin, log=log)
+    node: Any = Node()
+    runtime = RobotRuntime(cell.cell, robot, backend, controller, node, cell.publish, arm=kin)
+    runtime.declare()
+    return cartesian, controller, backend, runtime
 
 
 def _linear(pose: list[float], **fields: float) -> linear_goal.LinearGoalMessage:
@@ -97,7 +80,7 @@ def _linear(pose: list[float], **fields: float) -> linear_goal.LinearGoalMessage
 async def test_a_linear_goal_while_the_robot_still_decelerates_is_refused_as_moving() -> None:
     """A velocity stream stopped a moment ago: the robot is not busy (no goal, no live stream) but
     still slows down, so a linear goal, which starts from rest, is refused naming that."""
-    cartesian, controller, backend, gate = _parts()
+    cartesian, controller, backend, _ = _parts()
     state = backend.state
     now = 0.0
     controller.stream_velocities(controller.joint_names, [0.5, 0.0, 0.0, 0.0, 0.0, 0.0], state, now)
@@ -109,14 +92,14 @@ async def test_a_linear_goal_while_the_robot_still_decelerates_is_refused_as_mov
     controller.tick(state, backend.command, now + backend.period)
     assert abs(state.velocities[0]) > 0.1, "still moving"
     pose = list(controller_tcp_pose(cartesian, state.positions))
+    goal = _linear(pose)
     with pytest.raises(GoalRejected) as refused:
-        await cartesian._plan(_linear(pose), gate.generation)
+        cartesian.linear_steps(goal, *cartesian.linear_targets(goal))
     assert refused.value.reason == "linear goal: the robot is moving; a linear goal starts from rest"
 
 
 def controller_tcp_pose(cartesian: Cartesian, q: list[float]) -> tuple[float, ...]:
-    kin = cartesian._arm("test")
-    return tuple(kin.forward(q))
+    return tuple(cartesian._kin.forward(q))
 
 
 async def test_a_limit_above_its_cap_is_refused_naming_both_and_the_defaults_fill_the_rest() -> None:
@@ -131,26 +114,36 @@ async def test_a_limit_above_its_cap_is_refused_naming_both_and_the_defaults_fil
     )
 
 
-async def test_a_plan_interrupted_between_slices_stops_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
+async def test_a_plan_interrupted_between_slices_stops_at_once() -> None:
     """What ends motion while a linear goal is planned (stop, cancel, freedrive) refuses it at its
     next slice, not after the whole plan: here a stop comes between the planning's start and its
     first slice."""
-    from urdaemon.runtime import pose_goals as module
-
-    cartesian, _, backend, gate = _parts()
+    cartesian, _, backend, runtime = _parts()
+    motion: RobotMotion = runtime.motion
     pose = list(controller_tcp_pose(cartesian, backend.state.positions))
     pose[2] += 0.2
-    slices = []
+    goal = _linear(pose)
+    steps_run = 0
 
-    async def stopped_first(step: Callable[[float], bool]) -> None:
-        gate.interrupt_planning()  # as a stop does
-        slices.append(step(float("inf")))  # the slice that follows refuses, at once
+    def counted(steps: Generator[None, None, Any]) -> Generator[None, None, Any]:
+        nonlocal steps_run
+        while True:
+            steps_run += 1
+            try:
+                next(steps)
+            except StopIteration as stop:
+                return stop.value
+            yield
 
-    monkeypatch.setattr(module, "sliced", stopped_first)
-    with pytest.raises(GoalRejected) as refused:
-        await cartesian._plan(_linear(pose), gate.generation)
+    with motion.claim("linear goal being decoded") as ticket:
+        steps = counted(cartesian.linear_steps(goal, *cartesian.linear_targets(goal)))
+        motion.end("stop requested", How.STOP)  # as a stop does
+        with pytest.raises(GoalRejected) as refused:
+            await motion.plan(ticket, steps, what="linear goal of 1 pose", from_rest=True)
     assert refused.value.reason == STOPPED_WHILE_PLANNING
-    assert slices == []
+    assert steps_run == 0
+    assert motion.planning is None
+    assert not motion.from_rest
 
 
 def _move(pose: Sequence[float], **fields: object) -> move_goal.MoveGoalMessage:
@@ -158,38 +151,43 @@ def _move(pose: Sequence[float], **fields: object) -> move_goal.MoveGoalMessage:
 
 
 class _Slices:
-    """``sliced`` with a slice that has always run out of time: each runs one chunk of work."""
+    """``sliced`` with a slice that has always run out of time: each runs one step of work."""
 
     def __init__(self) -> None:
         self.count = 0
         self.hold: asyncio.Event | None = None
 
-    async def __call__(self, step: Callable[[float], bool]) -> None:
+    async def __call__(self, steps: Generator[None, None, Any], check: Any = None) -> Any:
         while True:
             if self.hold is not None:
                 await self.hold.wait()
             self.count += 1
-            if not step(-1.0):
-                return
+            if check is not None:
+                check()
+            try:
+                next(steps)
+            except StopIteration as stop:
+                return stop.value
             await asyncio.sleep(0)
 
 
-async def _answered(cartesian: Cartesian, goal: move_goal.MoveGoalMessage) -> list[tuple[str, object]]:
-    goals = _fake(cartesian)
-    assert goals.pose_goal is not None
-    goals.pose_goal(object(), goal)
-    await asyncio.gather(*_fake(cartesian)._requests.tasks)
-    return goals.answers
+def _ask(runtime: RobotRuntime, goal: dict[str, Any]) -> Query:
+    """A move goal asked of ``runtime``, as Zenoh hands it to the queryable."""
+    query = Query(f"{runtime.keys.base}/goal/move", goal)
+    runtime.goals.on_move_goal(query)
+    return query
 
 
-def _planning(gate: MotionGate) -> str | None:
-    """What the gate says is being planned (read afresh)."""
-    return gate.planning
+async def _answered(runtime: RobotRuntime, pose: Sequence[float]) -> list[tuple[str, object]]:
+    query = _ask(runtime, {"pose": list(pose)})
+    await asyncio.gather(*runtime.requests.tasks)
+    return [_answer(reply) for reply in query.replies]
 
 
-def _fake(cartesian: Cartesian) -> _Goals:
-    """The fake goals ``_parts`` gave ``cartesian``."""
-    return cast(_Goals, cartesian._goals)
+def _answer(reply: dict[str, Any]) -> tuple[str, object]:
+    if reply["accepted"]:
+        return ("accepted", {"positions": reply["positions"]})
+    return ("refused", reply["reason"])
 
 
 @pytest.mark.parametrize("name", ["alice", "carol"])
@@ -198,57 +196,55 @@ async def test_a_pose_goal_out_of_reach_is_solved_in_slices_and_refused_naming_i
 ) -> None:
     """The IK of a pose out of reach (a custom robot's nine numeric starts: 2-4 ms at once) runs one
     Newton evaluation per slice, between robot cycles; the refusal is the one it always was.
-    Reproduction: before, the IK ran at once inside ``goal/move``'s handler (no ``pose_goal``)."""
-    from urdaemon.runtime import pose_goals as module
-
+    Reproduction: before, the IK ran at once inside ``goal/move``'s handler (no pose goal kind)."""
     slices = _Slices()
-    monkeypatch.setattr(module, "sliced", slices)
-    cartesian, _, _, gate = _parts(name)
-    answers = await _answered(cartesian, _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    monkeypatch.setattr(slicing, "sliced", slices)
+    _, _, _, runtime = _parts(name)
+    answers = await _answered(runtime, [5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     assert answers == [
         ("refused", "move goal: pose [5.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000] is out of reach")
     ]
     assert slices.count >= (50 if name == "carol" else 2)
-    assert gate.planning is None
+    assert runtime.motion.planning is None
 
 
 async def test_a_pose_goal_is_answered_with_the_joints_nearest_ik_gives(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import pose_goals as module
-
-    monkeypatch.setattr(module, "sliced", _Slices())
-    cartesian, controller, backend, _ = _parts("carol")
-    kin = cartesian._arm("test")
+    monkeypatch.setattr(slicing, "sliced", _Slices())
+    cartesian, controller, backend, runtime = _parts("carol")
+    kin = cartesian._kin
     start = list(backend.state.positions)
     target = [v + 0.1 for v in start]
     pose = kin.forward(target, controller.tcp)
-    answers = await _answered(cartesian, _move(pose))
+    answers = await _answered(runtime, pose)
     expected = kin.nearest(pose, start, controller.tcp)
     assert expected is not None
     assert answers == [("accepted", {"positions": list(expected)})]
-    assert _fake(cartesian).started == [tuple(expected)]
+    assert controller.active_goal_id is not None  # started, to the joints it answered
 
 
 async def test_a_pose_goal_being_solved_makes_goals_busy_and_a_stop_refuses_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from urdaemon.runtime import pose_goals as module
-
     slices = _Slices()
     slices.hold = asyncio.Event()
-    monkeypatch.setattr(module, "sliced", slices)
-    cartesian, _, _, gate = _parts("carol")
-    goals = _fake(cartesian)
-    assert goals.pose_goal is not None
-    goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    assert gate.planning == "pose move goal"
-    goals.pose_goal(object(), _move([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    assert goals.answers == [("refused", "busy: still planning pose move goal")]
-    gate.interrupt_planning()  # as a stop or a cancel does
+    monkeypatch.setattr(slicing, "sliced", slices)
+    _, controller, _, runtime = _parts("carol")
+    motion = runtime.motion
+    first = _ask(runtime, {"pose": [5.0, 0.0, 0.0, 0.0, 0.0, 0.0]})
+    assert motion.planning == "pose move goal"
+    second = _ask(runtime, {"pose": [5.0, 0.0, 0.0, 0.0, 0.0, 0.0]})
+    assert [_answer(r) for r in second.replies] == [("refused", "busy: still planning pose move goal")]
+    motion.end("stop requested", How.STOP)  # as a stop or a cancel does
     slices.hold.set()
-    await asyncio.gather(*_fake(cartesian)._requests.tasks)
-    assert goals.answers[1:] == [("refused", STOPPED_WHILE_PLANNING)]
+    await asyncio.gather(*runtime.requests.tasks)
+    assert [_answer(r) for r in first.replies] == [("refused", STOPPED_WHILE_PLANNING)]
     assert slices.count == 1  # refused at its first slice, before any IK work
-    assert _planning(gate) is None
-    assert goals.started == []
+    assert _planning(motion) is None
+    assert controller.active_goal_id is None
+
+
+def _planning(motion: RobotMotion) -> str | None:
+    """What the gate says is being planned (read afresh)."""
+    return motion.planning

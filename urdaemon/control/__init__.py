@@ -12,7 +12,7 @@ from urdaemon.control.limits import (
 )
 from urdaemon.control.move import plan_move
 from urdaemon.control.planned_trajectory import PlannedTrajectory
-from urdaemon.control.trajectory import TrajectoryCheck, plan_trajectory
+from urdaemon.control.trajectory import plan_trajectory
 
 __all__ = [
     "ControllerStatistics",
@@ -22,7 +22,6 @@ __all__ = [
     "MotionController",
     "PlannedTrajectory",
     "Tolerances",
-    "TrajectoryCheck",
     "TrajectoryPoint",
     "check_finite",
     "check_positions_within",

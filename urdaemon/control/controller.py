@@ -30,7 +30,7 @@ Policies (documented contracts):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 from typing import cast
 
 from urdaemon.control.busy import (
@@ -53,9 +53,10 @@ from urdaemon.control.scaling import planning_limits
 from urdaemon.control.setpoint import Setpoint, write_idle
 from urdaemon.control.stopping import StopRamp
 from urdaemon.control.streams import STREAM_EXPIRED, StreamFollower
-from urdaemon.control.trajectory import TrajectoryCheck, TrajectoryPlanner
+from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.control.twist import TwistFollower
 from urdaemon.description.arm import ArmKinematics
+from urdaemon.description.ik_types import run_steps
 from urdaemon.model import JointCommand, JointLimits, RobotState
 
 __all__ = [
@@ -164,19 +165,18 @@ class MotionController:
 
     def check_trajectory(
         self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint], state: RobotState
-    ) -> TrajectoryCheck:
-        """Validate a trajectory in steps (``step(count)``, a few µs a step, until False); its result is
-        the planner that can plan the tail (``plan_next()``) before accepting. The same refusals, in
-        the same order, as ``prepare_trajectory``; nothing changes in the controller."""
-        return TrajectoryCheck(
-            self._intake.check_steps(tuple(joint_names), points, lambda: self._goal_seed(state)[0])
-        )
+    ) -> Generator[None, None, TrajectoryPlanner]:
+        """Validate a trajectory in steps (a generator, a few µs a step); it returns the planner that
+        can plan the tail (``tail_steps()``) before accepting. The same refusals, in the same order, as
+        ``prepare_trajectory``; nothing changes in the controller."""
+        return self._intake.check_steps(tuple(joint_names), points, lambda: self._goal_seed(state)[0])
 
     def prepare_trajectory(
         self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint], state: RobotState
     ) -> TrajectoryPlanner:
-        """Validate a trajectory at once; its planner can plan the tail (``plan_next()``) before accepting."""
-        return self.check_trajectory(joint_names, points, state).run()
+        """Validate a trajectory at once; its planner can plan the tail (``tail_steps()``) before
+        accepting."""
+        return run_steps(self.check_trajectory(joint_names, points, state))
 
     def accept_trajectory(
         self,

@@ -1,7 +1,8 @@
 """Linear goals: a straight TCP path through poses, checked completely and sampled every cycle.
 
-``plan_linear`` returns a ``LinearCheck`` that plans in small steps (no clock inside: the runtime runs
-it in slices between the robot's cycles, like control/trajectory.py's ``TrajectoryCheck``):
+``plan_linear`` plans in small steps, a generator whose return value is the plan (no clock inside:
+the runtime runs it in slices between the robot's cycles, like control/trajectory.py's
+``check_points``):
 
 1. the arguments, then each pose's reach (``kin.nearest_steps`` seeded with the pose before it): a pose
    out of reach is refused before anything is sampled;
@@ -35,7 +36,6 @@ from collections.abc import Generator, Sequence
 
 from urdaemon.control.cartesian import CartesianLimits, LinePath, build_path
 from urdaemon.control.sampled import SampledTrajectory, SampleWriter
-from urdaemon.control.stepped import StepCheck
 from urdaemon.description.arm import ArmKinematics
 from urdaemon.description.dls import singularity
 from urdaemon.description.frames import (
@@ -58,7 +58,6 @@ __all__ = [
     "MAX_POSES",
     "MAX_SLOWDOWN",
     "SINGULARITY_LIMIT",
-    "LinearCheck",
     "plan_linear",
 ]
 
@@ -88,17 +87,6 @@ _RETIME_MARGIN = 1e-3
 """A retimed path is slowed this much more than the differences asked, so one pass usually fits."""
 
 
-class LinearCheck(StepCheck[SampledTrajectory]):
-    """A linear goal planned in steps (control/stepped.py): ``step(count)`` until it returns False,
-    then ``result()``, the sampled plan.
-
-    Pure: no clock inside; a step is one chunk of an IK (one Newton evaluation), a segment's
-    profile or a sample's checks (its Jacobian, a bound of its smallest singular value, its finite
-    differences): each some 10-60 µs."""
-
-    __slots__ = ()
-
-
 def plan_linear(
     kin: ArmKinematics,
     start: Sequence[float],
@@ -108,11 +96,14 @@ def plan_linear(
     cartesian: CartesianLimits,
     limits: JointLimits,
     period: float,
-) -> LinearCheck:
+) -> Generator[None, None, SampledTrajectory]:
     """Plan a linear goal from joints ``start`` (at rest) through ``poses`` (TCP poses in base, with
     the flange -> TCP pose ``tcp``), blend radius ``blends[k]`` (m) at pose ``k`` (empty: none),
-    sampled every ``period`` s. Every refusal is raised by ``step`` as GoalRejected."""
-    return LinearCheck(_plan(kin, start, poses, blends, tcp, cartesian, limits, period))
+    sampled every ``period`` s, in steps: a generator whose return value is the sampled plan. Pure: no
+    clock inside; a step is one chunk of an IK (one Newton evaluation), a segment's profile or a
+    sample's checks (its Jacobian, a bound of its smallest singular value, its finite differences):
+    each some 10-60 µs. Every refusal is raised by a step as GoalRejected."""
+    return _plan(kin, start, poses, blends, tcp, cartesian, limits, period)
 
 
 def _plan(

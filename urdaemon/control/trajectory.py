@@ -3,7 +3,7 @@
 Ruckig's community build cannot plan through intermediate waypoints, so a trajectory is a chain of
 state-to-state segments, each stretched to the client's timing with ``minimum_duration``. The community
 build also ignores position limits, so every segment's position extrema are recomputed and checked
-(ruckig_calls.py). The points are checked first, in steps (``check_points``, ``TrajectoryCheck``).
+(ruckig_calls.py). The points are checked first, in steps (``check_points``, a generator of steps).
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from urdaemon.control.limits import (
 )
 from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.ruckig_calls import calculate, check_extrema, new_input
-from urdaemon.control.stepped import StepCheck
 from urdaemon.errors import GoalRejected
 from urdaemon.model import JointLimits
 
@@ -32,7 +31,6 @@ __all__ = [
     "SNAP_TOLERANCE",
     "TIMING_SLACK",
     "WAYPOINT_VELOCITY_FRACTION",
-    "TrajectoryCheck",
     "TrajectoryPlanner",
     "check_points",
     "check_start",
@@ -199,22 +197,11 @@ def _run(steps: Generator[None, None, _T]) -> _T:
             return stop.value  # type: ignore[no-any-return]
 
 
-class TrajectoryCheck(StepCheck["TrajectoryPlanner"]):
-    """A trajectory's check run in steps (control/stepped.py): ``step(count)`` until it returns False,
-    then ``result()``, the planner of the checked points.
-
-    Pure: no clock inside. The caller decides how many steps fit between two turns of its loop, as
-    with ``TrajectoryPlanner.plan_next``.
-    """
-
-    __slots__ = ()
-
-
 class TrajectoryPlanner:
     """Plans a multi-point trajectory in steps, so a long one never stalls the caller's loop.
 
     Segment k ≥ 1 starts exactly at point k−1's target state (position, chosen velocity,
-    acceleration), so the whole tail can be planned ahead, one ``plan_next()`` at a time, before
+    acceleration), so the whole tail can be planned ahead, a segment per step (``tail_steps()``), before
     the robot's live state is known; ``finish(start)`` then plans only segment 0 from it. Each
     tail segment's start time is kept as it is planned, counted from the end of segment 0, so
     ``finish`` hands the plan over without walking the segments.
@@ -271,8 +258,13 @@ class TrajectoryPlanner:
         """True when every segment after the first is planned."""
         return self._segments is None or len(self._segments) == len(self.points)
 
-    def plan_next(self) -> bool:
-        """Plan the next tail segment; True while more remain. Raises GoalRejected."""
+    def tail_steps(self) -> Generator[None, None, None]:
+        """Plan the tail, one segment per step (the runtime runs them in slices). Raises GoalRejected."""
+        while self._plan_next():
+            yield
+
+    def _plan_next(self) -> bool:
+        """Plan the next tail segment; True while more remain."""
         segments = self._segments
         if segments is None or len(segments) == len(self.points):
             return False
@@ -297,7 +289,7 @@ class TrajectoryPlanner:
         its segments to the plan: it can finish once.
         """
         check_start(self.limits, start_pos, start_vel, start_acc)
-        while self.plan_next():
+        while self._plan_next():
             pass
         segments = self._segments
         if segments is None:

@@ -32,7 +32,6 @@ _TEXT_BYTES = 16 * 1024
 _STRUCTURE = re.compile(rb'[][{}"]')
 _STRING_REST = re.compile(rb'(?:[^"\\]++|\\.)*+"')
 _SPACE = re.compile(rb"[ \t\n\r]{0,4096}")
-_DONE = object()
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,7 +44,7 @@ class CellGoalMessage:
 
 class CellGoalDecoder:
     """Splits a cell goal ``{"robots": {"alice": {...}, ...}, "on_abort": ...}`` into each robot's
-    trajectory goal body, a piece at a time (``advance()`` until False, then ``result()``): a part
+    trajectory goal body, a piece at a time (``steps()``, a generator that returns it): a part
     is delimited by counting its brackets, never decoded here (each robot's own decoder does that,
     in slices too), so no step costs more than searching ``_SCAN_BYTES`` or passing
     ``_SCAN_TOKENS`` brackets. Every error is a ``MessageError``."""
@@ -59,20 +58,13 @@ class CellGoalDecoder:
             )
         self._data = bytes(payload)
         self._decoder = json.JSONDecoder()
-        self._steps = self._run()
-        self._result: CellGoalMessage | None = None
 
-    def advance(self) -> bool:
-        """One bounded step; True while work is left (``slicing.until_deadline`` runs it in slices)."""
-        return next(self._steps, _DONE) is not _DONE
+    def steps(self) -> Generator[None, None, CellGoalMessage]:
+        """The split, one bounded step per ``next`` (runtime/slicing.py runs it in slices); returns the
+        split goal."""
+        return self._run()
 
-    def result(self) -> CellGoalMessage:
-        """The split goal."""
-        if self._result is None:
-            raise RuntimeError("the cell goal is not split yet")
-        return self._result
-
-    def _run(self) -> Generator[None, None, None]:
+    def _run(self) -> Generator[None, None, CellGoalMessage]:
         pos = self._expect(self._space(0), b"{", "a JSON object")
         own: dict[str, Any] = {}
         robots: dict[str, memoryview] | None = None
@@ -95,7 +87,7 @@ class CellGoalDecoder:
                 break
         if self._space(pos) != len(self._data):
             raise MessageError(f"{_CELL_GOAL}: not valid JSON: extra data at byte {self._space(pos)}")
-        self._result = _cell_goal(own, robots)
+        return _cell_goal(own, robots)
 
     def _robots(self, pos: int) -> Generator[None, None, tuple[dict[str, memoryview], int]]:
         pos = self._expect(pos, b"{", f"{_CELL_GOAL}.robots: an object naming each robot's trajectory")

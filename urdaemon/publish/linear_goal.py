@@ -4,7 +4,7 @@ poses; its type and its decoder, which checks the poses a few at a time."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Generator
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,10 +52,12 @@ class LinearGoalMessage:
 
 def decode_linear_goal(payload: bytes | None) -> LinearGoalMessage:
     """Decode a linear goal at once (the daemon uses ``LinearGoalDecoder``, in slices)."""
-    decoder = LinearGoalDecoder(payload)
-    while decoder.step(math.inf, lambda: 0.0):
-        pass
-    return decoder.result()
+    steps = LinearGoalDecoder(payload).steps()
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
 
 
 class LinearGoalDecoder:
@@ -64,7 +66,7 @@ class LinearGoalDecoder:
 
     The JSON is parsed at once (at most ``LINEAR_MESSAGE_BYTES``, refused by size before parsing:
     ~0.3 ms); its poses are checked
-    ``LINEAR_POSES_PER_LOOK`` at a time by ``step(deadline, clock)`` (True while work is left), so
+    ``LINEAR_POSES_PER_LOOK`` at a time by ``steps()`` (a generator that returns the goal), so
     the checks of a hundred poses (~0.3 ms) run in slices between robot cycles (runtime/slicing.py).
     """
 
@@ -82,23 +84,13 @@ class LinearGoalDecoder:
         self._poses: list[Pose6] = []
         self._raw_radii: Any = None
         self._radii: list[float] | None = None
-        self._result: LinearGoalMessage | None = None
 
-    def step(self, deadline: float, clock: Callable[[], float]) -> bool:
-        """Check poses, then blend radii, until ``clock()`` passes ``deadline`` (at least a few); True
-        while work is left. Raises ``MessageError``."""
-        while self._result is None:
-            if not self._next():
-                self._result = self._finish()
-            elif clock() > deadline:
-                return True
-        return False
-
-    def result(self) -> LinearGoalMessage:
-        """The decoded goal."""
-        if self._result is None:
-            raise RuntimeError("the linear goal is not decoded yet")
-        return self._result
+    def steps(self) -> Generator[None, None, LinearGoalMessage]:
+        """The checks, a few poses (then blend radii) per ``next``; returns the goal. Raises
+        ``MessageError``."""
+        while self._next():
+            yield
+        return self._finish()
 
     def _next(self) -> bool:
         """Check the next few poses or radii; False once all are checked."""

@@ -5,19 +5,18 @@ milliseconds, and a worker thread would not help: the decoder holds the GIL. Her
 taken apart by hand at its top level and in its ``points`` array, and every value is handed to
 ``json.JSONDecoder.raw_decode`` on a bounded window of the text, so no single step costs more than
 decoding that window: one point (at most ``POINT_CHARS``), or one other field (at most
-``FIELD_CHARS``). ``step(deadline)`` works until the deadline and returns whether work is left,
-like ``TrajectoryPlanner.plan_next``; the caller yields to the loop in between. The values read are
-checked and the goal built by trajectory_goal.py; ``decode_trajectory_goal`` decodes one at once.
+``FIELD_CHARS``). ``steps()`` is the work as a generator (one bounded step per ``next``, the goal
+its return value), the one shape of stepped work the runtime runs in slices (runtime/slicing.py). The
+values read are checked and the goal built by trajectory_goal.py; ``decode_trajectory_goal`` decodes
+one at once.
 """
 
 from __future__ import annotations
 
 import codecs
 import json
-import math
 import re
-import time
-from collections.abc import Generator, Iterator
+from collections.abc import Generator
 from typing import Any
 
 from urdaemon.control.goal_types import TrajectoryPoint
@@ -48,14 +47,16 @@ _WHITESPACE = re.compile(r"[ \t\n\r]*")
 
 def decode_trajectory_goal(payload: bytes | None) -> TrajectoryGoalMessage:
     """Decode a trajectory goal at once (the daemon uses ``TrajectoryGoalDecoder``, in slices)."""
-    decoder = TrajectoryGoalDecoder(payload)
-    while decoder.step(math.inf):
-        pass
-    return decoder.result()
+    steps = TrajectoryGoalDecoder(payload).steps()
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
 
 
 class TrajectoryGoalDecoder:
-    """Decodes one trajectory goal in steps; ``result()`` once ``step`` returned False.
+    """Decodes one trajectory goal in steps (``steps()``).
 
     The size is checked before anything is read. Every error is a ``MessageError`` naming the field.
     """
@@ -69,23 +70,14 @@ class TrajectoryGoalDecoder:
             )
         self._payload = payload
         self._decoder = json.JSONDecoder()
-        self._steps: Iterator[None] = self._run()
-        self._result: TrajectoryGoalMessage | None = None
 
-    def step(self, deadline: float) -> bool:
-        """Work until ``time.perf_counter()`` passes ``deadline`` (at least one step); True while
-        work is left. Raises ``MessageError``."""
-        return any(time.perf_counter() > deadline for _ in self._steps)
-
-    def result(self) -> TrajectoryGoalMessage:
-        """The decoded goal."""
-        if self._result is None:
-            raise RuntimeError("the goal is not decoded yet")
-        return self._result
+    def steps(self) -> Generator[None, None, TrajectoryGoalMessage]:
+        """The decoding, one bounded step per ``next``; returns the goal. Raises ``MessageError``."""
+        return self._run()
 
     # ---- the steps ---------------------------------------------------------------------------------
 
-    def _run(self) -> Generator[None, None, None]:
+    def _run(self) -> Generator[None, None, TrajectoryGoalMessage]:
         text = yield from self._text()
         pos = _skip(text, 0)
         if not text.startswith("{", pos):
@@ -119,7 +111,7 @@ class TrajectoryGoalDecoder:
             raise MessageError(f"{_WHAT}: not valid JSON: extra data at character {_skip(text, pos)}")
         if points is None:
             raise MessageError(f"{_WHAT}.points: expected a list of points")
-        self._result = trajectory_goal(data, points)
+        return trajectory_goal(data, points)
 
     def _text(self) -> Generator[None, None, str]:
         """The payload as text, decoded ``TEXT_CHUNK`` bytes a step."""

@@ -46,9 +46,11 @@ from urdaemon.publish.cell_goal import CellGoalDecoder, CellGoalMessage
 from urdaemon.publish.endpoints import CELL, Endpoint
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
-from urdaemon.runtime.goals import KEPT_RESULTS, PlannedGoal, put_signed
+from urdaemon.runtime.goal_events import KEPT_RESULTS, put_signed
+from urdaemon.runtime.goals import PlannedGoal
+from urdaemon.runtime.motion import Ticket
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
-from urdaemon.runtime.slicing import release, sliced, until_deadline
+from urdaemon.runtime.slicing import release, sliced
 
 if TYPE_CHECKING:
     from urdaemon.robot import RobotRuntime
@@ -143,24 +145,19 @@ class CellGoals:
             return
         self._planning = True
         # what ended motion before this query counts as before it: recorded now, not when it starts
-        generations = {name: runtime.gate.generation for name, runtime in self._robots.items()}
+        generations = {name: runtime.motion.generation for name, runtime in self._robots.items()}
         work = self._goal(query, tokens, generations)
         self._requests.spawn(work, query, {"accepted": False, "reason": SHUTTING_DOWN})
 
     async def _goal(self, query: Any, tokens: dict[str, bytes], generations: dict[str, int]) -> None:
         owned: list[object] = []
-        claimed: list[RobotRuntime] = []
         try:
             request = await _split(payload(query))
             parts = self._parts(request, tokens)
-            for name, runtime in parts:  # no robot goal is planned beside its part
-                if runtime.gate.planning is not None:
-                    raise GoalRejected(f"{name}: busy: still planning {runtime.gate.planning}")
-            for _, runtime in parts:
-                runtime.gate.planning = "a cell goal's part"
-                claimed.append(runtime)
-            planned = {name: await self._plan(name, request, generations, owned) for name, _ in parts}
-            run = self._start(request.on_abort, planned, tokens, generations)
+            with contextlib.ExitStack() as held:  # every ticket let go at the end, whatever happens
+                tickets = {name: held.enter_context(self._claim(name, generations)) for name, _ in parts}
+                planned = {name: await self._plan(name, request, tickets[name], owned) for name, _ in parts}
+                run = self._start(request.on_abort, planned, tokens, generations)
         except (MessageError, GoalRejected) as err:
             _refuse(query, err)
         except Exception as err:  # a bug must still answer the client, once
@@ -175,8 +172,6 @@ class CellGoals:
             }
             reply(query, {"accepted": True, **body})
         finally:  # cancelled (shutting down): the task's done-callback answers
-            for runtime in claimed:
-                runtime.gate.planning = None
             self._planning = False
         with contextlib.suppress(asyncio.CancelledError):  # answered already: shutting down frees it
             await release(owned)
@@ -213,14 +208,22 @@ class CellGoals:
             if refusal is not None:
                 raise GoalRejected(f"{name}: {refusal}")
 
+    def _claim(self, name: str, generations: dict[str, int]) -> Ticket:
+        """Hold a robot's gate for its part (no robot goal is planned beside it), with the generation
+        the cell goal was asked in; refused naming the robot."""
+        try:
+            return self._robots[name].motion.claim("a cell goal's part", generations[name])
+        except GoalRejected as err:
+            raise GoalRejected(f"{name}: {err.reason}") from None
+
     async def _plan(
-        self, name: str, request: CellGoalMessage, generations: dict[str, int], owned: list[object]
+        self, name: str, request: CellGoalMessage, ticket: Ticket, owned: list[object]
     ) -> PlannedGoal:
         """One robot's part planned by its robot's own pipeline; refused naming the robot."""
         goals = self._robots[name].goals
         try:
             return await goals.plan_trajectory(
-                request.robots[name], generations[name], owned, no_passthrough=PASSTHROUGH_REFUSED
+                ticket, request.robots[name], owned, no_passthrough=PASSTHROUGH_REFUSED
             )
         except (MessageError, GoalRejected) as err:
             raise GoalRejected(f"{name}: {_reason(err)}") from None
@@ -255,7 +258,7 @@ class CellGoals:
         self._running[run.goal_id] = run
         for name, goal_id in run.parts.items():
             goals = self._robots[name].goals
-            goals.result_listeners[goal_id] = functools.partial(self._part_ended, run, name)
+            goals.events.result_listeners[goal_id] = functools.partial(self._part_ended, run, name)
         log.info(
             "cell goal %s accepted: %s", run.goal_id, ", ".join(f"{n} {g}" for n, g in run.parts.items())
         )
@@ -345,9 +348,7 @@ class CellGoals:
 
 async def _split(body: bytes | None) -> CellGoalMessage:
     """A cell goal split into each robot's part, in slices (``sliced``)."""
-    decoder = CellGoalDecoder(body)
-    await sliced(until_deadline(decoder.advance))
-    return decoder.result()
+    return await sliced(CellGoalDecoder(body).steps())
 
 
 def _attachment(query: Any) -> bytes | None:

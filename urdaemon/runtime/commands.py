@@ -17,7 +17,7 @@ from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import stream_commands
 from urdaemon.publish.endpoints import ROBOT, Endpoint
-from urdaemon.runtime.gate import TOOL_CONTACT_BUSY, MotionGate
+from urdaemon.runtime.motion import TOOL_CONTACT_BUSY, How, RobotMotion
 from urdaemon.runtime.queries import SHUTTING_DOWN, internal_error
 from urdaemon.runtime.status import StatusPublisher
 
@@ -29,17 +29,20 @@ class Commands:
 
     def __init__(
         self,
+        *,
         robot: Robot,
         backend: Backend,
         controller: MotionController,
-        parts: tuple[MotionGate, StatusPublisher],
+        motion: RobotMotion,
+        status: StatusPublisher,
         joint_names: Callable[[Sequence[str] | None], tuple[str, ...]],
         log: logging.LoggerAdapter[logging.Logger],
     ) -> None:
         self._robot = robot
         self._backend = backend
         self._controller = controller
-        self._gate, self._status = parts
+        self._motion = motion
+        self._status = status
         self._joint_names = joint_names
         self._log = log
 
@@ -73,7 +76,7 @@ class Commands:
 
     def _stream_position(self, payload: bytes) -> None:
         message = stream_commands.decode_stream_position(payload)
-        self._gate.check_accepting()
+        self._motion.check_accepting()
         assert message.positions is not None
         self._controller.stream_positions(
             self._joint_names(message.joint_names),
@@ -85,7 +88,7 @@ class Commands:
 
     def _stream_velocity(self, payload: bytes) -> None:
         message = stream_commands.decode_stream_velocity(payload)
-        self._gate.check_accepting()
+        self._motion.check_accepting()
         assert message.velocities is not None
         self._controller.stream_velocities(
             self._joint_names(message.joint_names), message.velocities, self._backend.state, time.monotonic()
@@ -98,7 +101,7 @@ class Commands:
 
     def _twist(self, payload: bytes) -> None:
         message = stream_commands.decode_twist(payload)
-        self._gate.check_accepting()
+        self._motion.check_accepting()
         caps = self._robot.motion.cartesian
         for field, vector, cap, name, unit in (
             ("linear", message.linear, caps.max_speed, "max_speed", "m/s"),
@@ -135,7 +138,8 @@ class Commands:
             active = stream_commands.decode_freedrive(payload)
             if active:
                 self._check_freedrive_can_start()
-                self._gate.generation += 1  # a trajectory planned from now on was planned before freedrive
+                # a goal planned from now on was planned before freedrive
+                self._motion.end("freedrive", How.HAND_BACK)
             self._backend.freedrive(active, self._robot.motion.stream_timeout)
         except (MessageError, GoalRejected) as err:
             self.reject(key, err)
@@ -143,18 +147,18 @@ class Commands:
             self.reject(key, GoalRejected(str(err)))
 
     def _check_freedrive_can_start(self) -> None:
-        gate, controller = self._gate, self._controller
-        if gate.closing:
+        motion, controller = self._motion, self._controller
+        if motion.closing:
             raise GoalRejected(SHUTTING_DOWN)
-        if gate.in_contact:
+        if motion.in_contact:
             raise GoalRejected(TOOL_CONTACT_BUSY)
         controller.release_hold()
         if controller.mode != "idle":
             raise GoalRejected(
                 f"busy: the robot is {controller.mode.replace('_', ' ')}; freedrive starts at rest"
             )
-        if gate.planning is not None:
+        if motion.planning is not None:
             raise GoalRejected(
-                f"busy: trajectory goal {gate.planning} is being planned; freedrive starts at rest"
+                f"busy: trajectory goal {motion.planning} is being planned; freedrive starts at rest"
                 " (cancel it first)"
             )

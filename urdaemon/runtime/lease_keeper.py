@@ -26,6 +26,7 @@ from urdaemon.publish.keys import CellKeys, RobotKeys
 from urdaemon.publish.liveliness import LivelinessWatch
 from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.lease import LEASE_BIND_TIMEOUT_S, LeaseBook, LeaseOutcome, LeaseRequest, parse_request
+from urdaemon.runtime.motion import How, RobotMotion
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload, reply
 from urdaemon.runtime.status import StatusPublisher
 
@@ -42,16 +43,19 @@ class LeaseKeeper:
 
     def __init__(
         self,
+        *,
         keys: RobotKeys,
         book: LeaseBook,
-        stop: Callable[[str], None],
-        parts: tuple[Requests, StatusPublisher],
+        motion: RobotMotion,
+        requests: Requests,
+        status: StatusPublisher,
         log: logging.LoggerAdapter[logging.Logger],
     ) -> None:
         self.book = book
         self._keys = keys
-        self._stop = stop
-        self._requests, self._status = parts
+        self._motion = motion
+        self._requests = requests
+        self._status = status
         self._log = log
         self._watch: LivelinessWatch | None = None
         self._waiting: dict[asyncio.Event, str] = {}
@@ -183,8 +187,9 @@ class LeaseKeeper:
 
     def _act(self, outcome: LeaseOutcome) -> None:
         """Do what a decision says: stop first, then log and tell."""
-        if outcome.stop is not None:
-            self._stop(outcome.stop)
+        if outcome.stop is not None:  # stop whatever moves the robot, as ``stop`` does, and end
+            # freedrive (nobody may keep it on now)
+            self._motion.end(outcome.stop, How.STOP, end_freedrive=True)
         event = outcome.event
         shown = "" if event is None else f" (lease {event['fingerprint']})"  # never the session id
         if outcome.warning is not None:

@@ -3,20 +3,20 @@ sent in one write, ended by the robot's result or by the daemon.
 
 Which goal the robot runs is the backend's to say (``Backend.passthrough_goal``, the UR backend's
 reverse channel): a goal ended by the daemon (stopped, aborted, not ready) that is the one the robot
-runs also stops the robot's trajectory.
+runs also stops the robot's trajectory (runtime/motion.py ``publish_events``).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Generator
 
 from urdaemon.backends.base import Backend, PassthroughResult
 from urdaemon.control import GoalStatus, MotionController, Tolerances
 from urdaemon.control.trajectory import TrajectoryPlanner
 from urdaemon.errors import BackendError, GoalRejected
 from urdaemon.runtime.queries import internal_error
-from urdaemon.runtime.slicing import sliced
 
 __all__ = ["ROBOT_RESULTS", "Passthrough"]
 
@@ -46,26 +46,21 @@ class Passthrough:
         if problem is not None:
             raise GoalRejected(f"passthrough: {problem}")
 
-    async def encode(self, planner: TrajectoryPlanner) -> tuple[bytes, int]:
-        """Every point as the robot receives it, encoded in slices before the goal is accepted: a
-        value the robot cannot carry (a segment over 2147 s) refuses the goal, nothing is in limbo."""
+    def encode_steps(self, planner: TrajectoryPlanner) -> Generator[None, None, tuple[bytes, int]]:
+        """Every point as the robot receives it, a point a step, before the goal is accepted (the
+        runtime runs them in slices): a value the robot cannot carry (a segment over 2147 s) refuses the
+        goal, nothing is in limbo. Returns the frames and how many."""
         points, velocities = planner.points, planner.velocities
         encode = self._backend.encode_passthrough_point
         frames: list[bytes] = []
-
-        def step(deadline: float) -> bool:
-            for i in range(len(frames), len(points)):
-                point = points[i]
-                segment = point.time_from_start - (points[i - 1].time_from_start if i else 0.0)
-                try:
-                    frames.append(encode(point.positions, velocities[i], point.accelerations, segment))
-                except BackendError as err:
-                    raise GoalRejected(f"passthrough: point {i}: {err}") from None
-                if time.perf_counter() > deadline:
-                    return i + 1 < len(points)
-            return False
-
-        await sliced(step)
+        for i, point in enumerate(points):
+            segment = point.time_from_start - (points[i - 1].time_from_start if i else 0.0)
+            try:
+                frames.append(encode(point.positions, velocities[i], point.accelerations, segment))
+            except BackendError as err:
+                raise GoalRejected(f"passthrough: point {i}: {err}") from None
+            if i + 1 < len(points):
+                yield
         return b"".join(frames), len(frames)
 
     def start(
@@ -101,9 +96,3 @@ class Passthrough:
                 code, (GoalStatus.ABORTED, "the robot reported that the trajectory failed")
             )
         return self._controller.finish_external(goal_id, status, reason, self._backend.state)
-
-    def ended_here(self, goal_id: str) -> None:
-        """A goal ended by the daemon (not ready, stopped, aborted), not by the robot's result: the
-        robot must stop its trajectory too, or it would carry on after play."""
-        if goal_id == self._backend.passthrough_goal:
-            self._backend.cancel_passthrough()

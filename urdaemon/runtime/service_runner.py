@@ -10,7 +10,6 @@ command lease.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -19,8 +18,7 @@ from urdaemon.control import MotionController
 from urdaemon.errors import BackendError, GoalRejected, MessageError
 from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.publish.services import SERVICES, STOP, ServiceSpec
-from urdaemon.runtime.gate import TOOL_CONTACT_REASON, MotionGate
-from urdaemon.runtime.goals import Goals
+from urdaemon.runtime.motion import TOOL_CONTACT_REASON, How, RobotMotion
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
 from urdaemon.runtime.status import StatusPublisher
 
@@ -32,9 +30,12 @@ class ServiceRunner:
 
     def __init__(
         self,
+        *,
         backend: Backend,
         controller: MotionController,
-        parts: tuple[MotionGate, Requests, StatusPublisher, Goals],
+        motion: RobotMotion,
+        requests: Requests,
+        status: StatusPublisher,
         log: logging.LoggerAdapter[logging.Logger],
         on_tcp: Callable[[tuple[float, ...]], None] | None = None,
     ) -> None:
@@ -42,7 +43,9 @@ class ServiceRunner:
         """Told a new TCP offset once the controller and the backend took it (tcp_pose's composition)."""
         self._backend = backend
         self._controller = controller
-        self._gate, self._requests, self._status, self._goals = parts
+        self._motion = motion
+        self._requests = requests
+        self._status = status
         self._log = log
         self._running: set[str] = set()
 
@@ -71,17 +74,14 @@ class ServiceRunner:
     def stop(self, reason: str) -> dict[str, Any]:
         """Stop whatever moves the robot now, for ``reason``; the reply body (``planned``: the goal being
         planned that was refused, if any)."""
-        planned = self._gate.interrupt_planning()
-        self._backend.cancel_passthrough()  # the trajectory the robot runs, if any, stops too
-        self._controller.stop(reason, time.monotonic())
-        self._goals.publish_events()
+        planned = self._motion.end(reason, How.STOP).planned
         return {"ok": True} if planned is None else {"ok": True, "planned": planned}
 
     def run(self, query: Any, spec: ServiceSpec) -> None:
         """Run ``spec``'s service with the query's payload and answer once; a second call while it runs
         is refused, so a burst of requests never acts more than once at a time."""
         name = spec.name
-        if self._gate.closing:
+        if self._motion.closing:
             reply(query, {"ok": False, "reason": SHUTTING_DOWN})
             return
         if name in self._running:
@@ -117,27 +117,26 @@ class ServiceRunner:
 
     async def hand_back_control(self) -> None:
         """The pendant program continues: nothing being planned may start."""
-        self._gate.interrupt_planning()
+        self._motion.end("hand_back_control", How.HAND_BACK)
         await self._backend.hand_back_control()
 
     def check_not_planning_from_rest(self) -> None:
-        """Refuse while a linear goal is planned from where the robot rests (the gate's)."""
-        self._gate.check_not_planning_from_rest()
+        """Refuse while a linear goal is planned from where the robot rests (runtime/motion.py)."""
+        self._motion.check_not_planning_from_rest()
 
     async def end_tool_contact(self) -> None:
         """End tool-contact detection; motion starts anew from where the robot rests, never from a
         setpoint of before the contact."""
         await self._backend.tool_contact(False)
-        if self._gate.in_contact:
-            self._gate.in_contact = False
-            self._controller.abort(TOOL_CONTACT_REASON)
+        self._motion.end(TOOL_CONTACT_REASON, How.CONTACT, touched=False)
 
     async def set_tcp(self, pose: tuple[float, ...]) -> None:
         """Make ``pose`` the TCP offset: refused while anything moves or a goal is being planned (a plan
         is made for the TCP it started with); the controller's first (it refuses unless idle), then the
         backend's (the controller's is put back if the backend fails), then tcp_pose's."""
-        if self._gate.planning is not None:
-            raise GoalRejected(f"set_tcp: the robot is busy: a goal is being planned ({self._gate.planning})")
+        planning = self._motion.planning
+        if planning is not None:
+            raise GoalRejected(f"set_tcp: the robot is busy: a goal is being planned ({planning})")
         controller = self._controller
         before = controller.tcp
         controller.set_tcp(pose)  # "set_tcp: the robot is moving" unless it rests
