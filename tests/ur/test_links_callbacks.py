@@ -196,7 +196,7 @@ async def test_a_stray_that_connects_before_the_new_program_is_replaced_by_it() 
     async with ur_run() as run:
         await run.until(lambda: program_is_running(run), what="the program holds every link")
         servers = run.backend.servers
-        primary = run.backend._primary
+        primary = run.backend.links.primary
         assert primary is not None
         send_script = primary.send_script
         held: list[str] = []

@@ -101,7 +101,7 @@ async def test_a_controller_that_speaks_only_rtde_v1_is_driven() -> None:
     for: the codec refused it and the backend never connected."""
     async with ur_run(rtde_versions=(1,)) as run:
         await run.until(lambda: program_is_running(run), what="ready over RTDE v1")
-        rtde = run.backend._rtde
+        rtde = run.backend.links.rtde
         assert rtde is not None
         assert rtde.conn.protocol_version == 1
         assert rtde.frequency == 500.0
