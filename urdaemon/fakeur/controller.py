@@ -39,15 +39,15 @@ from pathlib import Path
 from typing import Any
 
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.connections import Connections, ServiceShell
 from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer, dashboard_reply
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.fakeur.programs import Programs, RunningScript
 from urdaemon.fakeur.reports import realtime_state, robot_state
 from urdaemon.fakeur.rtde_service import RtdeService
-from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.fakeur.shared_clock import SharedClock
+from urdaemon.fakeur.urscript.script_host import InputRegisters
 from urdaemon.model import RobotMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
