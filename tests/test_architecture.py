@@ -48,7 +48,7 @@ PURE = {
     # the UR backend's reverse channel: a state machine, time passed in (backends/ur/reverse_channel.py)
     "backends/ur/reverse_channel.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     # the fake's pure parts: the arm, its motions and surroundings, what it reports, program translation
-    "fakeur/arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
+    "fakeur/fake_arm.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/life.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/playback.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},
     "fakeur/pose.py": {"asyncio", "socket", "threading", "time", "zenoh", "logging"},

@@ -29,11 +29,11 @@ from urdaemon.protocols import (
 
 def test_the_run_states_and_status_bits_are_rtde_variables() -> None:
     from urdaemon.backends.ur import reverse_channel, rtde_link
-    from urdaemon.fakeur import arm, life
+    from urdaemon.fakeur import fake_arm, life
 
     states = rtde_variables.RuntimeState
     assert life.RuntimeState is states
-    assert arm.RuntimeState is states
+    assert fake_arm.RuntimeState is states
     assert (reverse_channel.RUNTIME_PLAYING, reverse_channel.RUNTIME_PAUSING) == (
         states.PLAYING,
         states.PAUSING,

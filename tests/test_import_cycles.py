@@ -1,10 +1,8 @@
 """No import cycle between urdaemon's modules (issue 31), counting every import: at the top, inside
 functions (lazy) and under ``TYPE_CHECKING``, since each is a dependency of one module on another.
 
-The cycles that remain are listed in ``STILL_CYCLIC`` as their sets of modules; the list only
-shrinks: a new cycle fails, a listed one that grew fails, and a listed one that is gone must be taken
-off. ``find_cycles`` is also run on a small package written for the test, where a deliberately bad
-import must be found.
+There is none: any cycle fails. ``find_cycles`` is also run on a small package written for the test,
+where a deliberately bad import must be found.
 """
 
 from __future__ import annotations
@@ -15,31 +13,10 @@ from tests.import_graph import find_cycles, module_graph
 
 PACKAGE = Path(__file__).resolve().parents[1] / "urdaemon"
 
-STILL_CYCLIC: list[frozenset[str]] = [
-    # circle 1 of issue 31: services.py and startup.py receive their owner, UrBackend, and read its
-    # privates; UrLinks (the links, the dashboard lock, send_program) is to be given them instead
-    frozenset(
-        {
-            "urdaemon.backends.ur.backend",
-            "urdaemon.backends.ur.diagnosis",
-            "urdaemon.backends.ur.robot_commands",
-            "urdaemon.backends.ur.startup",
-        }
-    ),
-]
-"""Each remaining cycle as the set of modules it joins."""
 
-
-def test_no_new_import_cycle() -> None:
+def test_no_import_cycle() -> None:
     cycles = find_cycles(module_graph(PACKAGE))
-    unknown = [sorted(c) for c in cycles if not any(c <= known for known in STILL_CYCLIC)]
-    assert not unknown, f"import cycles (lazy and TYPE_CHECKING imports count): {unknown}"
-
-
-def test_the_list_names_only_cycles_still_there() -> None:
-    cycles = find_cycles(module_graph(PACKAGE))
-    gone = [sorted(known) for known in STILL_CYCLIC if not any(c & known for c in cycles)]
-    assert not gone, f"no longer cyclic: take them off STILL_CYCLIC: {gone}"
+    assert not cycles, f"import cycles (lazy and TYPE_CHECKING imports count): {[sorted(c) for c in cycles]}"
 
 
 def test_a_bad_import_is_found(tmp_path: Path) -> None:

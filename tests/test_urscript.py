@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.protocols import reverse, script_command, trajectory_point
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.primary import (

@@ -130,17 +130,24 @@ class _Link:
 
 def test_the_reference_is_the_pair_that_waited_least_of_the_first_looks_per_link() -> None:
     state = SimpleNamespace(host_time_ns=0, controller_time=0.0)
-    ur = SimpleNamespace(_rtde=None, state=state)
-    diagnosis = Diagnosis(ur)  # type: ignore[arg-type]
+    links = SimpleNamespace(rtde=None)  # what watch() reads of the UrLinks: the RTDE link
+    diagnosis = Diagnosis(
+        links,  # type: ignore[arg-type]
+        state,  # type: ignore[arg-type]
+        period=0.002,
+        headless=True,
+        servers=None,  # type: ignore[arg-type]
+        program=None,  # type: ignore[arg-type]
+    )
     diagnosis.watch()
     assert _reference(diagnosis) is None, "no link, no reference"
-    ur._rtde = _Link()
+    links.rtde = _Link()
     delays = [500, 300, 900, 100, 700, 400, 800, 600, 50, 20]  # µs; the last two come after 8 looks
     for i, delay_us in enumerate(delays):
         state.host_time_ns, state.controller_time = _pair(1000.0 + i * 0.25, delay_us)
         diagnosis.watch()
     assert _reference(diagnosis) == _pair(1000.0 + 3 * 0.25, 100), "the least delayed of the first 8"
-    ur._rtde = _Link()  # a new link: chosen anew
+    links.rtde = _Link()  # a new link: chosen anew
     state.host_time_ns, state.controller_time = _pair(2000.0, 300)
     diagnosis.watch()
     assert _reference(diagnosis) == _pair(2000.0, 300)

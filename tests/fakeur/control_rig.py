@@ -20,10 +20,10 @@ from collections.abc import AsyncIterator, Callable, Sequence
 from typing import Any, Final
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRun
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.protocols import script_command as sc
 from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.reverse import (

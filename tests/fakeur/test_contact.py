@@ -14,7 +14,6 @@ import math
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.contact import (
     FORCE_LIMIT_N,
     TOOL_CONTACT_THRESHOLD_N,
@@ -22,10 +21,11 @@ from urdaemon.fakeur.contact import (
     Wall,
     surroundings_of,
 )
+from urdaemon.fakeur.fake_arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.reports import output_getter, realtime_state, robot_state
 from urdaemon.fakeur.urscript import lib_config as cfg
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.model import SafetyMode
 from urdaemon.protocols import primary as prim
 

@@ -106,7 +106,7 @@ async def test_a_client_flooding_every_port_stalls_neither_the_clock_nor_the_das
             backlog = max(
                 (
                     w.transport.get_write_buffer_size()
-                    for ws in controller._writers.values()
+                    for ws in controller.connections.writers.values()
                     for w in ws
                     if w.transport is not None
                 ),

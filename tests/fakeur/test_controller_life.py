@@ -16,7 +16,11 @@ import pytest
 
 from tests.fakeur.test_controller import Link
 from tests.helpers import fake_address
-from urdaemon.fakeur.controller import FakeController, SharedClock
+from urdaemon.fakeur import controller as fake_controller
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.fake_arm import FakeArm
+from urdaemon.fakeur.reports import realtime_state
+from urdaemon.fakeur.shared_clock import SharedClock
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -218,17 +222,18 @@ async def test_realtime_interface_streams_one_message_per_cycle_in_the_versions_
         writer.close()
 
 
-async def test_realtime_state_is_encoded_only_while_a_client_is_connected() -> None:
+async def test_realtime_state_is_encoded_only_while_a_client_is_connected(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     async with manual_fake() as (controller, clock):
         built = 0
-        original = controller._realtime_state
 
-        def counting() -> rt.RealtimeState:
+        def counting(arm: FakeArm) -> rt.RealtimeState:
             nonlocal built
             built += 1
-            return original()
+            return realtime_state(arm)
 
-        controller._realtime_state = counting  # type: ignore[method-assign]
+        monkeypatch.setattr(fake_controller, "realtime_state", counting)  # what the controller calls
         clock.turn(20)
         assert built == 0
         _, writer = await asyncio.open_connection(controller.address, 30003)

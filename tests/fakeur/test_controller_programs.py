@@ -17,7 +17,8 @@ import urdaemon.fakeur.urscript as urscript
 from tests.fakeur.test_controller import Link
 from tests.fakeur.test_controller_life import ManualClock, _ask, _dashboard, manual_fake
 from urdaemon.fakeur.controller import FakeController
-from urdaemon.fakeur.reports import robot_state
+from urdaemon.fakeur.dashboard_answers import dashboard_reply
+from urdaemon.fakeur.reports import realtime_state, robot_state
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import rtde
@@ -167,7 +168,7 @@ async def test_targets_and_tcp_speeds_come_from_the_arm_while_it_moves() -> None
         assert math.dist(moved, [0.0] * 3) > 0.05, "the TCP moves"
         assert speed == pytest.approx(moved, abs=1e-3), "the TCP speed is the pose's rate of change"
         assert after["target_TCP_speed"][:3] == pytest.approx(after["actual_TCP_speed"][:3], abs=1e-2)
-        assert controller._realtime_state().q_target == pytest.approx(arm.target_q, abs=1e-12)
+        assert realtime_state(controller.arm).q_target == pytest.approx(arm.target_q, abs=1e-12)
         link.close()
 
 
@@ -223,7 +224,7 @@ async def test_a_pausing_program_reads_playing_and_play_neither_restarts_nor_jum
         assert 0.0 < scaling < 1.0
         state = await _ask(link, dash.GetProgramState(), dash.ProgramStateReply)
         assert state.state is dash.ProgramState.PLAYING
-        assert controller._realtime_state().program_state == 2.0
+        assert realtime_state(controller.arm).program_state == 2.0
         refused = await _ask(link, dash.Play(), dash.CommandReply)
         assert not refused.success
         assert _state(controller) is RuntimeState.PAUSING
@@ -232,7 +233,7 @@ async def test_a_pausing_program_reads_playing_and_play_neither_restarts_nor_jum
         clock.until(lambda: _state(controller) is RuntimeState.PAUSED)
         state = await _ask(link, dash.GetProgramState(), dash.ProgramStateReply)
         assert state.state is dash.ProgramState.PAUSED
-        assert controller._realtime_state().program_state == 3.0
+        assert realtime_state(controller.arm).program_state == 3.0
         assert (await _ask(link, dash.Play(), dash.CommandReply)).success
         assert _state(controller) is RuntimeState.PLAYING
         assert controller.programs.main is script
@@ -244,7 +245,7 @@ async def test_a_dashboard_stop_also_stops_a_script_still_being_compiled() -> No
     async with manual_fake(powered=True) as (controller, _):
         controller.programs.submit("late", "def late():\n  while True:\n    sync()\n  end\nend\n")
         assert controller.programs.busy
-        assert controller._dashboard_reply(dash.Stop()) == "Stopped"
+        assert dashboard_reply(controller, dash.Stop()) == "Stopped"
         await controller.programs.settled()
         assert controller.programs.main is None
         assert _state(controller) is RuntimeState.STOPPED
@@ -254,7 +255,7 @@ async def test_a_queued_stop_program_stops_what_came_before_it_and_not_what_came
     async with manual_fake(powered=True) as (controller, _):
         loop = "def {name}():\n  while True:\n    sync()\n  end\nend\n"
         controller.programs.submit("first", loop.format(name="first"))
-        controller.programs.then(controller._stop_program)
+        controller.programs.then(controller.programs.stop)
         controller.programs.submit("second", loop.format(name="second"))
         await controller.programs.settled()
         main = controller.programs.main

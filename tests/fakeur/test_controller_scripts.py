@@ -36,7 +36,7 @@ async def _send(controller: FakeController, port: int, text: str) -> None:
 
 def _running(controller: FakeController) -> object:
     """The program the fake runs (a function: mypy would otherwise narrow the attribute for good)."""
-    return controller._script
+    return controller.programs.main
 
 
 async def _primary(controller: FakeController) -> Link:
@@ -56,7 +56,7 @@ async def test_a_bare_urscript_line_runs_as_a_program(port: int) -> None:
     controller command, and 30003 did not exist."""
     async with manual_fake(powered=True) as (controller, clock):
         await _send(controller, port, "set_digital_out(2, True)\n")
-        await _eventually(controller, lambda: controller.program_name is not None)
+        await _eventually(controller, lambda: controller.programs.name is not None)
         clock.turn(3)
         assert controller.arm.io.digital_out & (1 << 2)
 
@@ -69,10 +69,10 @@ async def test_a_def_program_replaces_the_running_one_and_a_sec_program_runs_bes
         assert (started.title, started.text) == ("PROGRAM_XXX_STARTED", "first")
         clock.turn(5)
         await _send(controller, 30001, "sec beside():\n  set_digital_out(3, True)\nend\n")
-        await _eventually(controller, lambda: bool(controller._secondary))
+        await _eventually(controller, lambda: bool(controller.programs.secondary))
         clock.turn(2)
         assert controller.arm.io.digital_out & (1 << 3)
-        assert controller.program_name == "first"
+        assert controller.programs.name == "first"
         await _send(controller, 30002, LOOP.format(name="second"))
         stopped = await link.next(prim.KeyMessage)
         assert (stopped.title, stopped.text) == ("PROGRAM_XXX_STOPPED", "first")
@@ -81,7 +81,7 @@ async def test_a_def_program_replaces_the_running_one_and_a_sec_program_runs_bes
         await _send(controller, 30001, "stop program\n")
         stopped = await link.next(prim.KeyMessage)
         assert (stopped.title, stopped.text) == ("PROGRAM_XXX_STOPPED", "second")
-        assert controller._script is None
+        assert controller.programs.main is None
         link.close()
 
 
@@ -94,8 +94,8 @@ async def test_a_compile_error_names_line_and_column_and_nothing_starts() -> Non
         assert error.column > 0
         assert "no_such_function" in error.text
         clock.turn(5)
-        assert controller._script is None
-        assert controller.program_name is None
+        assert controller.programs.main is None
+        assert controller.programs.name is None
         link.close()
 
 
@@ -109,7 +109,7 @@ async def test_a_runtime_error_names_its_line_and_stops_the_program() -> None:
         assert error.line == 4, error
         stopped = await link.next(prim.KeyMessage)
         assert (stopped.title, stopped.text) == ("PROGRAM_XXX_STOPPED", "failing")
-        assert controller._script is None
+        assert controller.programs.main is None
         link.close()
 
 
@@ -133,7 +133,7 @@ async def test_a_paused_program_is_not_stepped_and_resumes_where_it_was() -> Non
     )
     async with manual_fake(powered=True, urcap=("127.0.0.1", 9)) as (controller, clock):
         await _send(controller, 30001, program)
-        await _eventually(controller, lambda: controller._script is not None)
+        await _eventually(controller, lambda: controller.programs.main is not None)
         clock.turn(10)
         counted = controller.arm.io.registers_int[0]
         assert counted == 10
@@ -160,12 +160,12 @@ async def test_an_rtde_watchdog_stops_the_program_when_its_input_stops_arriving(
         await _send(controller, 30001, program)
         await link.next(prim.KeyMessage)  # started
         clock.turn(40)  # 80 ms < 100 ms: still running
-        assert controller._script is not None
+        assert controller.programs.main is not None
         controller.rtde.apply_inputs({"input_int_register_0": 1})  # what an RTDE input package does
         clock.turn(40)
-        assert controller._script is not None
+        assert controller.programs.main is not None
         clock.turn(20)  # 120 ms since the last input
-        assert controller.program_name == "watched"
+        assert controller.programs.name == "watched"
         assert _running(controller) is None
         warning = await link.next(prim.TextMessage)
         assert "input_int_register_0" in warning.text

@@ -8,7 +8,8 @@ import pytest
 
 from tests.helpers import fake_address
 from urdaemon.fakeur.command import share_clock
-from urdaemon.fakeur.controller import FakeController, SharedClock
+from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.shared_clock import SharedClock
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -20,8 +20,8 @@ from tests.integration.conftest import running_daemon
 from tests.replay.recorder import Recorder, aligned_errors, settle
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.client import Client
-from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.shared_clock import SharedClock
 
 pytestmark = pytest.mark.timeout(180)
 

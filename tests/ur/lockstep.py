@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 
-from urdaemon.fakeur.clock import SharedClock
+from urdaemon.fakeur.shared_clock import SharedClock
 
 __all__ = ["LockstepClock"]
 

@@ -76,7 +76,8 @@ async def test_by_default_the_servers_listen_on_the_robots_loopback_address(
         await run.until(lambda: program_is_running(run), what="the program holds its links")
         assert _bound(run.backend.servers) == {address}
         assert _peers(run.backend.servers) == {address}
-        assert run.backend._program.host_ip == address, "the program dials where the servers listen"
+        dials = run.backend.diagnosis.link_facts()["callbacks"]["dials"]  # the doctor's view
+        assert dials == address, "the program dials where the servers listen"
     said = [r.getMessage() for r in caplog.records if "callback servers listening" in r.getMessage()]
     assert said == [
         f"[alice] callback servers listening on {address}, the interface that reaches the robot at {address}"

@@ -23,8 +23,8 @@ from tests.integration.conftest import running_daemon
 from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.client import Client, send_cell_trajectory
 from urdaemon.daemon import Daemon
-from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.controller import FakeController
+from urdaemon.fakeur.shared_clock import SharedClock
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -148,7 +148,7 @@ async def _attack(
     fake_alice: FakeController, fake_bob: FakeController, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     programs: Counter[str] = Counter()
-    start_program, stop_program = fake_bob._start_program, fake_bob.arm.stop_program
+    start_program, stop_program = fake_bob.programs.submit, fake_bob.arm.stop_program
 
     def started(*args: Any) -> None:
         programs["started"] += 1
@@ -158,7 +158,7 @@ async def _attack(
         programs["stopped"] += 1
         return stop_program()
 
-    monkeypatch.setattr(fake_bob, "_start_program", started)
+    monkeypatch.setattr(fake_bob.programs, "submit", started)
     monkeypatch.setattr(fake_bob.arm, "stop_program", stopped)
     async with running_daemon(_cell(fake_alice.address, fake_bob.address)) as (daemon, client):
         await _ready(client, "alice")

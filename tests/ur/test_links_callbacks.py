@@ -196,7 +196,7 @@ async def test_a_stray_that_connects_before_the_new_program_is_replaced_by_it() 
     async with ur_run() as run:
         await run.until(lambda: program_is_running(run), what="the program holds every link")
         servers = run.backend.servers
-        primary = run.backend._primary
+        primary = run.backend.links.primary
         assert primary is not None
         send_script = primary.send_script
         held: list[str] = []
@@ -214,7 +214,7 @@ async def test_a_stray_that_connects_before_the_new_program_is_replaced_by_it() 
         stray_link = servers.trajectory.link
         send_script(held[0])
         await run.until(
-            lambda: run.backend._program.links_up_at > sent_at and program_is_running(run),
+            lambda: run.backend.links.program.links_up_at > sent_at and program_is_running(run),
             timeout=30.0,
             what="the new program holds every link, the stray replaced",
         )

@@ -64,7 +64,7 @@ class UrRun:
 
     def _on_cycle(self) -> None:
         self.cycles += 1
-        primary = self.backend._primary
+        primary = self.backend.links.primary
         if primary is not None and not getattr(primary, "_counted", False):
             self._count_scripts(primary)
         self._tick.set()

@@ -11,6 +11,7 @@ import pytest
 
 from tests.ur.test_links_harness import program_is_running, ur_run
 from urdaemon.errors import BackendError, UrDaemonError
+from urdaemon.fakeur.dashboard_answers import dashboard_reply
 from urdaemon.fakeur.faults import FaultInjector
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
 from urdaemon.protocols import dashboard as dash
@@ -101,7 +102,7 @@ async def test_a_controller_that_speaks_only_rtde_v1_is_driven() -> None:
     for: the codec refused it and the backend never connected."""
     async with ur_run(rtde_versions=(1,)) as run:
         await run.until(lambda: program_is_running(run), what="ready over RTDE v1")
-        rtde = run.backend._rtde
+        rtde = run.backend.links.rtde
         assert rtde is not None
         assert rtde.conn.protocol_version == 1
         assert rtde.frequency == 500.0
@@ -159,7 +160,7 @@ async def test_readiness_reasons_say_why_after_a_power_off_and_a_failed_startup(
     (empty reason). Then an emergency stop makes ``startup`` fail: the reason did not say so."""
     async with ur_run() as run:
         await run.until(lambda: program_is_running(run), what="ready")
-        run.fake._dashboard_reply(dash.PowerOff())
+        dashboard_reply(run.fake, dash.PowerOff())
         await run.until(lambda: not run.ready, what="not ready")
         await run.until(
             lambda: "powered off" in run.backend.state.lifecycle_reason, what="the reason says powered off"
@@ -179,7 +180,7 @@ async def test_a_program_the_controller_ended_is_named_with_the_controllers_mess
     async with ur_run(headless=False) as run:
         await run.until(lambda: program_is_running(run), what="ready")
         run.fake._broadcast(prim.RuntimeExceptionMessage(12, 3, "socket_read_binary_integer: timeout"))
-        run.fake._stop_program()
+        run.fake.programs.stop()
         await run.until(lambda: run.backend.servers.reverse.link is None, what="the program ended")
         await run.until(
             lambda: "the control program ended" in run.backend.state.lifecycle_reason,

@@ -282,7 +282,7 @@ async def test_a_read_only_robot_is_watched_and_never_commanded() -> None:
             state = await states.get_json(timeout=10.0)
             states.close()
             assert state["position"] == pytest.approx(HOME, abs=1e-9)
-            assert fake._input_owner == {}  # no RTDE input claimed: another client may own them all
+            assert fake.rtde.input_owner == {}  # no RTDE input claimed: another client may own them all
             with pytest.raises(ConnectionRefusedError):  # no callback server listens
                 await asyncio.open_connection("127.0.0.1", reverse_port)
             for reply in (

@@ -11,6 +11,7 @@ import pytest
 from tests.helpers import fake_address, run_cli_in_thread
 from tests.integration.conftest import running_daemon
 from tests.ur.test_ur_backend import HOME, _cell, _until
+from urdaemon.backends.ur.backend import UrBackend
 from urdaemon.client import Client, RobotClient
 from urdaemon.daemon import Daemon
 from urdaemon.errors import GoalRejected
@@ -193,8 +194,10 @@ async def test_packages_queued_while_the_loop_was_held_up_count_late_not_missed_
     """
     async with _ready_alice() as (fake, daemon, _, alice):
         backend = daemon.runtimes[0].backend
-        rtde: Any = getattr(backend, "_rtde", None)
+        assert isinstance(backend, UrBackend)
+        rtde = backend.links.rtde
         assert rtde is not None
+        assert rtde.transport is not None
         goal = await alice.move([0.2, *HOME[1:]], duration=1.0)
         # one synchronous snapshot: no cycle can run between these reads
         before, turnarounds, superseded = backend.statistics(), backend.turnaround.count, rtde.superseded

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from urdaemon.control.controller import ControllerStatistics, MotionController
 from urdaemon.control.goal_types import GoalFeedback, GoalResult, GoalStatus, Tolerances, TrajectoryPoint
 from urdaemon.control.limits import (
     check_finite,
@@ -10,6 +9,7 @@ from urdaemon.control.limits import (
     check_velocities_within,
     reorder,
 )
+from urdaemon.control.motion_controller import ControllerStatistics, MotionController
 from urdaemon.control.move import plan_move
 from urdaemon.control.planned_trajectory import PlannedTrajectory
 from urdaemon.control.trajectory import plan_trajectory

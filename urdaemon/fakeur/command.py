@@ -13,8 +13,9 @@ from urdaemon.description.calibration import load_calibration, robot_dh
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.errors import ConfigError
 from urdaemon.fakeur.contact import Wall, surroundings_of
-from urdaemon.fakeur.controller import FakeController, SharedClock
+from urdaemon.fakeur.controller import FakeController
 from urdaemon.fakeur.faults import SERVICES, FaultInjector
+from urdaemon.fakeur.shared_clock import SharedClock
 from urdaemon.scheduling import startup_objects_frozen
 from urdaemon.stop_signals import end_stop_signals, stop_on_signals, stop_signal_handlers
 

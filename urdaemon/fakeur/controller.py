@@ -39,15 +39,15 @@ from pathlib import Path
 from typing import Any
 
 from urdaemon.description.urmodels import DhParameters, UrModel, load_ur_model
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.clock import SharedClock
 from urdaemon.fakeur.connections import Connections, ServiceShell
-from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer, dashboard_reply
+from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.faults import FaultInjector
-from urdaemon.fakeur.programs import Programs, RunningScript
+from urdaemon.fakeur.programs import Programs
 from urdaemon.fakeur.reports import realtime_state, robot_state
 from urdaemon.fakeur.rtde_service import RtdeService
-from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.fakeur.shared_clock import SharedClock
+from urdaemon.fakeur.urscript.script_host import InputRegisters
 from urdaemon.model import RobotMode
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -56,7 +56,7 @@ from urdaemon.protocols._buffer import Side
 from urdaemon.protocols.rtde import RTDE_PORT, max_frequency
 from urdaemon.shell import Shell, serve
 
-__all__ = ["FakeController", "FakePorts", "SharedClock"]
+__all__ = ["FakeController", "FakePorts"]
 
 log = logging.getLogger("urdaemon.fakeur")
 
@@ -159,7 +159,6 @@ class FakeController:
         self._realtime_clients: list[ServiceShell] = []
         self._servers: list[asyncio.Server] = []
         self._state_clients: list[ServiceShell] = []
-        self._writers = self.connections.writers
         self._next_state = 0.0
         self._clock: asyncio.Task[None] | None = None
         self._shared_clock: tuple[SharedClock, int] | None = None
@@ -202,7 +201,7 @@ class FakeController:
         await self.programs.close()
         for server in self._servers:
             server.close()
-        for writers in self._writers.values():
+        for writers in self.connections.writers.values():
             for writer in list(writers):
                 writer.close()
         tasks = [t for t in (self._clock,) if t is not None] + list(self.connections.tasks)
@@ -375,13 +374,10 @@ class FakeController:
         return None
 
     def _send_realtime(self) -> None:
-        state = self._realtime_state()
+        state = realtime_state(self.arm)
         for shell in self._realtime_clients:
             shell.codec.send(state)
             shell.flush()
-
-    def _realtime_state(self) -> rt.RealtimeState:
-        return realtime_state(self.arm)
 
     def _send_primary(self, shell: Shell, message: Any) -> None:
         shell.codec.send(message)
@@ -399,52 +395,25 @@ class FakeController:
             if line in CONTROLLER_COMMANDS:  # after the scripts that arrived before it
                 self.programs.then(lambda: self._controller_command(line))
             else:
-                self._start_program("script", line + "\n")
+                self.programs.submit("script", line + "\n")
         else:
-            self._start_program(event.name, event.text)
+            self.programs.submit(event.name, event.text)
 
     def _controller_command(self, line: str) -> None:
         arm = self.arm
         if line == prim.ControllerCommand.POWER_ON:
             arm.life.power_on(arm.timestamp)
         elif line == prim.ControllerCommand.POWER_OFF:
-            self._stop_program()
+            self.programs.stop()
             arm.power_off()
         elif line == prim.ControllerCommand.BRAKE_RELEASE:
             self.brake_release()
         elif line == prim.ControllerCommand.UNLOCK_PROTECTIVE_STOP:
             arm.unlock_protective_stop()
         elif line == prim.ControllerCommand.STOP_PROGRAM:
-            self._stop_program()
+            self.programs.stop()
 
     # ---- programs (fakeur.programs) and the dashboard's answers (fakeur.dashboard_answers) -----------
-
-    def _start_program(self, name: str, text: str) -> None:
-        """Compile ``text`` (off the event loop, after what arrived before), then run it."""
-        self.programs.submit(name, text)
-
-    def _stop_program(self) -> None:
-        self.programs.stop()
-
-    def _dashboard_reply(self, command: Any) -> str:
-        return dashboard_reply(self, command)
-
-    @property
-    def program_name(self) -> str | None:
-        """The name of the last main program started."""
-        return self.programs.name
-
-    @property
-    def _script(self) -> RunningScript | None:
-        return self.programs.main
-
-    @property
-    def _secondary(self) -> list[RunningScript]:
-        return self.programs.secondary
-
-    @property
-    def _input_owner(self) -> dict[str, Any]:
-        return self.rtde.input_owner
 
     def brake_release(self) -> str | None:
         """Release the brakes; from POWER_OFF power on first, then release once IDLE (as URSim does)."""
@@ -460,7 +429,7 @@ class FakeController:
         """What the External Control program does on play: fetch the script from the daemon's script
         sender (``urcap``), then run it; nothing without a script sender."""
         if self.urcap is not None:
-            self.connections.spawn(self.programs.play_urcap(self.urcap, self._start_program))
+            self.connections.spawn(self.programs.play_urcap(self.urcap, self.programs.submit))
 
     # ---- dashboard (29999) ------------------------------------------------------------------------------
 

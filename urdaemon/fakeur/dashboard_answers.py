@@ -30,7 +30,7 @@ from urdaemon.protocols.rtde_variables import RuntimeState
 
 if TYPE_CHECKING:
     from urdaemon.description.urmodels import UrModel
-    from urdaemon.fakeur.arm import FakeArm
+    from urdaemon.fakeur.fake_arm import FakeArm
     from urdaemon.fakeur.programs import Programs
 
 __all__ = [

@@ -1,6 +1,6 @@
 """The fake arm's life: power, brakes, safety stops and the program's run state (``ArmLife``).
 
-One ``ArmLife`` per ``FakeArm`` (fakeur/arm.py), which holds it as ``arm.life``. It owns the robot mode,
+One ``ArmLife`` per ``FakeArm`` (fakeur/fake_arm.py), which holds it as ``arm.life``. It owns the robot mode,
 the safety mode, the RTDE ``runtime_state``, the timed transitions (booting, releasing the brakes)
 and the status bits RTDE reports, and it answers each command with a refusal reason (or None) the way
 a real controller refuses it (e.g. brake release while powered off).

@@ -1,7 +1,7 @@
 """The motion a program plays, on the program's time (``Playback``), and the time scaling that pausing
 and resuming ramp (``ScalingRamp``).
 
-Pure: no asyncio, no clock, no arm. ``FakeArm`` (fakeur/arm.py) holds one ``Playback`` and, while it
+Pure: no asyncio, no clock, no arm. ``FakeArm`` (fakeur/fake_arm.py) holds one ``Playback`` and, while it
 plays a motion, asks it once per cycle where the joints head (``advance``): a played motion advances
 ``dt × speed slider × speed scaling`` of program time per cycle (the controller's time scaling). When
 it is over and no new motion replaced it, it goes on as a stop with the motion's deceleration, along

@@ -2,7 +2,7 @@
 
 Pure: forward kinematics of the arm's calibrated DH model, each pose kept for the joint values (and
 TCP offset) it was computed for: one RTDE package asks for it twice (actual and target TCP pose) and
-several clients may each ask once per cycle. ``FakeArm.tcp_pose``/``actual_tcp_pose`` (fakeur/arm.py)
+several clients may each ask once per cycle. ``FakeArm.tcp_pose``/``actual_tcp_pose`` (fakeur/fake_arm.py)
 read it.
 """
 

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.errors import ProtocolError, UrDaemonError
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urp import UrpProgram
-from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.fakeur.urscript.lib_io import apply_runstate_outputs
+from urdaemon.fakeur.urscript.script_host import InputRegisters, ScriptHost
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import script_sender
 from urdaemon.protocols._buffer import Side

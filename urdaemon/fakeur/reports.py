@@ -14,10 +14,10 @@ from collections.abc import Callable
 from typing import Any
 
 from urdaemon.description.urmodels import UrModel
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript.lib_motion import tool_speed
 from urdaemon.fakeur.urscript.lib_state import JOINT_TEMPERATURE, tool_accelerometer
+from urdaemon.fakeur.urscript.script_host import InputRegisters
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols import realtime as rt

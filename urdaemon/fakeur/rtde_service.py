@@ -41,10 +41,10 @@ from dataclasses import dataclass, field
 from typing import Any, Final
 
 from urdaemon.errors import ProtocolError
-from urdaemon.fakeur.arm import FakeArm
 from urdaemon.fakeur.connections import Connections, ServiceShell
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.reports import output_getter
-from urdaemon.fakeur.urscript.host import InputRegisters
+from urdaemon.fakeur.urscript.script_host import InputRegisters
 from urdaemon.model import CONFIGURABLE_IO_SHIFT, STANDARD_IO_SHIFT, TOOL_IO_SHIFT
 from urdaemon.protocols import rtde
 from urdaemon.protocols._buffer import Side

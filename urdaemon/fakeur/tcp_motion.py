@@ -242,11 +242,6 @@ class ToolSpeedRamp:
         self._rate = [float(v) for v in joint_velocity(self._last, self._twist0)]
         self.duration = duration if duration > 0 else self._ramp
 
-    @property
-    def ramp_time(self) -> float:
-        """s: how long the twist takes to reach its target."""
-        return self._ramp
-
     def twist(self, t: float) -> Vector:
         """The commanded TCP twist at ``t``."""
         ramp = self._ramp

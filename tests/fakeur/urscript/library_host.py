@@ -6,10 +6,10 @@ from __future__ import annotations
 from typing import Any, Final
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import ScriptRun, compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import BUILTINS
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 __all__ = ["DT", "call_builtin", "make_host", "run_script"]
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_unsimulated import NOT_SIMULATED, REASONS
 from urdaemon.fakeur.urscript.runtime import BUILTINS
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import SERIES, all_signatures, load_signatures
 
 DT = 0.002

@@ -8,8 +8,8 @@ import pytest
 
 from tests.fakeur.urscript.library_host import DT, make_host, run_script
 from urdaemon.fakeur.urscript import lib_config as cfg
-from urdaemon.fakeur.urscript.host import Watchdog
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrPose
+from urdaemon.fakeur.urscript.script_host import Watchdog
 from urdaemon.fakeur.urscript.signatures import ACTIVE_TCP
 
 

@@ -8,8 +8,8 @@ import pytest
 
 from tests.fakeur.urscript.library_host import call_builtin, make_host, run_script
 from urdaemon.fakeur.urscript import lib_io as io
-from urdaemon.fakeur.urscript.host import InputRegisters
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError
+from urdaemon.fakeur.urscript.script_host import InputRegisters
 
 
 def test_digital_outputs_land_in_their_groups_bits() -> None:

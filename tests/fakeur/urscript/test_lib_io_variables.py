@@ -11,9 +11,9 @@ from typing import Any
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import ScriptCompileError, compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 DT = 0.008
 

@@ -10,11 +10,11 @@ from typing import Any
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.joint_motion import ServoFilter
 from urdaemon.fakeur.urscript import lib_motion, lib_state
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
 from urdaemon.model import SafetyMode
 

@@ -7,9 +7,9 @@ import math
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.model import SafetyMode
 
 DT = 0.002

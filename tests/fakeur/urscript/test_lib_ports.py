@@ -7,12 +7,12 @@ from __future__ import annotations
 import pytest
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript import lib_ports as ports
-from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import tcp_pose
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError
+from urdaemon.fakeur.urscript.script_host import InputRegisters, ScriptHost
 from urdaemon.model import RobotMode
 
 DT = 0.002

@@ -8,9 +8,9 @@ import pytest
 
 from tests.fakeur.urscript.library_host import DT, make_host, run_script
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript.lib_settings import pause_on_error_of, settings_of
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.model import RobotMode
 from urdaemon.protocols.rtde_variables import RuntimeState
 

@@ -18,11 +18,11 @@ import pytest
 
 from tests.helpers import fake_address, free_tcp_port
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript import lib_sockets as ls
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 DT = 0.002
 WAIT_S = 5.0

@@ -10,10 +10,10 @@ import pytest
 
 from urdaemon.description import frames
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import HISTORY_STEPS, FakeArm
+from urdaemon.fakeur.fake_arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.urscript import lib_motion, lib_state
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import ACTIVE_TCP, CURRENT_JOINT_POSITIONS
 
 DT = 0.002

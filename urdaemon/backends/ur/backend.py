@@ -8,13 +8,15 @@ link drops, the runtime above aborts the motion and calls ``run()`` again after 
 reconnect starts from scratch and motion resumes only from a new command, seeded from the measured pose.
 
 This module supervises the links (connect, watch, close), runs the cycle and routes the links' events;
-the jobs it composes have their own modules: ``reverse_channel`` (what the program does with the
-reverse socket), ``frames`` (the bytes written to it), ``program`` (the control program, and the
+the jobs it composes have their own modules: ``links`` (``UrLinks``: the RTDE, primary and dashboard
+links, sending the program headless), ``reverse_channel`` (what the program does with the reverse
+socket), ``reverse_writer`` (the bytes written to it), ``program`` (the control program, and the
 address it connects back to), ``route`` (where the callback servers listen: the interface that reaches
-the robot), ``startup`` (power, brakes, play), ``services`` (script commands, RTDE inputs, the
-dashboard), ``readiness`` (the status's reason). The logic takes ``now`` (the reverse channel, the
-program's windows); only the asyncio parts read the clock: this module, start-up's waits and the
-servers' admission window.
+the robot), ``startup`` (power, brakes, play), ``robot_commands`` (script commands, RTDE inputs, the
+dashboard), ``diagnosis`` (the doctor's facts), ``readiness`` (the status's reason). Each is given the
+collaborators it uses (``UrLinks``, the program, the servers), never the backend. The logic takes
+``now`` (the reverse channel, the program's windows); only the asyncio parts read the clock: this
+module, start-up's waits and the servers' admission window.
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend, PassthroughResult
-from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.diagnosis import Diagnosis
+from urdaemon.backends.ur.links import UrLinks
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
@@ -36,9 +38,9 @@ from urdaemon.backends.ur.reverse_writer import (
     ReverseWriter,
     encode_passthrough_point,
 )
-from urdaemon.backends.ur.robot_commands import UrServices
+from urdaemon.backends.ur.robot_commands import UrRobotCommands
 from urdaemon.backends.ur.robot_messages import RobotMessages
-from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, input_recipe, output_recipe
+from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, output_recipe
 from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.backends.ur.startup import StartUp
 from urdaemon.cell.robot_options import Robot, UrOptions
@@ -80,11 +82,6 @@ class UrBackend(Backend):
         self.expected_hash = expected_hash
         self.servers = CallbackServers(self.address, self.ports, self)
         self._mapper = StateMapper(output_recipe())
-        self._inputs = input_recipe()
-        self._rtde: RtdeLink | None = None
-        self._primary: PrimaryLink | None = None
-        self._dashboard: DashboardLink | None = None
-        self._dashboard_lock = asyncio.Lock()
         self._on_cycle: Callable[[], None] = lambda: None
         self._channel = ReverseChannel()
         """What the program does with the reverse socket: the one owner of the passthrough goal."""
@@ -92,13 +89,34 @@ class UrBackend(Backend):
         """Who hears the running passthrough goal's result."""
         self._writer = ReverseWriter(self.servers)
         self._program = ControlProgram(robot, self.options, self.ports, self.servers, program)
+        self.links = UrLinks(self.address, read_only=self.options.read_only, program=self._program)
+        """The RTDE, primary and dashboard links (``links.UrLinks``)."""
         self.messages = RobotMessages(self.name, self.notice, self._program)
-        self._services = UrServices(self)
-        self._start_up = StartUp(self)
-        self.diagnosis: Diagnosis = Diagnosis(self)  # the doctor's: what it learns of the controller
+        self._commands = UrRobotCommands(
+            self.links, self.servers.script_command, notice=self.notice, name=self.name
+        )
+        self.tcp = self.check_tcp(robot.tcp)  # the cell file's until set_tcp; sent as the program connects
+        self._first_package = asyncio.Event()
+        """Set by each RTDE package; cleared before a new link streams (start-up waits on it)."""
+        self._start_up = StartUp(
+            robot,
+            links=self.links,
+            program=self._program,
+            channel=self._channel,
+            reverse_link=self.servers.reverse,
+            state=self.state,
+            first_package=self._first_package,
+        )
+        self.diagnosis: Diagnosis = Diagnosis(  # the doctor's: what it learns of the controller
+            self.links,
+            self.state,
+            period=self.period,
+            headless=robot.headless,
+            servers=self.servers,
+            program=self._program,
+        )
         step_time = reverse.step_time_for_frequency(self.rate_hz)
         self._writer.servo_timeout = _servo_timeout(self.options, step_time)
-        self._first_package = asyncio.Event()
         self._package_at = 0.0
         """``time.monotonic()`` when the latest RTDE package was handled (the cycle's ``now``)."""
         self._cycle_error_logged = False
@@ -115,7 +133,7 @@ class UrBackend(Backend):
             await self._program.listen(self.address)
         try:
             rtde = await self._connect_rtde()
-            primary = self._primary = await PrimaryLink.connect(self.address, self.messages.on_message)
+            primary = await self.links.connect_primary(self.messages.on_message)
             primary_task = asyncio.get_running_loop().create_task(primary.run())
             try:
                 await self._serve(primary, primary_task, rtde)
@@ -147,8 +165,7 @@ class UrBackend(Backend):
 
     async def _connect_rtde(self) -> RtdeLink:
         """Connect and handshake RTDE; learn the controller's version and the address it reaches us at."""
-        rtde = self._rtde = await RtdeLink.connect(self.address, self._on_package)
-        await rtde.handshake(output_recipe(), None if self.options.read_only else self._inputs)
+        rtde = await self.links.connect_rtde(self._on_package)
         if abs(rtde.frequency - self.rate_hz) > 1e-6:
             raise RobotFaultError(
                 f"the controller streams at {rtde.frequency:g} Hz but a {self.robot.model} runs at "
@@ -168,7 +185,7 @@ class UrBackend(Backend):
         """With RTDE and the primary link up: the dashboard, the calibration check, streaming, start-up;
         then watch the links until one drops."""
         try:
-            await self._dashboard_link()
+            await self.links.dashboard_link()
         except UrDaemonError as err:  # PolyScope X has none; services will say so when asked
             log.warning("[%s] no dashboard: %s", self.name, err)
         await self.messages.check_calibration(primary, self.expected_hash, self.options.calibration_check)
@@ -206,65 +223,53 @@ class UrBackend(Backend):
         self._close_links()
         await self.servers.close()
 
-    async def _dashboard_link(self) -> DashboardLink:
-        """The dashboard connection, opened now if there is none (it does not need the other links)."""
-        async with self._dashboard_lock:
-            if self._dashboard is None:
-                self._dashboard = await DashboardLink.connect(self.address)
-            return self._dashboard
-
-    def _drop_dashboard(self) -> None:
-        if self._dashboard is not None:
-            self._dashboard.close()
-            self._dashboard = None
-
     def _close_links(self) -> None:
-        for link in (self._rtde, self._primary, self._dashboard):
-            if link is not None:
-                link.close()
+        self.links.close()
         for server in self.servers.all:
             if server.link is not None:
                 server.link.close()
-        self._rtde = self._primary = self._dashboard = None
         self._program.lost_link = ""
 
-    # ---- services (``services.py``, ``startup.py``) --------------------------------------------------
+    # ---- commands (``robot_commands.py``), start-up (``startup.py``) ----------------------------------
 
     async def set_io(self, kind: str, pin: int, value: float | bool) -> None:
         """Set an output through RTDE inputs."""
-        self._services.set_io(kind, pin, value)
+        self._commands.set_io(kind, pin, value)
 
     async def set_speed_slider(self, fraction: float) -> None:
         """Set the speed slider through RTDE inputs."""
-        self._services.set_speed_slider(fraction)
+        self._commands.set_speed_slider(fraction)
 
     async def set_payload(self, mass: float, cog: tuple[float, float, float]) -> None:
         """Set the payload through the script command socket (or a secondary program without one)."""
-        self._services.set_payload(mass, cog)
+        self._commands.set_payload(mass, cog)
 
     async def set_tcp(self, pose: Sequence[float]) -> None:
-        """Make ``pose`` the TCP offset, the controller's too (``services.UrServices.set_tcp``)."""
-        self._services.set_tcp(self.check_tcp(pose))
+        """Make ``pose`` the TCP offset, the controller's too (``UrRobotCommands.set_tcp``); kept only
+        once the controller could be told (or will be, as the program connects)."""
+        checked = self.check_tcp(pose)
+        self._commands.set_tcp(checked)
+        self.tcp = checked
 
     async def dashboard(self, line: str) -> tuple[bool, str]:
         """Send a dashboard command line; (success, the robot's reply)."""
-        return await self._services.dashboard(line)
+        return await self._commands.dashboard(line)
 
     async def zero_ft_sensor(self) -> None:
         """Zero the force/torque sensor (script command)."""
-        self._services.script_command(script_command.ZeroFtSensor(), "zero_ft_sensor")
+        self._commands.script_command(script_command.ZeroFtSensor(), "zero_ft_sensor")
 
     async def set_tool_voltage(self, volts: int) -> None:
         """Set the tool voltage (script command)."""
-        self._services.set_tool_voltage(volts)
+        self._commands.set_tool_voltage(volts)
 
     async def force_mode(self, start: object | None) -> None:
         """Start force mode (a ``StartForceMode`` script command) or end it (None)."""
-        self._services.script_command(script_command.EndForceMode() if start is None else start, "force mode")
+        self._commands.script_command(script_command.EndForceMode() if start is None else start, "force mode")
 
     async def tool_contact(self, start: bool) -> None:
         """Arm tool-contact detection, or end it; the result comes back as a ``tool_contact`` notice."""
-        self._services.tool_contact(start)
+        self._commands.tool_contact(start)
 
     async def startup(self) -> None:
         """Power on, release the brakes, and start the control program (headless) or play it (URCap);
@@ -379,12 +384,12 @@ class UrBackend(Backend):
         if not self._command_sent:
             self.send_command()
         if not links_up and self._program.wanted(state, self._mapper.runtime_state, self._channel):
-            self._send_program(now, force=False)
+            self.links.send_program(now, force=False)
 
     @property
     def catching_up(self) -> bool:
         """The RTDE link is delivering a package that a newer one of the same read follows."""
-        rtde = self._rtde
+        rtde = self.links.rtde
         return rtde is not None and rtde.catching_up
 
     def send_command(self) -> None:
@@ -398,12 +403,9 @@ class UrBackend(Backend):
         if frame is _NO_FRAME:
             return
         self._writer.write(frame, self.command)
-        rtde = self._rtde
+        rtde = self.links.rtde
         if rtde is not None:  # package in → command out (issue 5's turnaround)
             self.turnaround.record(time.perf_counter_ns() - rtde.received_ns)
-
-    def _send_program(self, now: float, *, force: bool) -> None:
-        self._program.send_headless(self._primary, now, force=force)
 
     # ---- callbacks from the links and servers --------------------------------------------------------------
 
@@ -415,7 +417,7 @@ class UrBackend(Backend):
             if name == "reverse":
                 self._act(self._channel.program_connected())
             elif name == "script_command":
-                self._services.send_tcp()  # the controller's TCP is the daemon's from the program's start
+                self._commands.send_tcp(self.tcp)  # the controller's TCP is the daemon's from its start
             program.link_up(time.monotonic())
             return
         if name == "reverse":
@@ -424,8 +426,8 @@ class UrBackend(Backend):
         elif name == "trajectory":
             self._act(self._channel.trajectory_lost())
         elif name == "script_command":
-            self._services.tool_contact_armed = False  # its result can no longer come
-        if program.replaced_or_closing(name, reason, self._rtde is not None):
+            self._commands.script_link_lost()  # an armed tool contact's result can no longer come
+        if program.replaced_or_closing(name, reason, self.links.rtde is not None):
             return
         program.link_lost(name, self._channel.handed_back)
         state = self.state
@@ -439,7 +441,7 @@ class UrBackend(Backend):
         if isinstance(event, trajectory_point.TrajectoryResult):
             self._act(self._channel.passthrough_result(int(event.result)))
         elif isinstance(event, script_command.ToolContactResult):
-            self._services.tool_contact_result(event)
+            self._commands.tool_contact_result(event)
         elif isinstance(event, script_sender.ProgramRequested):
             self._program.send_requested(time.monotonic())
 

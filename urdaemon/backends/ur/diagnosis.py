@@ -6,7 +6,7 @@ left of the budget): ``PolyscopeVersion``, ``is in remote control``, then ``robo
 timestamp of the newest RTDE package every ``SAMPLE_EVERY_S`` (two attribute reads: the cycle does
 no work for it), which give the packages' arrival jitter and the clock offset; the drift is judged
 against a pair taken soon after the RTDE link came up (``Diagnosis.watch``, called by the backend's
-watch of its links). The links and the callback ports are read where the backend keeps them.
+watch of its links). The links are read from ``UrLinks``, the callback ports from the servers.
 Nothing here commands the robot: every dashboard line sent is a query.
 """
 
@@ -16,14 +16,14 @@ import asyncio
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import astuple
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from urdaemon.backends.ur.links import UrLinks
+from urdaemon.backends.ur.program import ControlProgram
+from urdaemon.backends.ur.servers import CallbackServers
 from urdaemon.errors import UrDaemonError
+from urdaemon.model import RobotState
 from urdaemon.protocols import dashboard as dash
-
-if TYPE_CHECKING:
-    from urdaemon.backends.ur.backend import UrBackend
-    from urdaemon.model import RobotState
 
 __all__ = [
     "BUDGET_S",
@@ -51,11 +51,26 @@ MIN_WINDOW_S = 0.5
 
 
 class Diagnosis:
-    """What the doctor learns of one UR backend's controller; part of the backend, like its
-    ``UrServices``, so it reads the backend's links where the backend keeps them."""
+    """What the doctor learns of one UR controller: through its ``links`` (RTDE, primary, the
+    dashboard's queries), from the ``state`` RTDE fills (a cycle of ``period`` s), and where the
+    ``servers`` listen for the ``program`` of a ``headless`` robot or not."""
 
-    def __init__(self, ur: UrBackend) -> None:
-        self.ur = ur
+    def __init__(
+        self,
+        links: UrLinks,
+        state: RobotState,
+        *,
+        period: float,
+        headless: bool,
+        servers: CallbackServers,
+        program: ControlProgram,
+    ) -> None:
+        self.links = links
+        self.state = state
+        self.period = period
+        self.headless = headless
+        self.servers = servers
+        self.program = program
         self.reference: tuple[int, float] | None = None
         """(host receive time ns, controller timestamp s) of a package soon after the RTDE link came up,
         the one that waited least of ``REFERENCE_LOOKS``: the baseline of the clocks' drift."""
@@ -66,7 +81,7 @@ class Diagnosis:
         """Look at the newest package's two times, the first ``REFERENCE_LOOKS`` times per RTDE link
         once packages come, and keep the pair that waited least (the backend's watch calls this every
         few hundred ms: the cycle does nothing for it)."""
-        rtde, state = self.ur._rtde, self.ur.state
+        rtde, state = self.links.rtde, self.state
         if rtde is None or not rtde.packages or not state.host_time_ns:
             return
         if rtde is not self._reference_link:
@@ -80,15 +95,14 @@ class Diagnosis:
 
     async def gather(self, budget_s: float = BUDGET_S) -> dict[str, Any]:
         """The controller's facts as ``doctor.checks`` reads them (under ``"controller"``)."""
-        ur = self.ur
         loop = asyncio.get_running_loop()
         started = loop.time()
         deadline = started + budget_s
         samples: list[tuple[int, float]] = []
         stop = asyncio.Event()
-        sampler = loop.create_task(_sample(ur.state, samples, stop, deadline))
+        sampler = loop.create_task(_sample(self.state, samples, stop, deadline))
         try:
-            board = await _dashboard(ur._services.query, deadline)
+            board = await _dashboard(self.links.dashboard_query, deadline)
             window = max(0.0, min(deadline, started + MIN_WINDOW_S) - loop.time())
             await asyncio.wait({sampler}, timeout=window)
         finally:
@@ -98,26 +112,26 @@ class Diagnosis:
         facts["dashboard"] = board
         for name in ("polyscope_version", "remote_control", "remote_control_text"):
             facts[name] = board.pop(name, None)
-        reference = self.reference if self._reference_link is ur._rtde else None
-        facts["clock"] = clock_facts(samples, reference, ur.period)
+        reference = self.reference if self._reference_link is self.links.rtde else None
+        facts["clock"] = clock_facts(samples, reference, self.period)
         return facts
 
     def link_facts(self) -> dict[str, Any]:
         """The links, the controller's version RTDE reported, and the callback ports."""
-        ur = self.ur
-        rtde, primary = ur._rtde, ur._primary
+        links = self.links
+        rtde, primary = links.rtde, links.primary
         version = rtde.controller_version if rtde is not None else None
         return {
-            "address": ur.address,
-            "headless": ur.robot.headless,
-            "read_only": ur.options.read_only,
+            "address": links.address,
+            "headless": self.headless,
+            "read_only": links.read_only,
             "links": {
                 "rtde": rtde is not None and not rtde.closed.done(),
                 "primary": primary is not None and not primary.closed.done(),
-                "error": ur.state.lifecycle_reason,
+                "error": self.state.lifecycle_reason,
             },
             "rtde_version": None if version is None else list(astuple(version)),
-            "callbacks": ur.servers.facts(ur._program.host_ip),
+            "callbacks": self.servers.facts(self.program.host_ip),
         }
 
 

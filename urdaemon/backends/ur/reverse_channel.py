@@ -157,11 +157,6 @@ class ReverseChannel:
         """True from hand_back until take_back or a new program."""
         return self.state is Channel.HANDED_BACK
 
-    @property
-    def results_owed(self) -> int:
-        """Results of canceled trajectories still to come."""
-        return self._owed
-
     def passthrough_problem(self, trajectory_connected: bool) -> str | None:
         """Why a passthrough goal cannot start now (None when it can)."""
         state = self.state

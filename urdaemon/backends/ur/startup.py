@@ -13,16 +13,18 @@ import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from urdaemon.backends.ur.dashboard_link import DashboardLink
+from urdaemon.backends.ur.links import UrLinks
+from urdaemon.backends.ur.program import ControlProgram
+from urdaemon.backends.ur.reverse_channel import ReverseChannel
+from urdaemon.backends.ur.servers import CallbackServer
+from urdaemon.cell.robot_options import Robot
 from urdaemon.errors import BackendError, RobotFaultError, UrDaemonError, UrTimeoutError
-from urdaemon.model import RobotMode
+from urdaemon.model import RobotMode, RobotState
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
-
-if TYPE_CHECKING:
-    from urdaemon.backends.ur.backend import UrBackend
 
 __all__ = ["MODE_POLL_S", "STARTUP_TIMEOUT_S", "StartUp"]
 
@@ -35,58 +37,78 @@ MODE_POLL_S = 0.05
 
 
 class StartUp:
-    """Start-up and program restarts of one UR backend (``ur``: the backend whose links they use)."""
+    """Start-up and program restarts of one UR robot (``robot``): through its ``links`` (dashboard,
+    primary, the program sent headless), telling its ``program`` and ``channel`` (the reverse socket's
+    state machine) a program is coming, reading its ``state`` once RTDE streams again
+    (``first_package``) and whether the program holds its ``reverse_link``."""
 
-    def __init__(self, ur: UrBackend) -> None:
-        self.ur = ur
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        links: UrLinks,
+        program: ControlProgram,
+        channel: ReverseChannel,
+        reverse_link: CallbackServer,
+        state: RobotState,
+        first_package: asyncio.Event,
+    ) -> None:
+        self.robot = robot
+        self.links = links
+        self.program = program
+        self.channel = channel
+        self.reverse_link = reverse_link
+        self.state = state
+        self.first_package = first_package
         self._lock = asyncio.Lock()
         """Held by startup and resend_program: a second call while one is under way is refused."""
 
     async def startup(self) -> None:
         """Power on, release the brakes, and start the control program (headless) or play it (URCap)."""
-        ur = self.ur
-        ur._services.check_commanding()
+        self.links.check_commanding()
         async with self._exclusive("start-up"):
             try:
                 await self._startup()
             except UrDaemonError as err:
-                ur._program.startup_problem = f"start-up failed: {err}"
+                self.program.startup_problem = f"start-up failed: {err}"
                 raise
-            ur._program.startup_problem = ""
+            self.program.startup_problem = ""
 
     async def _startup(self) -> None:
-        ur = self.ur
         board: DashboardLink | None
         try:
-            board = await ur._dashboard_link()
+            board = await self.links.dashboard_link()
         except UrDaemonError as err:
             board = None
-            log.info("[%s] start-up without the dashboard (%s): using the primary interface", ur.name, err)
-        ur._channel.take_back()
+            log.info(
+                "[%s] start-up without the dashboard (%s): using the primary interface", self.robot.name, err
+            )
+        self.channel.take_back()
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         try:  # decide on fresh state, not on what the last connection left behind
-            await asyncio.wait_for(ur._first_package.wait(), STARTUP_TIMEOUT_S)
+            await asyncio.wait_for(self.first_package.wait(), STARTUP_TIMEOUT_S)
         except TimeoutError as err:
             raise UrTimeoutError("no RTDE data to start up from") from err
-        if ur.state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
+        state = self.state
+        if state.robot_mode not in (RobotMode.IDLE, RobotMode.RUNNING):
             await self._power_step(board, dash.PowerOn(), prim.ControllerCommand.POWER_ON, "power on")
             await self._wait_mode((RobotMode.IDLE, RobotMode.RUNNING), deadline)
-        if ur.state.robot_mode is not RobotMode.RUNNING:
+        if state.robot_mode is not RobotMode.RUNNING:
             await self._power_step(
                 board, dash.BrakeRelease(), prim.ControllerCommand.BRAKE_RELEASE, "brake release"
             )
             await self._wait_mode((RobotMode.RUNNING,), deadline)
-        if ur.robot.headless:
+        if self.robot.headless:
             # the cycle may already have sent it the moment the brakes came off: a second program
             # would replace the first while it is still connecting back
-            ur._send_program(time.monotonic(), force=False)
-        elif not ur.servers.reverse.connected:
+            self.links.send_program(time.monotonic(), force=False)
+        elif not self.reverse_link.connected:
             if board is None:
                 raise BackendError(
                     "no dashboard to play the External Control program (PolyScope X, or the dashboard "
                     "refused the connection): press play on the pendant, or run headless"
                 )
-            ur._program.expect(time.monotonic())
+            self.program.expect(time.monotonic())
             reply = await board.command(dash.Play())
             if not reply.success:
                 raise RobotFaultError(f"play refused: {reply.text}")
@@ -100,13 +122,10 @@ class StartUp:
             if not reply.success:
                 raise RobotFaultError(f"{what} refused: {reply.text}")
             return
-        primary = self.ur._primary
-        if primary is None:
-            raise BackendError("not connected to the robot")
-        primary.send_script(str(fallback))
+        self.links.send_script(str(fallback))
 
     async def _wait_mode(self, modes: tuple[RobotMode, ...], deadline: float) -> None:
-        state = self.ur.state
+        state = self.state
         while state.robot_mode not in modes:
             if time.monotonic() > deadline:
                 raise UrTimeoutError(f"robot mode {state.robot_mode.name} did not become {modes[0].name}")
@@ -117,21 +136,21 @@ class StartUp:
 
         Refused while a start-up or restart is under way, and while the program sent last is still
         connecting back (a second program would only replace it)."""
-        ur = self.ur
-        ur._services.check_commanding()
+        links, program = self.links, self.program
+        links.check_commanding()
         async with self._exclusive("program restart"):
-            if ur.robot.headless:
-                if ur._primary is None:
+            if self.robot.headless:
+                if links.primary is None:
                     raise BackendError("not connected to the robot")
-                pending = ur._program.still_connecting(time.monotonic())
+                pending = program.still_connecting(time.monotonic())
                 if pending is not None:
                     raise BackendError(pending)
-                ur._channel.take_back()
-                ur._send_program(time.monotonic(), force=True)
+                self.channel.take_back()
+                links.send_program(time.monotonic(), force=True)
             else:
-                ur._channel.take_back()
-                ur._program.expect(time.monotonic())
-                reply = await (await ur._dashboard_link()).command(dash.Play())
+                self.channel.take_back()
+                program.expect(time.monotonic())
+                reply = await (await links.dashboard_link()).command(dash.Play())
                 if not reply.success:
                     raise BackendError(f"play refused: {reply.text}")
 

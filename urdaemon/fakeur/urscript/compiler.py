@@ -31,7 +31,7 @@ from urdaemon.fakeur.urscript.runtime import (
 from urdaemon.fakeur.urscript.signatures import all_signatures, load_signatures
 
 if TYPE_CHECKING:
-    from urdaemon.fakeur.urscript.host import ScriptHost
+    from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 __all__ = ["MAX_PROGRAM_CHARS", "Program", "compile_program"]
 

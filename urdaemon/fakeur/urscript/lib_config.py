@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from typing import Any, Final
 
 from urdaemon.description.frames import IDENTITY, frame_of_pose
-from urdaemon.fakeur.arm import HISTORY_STEPS
 from urdaemon.fakeur.contact import ForceModeSettings, surroundings_of
-from urdaemon.fakeur.urscript.host import WATCHDOG_ACTIONS, ScriptHost, Watchdog
+from urdaemon.fakeur.fake_arm import HISTORY_STEPS
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+from urdaemon.fakeur.urscript.script_host import WATCHDOG_ACTIONS, ScriptHost, Watchdog
 from urdaemon.fakeur.urscript.signatures import Computed
 from urdaemon.protocols.rtde_variables import INPUT_VARIABLES
 

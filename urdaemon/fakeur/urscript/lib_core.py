@@ -20,8 +20,8 @@ from urdaemon.description.frames import (
     rotate,
     rotation_vector,
 )
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin, copy_value
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
 
 __all__ = ["text"]

@@ -19,10 +19,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Final
 
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript.lib_settings import INPUT_ACTIONS, settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.model import (
     CONFIGURABLE_IO_SHIFT,
     IO_SIZES,

@@ -27,7 +27,7 @@ from collections.abc import Callable, Generator, Sequence
 from typing import Any, Final
 
 from urdaemon.description.frames import compose, frame_of_pose, inverse, pose_of_frame
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.joint_motion import (
     TIME_EPSILON_S,
     LinearStop,
@@ -40,8 +40,8 @@ from urdaemon.fakeur.joint_motion import (
 )
 from urdaemon.fakeur.life import PROTECTIVE_STOP_DECELERATION
 from urdaemon.fakeur.tcp_motion import ArcMove, CartesianMove, ToolSpeedRamp
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
 from urdaemon.urscript import SERVOJ_GAIN_RANGE, SERVOJ_LOOKAHEAD_RANGE_S
 

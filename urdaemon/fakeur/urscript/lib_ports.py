@@ -29,11 +29,11 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any, Final
 
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript.lib_motion import tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.lib_settings import settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.model import CONFIGURABLE_IO_SHIFT, TOOL_IO_SHIFT, TOOL_VOLTAGES, RobotMode, SafetyMode
 
 __all__ = ["GENERAL_PURPOSE"]

@@ -15,9 +15,9 @@ import weakref
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from urdaemon.fakeur.arm import FakeArm
-from urdaemon.fakeur.urscript.host import ScriptHost
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript.runtime import ProgramHalt, ScriptRuntimeError, UrList, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 __all__ = ["BASELIGHT_MODES", "ControllerSettings", "pause_on_error_of", "settings_of"]
 
@@ -120,7 +120,7 @@ def get_base_acceleration(host: ScriptHost) -> UrList:
 @builtin("set_safety_mode_transition_hardness")
 def set_safety_mode_transition_hardness(host: ScriptHost, type: Any) -> None:
     """How hard the arm stops between normal, reduced and safeguard stop: 1 soft, what the fake's stops
-    do (fakeur/arm.py); 0 hard stops the program with "not simulated"."""
+    do (fakeur/fake_arm.py); 0 hard stops the program with "not simulated"."""
     hardness = _integer("set_safety_mode_transition_hardness", type)
     if hardness not in (0, 1):
         raise ScriptRuntimeError(f"set_safety_mode_transition_hardness: type must be 0 or 1, got {hardness}")

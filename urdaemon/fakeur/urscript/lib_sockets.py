@@ -33,9 +33,9 @@ from collections.abc import Generator
 from typing import Any, Final
 
 from urdaemon.fakeur.urscript.checker import DEFAULT_SOCKET
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_core import text as printed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 __all__ = [
     "CONNECT_TIMEOUT_S",

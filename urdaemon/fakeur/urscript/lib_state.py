@@ -13,12 +13,12 @@ import math
 from typing import Any, Final
 
 from urdaemon.description.frames import frame_of_pose, inverse, rotate
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.joint_motion import JointMove, ServoFilter
 from urdaemon.fakeur.tcp_motion import CartesianMove
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.lib_motion import flange_pose, inverse_near, tcp_pose, tool_speed
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
 
 __all__ = ["tool_accelerometer"]

@@ -13,8 +13,8 @@ from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any, Final
 
-from urdaemon.fakeur.urscript.host import ScriptHost
 from urdaemon.fakeur.urscript.runtime import BUILTINS, ScriptRuntimeError, builtin
+from urdaemon.fakeur.urscript.script_host import ScriptHost
 
 __all__ = ["NOT_SIMULATED", "REASONS"]
 

@@ -1,7 +1,7 @@
 """The URScript runtime: values, builtin registry, errors and the scheduler (:class:`ScriptRun`).
 
 Contract shared by every ``lib_*.py`` (see each function's docstring): builtins are registered with
-:func:`builtin`, take the :class:`~urdaemon.fakeur.urscript.host.ScriptHost` first and then their
+:func:`builtin`, take the :class:`~urdaemon.fakeur.urscript.script_host.ScriptHost` first and then their
 arguments positionally in the order of their signature in ``functions.yaml``, every default already
 filled in by the compiler. A blocking builtin is a generator function: each bare ``yield`` gives up the
 rest of the current controller cycle; its return value is the call's value.

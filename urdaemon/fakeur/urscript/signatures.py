@@ -135,11 +135,6 @@ class Signature:
     supported: bool = True
 
     @property
-    def required_count(self) -> int:
-        """How many leading parameters a call must give (defaults only ever follow required ones)."""
-        return sum(1 for p in self.params if p.required)
-
-    @property
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.params)
 

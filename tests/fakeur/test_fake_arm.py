@@ -9,7 +9,7 @@ import pytest
 
 from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import HISTORY_STEPS, FakeArm
+from urdaemon.fakeur.fake_arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.joint_motion import JointMove, SpeedRamp, joint_move
 from urdaemon.fakeur.life import BOOT_TIME_S, BRAKE_RELEASE_TIME_S
 from urdaemon.model import RobotMode, SafetyMode

@@ -6,7 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 
 __all__ = ["WATCHDOG_ACTIONS", "InputRegisters", "ScriptHost", "Watchdog"]
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import socket
 
 from urdaemon.description.urmodels import load_ur_model
-from urdaemon.fakeur.arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.urscript import lib_sockets
-from urdaemon.fakeur.urscript.host import InputRegisters, ScriptHost
+from urdaemon.fakeur.urscript.script_host import InputRegisters, ScriptHost
 
 DT = 0.002
 
