@@ -37,6 +37,7 @@ PURE = {
     "publish/service_requests.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/stream_commands.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/goal_cancel.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
+    "publish/lease_request.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/move_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/linear_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},
     "publish/cell_goal.py": {"asyncio", "socket", "threading", "time", "zenoh", "pydantic"},

@@ -11,7 +11,8 @@ import pytest
 
 from urdaemon.errors import MessageError
 from urdaemon.model import fingerprint
-from urdaemon.runtime.lease import LeaseBook, LeaseRequest, parse_request
+from urdaemon.publish.lease_request import LeaseRequest, parse_request
+from urdaemon.runtime.lease import LeaseBook
 
 KEY = "cell/alice/lease"
 NOW = 1_800_000_000.0

@@ -24,8 +24,11 @@ from urdaemon.client.goal_messages import RESULT_POLL_S
 from urdaemon.client.session import QUERY_TIMEOUT_S, Received, Subscription
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish import signing
+from urdaemon.publish.cell_goal import CellGoalRequest, cell_goal_body, lease_tokens_attachment
 from urdaemon.publish.envelope import client_text
+from urdaemon.publish.goal_cancel import cancel_body
 from urdaemon.publish.keys import CellKeys
+from urdaemon.publish.trajectory_goal import TrajectoryGoalRequest
 
 __all__ = ["CellGoalHandle", "send_cell_trajectory"]
 
@@ -86,7 +89,7 @@ class CellGoalHandle:
     async def cancel(self) -> dict[str, Any]:
         """Cancel every part (the reply says whether it was canceled, or why not)."""
         return await self.client.request(
-            self.keys.goal_cancel, {"goal_id": self.goal_id}, attachment=self._tokens
+            self.keys.goal_cancel, cancel_body(self.goal_id), attachment=self._tokens
         )
 
 
@@ -108,19 +111,15 @@ async def send_cell_trajectory(
         robot = await client.robot(name, cell=cell)
         await robot.lease.acquire()  # as a goal does: after a take-over it raises, never takes it back
         tokens[name] = robot.lease.token or ""
-    robots = {
-        name: dict(part) if isinstance(part, Mapping) else {"points": list(part)}
+    robots: dict[str, TrajectoryGoalRequest | dict[str, Any]] = {
+        name: dict(part) if isinstance(part, Mapping) else TrajectoryGoalRequest(tuple(part))
         for name, part in parts.items()
     }
-    attachment = json.dumps(tokens).encode()
+    body = cell_goal_body(CellGoalRequest(robots, on_abort))
+    attachment = lease_tokens_attachment(tokens)
     sub = client.subscribe(keys.goal_results)  # before the goal starts: its result cannot be missed
     try:
-        reply = await client.request(
-            keys.goal_trajectory,
-            {"robots": robots, "on_abort": on_abort},
-            timeout=timeout,
-            attachment=attachment,
-        )
+        reply = await client.request(keys.goal_trajectory, body, timeout=timeout, attachment=attachment)
     except BaseException:
         client.unsubscribe(sub)
         raise
@@ -142,4 +141,4 @@ async def _cancel_unfollowable(client: Client, keys: CellKeys, reply: dict[str, 
     """Cancel an accepted cell goal whose result could not be trusted (best effort: the caller
     raises either way), so that no robot moves for a goal nobody can follow."""
     with contextlib.suppress(UrDaemonError):
-        await client.request(keys.goal_cancel, {"goal_id": str(reply.get("goal_id"))}, attachment=tokens)
+        await client.request(keys.goal_cancel, cancel_body(str(reply.get("goal_id"))), attachment=tokens)

@@ -25,6 +25,7 @@ from urdaemon.errors import GoalRejected, UrDaemonError
 from urdaemon.model import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
 from urdaemon.publish.envelope import client_text
 from urdaemon.publish.keys import RobotKeys
+from urdaemon.publish.lease_request import LeaseRequest, lease_body
 
 __all__ = ["LEASE_SESSION_BYTES", "Lease", "LeaseHeld", "default_holder", "holder_text"]
 
@@ -123,12 +124,9 @@ class Lease:
             if self.ended_reason is not None and not (again or force):
                 raise LeaseHeld(self.ended_reason)
             self._declare()
-            body: dict[str, Any] = {"action": "acquire", "session": self._session}
-            body["holder"] = self.client.holder
-            if force:
-                body.update(force=True, reason=reason)
+            request = LeaseRequest("acquire", self._session, self.client.holder, force, reason)
             try:
-                reply = await self.client.request(self.keys.lease, body)
+                reply = await self.client.request(self.keys.lease, lease_body(request))
             except NoSuchService:
                 self._undeclare()
                 self.unchecked = True
@@ -215,7 +213,10 @@ class Lease:
                 if attachment is None:
                     return None
                 return await self.client.request(
-                    self.keys.lease, {"action": "release"}, timeout=timeout, attachment=attachment
+                    self.keys.lease,
+                    lease_body(LeaseRequest("release")),
+                    timeout=timeout,
+                    attachment=attachment,
                 )
             finally:
                 self._undeclare()
@@ -230,7 +231,7 @@ class Lease:
 
     async def show(self) -> dict[str, Any] | None:
         """The lease as the daemon shows it (``holder``, ``fingerprint``, ``since``), None when free."""
-        reply = await self.client.request(self.keys.lease, {"action": "show"})
+        reply = await self.client.request(self.keys.lease, lease_body(LeaseRequest("show")))
         if reply.get("ok") is not True:
             raise UrDaemonError(str(reply.get("reason") or f"lease: no answer to show ({reply})"))
         lease = reply.get("lease")

@@ -3,10 +3,12 @@
 
 A ``RobotClient`` works through the client's session (client/session.py), its command lease
 (client/command_lease.py: acquired before a command, its token attached) and its goals' messages
-(client/goal_messages.py: each goal's signed feedback and result). Cartesian poses are (x, y, z, rx,
-ry, rz): metres and a rotation vector (rad), of the TCP (the robot's current TCP offset applied), in
-the robot's base frame (``frame="base"``, the frame of ``tcp_pose``) or the cell's world frame
-(``frame="world"``, for a robot mounted on ``world``).
+(client/goal_messages.py: each goal's signed feedback and result). Each body it sends is built from
+the message's type next to its decoder in publish/ (``MoveGoalRequest`` and ``move_goal_body`` in
+publish/move_goal.py, and so on), so one module knows each message's fields. Cartesian poses are
+(x, y, z, rx, ry, rz): metres and a rotation vector (rad), of the TCP (the robot's current TCP
+offset applied), in the robot's base frame (``frame="base"``, the frame of ``tcp_pose``) or the
+cell's world frame (``frame="world"``, for a robot mounted on ``world``).
 """
 
 from __future__ import annotations
@@ -42,8 +44,12 @@ from urdaemon.model import (
 )
 from urdaemon.publish import service_requests, services
 from urdaemon.publish.envelope import message_body
+from urdaemon.publish.goal_cancel import cancel_body
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.publish.stream_commands import StreamMessage, TwistMessage
+from urdaemon.publish.linear_goal import LinearGoalRequest, linear_goal_body
+from urdaemon.publish.move_goal import MoveGoalRequest, move_goal_body
+from urdaemon.publish.stream_commands import StreamMessage, TwistMessage, freedrive_body
+from urdaemon.publish.trajectory_goal import TrajectoryGoalRequest, trajectory_goal_body
 
 __all__ = ["GoalHandle", "RobotClient"]
 
@@ -201,14 +207,14 @@ class RobotClient:
 
         ``passthrough``: the robot interpolates the points itself (UR controllers).
         """
-        body: dict[str, Any] = {"points": list(points), "preempt": preempt}
-        if passthrough:
-            body["passthrough"] = True
-        if joint_names is not None:
-            body["joint_names"] = list(joint_names)
-        if tolerances is not None:
-            body["tolerances"] = tolerances
-        return await self._send_goal(self.keys.goal_trajectory, body)
+        goal = TrajectoryGoalRequest(
+            points=tuple(points),
+            preempt=preempt,
+            passthrough=passthrough,
+            joint_names=None if joint_names is None else tuple(joint_names),
+            tolerances=tolerances,
+        )
+        return await self._send_goal(self.keys.goal_trajectory, trajectory_goal_body(goal))
 
     async def move(
         self,
@@ -221,17 +227,15 @@ class RobotClient:
         preempt: bool = False,
     ) -> GoalHandle:
         """Send a point-to-point move goal; raises ``GoalRejected`` with the daemon's reason."""
-        body: dict[str, Any] = {
-            "positions": list(positions),
-            "velocity_scale": velocity_scale,
-            "acceleration_scale": acceleration_scale,
-            "preempt": preempt,
-        }
-        if duration is not None:
-            body["duration"] = duration
-        if joint_names is not None:
-            body["joint_names"] = list(joint_names)
-        return await self._send_goal(self.keys.goal_move, body)
+        goal = MoveGoalRequest(
+            positions=tuple(positions),
+            velocity_scale=velocity_scale,
+            acceleration_scale=acceleration_scale,
+            preempt=preempt,
+            duration=duration,
+            joint_names=None if joint_names is None else tuple(joint_names),
+        )
+        return await self._send_goal(self.keys.goal_move, move_goal_body(goal))
 
     async def move_pose(
         self,
@@ -250,10 +254,17 @@ class RobotClient:
         ``configuration`` (UR models: any of ``shoulder`` "left"/"right", ``elbow`` "up"/"down",
         ``wrist`` "up"/"down"). Raises ``GoalRejected`` with the daemon's reason (out of reach, no
         solution in that configuration, a joint limit...)."""
-        body: dict[str, Any] = {"pose": list(pose), "frame": frame}
-        body.update(velocity_scale=velocity_scale, acceleration_scale=acceleration_scale, preempt=preempt)
-        _put_given(body, configuration=configuration, duration=duration, tolerances=tolerances)
-        return await self._send_goal(self.keys.goal_move, body)
+        goal = MoveGoalRequest(
+            pose=tuple(pose),
+            frame=frame,
+            velocity_scale=velocity_scale,
+            acceleration_scale=acceleration_scale,
+            preempt=preempt,
+            configuration=configuration,
+            duration=duration,
+            tolerances=tolerances,
+        )
+        return await self._send_goal(self.keys.goal_move, move_goal_body(goal))
 
     async def move_linear(
         self,
@@ -273,10 +284,10 @@ class RobotClient:
         m/s², m/s³ and rad/s, rad/s², rad/s³ (left out: the cell's defaults; at most its caps). The
         daemon checks the whole path before motion: ``GoalRejected`` says what and where (a pose out
         of reach, a singularity, a joint limit at some % of a segment)."""
-        body: dict[str, Any] = {"poses": _pose_list(poses), "frame": frame}
-        _put_given(
-            body,
-            blend_radii=None if blend_radii is None else list(blend_radii),
+        goal = LinearGoalRequest(
+            poses=_pose_list(poses),
+            frame=frame,
+            blend_radii=None if blend_radii is None else tuple(blend_radii),
             speed=speed,
             acceleration=acceleration,
             jerk=jerk,
@@ -284,7 +295,7 @@ class RobotClient:
             angular_acceleration=angular_acceleration,
             angular_jerk=angular_jerk,
         )
-        return await self._send_goal(self.keys.goal_linear, body)
+        return await self._send_goal(self.keys.goal_linear, linear_goal_body(goal))
 
     def twist(self, linear: Sequence[float], angular: Sequence[float], *, frame: str = "base") -> None:
         """Publish one twist command: the TCP point's velocity (m/s) and the angular velocity (rad/s),
@@ -332,8 +343,7 @@ class RobotClient:
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
         """Cancel a goal (default: the active one); needs the lease like any command."""
-        body = {} if goal_id is None else {"goal_id": goal_id}
-        return await self._command(self.keys.goal_cancel, body, "canceled", QUERY_TIMEOUT_S)
+        return await self._command(self.keys.goal_cancel, cancel_body(goal_id), "canceled", QUERY_TIMEOUT_S)
 
     async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
         """Set an output; the reply says ok or the reason."""
@@ -402,9 +412,8 @@ class RobotClient:
         """Keep freedrive (hand guiding) on for one deadman period, or end it; repeat while it should
         last. Needs the lease held, as ``stream_positions``."""
         attachment = self._stream_attachment()
-        self.client.session.put(
-            self.keys.command_freedrive, encode_body({"active": active}), attachment=attachment
-        )
+        body = encode_body(freedrive_body(active))
+        self.client.session.put(self.keys.command_freedrive, body, attachment=attachment)
 
     async def start_force_mode(
         self,
@@ -485,14 +494,9 @@ def _commanding(service: str) -> bool:
     return entry.commanding
 
 
-def _put_given(body: dict[str, Any], **fields: object) -> None:
-    """Add each field that is not None to ``body`` (left out: the daemon's default)."""
-    body.update({name: value for name, value in fields.items() if value is not None})
-
-
-def _pose_list(poses: Sequence[float] | Sequence[Sequence[float]]) -> list[Any]:
-    """``poses`` as a list of poses: one pose (six numbers) becomes a list of one."""
+def _pose_list(poses: Sequence[float] | Sequence[Sequence[float]]) -> tuple[Any, ...]:
+    """``poses`` as poses: one pose (six numbers) becomes a list of one."""
     items = list(poses)
     if items and all(isinstance(v, numbers.Real) for v in items):
-        return [items]
-    return [list(p) if isinstance(p, Iterable) and not isinstance(p, str) else p for p in items]
+        return (items,)
+    return tuple(list(p) if isinstance(p, Iterable) and not isinstance(p, str) else p for p in items)

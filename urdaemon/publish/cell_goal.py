@@ -1,6 +1,7 @@
 """The cell goal's message (``<cell>/goal/trajectory``): each robot's trajectory goal and the abort
-policy, split a piece at a time (``CellGoalDecoder``); and the lease tokens a cell request carries
-as its attachment (``decode_lease_tokens``, for the goal and its cancel)."""
+policy, as a client sends it (``CellGoalRequest``, ``cell_goal_body``) and split a piece at a time
+(``CellGoalDecoder``); and the lease tokens a cell request carries as its attachment
+(``lease_tokens_attachment``, ``decode_lease_tokens``, for the goal and its cancel)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,17 @@ from typing import Any
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
 from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES, check_version, client_text
+from urdaemon.publish.trajectory_goal import TrajectoryGoalRequest, trajectory_goal_body
 
-__all__ = ["CELL_GOAL_POLICIES", "CellGoalDecoder", "CellGoalMessage", "decode_lease_tokens"]
+__all__ = [
+    "CELL_GOAL_POLICIES",
+    "CellGoalDecoder",
+    "CellGoalMessage",
+    "CellGoalRequest",
+    "cell_goal_body",
+    "decode_lease_tokens",
+    "lease_tokens_attachment",
+]
 
 CELL_GOAL_POLICIES = ("stop_all", "continue")
 """What a cell goal does when one robot's part ends other than succeeded: stop the others, or not."""
@@ -32,6 +42,27 @@ _TEXT_BYTES = 16 * 1024
 _STRUCTURE = re.compile(rb'[][{}"]')
 _STRING_REST = re.compile(rb'(?:[^"\\]++|\\.)*+"')
 _SPACE = re.compile(rb"[ \t\n\r]{0,4096}")
+
+
+@dataclass(frozen=True, slots=True)
+class CellGoalRequest:
+    """A cell goal as a client sends it: each robot's trajectory goal, and the abort policy."""
+
+    robots: dict[str, TrajectoryGoalRequest | dict[str, Any]]
+    """Each robot's part: a ``TrajectoryGoalRequest``, or a whole trajectory goal body as the program
+    gave it (sent as it is: the robot's decoder checks it)."""
+    on_abort: str = CELL_GOAL_POLICIES[0]
+    """One of ``CELL_GOAL_POLICIES``."""
+
+
+def cell_goal_body(request: CellGoalRequest) -> dict[str, Any]:
+    """The message's fields of ``request`` (``CellGoalDecoder``'s inverse, each part the trajectory
+    decoder's)."""
+    robots = {
+        name: trajectory_goal_body(part) if isinstance(part, TrajectoryGoalRequest) else part
+        for name, part in request.robots.items()
+    }
+    return {"robots": robots, "on_abort": request.on_abort}
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,6 +213,11 @@ def _cell_goal(own: dict[str, Any], robots: dict[str, memoryview] | None) -> Cel
             f"got {fields.shown(on_abort)}"
         )
     return CellGoalMessage(robots, on_abort)
+
+
+def lease_tokens_attachment(tokens: dict[str, str]) -> bytes:
+    """A cell request's attachment: each robot's lease token (``decode_lease_tokens``' inverse)."""
+    return json.dumps(tokens).encode()
 
 
 def decode_lease_tokens(attachment: bytes | None, limit: int = SMALL_MESSAGE_BYTES) -> dict[str, bytes]:

@@ -1,13 +1,22 @@
-"""The decoders of a goal's cancel request: a robot's (``<cell>/<robot>/goal/cancel``, the goal id
-optional) and a cell's (``<cell>/goal/cancel``, the goal id required)."""
+"""A goal's cancel request: a robot's (``<cell>/<robot>/goal/cancel``, the goal id optional) and a
+cell's (``<cell>/goal/cancel``, the goal id required); their decoders and, the client's side, the
+request's body (``cancel_body``)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
 from urdaemon.publish.envelope import client_text, decode_message
 
-__all__ = ["decode_cancel", "decode_cell_cancel"]
+__all__ = ["cancel_body", "decode_cancel", "decode_cell_cancel"]
+
+
+def cancel_body(goal_id: str | None) -> dict[str, Any]:
+    """The cancel request of goal ``goal_id`` (None: the robot's active goal), ``decode_cancel``'s
+    inverse (and ``decode_cell_cancel``'s, given an id)."""
+    return {} if goal_id is None else {"goal_id": goal_id}
 
 
 def decode_cancel(payload: bytes | None) -> str | None:

@@ -1,8 +1,10 @@
 """The linear goal's message (``<cell>/<robot>/goal/linear``): straight TCP lines through a list of
-poses; its type and its decoder, which checks the poses a few at a time."""
+poses; the goal as a client sends it (``LinearGoalRequest``, ``linear_goal_body``), its decoded type
+and its decoder, which checks the poses a few at a time."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Generator
 from dataclasses import dataclass
@@ -10,17 +12,20 @@ from typing import Any
 
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
-from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, decode_message
+from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES, decode_message, message_body
 from urdaemon.publish.fields import MAX_POSE_M, POSE_FRAMES, Pose6, ToleranceMessage
 
 __all__ = [
+    "LINEAR_FIELDS",
     "LINEAR_LIMITS",
     "LINEAR_MESSAGE_BYTES",
     "LINEAR_POSES_PER_LOOK",
     "MAX_LINEAR_POSES",
     "LinearGoalDecoder",
     "LinearGoalMessage",
+    "LinearGoalRequest",
     "decode_linear_goal",
+    "linear_goal_body",
 ]
 
 LINEAR_LIMITS = ("speed", "acceleration", "jerk", "angular_speed", "angular_acceleration", "angular_jerk")
@@ -35,6 +40,37 @@ of full-precision numbers with every field are ~15.6 KB as compact JSON; its pos
 slices (``LinearGoalDecoder``)."""
 LINEAR_POSES_PER_LOOK = 16
 """Poses of a linear goal checked between two looks at the clock (~3 µs each)."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinearGoalRequest:
+    """A linear goal as a client sends it. Each field is the message's field of that name, in this
+    order; None is left out (the daemon's default: no blend, the cell's limits). Values go as given:
+    the daemon checks them and refuses naming the field."""
+
+    poses: tuple[Any, ...]
+    """Each pose [x, y, z, rx, ry, rz] (m, rad)."""
+    frame: str | None = None
+    blend_radii: tuple[float, ...] | None = None
+    """One per corner (``len(poses) - 1``), m."""
+    speed: float | None = None
+    acceleration: float | None = None
+    jerk: float | None = None
+    angular_speed: float | None = None
+    angular_acceleration: float | None = None
+    angular_jerk: float | None = None
+    tolerances: dict[str, Any] | None = None
+    """``path``, ``goal`` (a number, or one per joint), ``goal_time`` (s)."""
+
+
+LINEAR_FIELDS = frozenset(item.name for item in dataclasses.fields(LinearGoalRequest))
+"""The fields of a linear goal (``LINEAR_LIMITS`` among them)."""
+
+
+def linear_goal_body(request: LinearGoalRequest) -> dict[str, Any]:
+    """The message's fields of ``request`` (the linear decoder's inverse): tuples as lists, None left
+    out."""
+    return message_body(request)
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,7 +109,7 @@ class LinearGoalDecoder:
     def __init__(self, payload: bytes | None) -> None:
         what = self._what = "linear goal"
         data = decode_message(payload, what, max_bytes=LINEAR_MESSAGE_BYTES)
-        fields.allowed(data, what, {"poses", "frame", "blend_radii", "tolerances", *LINEAR_LIMITS})
+        fields.allowed(data, what, set(LINEAR_FIELDS))
         raw = data.get("poses")
         if not isinstance(raw, list) or not raw:
             raise MessageError(f"{what}.poses: expected a list of one or more poses [x, y, z, rx, ry, rz]")

@@ -1,36 +1,61 @@
 """The move goal's message (``<cell>/<robot>/goal/move``): point to point, to joint positions or to a
-TCP pose; its type and its decoder."""
+TCP pose; the goal as a client sends it (``MoveGoalRequest``, ``move_goal_body``), its decoded type
+and its decoder."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
 from urdaemon.control.trajectory import MAX_GOAL_TIME_S
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
-from urdaemon.publish.envelope import decode_message
+from urdaemon.publish.envelope import decode_message, message_body
 from urdaemon.publish.fields import POSE_FRAMES, Pose6, ToleranceMessage
 
-__all__ = ["CONFIGURATIONS", "MOVE_FIELDS", "MoveGoalMessage", "decode_move_goal"]
+__all__ = [
+    "CONFIGURATIONS",
+    "MOVE_FIELDS",
+    "MoveGoalMessage",
+    "MoveGoalRequest",
+    "decode_move_goal",
+    "move_goal_body",
+]
 
 CONFIGURATIONS = {"shoulder": ("left", "right"), "elbow": ("up", "down"), "wrist": ("up", "down")}
 """A pose goal's ``configuration``: each joint group it may name and the values it may take."""
-MOVE_FIELDS = frozenset(
-    {
-        "joint_names",
-        "positions",
-        "pose",
-        "frame",
-        "configuration",
-        "duration",
-        "velocity_scale",
-        "acceleration_scale",
-        "tolerances",
-        "preempt",
-    }
-)
+
+
+@dataclass(frozen=True, slots=True)
+class MoveGoalRequest:
+    """A move goal as a client sends it: to joint ``positions``, or to a TCP ``pose`` (with ``frame``
+    and ``configuration``, a pose goal's only). Each field is the message's field of that name, in
+    this order; None is left out (the daemon's default). Values go as given: the daemon checks them
+    and refuses naming the field."""
+
+    positions: tuple[float, ...] | None = None
+    pose: tuple[float, ...] | None = None
+    frame: str | None = None
+    velocity_scale: float | None = None
+    acceleration_scale: float | None = None
+    preempt: bool | None = None
+    configuration: dict[str, str] | None = None
+    """Joint group → value (``{"elbow": "up"}``, ``CONFIGURATIONS``)."""
+    duration: float | None = None
+    joint_names: tuple[str, ...] | None = None
+    tolerances: dict[str, Any] | None = None
+    """``path``, ``goal`` (a number, or one per joint), ``goal_time`` (s)."""
+
+
+MOVE_FIELDS = frozenset(item.name for item in dataclasses.fields(MoveGoalRequest))
 """The fields of a move goal (``pose``, ``frame``, ``configuration``: a pose goal's)."""
+
+
+def move_goal_body(request: MoveGoalRequest) -> dict[str, Any]:
+    """The message's fields of ``request`` (``decode_move_goal``'s inverse): tuples as lists, None
+    left out."""
+    return message_body(request)
 
 
 @dataclass(frozen=True, slots=True)

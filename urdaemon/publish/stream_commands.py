@@ -1,12 +1,14 @@
 """The decoders of the streaming commands (``<cell>/<robot>/command/<name>``): joint positions, joint
 velocities, a twist, freedrive. Each returns the typed command or raises ``MessageError`` naming the
-field; the runtime's commands (runtime/commands.py) act on them.
+field; the runtime's commands (runtime/commands.py) act on them. A client sends the typed commands as
+``message_body`` gives them (envelope.py), freedrive's as ``freedrive_body``.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
@@ -20,6 +22,7 @@ __all__ = [
     "decode_stream_position",
     "decode_stream_velocity",
     "decode_twist",
+    "freedrive_body",
 ]
 
 TWIST_FRAMES = ("base", "tool")
@@ -95,3 +98,8 @@ def decode_freedrive(payload: bytes | None) -> bool:
     data = decode_message(payload, what)
     fields.allowed(data, what, {"active"})
     return fields.boolean(data, "active", what, default=True)
+
+
+def freedrive_body(active: bool) -> dict[str, Any]:
+    """A freedrive command's fields (``decode_freedrive``'s inverse)."""
+    return {"active": active}

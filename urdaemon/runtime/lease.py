@@ -17,31 +17,24 @@ constant-time compare, and never sees a half-made change.
 from __future__ import annotations
 
 import hmac
-import re
 import secrets
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
-from urdaemon.errors import MessageError
-from urdaemon.model import HOLDER_MAX_CHARS, TOKEN_BYTES, fingerprint
-from urdaemon.publish.envelope import client_text, decode_message
+from urdaemon.model import TOKEN_BYTES, fingerprint
+from urdaemon.publish.lease_request import LeaseRequest
 
 __all__ = [
     "LEASE_BIND_TIMEOUT_S",
     "Lease",
     "LeaseBook",
     "LeaseOutcome",
-    "LeaseRequest",
     "LeaseView",
-    "parse_request",
 ]
 
 LEASE_BIND_TIMEOUT_S = 2.0
 """How long an acquire waits for the client's liveliness token before it is refused."""
-_SESSION = re.compile(r"[A-Za-z0-9_-]{16,64}")
-_ACTIONS = ("show", "acquire", "release")
-_FIELDS = {"v", "action", "session", "holder", "force", "reason"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,17 +80,6 @@ class LeaseView:
 
 
 @dataclass(frozen=True, slots=True)
-class LeaseRequest:
-    """A decoded request to the lease queryable."""
-
-    action: str
-    session: str = ""
-    holder: str = ""
-    force: bool = False
-    reason: str = ""
-
-
-@dataclass(frozen=True, slots=True)
 class LeaseOutcome:
     """What a decision means: the reply, and what the keeper must do."""
 
@@ -108,36 +90,6 @@ class LeaseOutcome:
     """Stop whatever moves the robot, for this reason."""
     warning: str | None = None
     """Logged as a warning."""
-
-
-def parse_request(payload: bytes | None) -> LeaseRequest:
-    """A lease request from its payload; ``MessageError`` naming what is wrong."""
-    data = decode_message(payload, "lease")
-    unknown = sorted(set(data) - _FIELDS)
-    if unknown:
-        raise MessageError(f"lease: unknown field(s) {', '.join(client_text(k, 40) for k in unknown[:3])}")
-    action = data.get("action")
-    if action not in _ACTIONS:
-        raise MessageError(
-            f"lease: 'action' must be one of {', '.join(_ACTIONS)}, not {client_text(repr(action), 40)}"
-        )
-    if action != "acquire":
-        return LeaseRequest(action)
-    session, holder = data.get("session"), data.get("holder")
-    if not isinstance(session, str) or not _SESSION.fullmatch(session):
-        raise MessageError(
-            "lease: 'session' must be 16 to 64 characters of A-Z, a-z, 0-9, '_' and '-' "
-            "(a secret chosen per lease)"
-        )
-    if not isinstance(holder, str) or not 0 < len(holder) <= HOLDER_MAX_CHARS or not holder.isprintable():
-        raise MessageError(f"lease: 'holder' must be 1 to {HOLDER_MAX_CHARS} printable characters")
-    force = data.get("force", False)
-    if not isinstance(force, bool):
-        raise MessageError("lease: 'force' must be true or false")
-    reason = data.get("reason", "")
-    if not isinstance(reason, str) or (force and not reason.strip()):
-        raise MessageError("lease: 'reason' must be a non-empty text saying why, to take the lease over")
-    return LeaseRequest(action, session, holder, force, client_text(reason, 200))
 
 
 class LeaseBook:

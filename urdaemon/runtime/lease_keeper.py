@@ -23,9 +23,10 @@ from urdaemon.errors import MessageError
 from urdaemon.publish.admission import attachment_of
 from urdaemon.publish.endpoints import ROBOT, Endpoint
 from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.publish.lease_request import LeaseRequest, parse_request
 from urdaemon.publish.liveliness import LivelinessWatch
 from urdaemon.publish.node import ZenohNode
-from urdaemon.runtime.lease import LEASE_BIND_TIMEOUT_S, LeaseBook, LeaseOutcome, LeaseRequest, parse_request
+from urdaemon.runtime.lease import LEASE_BIND_TIMEOUT_S, LeaseBook, LeaseOutcome
 from urdaemon.runtime.motion import How, RobotMotion
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, payload, reply
 from urdaemon.runtime.status import StatusPublisher
