@@ -59,9 +59,9 @@ def encode(message: dict[str, Any]) -> bytes:
 
 
 def message_body(message: object, renamed: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """A message type (a dataclass of model.py or publish/ that a decoder returns) as the fields a
-    client sends: tuples as lists, a None field left out (the daemon's default), a field whose name
-    on the wire differs as ``renamed`` says."""
+    """A message type (a dataclass of model.py or publish/: what a decoder returns or a client's
+    request) as the fields a client sends: tuples as lists, a None field left out (the daemon's
+    default), a field whose name on the wire differs as ``renamed`` says."""
     body: dict[str, Any] = {}
     for item in dataclasses.fields(message):  # type: ignore[arg-type]
         value = getattr(message, item.name)
