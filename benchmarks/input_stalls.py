@@ -38,6 +38,7 @@ from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.protocols import trajectory_point
 from urdaemon.publish.envelope import SMALL_MESSAGE_BYTES
+from urdaemon.publish.lease_request import LeaseRequest, lease_body
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
@@ -246,7 +247,7 @@ def _lease(session: Any) -> tuple[bytes, Any]:
     attach, and the liveliness token to keep while it is held."""
     secret = secrets.token_hex(16)  # the lease's session id: only its holder knows it
     held = session.liveliness().declare_token(f"stalls/alice/lease/{secret}")
-    body = json.dumps({"action": "acquire", "session": secret, "holder": "input_stalls benchmark"})
+    body = json.dumps(lease_body(LeaseRequest("acquire", secret, "input_stalls benchmark")))
     replies = [
         r.ok.payload.to_bytes() for r in session.get("stalls/alice/lease", payload=body, timeout=10.0) if r.ok
     ]
