@@ -25,14 +25,7 @@ SAME_JOB: dict[str, str] = {
 }
 """Basenames that repeat with one meaning: the same job, one per package."""
 
-STILL_SHARED: dict[str, set[str]] = {
-    # runtime/commands.py (a robot's streaming commands) vs introspect/commands.py (the `list`, `info`
-    # and `hz` commands of the CLI); not renamed in the helper that added this test: neither is its file
-    "commands": {"urdaemon/runtime/commands.py", "urdaemon/introspect/commands.py"},
-    # foxglove_bridge/plan.py (the channels served over Foxglove) vs replay/plan.py (recorded joint
-    # states → cell goals); likewise left to their owners
-    "plan": {"urdaemon/foxglove_bridge/plan.py", "urdaemon/replay/plan.py"},
-}
+STILL_SHARED: dict[str, set[str]] = {}
 """Basenames still shared with two meanings, and their modules today."""
 
 

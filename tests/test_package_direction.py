@@ -27,14 +27,7 @@ DOC = ROOT / "docs" / "architecture.md"
 HEADER = "| package | job | may use |"
 BASE_LINE = "Every package may also use"
 
-STILL_CROSSING: dict[tuple[str, str], str] = {
-    # runtime/ is one robot's runtime and sits under robot.py; these two modules are the cell's parts
-    # (daemon.py builds them over every robot) and name RobotRuntime: the one at run time, the other
-    # under TYPE_CHECKING. Fix: move them beside daemon.py (the cell's runtime), or have them take a
-    # small protocol of what they use of a robot, declared in runtime/.
-    ("urdaemon.runtime.cell_goals", "urdaemon.robot"): "the cell goal names RobotRuntime (TYPE_CHECKING)",
-    ("urdaemon.runtime.daemon_info", "urdaemon.robot"): "the daemon's self-description reads RobotRuntime",
-}
+STILL_CROSSING: dict[tuple[str, str], str] = {}
 """(importing module, imported module) → why it is still allowed: imports that break the table today.
 Take an entry off when its import is gone (the test says so); never add one."""
 

@@ -28,7 +28,6 @@ from urdaemon.publish.endpoints import ROBOT, Endpoint, declare_endpoints, read_
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
-from urdaemon.runtime.commands import Commands
 from urdaemon.runtime.goal_events import GoalEvents
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.lease import LeaseBook
@@ -38,6 +37,7 @@ from urdaemon.runtime.pose_goals import Cartesian
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests
 from urdaemon.runtime.service_runner import ServiceRunner
 from urdaemon.runtime.status import StatusPublisher, tool_link
+from urdaemon.runtime.streaming import Commands
 
 __all__ = ["RESTART_BACKOFF_S", "RobotRuntime"]
 

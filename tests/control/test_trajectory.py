@@ -404,7 +404,8 @@ def _dense_points(n: int) -> list[TrajectoryPoint]:
     return [*points, TrajectoryPoint(points[-1].positions, points[-1].time_from_start + 1.0)]
 
 
-def test_stepwise_planning_equals_one_shot_planning() -> None:
+def test_stepwise_planning_equals_one_shot_planning(monkeypatch: pytest.MonkeyPatch) -> None:
+    from urdaemon.control import trajectory
     from urdaemon.control.trajectory import TrajectoryPlanner
 
     points = _dense_points(40)
@@ -418,10 +419,18 @@ def test_stepwise_planning_equals_one_shot_planning() -> None:
         steps += 1
         if not tail.step():
             break
-    assert planner.tail_done
     assert steps == len(points) - 1, "one step per tail segment"
     assert tail.step() is False
+    calls: list[str] = []
+
+    def counted(otg: Ruckig, inp: InputParameter, what: str) -> Trajectory:
+        calls.append(what)
+        return calculate(otg, inp, what)
+
+    monkeypatch.setattr(trajectory, "calculate", counted)
     stepped = planner.finish([0.0] * 6, start_v, start_a)
+    monkeypatch.undo()
+    assert calls == ["point 0"], "the whole tail was planned in the steps: finish plans segment 0 only"
     assert stepped.duration == pytest.approx(whole.duration, abs=1e-12)
     assert stepped.segment_count == whole.segment_count == len(points)
     for k in range(1001):

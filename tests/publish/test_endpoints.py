@@ -12,6 +12,7 @@ import pytest
 
 from tests.integration.conftest import TWO_MOCKS
 from urdaemon.cell import parse_cell
+from urdaemon.cell.robot_options import READ_ONLY_REASON
 from urdaemon.cell.zenoh_options import AccessOptions
 from urdaemon.control import MotionController
 from urdaemon.daemon import describe_cell, make_backend
@@ -20,7 +21,6 @@ from urdaemon.publish.access import ACTIONS, ANYONE, access_control, grant_key
 from urdaemon.publish.endpoints import (
     CELL,
     CELL_ENDPOINTS,
-    READ_ONLY_REASON,
     ROBOT,
     ROBOT_ENDPOINTS,
     Audience,

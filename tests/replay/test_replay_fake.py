@@ -2,7 +2,7 @@
 recorded on the fake cell, replayed on it, follows the recorded (measured) path within 1e-4 rad.
 
 The fake arm lags and smooths what it is commanded, so its measured moves last longer than they were
-planned; the replay times each move by the recorded result of the goal that made it (plan.py,
+planned; the replay times each move by the recorded result of the goal that made it (goal_plan.py,
 ``moves``), so the fake is commanded the same plan again. The residual is where the arm came to rest
 before each run, a hair off the commanded position. The measured worst error is printed."""
 

@@ -62,8 +62,7 @@ def test_tokens_nobody_watches_are_dropped_and_nothing_is_kept_of_them() -> None
     watch.watch("c/alice/lease/mine")
     for n in range(5000):
         watch.on_sample(came(f"c/zz/lease/s{n}"))
-    assert watch.tracked == 1, "only the key asked about"
-    assert watch.ignored == 5000
+    assert watch.ignored == 5000, "every sample of a key nobody asked about dropped, none kept"
     assert asked == []
     assert not watch.alive("c/zz/lease/s0")
     watch.on_sample(came("c/alice/lease/mine"))
@@ -79,7 +78,9 @@ def test_a_key_is_forgotten_when_the_last_part_watching_it_lets_go() -> None:
     watch.unwatch("k")
     assert watch.alive("k"), "still watched once"
     watch.unwatch("k")
-    assert watch.tracked == 0
+    assert not watch.alive("k")
+    watch.on_sample(came("k"))
+    assert watch.ignored == 1, "forgotten: its samples are dropped as anyone's"
     assert not watch.alive("k")
     watch.watch("k")
     assert not watch.alive("k"), "watched anew: nothing heard yet"
@@ -97,8 +98,9 @@ def test_a_probe_answer_counts_only_if_no_sample_came_since_the_key_was_watched(
     watch.on_sample(went("gone"))
     watch.heard("gone")  # an answer made before the token went, arriving after its DELETE
     assert not watch.alive("gone")
+    assert watch.ignored == 0
     watch.heard("unwatched")
-    assert watch.tracked == 2
+    assert watch.ignored == 1, "an answer for a key nobody watches is dropped, nothing kept"
     assert not watch.alive("unwatched")
 
 

@@ -62,7 +62,8 @@ class UrRun:
         backend.on_notice = self._on_notice
         backend.on_change = self._on_change
 
-    def _on_cycle(self) -> None:
+    def on_cycle(self) -> None:
+        """Count a cycle the backend ran (its ``run``'s ``on_cycle``, or called after the owner's)."""
         self.cycles += 1
         primary = self.backend.links.primary
         if primary is not None and not getattr(primary, "_counted", False):
@@ -91,7 +92,7 @@ class UrRun:
 
     def start(self) -> None:
         """Start ``backend.run``."""
-        self.task = asyncio.get_running_loop().create_task(self.backend.run(self._on_cycle))
+        self.task = asyncio.get_running_loop().create_task(self.backend.run(self.on_cycle))
         self.task.add_done_callback(lambda _: self._tick.set())  # a failed run ticks no more
 
     async def until(self, predicate: Callable[[], bool], *, timeout: float = 30.0, what: str = "") -> None:

@@ -13,9 +13,10 @@ import pytest
 
 from tests.helpers import acquire_lease, fake_address, free_tcp_port, zenoh_ask
 from tests.integration.conftest import running_daemon
+from urdaemon.cell.robot_options import READ_ONLY_REASON
 from urdaemon.fakeur.controller import FakeController
 from urdaemon.publish import services
-from urdaemon.publish.endpoints import READ_ONLY_REASON, ROBOT, ROBOT_ENDPOINTS, Kind, ReadOnly
+from urdaemon.publish.endpoints import ROBOT, ROBOT_ENDPOINTS, Kind, ReadOnly
 from urdaemon.publish.envelope import encode
 
 pytestmark = pytest.mark.timeout(120)

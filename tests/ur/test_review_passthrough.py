@@ -6,7 +6,7 @@ fake queries); waits are on cycles and replies, bounded in time."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 import pytest
@@ -24,6 +24,19 @@ from urdaemon.protocols import trajectory_point
 from urdaemon.robot import RobotRuntime
 
 pytestmark = pytest.mark.timeout(90)
+
+
+class CountedUrBackend(UrBackend):
+    """The ur backend; ``after_cycle`` runs after each cycle, once the runtime's work of it is done."""
+
+    after_cycle: Callable[[], None] = staticmethod(lambda: None)
+
+    async def run(self, on_cycle: Callable[[], None]) -> None:
+        def cycle() -> None:
+            on_cycle()
+            self.after_cycle()
+
+        await super().run(cycle)
 
 
 @asynccontextmanager
@@ -49,18 +62,12 @@ robots:
     limits = describe_cell(cell).limits["alice"]
     fake = FakeController("ur10e", address=address, initial_positions=HOME)
     await fake.start()
-    backend = UrBackend(robot, limits.names, expected_hash=None)
+    backend = CountedUrBackend(robot, limits.names, expected_hash=None)
     run = UrRun(backend, fake)
+    backend.after_cycle = run.on_cycle
     controller = MotionController(limits, period=backend.period)
     runtime = RobotRuntime(cell.cell, robot, backend, controller, Node(), cell.publish)  # type: ignore[arg-type]
     runtime.declare()
-    on_cycle = runtime._on_cycle
-
-    def counted() -> None:
-        on_cycle()
-        run._on_cycle()
-
-    runtime._on_cycle = counted  # type: ignore[method-assign]
     task = asyncio.create_task(runtime.run())
     run.task = task
     try:
@@ -91,13 +98,15 @@ async def test_a_segment_longer_than_the_protocol_carries_is_refused_and_leaves_
             "passthrough: point 4: a segment of 2200 s is longer than the robot can take"
             " (at most 2147 s between two points)"
         ), answer
-        assert runtime.controller.external_goal_id is None
+        assert runtime.controller.active_goal_id is None, "no goal kept, passthrough or other"
+        assert runtime.controller.mode == "idle"
         assert run.backend.passthrough_problem() is None, "no START went out"
         good = Query("review/alice/goal/trajectory", trajectory(5, passthrough=True))
         runtime.goals.on_trajectory_goal(good)
         accepted = await good.answer()
         assert accepted["accepted"] is True, accepted
-        assert runtime.controller.external_goal_id == accepted["goal_id"]
+        assert runtime.controller.active_goal_id == accepted["goal_id"]
+        assert runtime.controller.mode == "external", "the robot interpolates it (passthrough)"
 
 
 async def test_the_backend_encodes_a_point_at_a_time_and_sends_pre_encoded_points() -> None:

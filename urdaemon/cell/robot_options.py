@@ -24,6 +24,7 @@ from urdaemon.urscript import (
 __all__ = [
     "CARTESIAN_PAIRS",
     "NAME_PATTERN",
+    "READ_ONLY_REASON",
     "TCP_MAX_OFFSET_M",
     "TCP_MAX_ROTATION_RAD",
     "CartesianOptions",
@@ -45,6 +46,9 @@ NAME_PATTERN = r"^[a-z][a-z0-9_]{0,30}$"
 _LOOKAHEAD = SERVOJ_LOOKAHEAD_RANGE_S
 _GAIN = (int(SERVOJ_GAIN_RANGE[0]), int(SERVOJ_GAIN_RANGE[1]))
 """servoj's limits (urscript.py), the gain as the whole numbers the cell file takes."""
+READ_ONLY_REASON = "read-only robot (ur.read_only: true): it is watched, not commanded"
+"""What a read-only robot (``UrOptions.read_only``) answers to whatever would command it: the
+endpoints' refusals (publish/endpoints.py) and the UR backend's own (backends/ur/links.py)."""
 
 
 def check_host(value: str, what: str) -> str:

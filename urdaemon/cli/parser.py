@@ -18,7 +18,7 @@ __all__ = ["TOOL_MODULES", "build_parser"]
 TOOL_MODULES: tuple[str, ...] = (
     "urdaemon.introspect.doctor_command",
     "urdaemon.foxglove_bridge.command",
-    "urdaemon.introspect.commands",
+    "urdaemon.introspect.list_info_hz",
     "urdaemon.recording.record_command",
     "urdaemon.replay.command",
     "urdaemon.router",

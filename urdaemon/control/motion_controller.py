@@ -138,11 +138,6 @@ class MotionController:
         return self._goal.goal_id if self._goal is not None else None
 
     @property
-    def external_goal_id(self) -> str | None:
-        """The id of the running passthrough goal, or None."""
-        return self._goal.goal_id if self._goal is not None and self._mode is Mode.EXTERNAL else None
-
-    @property
     def has_events(self) -> bool:
         """True when feedback or results wait to be drained (cheap: checked every cycle)."""
         return bool(self._events)

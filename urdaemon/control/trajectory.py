@@ -253,11 +253,6 @@ class TrajectoryPlanner:
         """The velocity at each point: the client's, else the chosen one (0 at the last)."""
         return list(self._velocities)
 
-    @property
-    def tail_done(self) -> bool:
-        """True when every segment after the first is planned."""
-        return self._segments is None or len(self._segments) == len(self.points)
-
     def tail_steps(self) -> Generator[None, None, None]:
         """Plan the tail, one segment per step (the runtime runs them in slices). Raises GoalRejected."""
         while self._plan_next():

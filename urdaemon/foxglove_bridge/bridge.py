@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Any, cast
 
 from urdaemon.cell_lookup import cell_description, served_cell
 from urdaemon.client import Client, default_holder
+from urdaemon.foxglove_bridge.channel_plan import ChannelPlan, channel_plan
 from urdaemon.foxglove_bridge.convert import description_record, records_of
 from urdaemon.foxglove_bridge.handoff import Handoff
-from urdaemon.foxglove_bridge.plan import ChannelPlan, channel_plan
 from urdaemon.recording.channels import DESCRIPTION_TOPIC
 from urdaemon.recording.tf_tree import joint_links
 

@@ -21,8 +21,9 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
+from urdaemon.cell.robot_options import READ_ONLY_REASON, Robot
 from urdaemon.errors import MessageError
 from urdaemon.publish.admission import Guard, refuse_query
 from urdaemon.publish.cell_goal import CellGoalMessage
@@ -34,13 +35,9 @@ from urdaemon.publish.services import SERVICES, STOP, ServiceSpec
 from urdaemon.publish.stream_commands import StreamMessage, TwistMessage
 from urdaemon.publish.trajectory_goal import TrajectoryGoalMessage
 
-if TYPE_CHECKING:
-    from urdaemon.cell.robot_options import Robot
-
 __all__ = [
     "CELL",
     "CELL_ENDPOINTS",
-    "READ_ONLY_REASON",
     "ROBOT",
     "ROBOT_ENDPOINTS",
     "Audience",
@@ -54,9 +51,6 @@ __all__ = [
     "read_only_reason",
     "service_row",
 ]
-
-READ_ONLY_REASON = "read-only robot (ur.read_only: true): it is watched, not commanded"
-"""What a read-only robot answers to a commanding message (the UR backend's own refusal reads the same)."""
 
 
 class Node(Protocol):

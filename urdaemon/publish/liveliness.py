@@ -38,12 +38,6 @@ class LivelinessWatch:
         self.ignored = 0
         """Samples of keys nobody watched, dropped (a count, nothing kept of them)."""
 
-    @property
-    def tracked(self) -> int:
-        """How many keys the watch keeps state for (only those asked about)."""
-        with self._lock:
-            return len(self._wanted)
-
     def watch(self, key: str) -> None:
         """Keep what is heard of ``key`` from now on (until as many ``unwatch`` calls)."""
         with self._lock:

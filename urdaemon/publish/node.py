@@ -92,7 +92,6 @@ class ZenohNode:
             raise UrDaemonError(f"cannot open Zenoh session (listen {list(endpoints)}): {err}") from err
         self._entities: list[Any] = []
         self._closed = False
-        self._flights: dict[str, InFlight] = {}
         self._asker: ThreadPoolExecutor | None = None
         """Sends liveliness queries off the loop (``liveliness_watch``)."""
         self.latest: dict[str, Latest] = {}
@@ -199,16 +198,8 @@ class ZenohNode:
                 return
             self._to_loop_counted(flight, work, query)
 
-        flight = self._flight(key)
+        flight = InFlight(MAX_IN_FLIGHT)  # this key's messages waiting for the loop
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
-
-    def in_flight(self, key: str) -> InFlight:
-        """The in-flight counter of a queryable declared on ``key`` (its ``refused`` count)."""
-        return self._flights[key]
-
-    def _flight(self, key: str) -> InFlight:
-        flight = self._flights[key] = InFlight(MAX_IN_FLIGHT)
-        return flight
 
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
@@ -221,7 +212,7 @@ class ZenohNode:
             else:  # others may answer it; this one stays silent rather than queue without bound
                 _drop(query)
 
-        flight = self._flight(key)
+        flight = InFlight(MAX_IN_FLIGHT)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=False))
 
     def subscriber(

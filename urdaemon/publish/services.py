@@ -117,11 +117,6 @@ class ServiceSpec:
     this decoded request (None: it only reads, so it is served). Without it a read-only robot refuses
     a commanding service whole (publish/endpoints.py)."""
 
-    @property
-    def payloadless(self) -> bool:
-        """True when the request is nothing, ``{}`` or ``{"v": 1}``."""
-        return self.request is None
-
 
 def _without_arguments(name: str) -> Callable[[bytes | None], None]:
     """The decoder of a service without arguments: garbage is refused, so it never acts."""

@@ -1,6 +1,6 @@
 """``urdaemon replay``: a recording driven through a cell again, or published again (docs/replay.md).
 
-``plan.py`` turns recorded joint states into goals (pure), ``source.py`` reads what a replay needs of
+``goal_plan.py`` turns recorded joint states into goals (pure), ``source.py`` reads what a replay needs of
 a recording, ``drive.py`` sends the goals, ``publish.py`` publishes the recording, ``command.py`` is
 the command.
 """

@@ -1,6 +1,6 @@
 """Driving a cell through a recorded motion: check that the daemon serves the recording's cell with
 the same robots and joints, move each robot to where the recording starts (one move goal each, at
-once), then send the plan's cell goals one after another (plan.py). Ctrl-C cancels whatever goal
+once), then send the plan's cell goals one after another (goal_plan.py). Ctrl-C cancels whatever goal
 runs (the robots stop), as ``urdaemon move`` does.
 
 The goals take each robot's command lease like any client (``Client.robot``, ``send_cell_trajectory``).
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 from urdaemon.client import CellGoalHandle, Client, GoalHandle, send_cell_trajectory
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.replay.plan import Plan, Track, make_plan
+from urdaemon.replay.goal_plan import Plan, Track, make_plan
 from urdaemon.replay.source import RecordedCell, mismatch, sample_period
 
 if TYPE_CHECKING:
@@ -69,7 +69,7 @@ class Drive:
     err: TextIO
     out: TextIO
     mode: str | None = None
-    """``samples`` or ``moves`` (plan.py); None: chosen by the rate."""
+    """``samples`` or ``moves`` (goal_plan.py); None: chosen by the rate."""
 
     async def run(self) -> int:
         """Check, plan, drive; the exit code (130 after Ctrl-C, the goal canceled first)."""
@@ -108,7 +108,7 @@ class Drive:
         return mismatch(self.recorded, self.cell, names, self.robots)
 
     def plan(self) -> Plan:
-        """The plan of the chosen robots' motion (plan.py)."""
+        """The plan of the chosen robots' motion (goal_plan.py)."""
         config = {r.name: r for r in self.cell.robots}
         tracks = [
             Track(

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from urdaemon.errors import ConfigError
 from urdaemon.recording.mcap_file import Recorded, read_recording
-from urdaemon.replay.plan import Sample
+from urdaemon.replay.goal_plan import Sample
 
 if TYPE_CHECKING:
     from urdaemon.cell.config import Cell

@@ -11,7 +11,7 @@
 - ``pose_goals.py``: a pose goal's IK and a linear goal's plan, in steps;
 - ``passthrough.py``: goals the robot interpolates itself;
 - ``cell_goals.py``: trajectories started together on several robots;
-- ``commands.py``: streaming and freedrive commands;
+- ``streaming.py``: streaming and freedrive commands;
 - ``service_runner.py``: the service table's runner (publish/services.py declares the services);
 - ``lease.py``, ``lease_keeper.py``: the command lease, decided and served.
 """

@@ -37,8 +37,9 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
+from urdaemon.cell.robot_options import Robot
 from urdaemon.control import GoalResult, GoalStatus
 from urdaemon.errors import GoalRejected, MessageError, UrDaemonError
 from urdaemon.publish import cell_goal, envelope, goal_cancel, signing
@@ -47,15 +48,13 @@ from urdaemon.publish.endpoints import CELL, Endpoint
 from urdaemon.publish.keys import CellKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.runtime.goal_events import KEPT_RESULTS, put_signed
-from urdaemon.runtime.goals import PlannedGoal
-from urdaemon.runtime.motion import Ticket
+from urdaemon.runtime.goals import Goals, PlannedGoal
+from urdaemon.runtime.lease_keeper import LeaseKeeper
+from urdaemon.runtime.motion import RobotMotion, Ticket
 from urdaemon.runtime.queries import SHUTTING_DOWN, Requests, internal_error, payload, reply
 from urdaemon.runtime.slicing import release, sliced
 
-if TYPE_CHECKING:
-    from urdaemon.robot import RobotRuntime
-
-__all__ = ["NO_TOKENS", "PASSTHROUGH_REFUSED", "CellGoals", "lease_refusal"]
+__all__ = ["NO_TOKENS", "PASSTHROUGH_REFUSED", "CellGoals", "CellRobot", "lease_refusal"]
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +71,28 @@ NO_TOKENS = (
 """Why a cell goal without lease tokens is refused (while the cell checks leases)."""
 
 
-def lease_refusal(runtime: RobotRuntime, token: bytes | None) -> str | None:
+class CellRobot(Protocol):
+    """What the cell goal uses of each of its robots: their parts of the runtime (robot.py's
+    ``RobotRuntime`` is one; daemon.py hands over each of its own)."""
+
+    @property
+    def robot(self) -> Robot:
+        """The robot's options: its name."""
+
+    @property
+    def goals(self) -> Goals:
+        """Its goals: each part planned, checked, started, stopped, cancelled as its own goal."""
+
+    @property
+    def motion(self) -> RobotMotion:
+        """Its motion: the generation a part is asked in, the gate claimed while the part plans."""
+
+    @property
+    def lease(self) -> LeaseKeeper:
+        """Its command lease: whose token may command it."""
+
+
+def lease_refusal(runtime: CellRobot, token: bytes | None) -> str | None:
     """Why ``token`` may not command ``runtime``'s robot (its command lease, as the robot's own goal
     queryables check it); None: it may."""
     return runtime.lease.book.refusal(token)
@@ -100,7 +120,7 @@ class _CellRun:
 class CellGoals:
     """Owns the cell goal queryables, the cell goals that run, their results and the abort policy."""
 
-    def __init__(self, node: ZenohNode, keys: CellKeys, runtimes: Sequence[RobotRuntime]) -> None:
+    def __init__(self, node: ZenohNode, keys: CellKeys, runtimes: Sequence[CellRobot]) -> None:
         self._node = node
         self._keys = keys
         self._robots = {runtime.robot.name: runtime for runtime in runtimes}
@@ -187,7 +207,7 @@ class CellGoals:
             self._runtime(name)
         self._check_leases(list(tokens), tokens)
 
-    def _runtime(self, name: str) -> RobotRuntime:
+    def _runtime(self, name: str) -> CellRobot:
         runtime = self._robots.get(name)
         if runtime is None:
             raise GoalRejected(
@@ -196,7 +216,7 @@ class CellGoals:
             )
         return runtime
 
-    def _parts(self, request: CellGoalMessage, tokens: dict[str, bytes]) -> list[tuple[str, RobotRuntime]]:
+    def _parts(self, request: CellGoalMessage, tokens: dict[str, bytes]) -> list[tuple[str, CellRobot]]:
         """The robots of ``request``, each served here and commanded by its lease token, else refused."""
         parts = [(name, self._runtime(name)) for name in request.robots]
         self._check_leases([name for name, _ in parts], tokens)

@@ -16,19 +16,53 @@ import os
 import socket
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 from urdaemon import __version__
+from urdaemon.backends.base import Backend
 from urdaemon.cell.config import Cell
 from urdaemon.cell.robot_options import Robot
 from urdaemon.model import JointLimits
 from urdaemon.publish import envelope
+from urdaemon.publish.endpoints import ROBOT, ROBOT_ENDPOINTS, Kind
 from urdaemon.publish.keys import CellKeys, RobotKeys
-from urdaemon.robot import RobotRuntime
 
-__all__ = ["DaemonInfo", "robot_keys", "ur_ports"]
+__all__ = ["DaemonInfo", "DescribedRobot", "robot_keys", "ur_ports"]
 
 log = logging.getLogger(__name__)
+
+
+class _Poses(Protocol):
+    @property
+    def available(self) -> bool:
+        """Whether the robot publishes its TCP pose."""
+
+
+class DescribedRobot(Protocol):
+    """What the daemon's self-description reads of each robot (robot.py's ``RobotRuntime`` is one)."""
+
+    @property
+    def robot(self) -> Robot:
+        """Its options: name, model, ports, calibration, TCP, servo."""
+
+    @property
+    def backend(self) -> Backend:
+        """Its backend: kind, rate, and what it heard of the controller."""
+
+    @property
+    def keys(self) -> RobotKeys:
+        """Its keys."""
+
+    @property
+    def service_names(self) -> frozenset[str]:
+        """The services it answers (once declared)."""
+
+    @property
+    def tcp_poses(self) -> _Poses:
+        """Its TCP poses: whether it publishes them."""
+
+    def status_message(self) -> dict[str, Any]:
+        """Its status message body, now."""
 
 
 def ur_ports(robot: Robot) -> dict[str, Any] | None:
@@ -47,29 +81,25 @@ def ur_ports(robot: Robot) -> dict[str, Any] | None:
     }
 
 
+_LISTED = {
+    Kind.PUBLICATION: "published",
+    Kind.QUERYABLE: "queryables",
+    Kind.SUBSCRIBER: "subscribed",
+    Kind.LIVELINESS: "liveliness",
+}
+"""Where the reply lists a row of each kind (a client's token, ``Kind.TOKEN``, is not the robot's key)."""
+
+
 def robot_keys(keys: RobotKeys, services: Sequence[str], *, posed: bool, servo: bool) -> dict[str, list[str]]:
-    """The keys one robot serves: what it publishes, answers and subscribes to (docs/keys.md)."""
-    published = [keys.joint_states]
-    if posed:
-        published.append(keys.tcp_pose)
-    published += [keys.status, keys.io, keys.events]
-    if servo:
-        published.append(keys.servo_command)
-    published.append(keys.goal_messages)
-    queryables = [keys.goal_trajectory, keys.goal_move, keys.goal_linear, keys.goal_cancel]
-    queryables += [keys.goal_results, keys.lease, *(keys.service(name) for name in sorted(services))]
-    subscribed = [
-        keys.command_joint_position,
-        keys.command_joint_velocity,
-        keys.command_twist,
-        keys.command_freedrive,
-    ]
-    return {
-        "published": published,
-        "queryables": queryables,
-        "subscribed": subscribed,
-        "liveliness": [keys.alive],
-    }
+    """The keys one robot serves, by what it does on them (docs/keys.md): every row of the endpoint
+    table (publish/endpoints.py) it serves, in the table's order, its services by name."""
+    skipped = {ROBOT.tcp_pose: not posed, ROBOT.servo_command: not servo}
+    listed: dict[str, list[str]] = {name: [] for name in _LISTED.values()}
+    for row in ROBOT_ENDPOINTS:
+        if row.kind in _LISTED and row.service is None and not skipped.get(row, False):
+            listed[_LISTED[row.kind]].append(row.key(keys))
+    listed["queryables"] += [ROBOT.service(name).key(keys) for name in sorted(services)]
+    return listed
 
 
 def _limits(limits: JointLimits) -> dict[str, Any]:
@@ -88,7 +118,7 @@ class DaemonInfo:
     def __init__(
         self,
         cell: Cell,
-        runtimes: Sequence[RobotRuntime],
+        runtimes: Sequence[DescribedRobot],
         limits: dict[str, JointLimits],
         listen: Sequence[str],
     ) -> None:
@@ -122,7 +152,7 @@ class DaemonInfo:
         self._robots = [self._robot_facts(rt, limits[rt.robot.name], cell) for rt in self._runtimes]
 
     @staticmethod
-    def _robot_facts(runtime: RobotRuntime, limits: JointLimits, cell: Cell) -> dict[str, Any]:
+    def _robot_facts(runtime: DescribedRobot, limits: JointLimits, cell: Cell) -> dict[str, Any]:
         robot, backend = runtime.robot, runtime.backend
         state_hz = backend.rate_hz / cell.publish.joint_states_decimation
         posed = runtime.tcp_poses.available

@@ -18,6 +18,7 @@ from urdaemon.backends.ur.dashboard_link import DashboardLink
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram
 from urdaemon.backends.ur.rtde_link import RtdeLink, input_recipe, output_recipe
+from urdaemon.cell.robot_options import READ_ONLY_REASON
 from urdaemon.errors import BackendError, ConnectionLostError, UrTimeoutError
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols.rtde_variables import DOUBLE, INPUT_VARIABLES
@@ -48,7 +49,7 @@ class UrLinks:
     def check_commanding(self) -> None:
         """Refuse a read-only robot."""
         if self.read_only:
-            raise BackendError("read-only robot (ur.read_only: true): it is watched, not commanded")
+            raise BackendError(READ_ONLY_REASON)
 
     # ---- connect and close ---------------------------------------------------------------------------
 

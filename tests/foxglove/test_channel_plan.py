@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from urdaemon.foxglove_bridge.plan import channel_plan
+from urdaemon.foxglove_bridge.channel_plan import channel_plan
 from urdaemon.recording.channels import DESCRIPTION_TOPIC, KINDS, ROBOT_DESCRIPTION, kind_of, recorded_keys
 
 ROBOT_KINDS = ("joint_states", "tcp_pose", "status", "io", "events", "servo_command")

@@ -1,4 +1,4 @@
-"""plan.py from tables and generated motions: recorded samples made from the controller's own
+"""goal_plan.py from tables and generated motions: recorded samples made from the controller's own
 jerk-limited moves (control/move.py, sampled every cycle as the mock publishes them, with the
 host times jittered), planned into goals, and the goals planned again by the controller's planner:
 every recorded position comes back at its recorded time ÷ rate.
@@ -19,7 +19,7 @@ from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.control.move import plan_move
 from urdaemon.control.trajectory import plan_trajectory
 from urdaemon.model import JointLimits
-from urdaemon.replay.plan import (
+from urdaemon.replay.goal_plan import (
     Sample,
     Track,
     estimate_accelerations,
@@ -183,7 +183,7 @@ def test_a_motion_longer_than_one_goal_is_cut_where_every_robot_rests(
 ) -> None:
     """At half rate every sample is a point: six moves of about 0.35 s at 500 Hz do not fit in a
     goal of (here) 500 points, so they are cut at rests; no piece holds more than a goal may."""
-    monkeypatch.setattr("urdaemon.replay.plan.MAX_POINTS", 500)
+    monkeypatch.setattr("urdaemon.replay.goal_plan.MAX_POINTS", 500)
     targets = [[0.2, -1.4, 1.4, -1.5, -1.5, 0.1], list(HOME)] * 3
     recorded = _record(targets, [5] * (len(targets) + 1))
     plan = make_plan([Track("alice", P, _samples(recorded, 1))], 0.5)
@@ -200,7 +200,7 @@ def test_a_motion_longer_than_one_goal_is_cut_where_every_robot_rests(
 
 
 def test_a_stretch_that_cannot_fit_is_thinned_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("urdaemon.replay.plan.MAX_POINTS", 100)
+    monkeypatch.setattr("urdaemon.replay.goal_plan.MAX_POINTS", 100)
     recorded = _record([[0.5, -1.2, 1.2, -1.5, -1.5, 0.3]], [5, 5])
     plan = make_plan([Track("alice", P, _samples(recorded, 2))], 0.5)
     assert len(plan.steps) == 1
