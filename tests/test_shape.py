@@ -16,8 +16,7 @@ MAX_CLASS_LINES = 400
 MAX_FUNCTION_LINES = 60
 MAX_MODULE_LINES = 600
 
-MODULES_STILL_OVER: dict[str, int] = {
-}
+MODULES_STILL_OVER: dict[str, int] = {}
 """``urdaemon/…`` module → its length in lines today, for each module still over 600 (issue 31 cuts them
 by job); the list only shrinks, as ``STILL_OVER`` below."""
 

@@ -33,8 +33,8 @@ from urdaemon.cell import parse_cell
 from urdaemon.control import GoalResult, MotionController
 from urdaemon.daemon import describe_cell
 from urdaemon.model import Lifecycle, RobotMode, SafetyMode
-from urdaemon.robot import RobotRuntime
 from urdaemon.publish.lease_request import LeaseRequest
+from urdaemon.robot import RobotRuntime
 from urdaemon.runtime.motion import ENDINGS, How
 
 FACTS = frozenset({"closing", "in_contact", "planning", "from_rest", "generation"})

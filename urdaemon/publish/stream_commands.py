@@ -1,6 +1,6 @@
 """The decoders of the streaming commands (``<cell>/<robot>/command/<name>``): joint positions, joint
 velocities, a twist, freedrive. Each returns the typed command or raises ``MessageError`` naming the
-field; the runtime's commands (runtime/commands.py) act on them. A client sends the typed commands as
+field; the runtime's commands (runtime/streaming.py) act on them. A client sends the typed commands as
 ``message_body`` gives them (envelope.py), freedrive's as ``freedrive_body``.
 """
 
