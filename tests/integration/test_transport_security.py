@@ -3,8 +3,9 @@ control from its cell file, reached by raw Zenoh sessions made from ``client_con
 client code on the far side, as an intruder would have none).
 
 Certificates come from trustme (a throw-away CA per module): the daemon's for 127.0.0.1, clients
-``operator`` (commands alice), ``viewer`` (reads alice), ``visitor`` (signed by the CA, granted
-nothing) and ``stranger`` (signed by another CA).
+``operator`` (commands alice), ``viewer`` (reads alice), ``overseer`` (commands every robot: the
+cell's own rows), ``visitor`` (signed by the CA, granted nothing) and ``stranger`` (signed by
+another CA).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,9 +25,49 @@ import zenoh
 
 from tests.helpers import acquire_lease, free_tcp_port, zenoh_ask
 from urdaemon.cell import Cell, parse_cell
+from urdaemon.cell.zenoh_options import ALL_ROBOTS, AccessOptions
 from urdaemon.daemon import Daemon
+from urdaemon.model import (
+    CycleStatsRequest,
+    DashboardRequest,
+    ForceModeRequest,
+    SetIoRequest,
+    SetPayloadRequest,
+    SetTcpRequest,
+    SpeedSliderRequest,
+    ToolVoltageRequest,
+)
 from urdaemon.publish import session_config
+from urdaemon.publish.cell_goal import CellGoalMessage, CellGoalRequest, cell_goal_body
+from urdaemon.publish.endpoints import CELL as CELL_ROWS
+from urdaemon.publish.endpoints import CELL_ENDPOINTS, ROBOT, ROBOT_ENDPOINTS, Audience, Endpoint, Kind
+from urdaemon.publish.envelope import encode
+from urdaemon.publish.goal_cancel import cancel_body, decode_cancel, decode_cell_cancel
+from urdaemon.publish.keys import CellKeys, RobotKeys
+from urdaemon.publish.lease_request import LeaseRequest, lease_body, parse_request
+from urdaemon.publish.linear_goal import (
+    LinearGoalMessage,
+    LinearGoalRequest,
+    decode_linear_goal,
+    linear_goal_body,
+)
+from urdaemon.publish.move_goal import MoveGoalMessage, MoveGoalRequest, decode_move_goal, move_goal_body
+from urdaemon.publish.service_requests import request_body
 from urdaemon.publish.session_config import configure_daemon
+from urdaemon.publish.stream_commands import (
+    TwistMessage,
+    decode_freedrive,
+    decode_stream_position,
+    decode_stream_velocity,
+    decode_twist,
+    freedrive_body,
+)
+from urdaemon.publish.trajectory_goal import (
+    TrajectoryGoalMessage,
+    TrajectoryGoalRequest,
+    trajectory_goal_body,
+)
+from urdaemon.publish.trajectory_json import decode_trajectory_goal
 from urdaemon.transport_security import client_config
 
 CELL = "seccell"
@@ -42,9 +83,11 @@ zenoh:
     identities:
       operator: {{cert_common_names: [operator]}}
       viewer: {{cert_common_names: [viewer]}}
+      overseer: {{cert_common_names: [overseer]}}
     grants:
       - {{identities: [viewer], read: [alice]}}
       - {{identities: [operator], command: [alice]}}
+      - {{identities: [overseer], command: ["*"]}}
 robots:
   - name: alice
     model: ur10e
@@ -89,6 +132,7 @@ def certs(tmp_path_factory: pytest.TempPathFactory) -> Certs:
         "daemon": ca.issue_cert("127.0.0.1", common_name="urdaemon"),
         "operator": ca.issue_cert("operator.invalid", common_name="operator"),
         "viewer": ca.issue_cert("viewer.invalid", common_name="viewer"),
+        "overseer": ca.issue_cert("overseer.invalid", common_name="overseer"),
         "visitor": ca.issue_cert("visitor.invalid", common_name="visitor"),
         "stranger": other_ca.issue_cert("operator.invalid", common_name="operator"),
     }
@@ -194,10 +238,16 @@ class Samples:
     def __init__(self, session: Any, key: str) -> None:
         loop = asyncio.get_running_loop()
         self.queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self.seen = 0
+        """How many samples arrived, taken from the queue or not."""
+
+        def arrived(data: dict[str, Any]) -> None:
+            self.seen += 1
+            self.queue.put_nowait(data)
 
         def on_sample(sample: Any) -> None:
             data = json.loads(bytes(sample.payload.to_bytes()))
-            loop.call_soon_threadsafe(self.queue.put_nowait, data)
+            loop.call_soon_threadsafe(arrived, data)
 
         self.sub = session.declare_subscriber(key, on_sample)
 
@@ -241,57 +291,293 @@ async def test_mtls_lets_in_only_clients_with_a_certificate_of_the_cells_ca(cert
             assert isinstance(result, zenoh.ZError), f"{name}: the session reached the daemon"
 
 
+IDENTITIES = ("viewer", "operator", "overseer")
+"""The identities the walk connects as: one that reads alice, one that commands her, one that
+commands every robot (the cell's own rows)."""
+ROUND_TRIP = ROBOT.service("cycle_stats")
+"""A row every identity of the walk may ask: its reply, on the same link after what was sent before,
+closes a check that something never arrived."""
+ROWS = (*ROBOT_ENDPOINTS, *CELL_ENDPOINTS)
+
+
+def _may(access: AccessOptions, identity: str, row: Endpoint, robot: str = "alice") -> bool:
+    """Whether ``identity``'s grants reach ``row`` (of ``robot``, or of the cell), as ``Audience`` and
+    cell/zenoh_options.py's ``Grant`` say it: the walk's expectation, from the row's audience."""
+    grants = [grant for grant in access.grants if identity in grant.identities]
+    read = {name for grant in grants for name in (*grant.read, *grant.command)}
+    command = {name for grant in grants for name in grant.command}
+    if row.audience is Audience.ANYONE:
+        return True
+    if row.audience is Audience.READER:
+        return bool(read) if row.cell_level else bool(read & {robot, ALL_ROBOTS})
+    if row.audience is Audience.CELL_READER:
+        return ALL_ROBOTS in read
+    if row.audience is Audience.COMMANDER:
+        return ALL_ROBOTS in command if row.cell_level else bool(command & {robot, ALL_ROBOTS})
+    assert row.audience is Audience.NOBODY, row.audience
+    return False
+
+
+def _key(row: Endpoint, goal_ids: Mapping[bool, str] | None = None) -> str:
+    """``row``'s key for alice (or the cell), each ``*`` chunk made concrete: a goal's id (``goal_ids``
+    by whether the row is the cell's), else a robot the cell lacks; ``**``: a key under it."""
+    chunks = row.key(CellKeys(CELL) if row.cell_level else RobotKeys(CELL, "alice")).split("/")
+    for i, chunk in enumerate(chunks):
+        if chunk == "*":
+            chunks[i] = (goal_ids or {}).get(row.cell_level, "none") if chunks[i - 1] == "goal" else "bob"
+        elif chunk == "**":
+            chunks[i] = "status"
+    return "/".join(chunks)
+
+
+def _bodies(target: Sequence[float], cell_goal_id: str = "none") -> dict[Endpoint, dict[str, Any]]:
+    """A body for every row a client sends on, of the row's message type and valid: the daemon would
+    act on it (no message type: the body the row's decoder takes, ``{}`` for none). A row whose
+    message type has no body here fails the walk (KeyError) until it gets one."""
+    point = {"positions": list(target), "time_from_start": 1.0}
+    trajectory = TrajectoryGoalRequest(points=(point,))
+    force = ForceModeRequest(
+        task_frame=(0.0,) * 6,
+        selection=(0, 0, 1, 0, 0, 0),
+        wrench=(0.0, 0.0, -5.0, 0.0, 0.0, 0.0),
+        limits=(0.1, 0.1, 0.1, 0.3, 0.3, 0.3),
+    )
+    requests: tuple[Any, ...] = (
+        SetIoRequest("digital", 0, True),
+        SetPayloadRequest(1.0),
+        SpeedSliderRequest(0.1),
+        DashboardRequest("power off"),
+        SetTcpRequest((0.0, 0.0, 0.1, 0.0, 0.0, 0.0)),
+        ToolVoltageRequest(24),
+        force,
+        CycleStatsRequest(),
+    )
+    by_type: dict[type, dict[str, Any]] = {type(r): request_body(r) for r in requests}
+    by_type |= {
+        MoveGoalMessage: move_goal_body(MoveGoalRequest(positions=tuple(target))),
+        TrajectoryGoalMessage: trajectory_goal_body(trajectory),
+        LinearGoalMessage: linear_goal_body(LinearGoalRequest(poses=((0.3, 0.1, 0.4, 3.1, 0.0, 0.0),))),
+        TwistMessage: {"linear": [0.05, 0.0, 0.0], "angular": [0.0, 0.0, 0.0]},
+        CellGoalMessage: cell_goal_body(CellGoalRequest({"alice": trajectory})),
+    }
+    by_row: dict[Endpoint, dict[str, Any]] = {  # a message type two rows share, or no type
+        ROBOT.command_joint_position: {"positions": list(target)},
+        ROBOT.command_joint_velocity: {"velocities": [0.1] * 6},
+        ROBOT.command_freedrive: freedrive_body(True),
+        ROBOT.lease: lease_body(LeaseRequest("show")),
+        CELL_ROWS.goal_cancel: cancel_body(cell_goal_id),
+    }
+    sent = [row for row in ROWS if row.kind in (Kind.QUERYABLE, Kind.SUBSCRIBER)]
+    return {
+        row: by_row[row] if row in by_row else by_type[row.message] if row.message else {} for row in sent
+    }
+
+
+def test_the_walks_bodies_are_messages_the_daemon_would_act_on() -> None:
+    """Each body the walk sends decodes, with the daemon's own decoder, to its row's message type:
+    a command the access control drops is one the daemon would have carried out."""
+    decoders: dict[Endpoint, Callable[[bytes | None], Any]] = {
+        ROBOT.goal_move: decode_move_goal,
+        ROBOT.goal_trajectory: decode_trajectory_goal,
+        ROBOT.goal_linear: decode_linear_goal,
+        ROBOT.goal_cancel: decode_cancel,
+        ROBOT.lease: parse_request,
+        ROBOT.command_joint_position: decode_stream_position,
+        ROBOT.command_joint_velocity: decode_stream_velocity,
+        ROBOT.command_twist: decode_twist,
+        ROBOT.command_freedrive: decode_freedrive,
+        CELL_ROWS.goal_cancel: decode_cell_cancel,
+    }
+    for row, body in _bodies(START).items():
+        decode = row.service.decode if row.service is not None else decoders.get(row)
+        if decode is None:
+            assert row.message is None or row is CELL_ROWS.goal_trajectory, row.name  # decoded robot by robot
+            continue
+        decoded = decode(encode(body))
+        assert row.message is None or isinstance(decoded, row.message), (row.name, decoded)
+
+
+async def _walk(
+    session: Any,
+    rows: Sequence[Endpoint],
+    bodies: Mapping[Endpoint, dict[str, Any]],
+    goal_ids: Mapping[bool, str],
+) -> dict[Endpoint, list[bytes]]:
+    """Every reply's payload to one query on each queryable row, asked all at once (a dropped query
+    ends at once with none, an unanswered one after ``WAIT_S``)."""
+    asked = [row for row in rows if row.kind is Kind.QUERYABLE]
+    replies = await asyncio.gather(*(_ask(session, _key(row, goal_ids), bodies[row]) for row in asked))
+    return dict(zip(asked, replies, strict=True))
+
+
+async def _ask(session: Any, key: str, body: dict[str, Any]) -> list[bytes]:
+    """Every reply's payload (an error reply's too) to a ``get`` on ``key`` with ``body``, as it came:
+    a queryable may answer in its own shape (``robot_description``: the URDF)."""
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[None] = loop.create_future()
+    replies: list[bytes] = []
+
+    def on_reply(reply: Any) -> None:
+        sample = reply.ok if reply.ok is not None else reply.err
+        loop.call_soon_threadsafe(replies.append, bytes(sample.payload.to_bytes()))
+
+    def finish() -> None:
+        if not done.done():
+            done.set_result(None)
+
+    handler = zenoh.handlers.Callback(on_reply, lambda: loop.call_soon_threadsafe(finish))
+    session.get(key, handler, payload=encode(body), timeout=WAIT_S)
+    await asyncio.wait_for(done, 2 * WAIT_S)
+    return replies
+
+
+def _answer(payload: bytes) -> Any:
+    """A reply's message (None: not JSON)."""
+    with contextlib.suppress(ValueError):
+        return json.loads(payload)
+    return None
+
+
+def _wrong(access: AccessOptions, identity: str, walked: Mapping[Endpoint, list[bytes]]) -> list[str]:
+    """The rows whose replies are not what ``identity``'s grants say: one answer where it may ask,
+    none at all where it may not."""
+    wrong = []
+    for row, replies in walked.items():
+        if not _may(access, identity, row):
+            if replies:
+                wrong.append(f"{identity} reached {row.name} ({row.audience}): {replies}")
+        elif len(replies) != 1:
+            wrong.append(f"{identity} was not answered on {row.name} ({row.audience}): {replies}")
+    return wrong
+
+
+def _unanswered(walks: Sequence[tuple[str, Mapping[Endpoint, list[bytes]]]]) -> list[str]:
+    """The queryable rows some grant reaches that no identity's walk had answered: where nobody is
+    answered, a query without a reply proves nothing (the rows for nobody excepted: no grant names
+    them, the cell's default denies them)."""
+    answered = {row for _, walk in walks for row, replies in walk.items() if replies}
+    return [
+        f"nobody was answered on {row.name} ({row.audience}): its refusals prove nothing"
+        for row in ROWS
+        if row.kind is Kind.QUERYABLE and row.audience is not Audience.NOBODY and row not in answered
+    ]
+
+
 @pytest.mark.usefixtures("rules_for")
-async def test_a_reader_subscribes_but_its_commands_never_reach_the_daemon(certs: Certs) -> None:
-    """Reproduction (issue 16): any session could command any robot. With access control the viewer
-    (granted ``read: [alice]``) receives alice's joint states, but its move goal, trajectory goal,
-    cancel and service queries get no reply at all and its stream puts (a valid target and a
-    malformed one) never arrive (issue 17: nor its linear goal, set_tcp, or twist puts): after a
-    round trip on the same link (cycle_stats, which it may ask)
-    the daemon has counted no rejected command and alice has not moved. The operator's identical
-    malformed put is rejected and its move goal accepted (positive control). ``command_lease:
-    false`` so the operator's commands do not depend on the lease (tested on its own below)."""
+async def test_each_endpoint_serves_exactly_the_grants_its_row_names(certs: Certs) -> None:
+    """The endpoint table walked under access control (issues 16, 17, 31), each row's expectation
+    from its audience and the cell file's grants: the viewer (``read: [alice]``), the operator
+    (``command: [alice]``) and the overseer (``command: ["*"]``: the cell's goals) each ask every
+    queryable row, all at once, with a valid body of the row's message type (the daemon would act on
+    it); where the grants reach the row it is answered once, where not the query gets no reply at
+    all, and every row some grant reaches is answered for someone. The viewer's puts on every
+    commanding subscriber row (a valid command and a malformed one) never arrive: after a round
+    trip on its link the daemon has counted no rejected command and alice has not moved, while the
+    operator's identical malformed put is rejected (an event the viewer reads) and its move goal
+    accepted. Each identity receives a sample of every publication the daemon serves that it may
+    read (the events, goal messages and tf the walk makes happen) and none of the others.
+
+    ``command_lease: false`` so the commands do not depend on the lease; the lease holder's token
+    (the one row of kind token) is walked by the lease test below, and alive (liveliness, anyone's)
+    by every session, which waits for it."""
     async with secure_daemon(certs, lease=False) as secure:
-        runtime = secure.daemon.runtimes[0]
-        viewer, operator = await secure.session("viewer"), await secure.session("operator")
+        runtime, access = secure.daemon.runtimes[0], secure.cell.zenoh.access
+        assert access is not None
+        sessions = {name: await secure.session(name) for name in IDENTITIES}
+        viewer, operator, overseer = sessions.values()
         try:
-            states = Samples(viewer, f"{CELL}/alice/joint_states")
-            before = (await states.next())["position"]
+            published = [row for row in ROWS if row.kind is Kind.PUBLICATION]
+            samples = {
+                (n, row): Samples(s, row.key(_keys(row))) for n, s in sessions.items() for row in published
+            }
+            before = (await samples["viewer", ROBOT.joint_states].next())["position"]
             target = [q + 0.3 for q in START]
-            for key, body in (
-                ("goal/move", {"positions": target}),
-                ("goal/trajectory", {"points": [{"positions": target, "time_from_start": 2.0}]}),
-                ("goal/cancel", {}),
-                ("goal/linear", {"poses": [[0.3, 0.1, 0.4, 3.1, 0.0, 0.0]]}),  # issue 17's goal
-                ("service/set_speed_slider", {"fraction": 0.1}),
-                ("service/set_tcp", {"pose": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]}),
-                ("service/dashboard", {"command": "power off"}),
-            ):
-                replies = await zenoh_ask(viewer, f"{CELL}/alice/{key}", body, timeout=WAIT_S)
-                assert replies == [], f"the viewer's {key} reached the daemon: {replies}"
-            viewer.put(f"{CELL}/alice/command/joint_position", json.dumps({"positions": target}))
-            viewer.put(f"{CELL}/alice/command/joint_velocity", json.dumps({"velocities": [0.1] * 6}))
-            viewer.put(f"{CELL}/alice/command/joint_position", b"not json")
-            viewer.put(
-                f"{CELL}/alice/command/twist", json.dumps({"linear": [0.05, 0, 0], "angular": [0, 0, 0]})
-            )
-            viewer.put(f"{CELL}/alice/command/twist", b"not json")
-            stats = await zenoh_ask(viewer, f"{CELL}/alice/service/cycle_stats", {})
-            assert [r.get("ok") for r in stats] == [True], stats
+            bodies = _bodies(target)
+            commands = [
+                row for row in ROWS if row.kind is Kind.SUBSCRIBER and not _may(access, "viewer", row)
+            ]
+            assert commands, "the viewer may put on every subscriber row"
+            for row in commands:
+                viewer.put(_key(row), encode(bodies[row]))
+                viewer.put(_key(row), b"not json")
+            walked = await _walk(viewer, [row for row in ROWS if not row.any_id], bodies, {})
+            wrong = _wrong(access, "viewer", walked)
+            assert wrong == [], "\n".join(wrong)
+            assert walked[ROUND_TRIP], "no round trip after the viewer's puts"
             assert runtime.status.rejected_commands == 0
-            after = (await states.next())["position"]
+            after = (await samples["viewer", ROBOT.joint_states].next())["position"]
             assert after == pytest.approx(before, abs=1e-9), "alice moved on the viewer's command"
 
-            events = Samples(operator, f"{CELL}/alice/events")
-            await _wait_matched(operator, f"{CELL}/alice/command/joint_position")
-            operator.put(f"{CELL}/alice/command/joint_position", b"not json")
-            rejected = await events.matching("command_rejected")
-            assert rejected["key"] == f"{CELL}/alice/command/joint_position"
+            key = _key(ROBOT.command_joint_position)
+            await _wait_matched(operator, key)
+            operator.put(key, b"not json")
+            rejected = await samples["viewer", ROBOT.events].matching("command_rejected")
+            assert rejected["key"] == key
             assert runtime.status.rejected_commands == 1
-            accepted = await zenoh_ask(operator, f"{CELL}/alice/goal/move", {"positions": target})
-            assert [r.get("accepted") for r in accepted] == [True], accepted
+            goal_ids = {
+                False: await _goal(
+                    operator, ROBOT.goal_move, bodies, samples["operator", ROBOT.goal_messages]
+                )
+            }
+            goal_ids[True] = await _goal(
+                overseer, CELL_ROWS.goal_trajectory, bodies, samples["overseer", CELL_ROWS.goal_messages]
+            )
+
+            bodies = _bodies(target, goal_ids[True])
+            walks = [("viewer", walked)]
+            walks.append(("viewer", await _walk(viewer, [r for r in ROWS if r.any_id], bodies, goal_ids)))
+            walks += [(name, await _walk(sessions[name], ROWS, bodies, goal_ids)) for name in IDENTITIES[1:]]
+            wrong = [line for name, walk in walks for line in _wrong(access, name, walk)]
+            wrong += _unanswered(walks)
+            assert wrong == [], "\n".join(wrong)
+            wrong = await _reads(secure, sessions, samples)
+            assert wrong == [], "\n".join(wrong)
         finally:
-            _close(viewer, operator)
+            _close(*sessions.values())
+
+
+def _keys(row: Endpoint) -> RobotKeys | CellKeys:
+    return CellKeys(CELL) if row.cell_level else RobotKeys(CELL, "alice")
+
+
+async def _goal(
+    session: Any, row: Endpoint, bodies: Mapping[Endpoint, dict[str, Any]], messages: Samples
+) -> str:
+    """The id of ``row``'s goal ``session`` sends (its body from the walk), once it is accepted and
+    its result published (what the results' rows then answer)."""
+    accepted = await zenoh_ask(session, _key(row), bodies[row])
+    assert [r.get("accepted") for r in accepted] == [True], (row.name, accepted)
+    goal_id: str = accepted[0]["goal_id"]
+    await _result(messages, goal_id)
+    return goal_id
+
+
+async def _reads(
+    secure: Secure, sessions: Mapping[str, Any], samples: Mapping[tuple[str, Endpoint], Samples]
+) -> list[str]:
+    """What each identity received of each publication the daemon serves (its description of itself
+    says which), against its grants: a sample where it may read; none where it may not, although
+    another identity received one before a round trip on its link."""
+    access = secure.cell.zenoh.access
+    assert access is not None
+    described = [_answer(r) for r in await _ask(sessions["operator"], CellKeys(CELL).daemon, {})]
+    assert len(described) == 1, described
+    serves = {*described[0]["keys"]["published"], *described[0]["robots"][0]["keys"]["published"]}
+    watched = {(name, row): sub for (name, row), sub in samples.items() if row.key(_keys(row)) in serves}
+    for (name, row), sub in watched.items():
+        if _may(access, name, row) and not sub.seen:
+            await sub.next()
+    for name, session in sessions.items():  # what was sent to it before is in its queue now
+        answered = [_answer(r) for r in await _ask(session, _key(ROUND_TRIP), {})]
+        assert [r.get("ok") for r in answered] == [True], (name, answered)
+    received = {row for (_, row), sub in watched.items() if sub.seen}
+    wrong = []
+    for (name, row), sub in watched.items():
+        if not _may(access, name, row) and sub.seen:
+            wrong.append(f"{name} received {row.name} ({row.audience}): {sub.queue.get_nowait()}")
+        elif not _may(access, name, row) and row not in received:
+            wrong.append(f"nobody received {row.name}: {name}'s silence proves nothing")
+    return wrong
 
 
 async def _wait_matched(session: Any, key: str) -> None:
