@@ -10,7 +10,7 @@ runs on the rig's controller clock; the arm is judged by cycles counted, never b
 
 from __future__ import annotations
 
-from collections.abc import Generator
+from collections.abc import Callable, Generator
 from typing import Any
 
 from tests.fakeur.control_rig import DT, HOME, Rig, running_script
@@ -67,7 +67,11 @@ async def test_a_stream_stops_no_later_and_no_further_at_slider_0_1_than_at_1() 
 def test_stopj_and_stopl_brake_no_later_at_slider_0_1_than_at_1() -> None:
     """speedj (which the slider slows), then stopj(4) or stopl(1): the stop's cycles, at 0.1 no more
     than at 1.0 (played on the program's time the stop braked at a × slider²: 100 times longer)."""
-    for stop in (lambda host: lib_motion.stopj(host, 4.0), lambda host: lib_motion.stopl(host, 1.0, None)):
+    stops: tuple[Callable[[ScriptHost], Generator[None, None, Any]], ...] = (
+        lambda host: lib_motion.stopj(host, 4.0),
+        lambda host: lib_motion.stopl(host, 1.0, None),
+    )
+    for stop in stops:
         taken = {}
         for slider in (1.0, 0.1):
             model = load_ur_model("ur10e")
