@@ -129,10 +129,10 @@ def test_a_too_large_linear_goal_is_refused_before_it_is_parsed(monkeypatch: pyt
     calls = 0
     real = json.loads
 
-    def counted(data: Any) -> Any:
+    def counted(data: Any, **options: Any) -> Any:
         nonlocal calls
         calls += 1
-        return real(data)
+        return real(data, **options)
 
     monkeypatch.setattr(json, "loads", counted)  # the module codec parses with
     body = b'{"poses": [' + b"[]," * (envelope.SMALL_MESSAGE_BYTES // 3) + b"[]]}"

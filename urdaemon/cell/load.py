@@ -11,7 +11,11 @@ from pydantic import ValidationError
 from urdaemon.cell.config import Cell
 from urdaemon.errors import ConfigError
 
-__all__ = ["format_location", "load_cell", "parse_cell", "summarize"]
+__all__ = ["MAX_YAML_DEPTH", "format_location", "load_cell", "load_yaml", "parse_cell", "summarize"]
+
+MAX_YAML_DEPTH = 64
+"""Deepest nesting of lists and mappings a user's YAML file may have: a cell file needs 6, a
+calibration file 4; PyYAML builds a deeper one by recursion and dies of a ``RecursionError``."""
 
 
 def load_cell(path: str | Path) -> Cell:
@@ -28,13 +32,7 @@ def load_cell(path: str | Path) -> Cell:
 
 def parse_cell(text: str, *, source: str = "<string>", base_dir: Path | None = None) -> Cell:
     """Validate cell-file text; relative paths inside resolve against ``base_dir``."""
-    try:
-        data = yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: safe
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
-        problem = getattr(err, "problem", None) or str(err)
-        raise ConfigError(f"{source}{where}: not valid YAML: {problem}") from err
+    data = load_yaml(text, source)
     if not isinstance(data, dict):
         raise ConfigError(
             f"{source}: the cell file must be a mapping with 'cell' and 'robots', got {type(data).__name__}"
@@ -46,8 +44,40 @@ def parse_cell(text: str, *, source: str = "<string>", base_dir: Path | None = N
         raise ConfigError("\n".join(messages), errors=messages) from err
 
 
+def load_yaml(text: str, source: str) -> Any:
+    """A user's YAML text (a cell or calibration file) as plain values; ``ConfigError`` naming ``source``,
+    the line and the problem for text that is not YAML, a key given twice in one mapping, or nesting
+    deeper than ``MAX_YAML_DEPTH``."""
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: safe
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = getattr(err, "problem", None) or str(err)
+        raise ConfigError(f"{source}{where}: not valid YAML: {problem}") from err
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """A safe loader that refuses a key given twice in one mapping (plain YAML keeps the last)."""
+    """A safe loader that refuses a key given twice in one mapping (plain YAML keeps the last) and
+    nesting deeper than ``MAX_YAML_DEPTH`` (before the recursive composer could overflow the stack)."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        self._depth += 1
+        try:
+            if self._depth > MAX_YAML_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None,
+                    None,
+                    f"nested deeper than {MAX_YAML_DEPTH} levels of lists and mappings",
+                    self.peek_event().start_mark,  # type: ignore[no-untyped-call]
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen: set[Any] = set()

@@ -33,8 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from urdaemon.cell.load import load_yaml
 from urdaemon.cell.robot_options import Robot
 from urdaemon.description._checks import BadKey, mapping, only_keys
 from urdaemon.description._transforms import (
@@ -115,12 +114,7 @@ def load_calibration(path: str | Path, model: UrModel) -> Calibration:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as err:
         raise ConfigError(f"{source}: cannot read calibration file: {err.strerror or err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
-        raise ConfigError(f"{source}{where}: not valid YAML: {getattr(err, 'problem', None) or err}") from err
+    data = load_yaml(text, source)  # not YAML, a key twice or nested too deep: a ConfigError
     try:
         dh, kinematics_hash = _parse_calibration(data, model)
     except BadKey as err:

@@ -13,7 +13,15 @@ from typing import Any
 
 from urdaemon.errors import MessageError
 from urdaemon.publish import fields
-from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES, check_version, client_text
+from urdaemon.publish.envelope import (
+    JSON_DECODER,
+    MAX_MESSAGE_BYTES,
+    SMALL_MESSAGE_BYTES,
+    DuplicateField,
+    check_version,
+    client_text,
+    duplicate_field,
+)
 from urdaemon.publish.trajectory_goal import TrajectoryGoalRequest, trajectory_goal_body
 
 __all__ = [
@@ -88,7 +96,7 @@ class CellGoalDecoder:
                 f"{_CELL_GOAL}: message of {len(payload)} bytes exceeds the limit of {max_bytes} bytes"
             )
         self._data = bytes(payload)
-        self._decoder = json.JSONDecoder()
+        self._decoder = JSON_DECODER
 
     def steps(self) -> Generator[None, None, CellGoalMessage]:
         """The split, one bounded step per ``next`` (runtime/slicing.py runs it in slices); returns the
@@ -107,6 +115,8 @@ class CellGoalDecoder:
                 if not isinstance(key, str):
                     raise MessageError(f"{_CELL_GOAL}: expected a field name at byte {pos}")
                 pos = self._expect(pos, b":", "':' after a field name")
+                if key in own or (key == "robots" and robots is not None):
+                    raise duplicate_field(_CELL_GOAL, DuplicateField(key))
                 if key == "robots":
                     robots, pos = yield from self._robots(pos)
                 else:
@@ -184,6 +194,8 @@ class CellGoalDecoder:
             text = window[: err.start].decode()
         try:
             value, end = self._decoder.raw_decode(text)
+        except DuplicateField as err:
+            raise duplicate_field(f"{_CELL_GOAL}: {what}", err) from None
         except (ValueError, RecursionError) as err:
             raise MessageError(
                 f"{_CELL_GOAL}: not valid JSON: {what} at byte {pos} is malformed or over {limit} bytes"
@@ -227,7 +239,9 @@ def decode_lease_tokens(attachment: bytes | None, limit: int = SMALL_MESSAGE_BYT
     if len(attachment) > limit:
         raise MessageError(f"lease tokens: attachment of {len(attachment)} bytes exceeds {limit} bytes")
     try:
-        data = json.loads(attachment)
+        data = JSON_DECODER.decode(attachment.decode())
+    except DuplicateField as err:
+        raise duplicate_field("lease tokens", err) from None
     except (ValueError, RecursionError) as err:
         raise MessageError("lease tokens: the attachment is not a JSON object of robot tokens") from err
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):

@@ -22,12 +22,15 @@ from urdaemon.model import RobotState
 
 __all__ = [
     "CLIENT_TEXT_CHARS",
+    "JSON_DECODER",
     "MAX_MESSAGE_BYTES",
     "SCHEMA_VERSION",
     "SMALL_MESSAGE_BYTES",
+    "DuplicateField",
     "check_version",
     "client_text",
     "decode_message",
+    "duplicate_field",
     "encode",
     "encode_feedback",
     "encode_result",
@@ -89,17 +92,49 @@ def client_text(text: str, limit: int = CLIENT_TEXT_CHARS) -> str:
     return safe[:limit] + "…" if len(safe) > limit else safe
 
 
+class DuplicateField(ValueError):
+    """A JSON object of a client's message names a field twice (``name``)."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.name = name
+
+
+def _unique_fields(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's fields as a dict; ``DuplicateField`` if one is named twice (JSON leaves it open,
+    and Python's last-one-wins would let ``{"fraction": 0.5, "fraction": 0.2}`` mean 0.2)."""
+    data = dict(pairs)
+    if len(data) != len(pairs):
+        seen: set[str] = set()
+        for name, _ in pairs:
+            if name in seen:
+                raise DuplicateField(name)
+            seen.add(name)
+    return data
+
+
+JSON_DECODER = json.JSONDecoder(object_pairs_hook=_unique_fields)
+"""The decoder of every client message: any object that names a field twice is refused."""
+
+
+def duplicate_field(what: str, err: DuplicateField) -> MessageError:
+    """The refusal of a message whose object names a field twice, naming the field."""
+    return MessageError(f"{what}: the field {client_text(err.name)!r} is given twice; give each field once")
+
+
 def decode_message(
     payload: bytes | bytearray | memoryview | None, what: str, *, max_bytes: int = SMALL_MESSAGE_BYTES
 ) -> dict[str, Any]:
-    """Parse a client message into a dict, checking size (before decoding), JSON syntax, object
-    shape and version."""
+    """Parse a client message into a dict, checking size (before decoding), JSON syntax (no field
+    named twice in any object), object shape and version."""
     if payload is None or len(payload) == 0:
         raise MessageError(f"{what}: empty message; expected a JSON object")
     if len(payload) > max_bytes:
         raise MessageError(f"{what}: message of {len(payload)} bytes exceeds the limit of {max_bytes} bytes")
     try:
-        data = json.loads(bytes(payload))
+        data = json.loads(bytes(payload), object_pairs_hook=_unique_fields)
+    except DuplicateField as err:
+        raise duplicate_field(what, err) from None
     except (ValueError, RecursionError) as err:  # JSONDecodeError, UnicodeDecodeError, huge integers
         raise MessageError(f"{what}: not valid JSON: {client_text(str(err), 120)}") from err
     if not isinstance(data, dict):

@@ -14,14 +14,19 @@ one at once.
 from __future__ import annotations
 
 import codecs
-import json
 import re
 from collections.abc import Generator
 from typing import Any
 
 from urdaemon.control.goal_types import TrajectoryPoint
 from urdaemon.errors import MessageError
-from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, client_text
+from urdaemon.publish.envelope import (
+    JSON_DECODER,
+    MAX_MESSAGE_BYTES,
+    DuplicateField,
+    client_text,
+    duplicate_field,
+)
 from urdaemon.publish.trajectory_goal import (
     MAX_TRAJECTORY_POINTS,
     TrajectoryGoalMessage,
@@ -69,7 +74,7 @@ class TrajectoryGoalDecoder:
                 f"{_WHAT}: message of {len(payload)} bytes exceeds the limit of {max_bytes} bytes"
             )
         self._payload = payload
-        self._decoder = json.JSONDecoder()
+        self._decoder = JSON_DECODER
 
     def steps(self) -> Generator[None, None, TrajectoryGoalMessage]:
         """The decoding, one bounded step per ``next``; returns the goal. Raises ``MessageError``."""
@@ -96,6 +101,8 @@ class TrajectoryGoalDecoder:
                     raise MessageError(f"{_WHAT}: expected a field name at character {pos}")
                 pos = self._expect(text, _skip(text, pos), ":", "':' after a field name")
                 pos = _skip(text, pos)
+                if key in data or (key == "points" and points is not None):
+                    raise duplicate_field(_WHAT, DuplicateField(key))
                 if key == "points":
                     points, pos = yield from self._points(text, pos)
                 else:
@@ -154,6 +161,8 @@ class TrajectoryGoalDecoder:
         window = text[pos : pos + limit]
         try:
             value, end = self._decoder.raw_decode(window)
+        except DuplicateField as err:
+            raise duplicate_field(f"{_WHAT}: {what}", err) from None
         except RecursionError as err:
             raise MessageError(f"{_WHAT}: not valid JSON: {what} is nested too deeply") from err
         except ValueError as err:  # JSONDecodeError; an integer of too many digits

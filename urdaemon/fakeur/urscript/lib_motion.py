@@ -2,7 +2,8 @@
 
 Each builtin hands the fake arm a ``Motion`` (fakeur/joint_motion.py, fakeur/tcp_motion.py) and
 blocks its thread, cycle by cycle, until the arm has played it (``FakeArm.play``: ``dt × speed
-slider`` of program time per cycle).
+slider`` of program time per cycle). The slider slows a motion's progress, never servoj's tracking of
+its setpoint nor a stop's braking (stopj, stopl): a stop never gets longer because the slider is low.
 A motion starts from what the arm is commanded to do (position and velocity), so a command that
 follows one still moving (a blend, a servoj or speedj stream) continues smoothly.
 
@@ -166,7 +167,12 @@ def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any
     step = host.step_time
     cycles = max(1, round(duration / step))
     start, moving = _start(arm)
-    servo = ServoFilter(start, moving, target, cycles * step, proportional, lookahead)
+    # the slider slows a motion's progress, never the servo's tracking: the law runs in the controller's
+    # time (on the program's time, played ``dt × slider`` a cycle: gain / slider², lookahead × slider)
+    slider = max(arm.speed_slider, 1e-3)
+    servo = ServoFilter(
+        start, moving, target, cycles * step * slider, proportional / (slider * slider), lookahead * slider
+    )
     yield from _play(host, servo, SERVOJ_STOP_DECELERATION)
     return None
 
@@ -232,9 +238,20 @@ def stopj(host: ScriptHost, a: Any) -> Gen:
     deceleration = _number("stopj a", a)
     if deceleration <= 0:
         raise ScriptRuntimeError(f"stopj: deceleration must be > 0, got {deceleration}")
-    start, moving = _start(host.arm)
-    yield from _play(host, LinearStop(start, moving, leading_stop_time(moving, deceleration)), deceleration)
+    arm = host.arm
+    start, moving = _start(arm)
+    # a stop brakes at ``a`` in the controller's time whatever the speed slider: played on the program's
+    # time (``dt × slider`` a cycle) from the program-time velocity, that is a / slider² there
+    braking = deceleration / _slider_squared(arm)
+    yield from _play(host, LinearStop(start, moving, leading_stop_time(moving, braking)), braking)
     return None
+
+
+def _slider_squared(arm: FakeArm) -> float:
+    """The speed slider squared (floored): how a deceleration in controller time shrinks on the program's
+    time, on which motions are played (velocities scale by the slider, decelerations by its square)."""
+    slider = max(arm.speed_slider, 1e-3)
+    return slider * slider
 
 
 @builtin("stopl", blocking=True)
@@ -252,6 +269,7 @@ def stopl(host: ScriptHost, a: Any, aRot: Any) -> Gen:
     duration = max(linear / deceleration, angular / rotation)
     if duration <= 0 and any(moving):
         duration = leading_stop_time(moving, PROTECTIVE_STOP_DECELERATION)
+    duration *= _slider_squared(arm)  # braking in controller time whatever the slider (as stopj)
     joint_deceleration = leading_stop_time(moving, 1.0) / duration if duration > 0 else 1.0
     yield from _play(host, LinearStop(start, moving, duration), joint_deceleration)
     return None
