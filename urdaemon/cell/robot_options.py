@@ -301,6 +301,8 @@ class UrOptions(Frozen):
     def _read_only_does_not_start(self) -> UrOptions:
         if self.read_only and self.startup:
             raise ValueError("read_only: a read-only robot cannot also be started up (startup: true)")
+        if self.read_only and self.auto_recover is not None and self.auto_recover.protective_stop:
+            raise ValueError("read_only: a read-only robot cannot also recover by itself (auto_recover)")
         return self
 
 

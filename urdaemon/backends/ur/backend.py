@@ -33,6 +33,7 @@ from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.links import UrLinks
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
+from urdaemon.backends.ur.recovery import AutoRecovery
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
 from urdaemon.backends.ur.reverse_writer import ReverseWriter, encode_passthrough_point, window_s
 from urdaemon.backends.ur.robot_commands import UrRobotCommands
@@ -46,7 +47,7 @@ from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, 
 from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, SafetyMode
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 
-__all__ = ["RTDE_WATCHDOG_S", "UrBackend"]
+__all__ = ["CONTROLLER_WAIT_S", "RTDE_WATCHDOG_S", "UrBackend"]
 
 log = logging.getLogger("urdaemon.ur")
 
@@ -56,6 +57,9 @@ RTDE_WATCHDOG_S = 0.5
 """No output package for this long is a lost link (a pulled cable closes no socket); urcl waits 1 s.
 A longer window (``ur.receive_timeout_ms``) stretches it: a silence the program rides through is no
 lost link either."""
+CONTROLLER_WAIT_S = 0.5
+"""Before the controller was ever reached, how often a refused connection is tried again: a daemon
+started before its controller (or the fakes) waits for it, at INFO, instead of failing at ERROR."""
 
 
 class UrBackend(Backend):
@@ -95,6 +99,20 @@ class UrBackend(Backend):
         self._commands = UrRobotCommands(
             self.links, self.servers.script_command, notice=self.notice, name=self.name
         )
+        recover = self.options.auto_recover
+        self._recovery = (
+            None
+            if recover is None or not recover.protective_stop
+            else AutoRecovery(
+                self.name,
+                recover,
+                state=self.state,
+                dashboard=self._commands.dashboard,
+                restart=self.resend_program,
+                notice=self.notice,
+            )
+        )
+        """``ur.auto_recover``: looks at the robot with the link watch (``recovery.AutoRecovery``)."""
         self.tcp = self.check_tcp(robot.tcp)  # the cell file's until set_tcp; sent as the program connects
         self._first_package = asyncio.Event()
         """Set by each RTDE package; cleared before a new link streams (start-up waits on it)."""
@@ -120,6 +138,8 @@ class UrBackend(Backend):
         self._cycle_error_logged = False
         self._command_sent = True
         self._runs = 0
+        self._reached = False
+        """Whether RTDE ever connected: until then a refused connection is waited out, not a failure."""
 
     # ---- link supervision ------------------------------------------------------------------------------
 
@@ -130,7 +150,7 @@ class UrBackend(Backend):
         if not self.options.read_only:  # before RTDE: a URCap may fetch the program as soon as it plays
             await self._program.listen(self.address)
         try:
-            rtde = await self._connect_rtde()
+            rtde = await self._reach_controller()
             primary = await self.links.connect_primary(self.messages.on_message)
             primary_task = asyncio.get_running_loop().create_task(primary.run())
             try:
@@ -140,6 +160,8 @@ class UrBackend(Backend):
                 with contextlib.suppress(BaseException):
                     await primary_task
         finally:
+            if self._recovery is not None:
+                self._recovery.close()
             self._close_links()
             state = self.state
             _forget_robot(state)  # the last package's RUNNING/NORMAL say nothing about the robot now
@@ -160,6 +182,27 @@ class UrBackend(Backend):
         _forget_robot(state)
         if self.on_change is not None:
             self.on_change()  # no cycle runs until RTDE streams again: say it now
+
+    async def _reach_controller(self) -> RtdeLink:
+        """``_connect_rtde``; before the controller was ever reached, a refused connection (it is not
+        listening yet: the daemon started first) is said once at INFO and tried again, not a failure."""
+        said = False
+        while True:
+            try:
+                rtde = await self._connect_rtde()
+            except ConnectionLostError as err:
+                if self._reached or not isinstance(err.__cause__, ConnectionRefusedError):
+                    raise
+                if not said:
+                    said = True
+                    log.info("[%s] waiting for the controller at %s (%s)", self.name, self.address, err)
+                    self.state.lifecycle_reason = f"waiting for the controller at {self.address}"
+                    if self.on_change is not None:
+                        self.on_change()
+                await asyncio.sleep(CONTROLLER_WAIT_S)
+                continue
+            self._reached = True
+            return rtde
 
     async def _connect_rtde(self) -> RtdeLink:
         """Connect and handshake RTDE; learn the controller's version and the address it reaches us at."""
@@ -211,6 +254,8 @@ class UrBackend(Backend):
                 primary_task.result()
                 raise ConnectionLostError("primary: link ended")
             self.diagnosis.watch()  # the clocks' reference pair, once per RTDE link
+            if self._recovery is not None:
+                self._recovery.look()
             silent = time.monotonic() - self._package_at
             if self._first_package.is_set() and silent > max(RTDE_WATCHDOG_S, self._writer.window):
                 raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")
