@@ -46,7 +46,8 @@ def test_a_paused_headless_program_says_resend_program_not_play() -> None:
     (play)", but play plays the loaded .urp; only resend_program brought the program back."""
     state = _paused_state()
     headless = not_ready_reason(state, _facts(headless=True))
-    assert "resend_program" in headless and "(play)" not in headless, headless
+    assert "resend_program" in headless, headless
+    assert "(play)" not in headless, headless
     urcap = not_ready_reason(state, _facts(headless=False))
     assert "play" in urcap, urcap
     state.lifecycle = Lifecycle.PROTECTIVE_STOP
@@ -111,7 +112,9 @@ async def ur_robot(ur: str, *, start_fake: bool = True) -> AsyncIterator[UrRun]:
         await fake.close()
 
 
-RECOVERING = "{startup: true, listen_address: 127.0.0.1, auto_recover: {protective_stop: true, max_attempts: 1}}"
+RECOVERING = (
+    "{startup: true, listen_address: 127.0.0.1, auto_recover: {protective_stop: true, max_attempts: 1}}"
+)
 
 
 def _said(run: UrRun, text: str) -> int:
@@ -170,7 +173,7 @@ async def test_a_daemon_started_before_its_controller_waits_at_info_not_error() 
     logger.setLevel(logging.INFO)
     logger.addHandler(records)
     try:
-        async with served(start_fake=False) as (runtime, run):
+        async with served(start_fake=False) as (_, run):
             await asyncio.wait_for(records.waiting.wait(), 30.0)
             await run.fake.start()
             await run.until(lambda: program_is_running(run), what="ready")
@@ -265,13 +268,15 @@ async def test_a_stall_of_the_daemon_within_the_window_loses_no_goal(stall: int)
         await run.until(lambda: program_is_running(run), what="ready")
         goal = await _goal(runtime, last_segment=1.0)
         await run.cycles_pass(100)
+        sent = run.programs_sent
         dropped = _drop_frames(run, stall)
         await run.until(lambda: dropped() == stall, what="the stall")
         await run.until(lambda: bool(_results(runtime, goal)), timeout=30.0, what="the goal's result")
         await run.cycles_pass(50)
         results = _results(runtime, goal)
         assert len(results) == 1, results
-        assert program_is_running(run), "the program survived the stall"
+        assert program_is_running(run)
+        assert run.programs_sent == sent, "the program survived the stall: none was sent again"
         assert run.fake.programs.name is not None
         if stall < 100:
             assert results[0]["status"] == "succeeded", results

@@ -33,9 +33,9 @@ from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.links import UrLinks
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
-from urdaemon.backends.ur.recovery import AutoRecovery
+from urdaemon.backends.ur.recovery import auto_recovery
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
-from urdaemon.backends.ur.reverse_writer import ReverseWriter, encode_passthrough_point, window_s
+from urdaemon.backends.ur.reverse_writer import ReverseWriter, encode_passthrough_point
 from urdaemon.backends.ur.robot_commands import UrRobotCommands
 from urdaemon.backends.ur.robot_messages import RobotMessages
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, output_recipe
@@ -47,7 +47,7 @@ from urdaemon.errors import BackendError, ConnectionLostError, RobotFaultError, 
 from urdaemon.model import CommandMode, Lifecycle, RobotMode, RobotState, SafetyMode
 from urdaemon.protocols import reverse, script_command, script_sender, trajectory_point
 
-__all__ = ["CONTROLLER_WAIT_S", "RTDE_WATCHDOG_S", "UrBackend"]
+__all__ = ["RTDE_WATCHDOG_S", "UrBackend"]
 
 log = logging.getLogger("urdaemon.ur")
 
@@ -57,9 +57,6 @@ RTDE_WATCHDOG_S = 0.5
 """No output package for this long is a lost link (a pulled cable closes no socket); urcl waits 1 s.
 A longer window (``ur.receive_timeout_ms``) stretches it: a silence the program rides through is no
 lost link either."""
-CONTROLLER_WAIT_S = 0.5
-"""Before the controller was ever reached, how often a refused connection is tried again: a daemon
-started before its controller (or the fakes) waits for it, at INFO, instead of failing at ERROR."""
 
 
 class UrBackend(Backend):
@@ -90,8 +87,7 @@ class UrBackend(Backend):
         """What the program does with the reverse socket: the one owner of the passthrough goal."""
         self._on_result: PassthroughResult | None = None
         """Who hears the running passthrough goal's result."""
-        step_time = reverse.step_time_for_frequency(self.rate_hz)
-        self._writer = ReverseWriter(self.servers, window_s(self.options.receive_timeout_ms, step_time))
+        self._writer = ReverseWriter(self.servers, self.options.receive_timeout_ms)
         self._program = ControlProgram(robot, self.options, self.ports, self.servers, program)
         self.links = UrLinks(self.address, read_only=self.options.read_only, program=self._program)
         """The RTDE, primary and dashboard links (``links.UrLinks``)."""
@@ -99,20 +95,9 @@ class UrBackend(Backend):
         self._commands = UrRobotCommands(
             self.links, self.servers.script_command, notice=self.notice, name=self.name
         )
-        recover = self.options.auto_recover
-        self._recovery = (
-            None
-            if recover is None or not recover.protective_stop
-            else AutoRecovery(
-                self.name,
-                recover,
-                state=self.state,
-                dashboard=self._commands.dashboard,
-                restart=self.resend_program,
-                notice=self.notice,
-            )
+        self._recovery = auto_recovery(  # ur.auto_recover: looks at the robot with the link watch
+            self.name, self.options, self.state, self._commands.dashboard, self.resend_program, self.notice
         )
-        """``ur.auto_recover``: looks at the robot with the link watch (``recovery.AutoRecovery``)."""
         self.tcp = self.check_tcp(robot.tcp)  # the cell file's until set_tcp; sent as the program connects
         self._first_package = asyncio.Event()
         """Set by each RTDE package; cleared before a new link streams (start-up waits on it)."""
@@ -138,8 +123,6 @@ class UrBackend(Backend):
         self._cycle_error_logged = False
         self._command_sent = True
         self._runs = 0
-        self._reached = False
-        """Whether RTDE ever connected: until then a refused connection is waited out, not a failure."""
 
     # ---- link supervision ------------------------------------------------------------------------------
 
@@ -150,7 +133,7 @@ class UrBackend(Backend):
         if not self.options.read_only:  # before RTDE: a URCap may fetch the program as soon as it plays
             await self._program.listen(self.address)
         try:
-            rtde = await self._reach_controller()
+            rtde = await self._connect_rtde()
             primary = await self.links.connect_primary(self.messages.on_message)
             primary_task = asyncio.get_running_loop().create_task(primary.run())
             try:
@@ -160,8 +143,7 @@ class UrBackend(Backend):
                 with contextlib.suppress(BaseException):
                     await primary_task
         finally:
-            if self._recovery is not None:
-                self._recovery.close()
+            self._recovery.close()
             self._close_links()
             state = self.state
             _forget_robot(state)  # the last package's RUNNING/NORMAL say nothing about the robot now
@@ -183,27 +165,6 @@ class UrBackend(Backend):
         if self.on_change is not None:
             self.on_change()  # no cycle runs until RTDE streams again: say it now
 
-    async def _reach_controller(self) -> RtdeLink:
-        """``_connect_rtde``; before the controller was ever reached, a refused connection (it is not
-        listening yet: the daemon started first) is said once at INFO and tried again, not a failure."""
-        said = False
-        while True:
-            try:
-                rtde = await self._connect_rtde()
-            except ConnectionLostError as err:
-                if self._reached or not isinstance(err.__cause__, ConnectionRefusedError):
-                    raise
-                if not said:
-                    said = True
-                    log.info("[%s] waiting for the controller at %s (%s)", self.name, self.address, err)
-                    self.state.lifecycle_reason = f"waiting for the controller at {self.address}"
-                    if self.on_change is not None:
-                        self.on_change()
-                await asyncio.sleep(CONTROLLER_WAIT_S)
-                continue
-            self._reached = True
-            return rtde
-
     async def _connect_rtde(self) -> RtdeLink:
         """Connect and handshake RTDE; learn the controller's version and the address it reaches us at."""
         rtde = await self.links.connect_rtde(self._on_package)
@@ -213,7 +174,7 @@ class UrBackend(Backend):
                 f"{self.rate_hz:g} Hz: is the cell file's model right?"
             )
         step_time = reverse.step_time_for_frequency(rtde.frequency)
-        self._writer.use_window(window_s(self.options.receive_timeout_ms, step_time))
+        self._writer.use_step(step_time)
         if rtde.controller_version is not None:
             version = rtde.controller_version
             self._program.controller_version = (version.major, version.minor, version.bugfix)
@@ -254,8 +215,7 @@ class UrBackend(Backend):
                 primary_task.result()
                 raise ConnectionLostError("primary: link ended")
             self.diagnosis.watch()  # the clocks' reference pair, once per RTDE link
-            if self._recovery is not None:
-                self._recovery.look()
+            self._recovery.look()
             silent = time.monotonic() - self._package_at
             if self._first_package.is_set() and silent > max(RTDE_WATCHDOG_S, self._writer.window):
                 raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")

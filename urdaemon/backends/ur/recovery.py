@@ -17,11 +17,11 @@ import enum
 import logging
 from collections.abc import Awaitable, Callable
 
-from urdaemon.cell.robot_options import UrAutoRecover
+from urdaemon.cell.robot_options import UrAutoRecover, UrOptions
 from urdaemon.errors import UrDaemonError
 from urdaemon.model import RobotState, SafetyMode
 
-__all__ = ["NOTICE", "UNLOCK_WAIT_S", "AutoRecovery", "Decision", "RecoveryPolicy"]
+__all__ = ["NOTICE", "UNLOCK_WAIT_S", "AutoRecovery", "Decision", "RecoveryPolicy", "auto_recovery"]
 
 log = logging.getLogger("urdaemon.ur")
 
@@ -92,6 +92,19 @@ class RecoveryPolicy:
         return decision
 
 
+def auto_recovery(
+    name: str,
+    options: UrOptions,
+    state: RobotState,
+    dashboard: Callable[[str], Awaitable[tuple[bool, str]]],
+    restart: Callable[[], Awaitable[None]],
+    notice: Callable[[str, str], None],
+) -> AutoRecovery:
+    """The robot's ``AutoRecovery`` under ``options.auto_recover`` (one that does nothing without it)."""
+    policy = options.auto_recover or UrAutoRecover()
+    return AutoRecovery(name, policy, state=state, dashboard=dashboard, restart=restart, notice=notice)
+
+
 class AutoRecovery:
     """Carries out ``RecoveryPolicy``'s decisions for one robot."""
 
@@ -115,7 +128,7 @@ class AutoRecovery:
 
     def look(self) -> None:
         """Look at the robot now (the backend's link watch, a few times a second)."""
-        if self._task is not None and not self._task.done():
+        if not self.policy.options.protective_stop or (self._task is not None and not self._task.done()):
             return
         state = self.state
         decision = self.policy.decide(state.safety_mode, state.controller_time)
@@ -146,11 +159,11 @@ class AutoRecovery:
         if not ok:
             self._say(f"unlocking the protective stop failed: {reply}")
             return
-        try:
-            async with asyncio.timeout(SETTLE_S):
-                while self.state.safety_mode is SafetyMode.PROTECTIVE_STOP:
-                    await asyncio.sleep(_POLL_S)
-        except TimeoutError:
+        for _ in range(round(SETTLE_S / _POLL_S)):
+            if self.state.safety_mode is not SafetyMode.PROTECTIVE_STOP:
+                break
+            await asyncio.sleep(_POLL_S)
+        else:
             self._say(f"the protective stop was not cleared within {SETTLE_S:g} s of the unlock")
             return
         self._say("protective stop unlocked; starting the control program again (resend_program)")

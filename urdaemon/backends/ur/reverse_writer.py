@@ -18,7 +18,7 @@ from urdaemon.errors import BackendError, LocalProtocolError
 from urdaemon.model import JointCommand
 from urdaemon.protocols import reverse, trajectory_point
 
-__all__ = ["ReverseWriter", "encode_passthrough_point", "window_s"]
+__all__ = ["ReverseWriter", "encode_passthrough_point"]
 
 _SERVOJ, _SPEEDJ, _NONE = Frame.SERVOJ, Frame.SPEEDJ, Frame.NONE
 """(the 500 Hz path: an enum's attribute lookup costs ~0.1 µs, a module alias a fifth of that)"""
@@ -26,25 +26,21 @@ _T = reverse.TrajectoryAction
 _F = reverse.FreedriveAction
 
 
-def window_s(receive_timeout_ms: int, step_time: float) -> float:
-    """The read timeout every frame carries: the configured window, at least one controller step."""
-    return max(receive_timeout_ms / 1000.0, step_time)
-
-
 class ReverseWriter:
     """Writes the channel's frames and actions to the reverse (and trajectory) server."""
 
-    def __init__(self, servers: CallbackServers, window: float) -> None:
+    def __init__(self, servers: CallbackServers, receive_timeout_ms: int) -> None:
         self.servers = servers
-        self.window = window
-        """The read timeout of every frame (``window_s``; the backend sets it again per RTDE link)."""
+        self.receive_timeout_ms = receive_timeout_ms
+        self.window = receive_timeout_ms / 1000.0
+        """The read timeout of every frame, s: the configured window, at least one controller step."""
         self._frames: dict[Frame, bytes] = {}
         self._actions: dict[Action, reverse.ReverseCommand] = {}
-        self.use_window(window)
+        self.use_step(0.0)
 
-    def use_window(self, window: float) -> None:
-        """Encode every constant frame and action with ``window`` as its read timeout."""
-        self.window = window
+    def use_step(self, step_time: float) -> None:
+        """The controller's step (s): encode every constant frame and action with the window."""
+        window = self.window = max(self.receive_timeout_ms / 1000.0, step_time)
         constant: dict[Frame, reverse.ReverseCommand] = {
             Frame.IDLE: reverse.Idle(window),
             Frame.TRAJECTORY_NOOP: reverse.TrajectoryControl(_T.NOOP, 0, window),
