@@ -11,6 +11,7 @@ replaced by plain string substitution:
     {{MULT_JOINTSTATE}}      scale of every scaled int (1 000 000)
     {{SERVOJ_LOOKAHEAD}}     servoj lookahead_time, s
     {{SERVOJ_GAIN}}          servoj gain
+    {{KEEPALIVE_CYCLES}}     cycles without a frame the program goes on with the last command
     {{TOOL_SETUP}}           lines run once before connecting (e.g. tool voltage), or nothing
 
 Rendering is pure: the same parameters and template give the same text. Headless wrapping is
@@ -33,11 +34,13 @@ from urdaemon.protocols.script_command import SCRIPT_COMMAND_PORT
 from urdaemon.protocols.trajectory_point import TRAJECTORY_PORT
 
 __all__ = [
+    "DEFAULT_KEEPALIVE_CYCLES",
     "DEFAULT_REVERSE_PORT",
     "DEFAULT_SCRIPT_COMMAND_PORT",
     "DEFAULT_SERVOJ_GAIN",
     "DEFAULT_SERVOJ_LOOKAHEAD_S",
     "DEFAULT_TRAJECTORY_PORT",
+    "KEEPALIVE_CYCLES_RANGE",
     "PLACEHOLDERS",
     "SERVOJ_GAIN_RANGE",
     "SERVOJ_LOOKAHEAD_RANGE_S",
@@ -63,6 +66,11 @@ SERVOJ_LOOKAHEAD_RANGE_S: Final = (0.03, 0.2)
 """Allowed servoj lookahead_time, s (URScript servoj limits; §5.1)."""
 SERVOJ_GAIN_RANGE: Final = (100.0, 2000.0)
 """Allowed servoj gain (URScript servoj limits; §5.1)."""
+DEFAULT_KEEPALIVE_CYCLES: Final = 100
+"""Controller cycles without a frame during which the program goes on with the last command, then
+stops the arm (0.2 s at 500 Hz, 0.8 s at 125 Hz; docs/operating.md, busy PCs)."""
+KEEPALIVE_CYCLES_RANGE: Final = (1, 5000)
+"""Allowed keepalive cycles: at least one, at most 10 s of a 500 Hz controller."""
 SPEEDJ_ACCELERATION: Final = 40.0
 """rad/s²: the acceleration the control script passes to every speedj step while the daemon streams
 velocities (urcl's script does the same, §5.3). Our choice, not a URScript default: speedj has none."""
@@ -75,6 +83,7 @@ PLACEHOLDERS: Final = (
     "MULT_JOINTSTATE",
     "SERVOJ_LOOKAHEAD",
     "SERVOJ_GAIN",
+    "KEEPALIVE_CYCLES",
     "SPEEDJ_ACCEL",
     "TOOL_SETUP",
     "TARGET_PAYLOAD_CALL",
@@ -166,6 +175,8 @@ class ScriptParameters:
     servoj_lookahead: float = DEFAULT_SERVOJ_LOOKAHEAD_S
     servoj_gain: float = DEFAULT_SERVOJ_GAIN
     tool_setup: tuple[str, ...] = field(default=())
+    keepalive_cycles: int = DEFAULT_KEEPALIVE_CYCLES
+    """Cycles without a frame the program goes on with the last command before it stops the arm."""
     controller_version: tuple[int, int, int] = (5, 10, 0)
     """The controller's version: ``set_target_payload`` exists from PolyScope 5.10 on; older ones
     (CB3 3.x included) get ``set_payload(mass, cog)`` for SET_TARGET_PAYLOAD instead."""
@@ -187,6 +198,9 @@ class ScriptParameters:
             seen[port] = name
         _check_range("servoj_lookahead", self.servoj_lookahead, *SERVOJ_LOOKAHEAD_RANGE_S)
         _check_range("servoj_gain", self.servoj_gain, *SERVOJ_GAIN_RANGE)
+        if type(self.keepalive_cycles) is not int:
+            raise _fail("keepalive_cycles", f"must be an int, got {self.keepalive_cycles!r}")
+        _check_range("keepalive_cycles", self.keepalive_cycles, *KEEPALIVE_CYCLES_RANGE)
         object.__setattr__(self, "tool_setup", _check_tool_setup(self.tool_setup))
 
 
@@ -206,6 +220,7 @@ def _values(params: ScriptParameters) -> dict[str, str]:
         "MULT_JOINTSTATE": str(MULT_JOINTSTATE),
         "SERVOJ_LOOKAHEAD": _number(params.servoj_lookahead),
         "SERVOJ_GAIN": _number(params.servoj_gain),
+        "KEEPALIVE_CYCLES": str(params.keepalive_cycles),
         "SPEEDJ_ACCEL": repr(SPEEDJ_ACCELERATION),
         "TOOL_SETUP": "\n".join(params.tool_setup),
         "TARGET_PAYLOAD_CALL": (

@@ -134,16 +134,16 @@ MUTATIONS = [
     ),
     Mutation(
         "unclosed bracket",
-        "ud_speed_qd = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\n    ud_motion_thread",
-        "ud_speed_qd = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0\n    ud_motion_thread",
+        "ud_speed_qd = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\n    ud_speed_age",
+        "ud_speed_qd = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0\n    ud_speed_age",
         "\n",
         lines_after=1,  # the next token shows the list is not closed
         any_column=True,
     ),
     Mutation(
         "stray elif",
-        "    speedj(ud_speed_qd, UD_SPEEDJ_ACCEL, UD_STEP)\n  end\n  stopj",
-        "    speedj(ud_speed_qd, UD_SPEEDJ_ACCEL, UD_STEP)\n  end\n  elif ud_mode == 0:\n  stopj",
+        "  end\n  stopj(UD_STOPJ_ACCEL)\nend\n\nthread ud_speed_loop",
+        "  end\n  elif ud_mode == 0:\n  stopj(UD_STOPJ_ACCEL)\nend\n\nthread ud_speed_loop",
         "elif",
     ),
     Mutation(

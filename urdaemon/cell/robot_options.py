@@ -15,8 +15,10 @@ from urdaemon.cell.servo import ServoOptions
 from urdaemon.model import UR_JOINTS
 from urdaemon.paths import resource_path
 from urdaemon.urscript import (
+    DEFAULT_KEEPALIVE_CYCLES,
     DEFAULT_SERVOJ_GAIN,
     DEFAULT_SERVOJ_LOOKAHEAD_S,
+    KEEPALIVE_CYCLES_RANGE,
     SERVOJ_GAIN_RANGE,
     SERVOJ_LOOKAHEAD_RANGE_S,
 )
@@ -35,6 +37,7 @@ __all__ = [
     "Ports",
     "Pose",
     "Robot",
+    "UrAutoRecover",
     "UrOptions",
     "check_host",
     "check_tcp",
@@ -221,6 +224,30 @@ class MotionOptions(Frozen):
     """Caps and defaults of Cartesian motion (linear goals, twists)."""
 
 
+DEFAULT_RECEIVE_TIMEOUT_MS = 1000
+"""The default window (ms): a hiccup of the host shorter than this loses no program (0.82 s of
+silence was seen on a busy 2-core PC)."""
+RECEIVE_TIMEOUT_MS_RANGE = (10, 10_000)
+"""Allowed ``receive_timeout_ms``: at least a few cycles, at most 10 s of a robot left alone."""
+
+
+def _old_ms(value: object) -> str:
+    """The old key's seconds in ms, for the error's example (the value as given if not a number)."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return str(round(value * 1000))
+    return str(DEFAULT_RECEIVE_TIMEOUT_MS)
+
+
+class UrAutoRecover(Frozen):
+    """``ur.auto_recover``: what the backend recovers from by itself, and how often."""
+
+    protective_stop: bool = False
+    """After a protective stop: wait the controller's 5 s, unlock it, then resend (headless) or play."""
+    max_attempts: Annotated[int, Field(strict=True, ge=1, le=100)] = 3
+    """Recoveries allowed within ``within_s``; past them the robot is left as it is, and says so."""
+    within_s: Annotated[float, Field(gt=0, le=86_400, allow_inf_nan=False)] = 60.0
+
+
 class UrOptions(Frozen):
     """Options of the ``ur`` backend."""
 
@@ -234,8 +261,19 @@ class UrOptions(Frozen):
     servoj_lookahead: Annotated[float, Field(ge=_LOOKAHEAD[0], le=_LOOKAHEAD[1])] = DEFAULT_SERVOJ_LOOKAHEAD_S
     """servoj lookahead time (s); UR allows 0.03–0.2."""
     servoj_gain: Annotated[int, Field(ge=_GAIN[0], le=_GAIN[1])] = DEFAULT_SERVOJ_GAIN
-    receive_timeout: Annotated[float, Field(ge=0.004, le=1.0)] = 0.1
-    """The robot halts the program when no command arrives for this long (s)."""
+    receive_timeout_ms: Annotated[
+        int, Field(strict=True, ge=RECEIVE_TIMEOUT_MS_RANGE[0], le=RECEIVE_TIMEOUT_MS_RANGE[1])
+    ] = DEFAULT_RECEIVE_TIMEOUT_MS
+    """The window (ms): the control program ends only when no frame arrives for this long; a frame
+    within it is followed without a program restart (docs/operating.md, busy PCs)."""
+    keepalive_cycles: Annotated[
+        int, Field(strict=True, ge=KEEPALIVE_CYCLES_RANGE[0], le=KEEPALIVE_CYCLES_RANGE[1])
+    ] = DEFAULT_KEEPALIVE_CYCLES
+    """Controller cycles without a frame during which the program goes on with the last command (a
+    servoj stream extrapolated within the joint speed limits, a speedj velocity, a trajectory); past
+    them it stops the arm with ``stopj`` and waits for the next frame, until ``receive_timeout_ms``."""
+    auto_recover: UrAutoRecover | None = None
+    """Recover from a protective stop by itself (opt-in; never from an emergency stop)."""
     calibration_check: Literal["warn", "error"] = "warn"
     """A kinematics hash that differs from the configured calibration: log a warning, or refuse to run."""
     read_only: bool = False
@@ -248,10 +286,23 @@ class UrOptions(Frozen):
     def _host(cls, value: str | None, info: ValidationInfo) -> str | None:
         return None if value is None else check_host(value, str(info.field_name))
 
+    @model_validator(mode="before")
+    @classmethod
+    def _old_receive_timeout(cls, data: object) -> object:
+        if isinstance(data, dict) and "receive_timeout" in data:
+            raise ValueError(
+                f"receive_timeout (s) is now receive_timeout_ms (ms, default {DEFAULT_RECEIVE_TIMEOUT_MS}), "
+                f"with keepalive_cycles (default {DEFAULT_KEEPALIVE_CYCLES}): write e.g. "
+                f"receive_timeout_ms: {_old_ms(data['receive_timeout'])} (docs/cell-file.md)"
+            )
+        return data
+
     @model_validator(mode="after")
     def _read_only_does_not_start(self) -> UrOptions:
         if self.read_only and self.startup:
             raise ValueError("read_only: a read-only robot cannot also be started up (startup: true)")
+        if self.read_only and self.auto_recover is not None and self.auto_recover.protective_stop:
+            raise ValueError("read_only: a read-only robot cannot also recover by itself (auto_recover)")
         return self
 
 

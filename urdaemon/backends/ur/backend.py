@@ -33,11 +33,9 @@ from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.links import UrLinks
 from urdaemon.backends.ur.primary_link import PrimaryLink
 from urdaemon.backends.ur.program import ControlProgram, ProgramBuilder
+from urdaemon.backends.ur.recovery import auto_recovery
 from urdaemon.backends.ur.reverse_channel import READING_FRAMES, Action, Frame, ReverseChannel, Step
-from urdaemon.backends.ur.reverse_writer import (
-    ReverseWriter,
-    encode_passthrough_point,
-)
+from urdaemon.backends.ur.reverse_writer import ReverseWriter, encode_passthrough_point
 from urdaemon.backends.ur.robot_commands import UrRobotCommands
 from urdaemon.backends.ur.robot_messages import RobotMessages
 from urdaemon.backends.ur.rtde_link import RtdeLink, StateMapper, output_recipe
@@ -56,7 +54,9 @@ log = logging.getLogger("urdaemon.ur")
 _NO_FRAME, _RUNNING = Frame.NONE, Lifecycle.RUNNING
 """(the 500 Hz path: an enum's attribute lookup costs ~0.1 µs, a module alias a fifth of that)"""
 RTDE_WATCHDOG_S = 0.5
-"""No output package for this long is a lost link (a pulled cable closes no socket); urcl waits 1 s."""
+"""No output package for this long is a lost link (a pulled cable closes no socket); urcl waits 1 s.
+A longer window (``ur.receive_timeout_ms``) stretches it: a silence the program rides through is no
+lost link either."""
 
 
 class UrBackend(Backend):
@@ -87,13 +87,16 @@ class UrBackend(Backend):
         """What the program does with the reverse socket: the one owner of the passthrough goal."""
         self._on_result: PassthroughResult | None = None
         """Who hears the running passthrough goal's result."""
-        self._writer = ReverseWriter(self.servers)
+        self._writer = ReverseWriter(self.servers, self.options.receive_timeout_ms)
         self._program = ControlProgram(robot, self.options, self.ports, self.servers, program)
         self.links = UrLinks(self.address, read_only=self.options.read_only, program=self._program)
         """The RTDE, primary and dashboard links (``links.UrLinks``)."""
         self.messages = RobotMessages(self.name, self.notice, self._program)
         self._commands = UrRobotCommands(
             self.links, self.servers.script_command, notice=self.notice, name=self.name
+        )
+        self._recovery = auto_recovery(  # ur.auto_recover: looks at the robot with the link watch
+            self.name, self.options, self.state, self._commands.dashboard, self.resend_program, self.notice
         )
         self.tcp = self.check_tcp(robot.tcp)  # the cell file's until set_tcp; sent as the program connects
         self._first_package = asyncio.Event()
@@ -115,8 +118,6 @@ class UrBackend(Backend):
             servers=self.servers,
             program=self._program,
         )
-        step_time = reverse.step_time_for_frequency(self.rate_hz)
-        self._writer.servo_timeout = _servo_timeout(self.options, step_time)
         self._package_at = 0.0
         """``time.monotonic()`` when the latest RTDE package was handled (the cycle's ``now``)."""
         self._cycle_error_logged = False
@@ -142,6 +143,7 @@ class UrBackend(Backend):
                 with contextlib.suppress(BaseException):
                     await primary_task
         finally:
+            self._recovery.close()
             self._close_links()
             state = self.state
             _forget_robot(state)  # the last package's RUNNING/NORMAL say nothing about the robot now
@@ -172,7 +174,7 @@ class UrBackend(Backend):
                 f"{self.rate_hz:g} Hz: is the cell file's model right?"
             )
         step_time = reverse.step_time_for_frequency(rtde.frequency)
-        self._writer.servo_timeout = _servo_timeout(self.options, step_time)
+        self._writer.use_step(step_time)
         if rtde.controller_version is not None:
             version = rtde.controller_version
             self._program.controller_version = (version.major, version.minor, version.bugfix)
@@ -213,8 +215,9 @@ class UrBackend(Backend):
                 primary_task.result()
                 raise ConnectionLostError("primary: link ended")
             self.diagnosis.watch()  # the clocks' reference pair, once per RTDE link
+            self._recovery.look()
             silent = time.monotonic() - self._package_at
-            if self._first_package.is_set() and silent > RTDE_WATCHDOG_S:
+            if self._first_package.is_set() and silent > max(RTDE_WATCHDOG_S, self._writer.window):
                 raise ConnectionLostError(f"rtde: no data for {silent:.2f} s")
 
     async def close(self) -> None:
@@ -456,11 +459,6 @@ class UrBackend(Backend):
     def calibration_ok(self) -> bool | None:
         """Whether the robot's kinematics are the configured calibration's (None: not checked yet)."""
         return self.messages.calibration_ok
-
-
-def _servo_timeout(options: UrOptions, step_time: float) -> float:
-    """The servoj/speedj read timeout: the configured one within [one step, 200 ms] (§4.2)."""
-    return reverse.clamp_timeout(reverse.ControlMode.SERVOJ, options.receive_timeout, step_time)
 
 
 def _forget_robot(state: RobotState) -> None:

@@ -11,6 +11,7 @@ Nothing here reads the clock or runs the cycle.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable
 from typing import Any
 
@@ -23,7 +24,13 @@ from urdaemon.errors import BackendError, ConnectionLostError, UrTimeoutError
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols.rtde_variables import DOUBLE, INPUT_VARIABLES
 
-__all__ = ["UrLinks"]
+__all__ = ["CONTROLLER_WAIT_S", "UrLinks"]
+
+log = logging.getLogger("urdaemon.ur")
+
+CONTROLLER_WAIT_S = 0.5
+"""Until the controller was first reached, how often a refused RTDE connection is tried again: a
+daemon started before its controller (or the fakes) waits for it instead of failing."""
 
 _DOUBLE_INPUTS = frozenset(name for name, kind in INPUT_VARIABLES.items() if kind == DOUBLE)
 """The RTDE inputs sent as doubles (the rest of an input package are integers)."""
@@ -45,6 +52,8 @@ class UrLinks:
         self._dashboard_lock = asyncio.Lock()
         """Held while the dashboard connects: one connection however many callers want it."""
         self._inputs = input_recipe()
+        self._reached = False
+        """Whether RTDE ever connected: until then a refused connection is waited out, not a failure."""
 
     def check_commanding(self) -> None:
         """Refuse a read-only robot."""
@@ -55,8 +64,23 @@ class UrLinks:
 
     async def connect_rtde(self, on_package: Callable[[tuple[Any, ...]], None]) -> RtdeLink:
         """Connect RTDE and handshake (the driver's recipes; no inputs on a read-only robot); not
-        streaming yet (``RtdeLink.start``)."""
-        rtde = self.rtde = await RtdeLink.connect(self.address, on_package)
+        streaming yet (``RtdeLink.start``). Until the controller was first reached, a refused
+        connection (it does not listen yet: the daemon started first) is said once, at INFO, and
+        tried again: not a failure."""
+        told = False
+        while True:
+            try:
+                rtde = self.rtde = await RtdeLink.connect(self.address, on_package)
+                break
+            except ConnectionLostError as err:
+                if self._reached or not isinstance(err.__cause__, ConnectionRefusedError):
+                    raise
+                if not told:
+                    told = True
+                    name = self.program.robot.name
+                    log.info("[%s] waiting for the controller at %s (%s)", name, self.address, err)
+                await asyncio.sleep(CONTROLLER_WAIT_S)
+        self._reached = True
         await rtde.handshake(output_recipe(), None if self.read_only else self._inputs)
         return rtde
 

@@ -119,6 +119,7 @@ class ControlProgram:
                 script_command_port=self.ports["script_command"],
                 servoj_lookahead=self.options.servoj_lookahead,
                 servoj_gain=self.options.servoj_gain,
+                keepalive_cycles=self.options.keepalive_cycles,
                 controller_version=self.controller_version,
             )
         )

@@ -44,7 +44,7 @@ def not_ready_reason(state: RobotState, facts: ProgramFacts) -> str:
         if state.safety_mode is SafetyMode.PROTECTIVE_STOP:
             return (
                 "protective stop: unlock it (dashboard 'unlock protective stop' or the pendant), "
-                f"then resend the program{problem}"
+                f"then {_restart(facts)}{problem}"
             )
         return f"safety mode {state.safety_mode.name}: clear its cause on the robot's safety system{problem}"
     if lifecycle is Lifecycle.IDLE:
@@ -55,10 +55,19 @@ def not_ready_reason(state: RobotState, facts: ProgramFacts) -> str:
             return f"the brakes are engaged: call startup, or release them on the pendant{problem}"
         return f"robot mode {mode.name}{problem}"
     if lifecycle is Lifecycle.PAUSED:
-        return "the program is paused on the controller: resume it (play)"
+        return f"the program is paused on the controller: {_restart(facts)}"
     if lifecycle is not Lifecycle.RUNNING:
         return state.lifecycle_reason  # connecting, recovering: the backend's own words stand
     return _program_reason(facts, problem)
+
+
+def _restart(facts: ProgramFacts) -> str:
+    """The action that starts the control program again after a pause or a protective stop: a headless
+    program is no program the controller can resume (its play plays the loaded .urp), so only the
+    daemon sending it again works; an External Control program resumes with play."""
+    if facts.headless:
+        return "call resend_program (a headless program cannot be resumed with play)"
+    return "resume it (play, on the pendant or the dashboard) or call resend_program"
 
 
 def _program_reason(facts: ProgramFacts, problem: str) -> str:
