@@ -127,7 +127,7 @@ def _verify_problem(err: ssl.SSLCertVerificationError, host: str, files: TlsFile
 
 
 def _refused(err: ssl.SSLError, files: TlsFiles) -> str:
-    reason = str(err.reason or err).lower()
+    reason = str(err.reason or err).lower().replace("_", " ")
     if "certificate required" in reason or (files.certificate is None and "handshake" in reason):
         return (
             "TLS: the daemon asks for a client certificate (mutual TLS) and this client gave none: "
