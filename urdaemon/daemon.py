@@ -39,7 +39,7 @@ from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap
 from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
-from urdaemon.runtime.audit import AuditLog, AuditOptions, CellAudit, watch_links
+from urdaemon.runtime.audit import AuditLog, AuditOptions, CellAudit, watch_links, zenoh_log_from_env
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.daemon_info import DaemonInfo
 from urdaemon.runtime.flight_recorder import FlightRecorder, flight_recorder
@@ -208,6 +208,7 @@ class Daemon:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
+        zenoh_log_from_env()  # RUST_LOG: Zenoh's own log, its access-control denials included
         tap = Tap(RING_STREAMS) if self.cell.record is not None else None  # the flight recorder's feed
         self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell, tap=tap)
         restore_priority: Callable[[], None] | None = None

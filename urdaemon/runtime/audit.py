@@ -39,6 +39,7 @@ __all__ = [
     "CellAudit",
     "RobotAudit",
     "watch_links",
+    "zenoh_log_from_env",
 ]
 
 AUDIT_QUEUE = 10_000
@@ -182,6 +183,19 @@ def watch_links(session: Any, log: AuditLog) -> Any:
         return session.info.declare_link_events_listener(on_event, history=True)
     except (AttributeError, zenoh.ZError):
         return None
+
+
+def zenoh_log_from_env() -> None:
+    """Let Zenoh log to stdout as ``RUST_LOG`` says (nothing without it): what its access control
+    denies before the daemon sees it is logged under ``zenoh::net::routing::interceptor::access_control``
+    (docs/security.md, "The audit log")."""
+    import os
+
+    import zenoh
+
+    if os.environ.get("RUST_LOG"):
+        with contextlib.suppress(Exception):  # set up already (once per process)
+            zenoh.try_init_log_from_env()
 
 
 def _text(value: object) -> str | None:
