@@ -195,7 +195,7 @@ def zenoh_log_from_env() -> None:
 
     if os.environ.get("RUST_LOG"):
         with contextlib.suppress(Exception):  # set up already (once per process)
-            zenoh.try_init_log_from_env()
+            zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]
 
 
 def _text(value: object) -> str | None:
