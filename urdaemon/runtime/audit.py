@@ -22,6 +22,7 @@ import logging
 import logging.handlers
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -151,7 +152,12 @@ class AuditLog:
         with self._seq_lock:
             self._seq += 1
             seq = self._seq
-        stamped = {"time": datetime.now(UTC).isoformat(timespec="milliseconds"), "seq": seq}
+        now = time.time_ns()
+        stamped = {
+            "time": datetime.fromtimestamp(now / 1e9, UTC).isoformat(timespec="milliseconds"),
+            "host_time_ns": now,
+            "seq": seq,
+        }
         stamped.update(cell=self.cell, **entry)
         self._enqueue.handle(logging.makeLogRecord({"msg": stamped, "levelno": logging.INFO}))
 
