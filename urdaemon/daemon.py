@@ -39,6 +39,7 @@ from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching, Tap
 from urdaemon.recording.channels import RING_STREAMS
 from urdaemon.robot import RobotRuntime
+from urdaemon.runtime.audit import AuditLog, AuditOptions, CellAudit, watch_links, zenoh_log_from_env
 from urdaemon.runtime.cell_goals import CellGoals
 from urdaemon.runtime.daemon_info import DaemonInfo
 from urdaemon.runtime.flight_recorder import FlightRecorder, flight_recorder
@@ -185,8 +186,12 @@ def twist_limits(robot: Robot) -> CartesianLimits:
 class Daemon:
     """Serves one cell over Zenoh until ``stop`` is set."""
 
-    def __init__(self, cell: Cell, *, listen: tuple[str, ...] | None = None) -> None:
+    def __init__(
+        self, cell: Cell, *, listen: tuple[str, ...] | None = None, audit: AuditOptions | None = None
+    ) -> None:
         self.cell = cell
+        self.audit = AuditLog(cell.cell, audit)
+        """Every commanding request and session, to ``<cell>/audit`` and the options' file."""
         self.keys = CellKeys(cell.cell)
         self._listen = listen
         self.description = describe_cell(cell)
@@ -203,9 +208,11 @@ class Daemon:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then end every goal and close the Zenoh session."""
         loop = asyncio.get_running_loop()
+        zenoh_log_from_env()  # RUST_LOG: Zenoh's own log, its access-control denials included
         tap = Tap(RING_STREAMS) if self.cell.record is not None else None  # the flight recorder's feed
         self.node = node = ZenohNode(self.cell.zenoh, loop, listen=self._listen, cell=self.cell.cell, tap=tap)
         restore_priority: Callable[[], None] | None = None
+        links: Any = None
         try:
             if self.cell.realtime_priority:  # after Zenoh started its threads: they stay as they are
                 try:
@@ -224,10 +231,14 @@ class Daemon:
                 CELL.daemon: info.on_query,  # also answers ``*/daemon``: every cell
                 CELL.any_robot: self._on_any_robot,
                 CELL.stop: self._on_cell_stop,  # never refused: any payload
+                CELL.audit: None,
                 **cell_goals.endpoints(),
                 **(recorder.endpoints() if recorder is not None else {}),
             }
-            tf_pub = declare_endpoints(node, self.keys, served)[CELL.tf]  # the cell's rows of the table
+            declared = declare_endpoints(node, self.keys, served, audit=CellAudit(self.audit))
+            tf_pub = declared[CELL.tf]  # the cell's rows of the table
+            self.audit.start(declared[CELL.audit].put)  # its writer thread: off the loop
+            links = watch_links(node.session, self.audit)
             with startup_objects_frozen() as frozen:  # no 40-70 ms collector pauses in the cycle
                 log.info("cell %r serving %d robot(s)", self.cell.cell, len(self.runtimes))
                 log.debug("%d objects of startup kept out of garbage collection", frozen)
@@ -246,6 +257,10 @@ class Daemon:
                     await runtime.backend.close()
                 except Exception:  # one backend failing to close must not keep the others open
                     log.exception("closing %s failed", runtime.robot.name)
+            with contextlib.suppress(Exception):
+                if links is not None:
+                    links.undeclare()
+            self.audit.close()  # what is queued is written and published before the session goes
             node.close()
             if restore_priority is not None:  # the thread may go on running someone else's loop
                 restore_priority()
@@ -279,6 +294,7 @@ class Daemon:
                 self.cell.publish,
                 kinematics=kinematics,
                 arm=arm,
+                audit=self.audit,
             )
             runtime.declare()
             self.runtimes.append(runtime)

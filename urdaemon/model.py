@@ -57,9 +57,10 @@ UR_JOINTS: tuple[str, ...] = (
 """The six joint names of every UR arm, without the robot prefix."""
 UR_JOINT_COUNT = len(UR_JOINTS)
 """Joints of every UR arm: the length of every joint vector on UR's wire formats and in the fake."""
-CELL_LEVEL_KEYS = frozenset({"tf", "robot_description", "service", "goal", "daemon"})
+CELL_LEVEL_KEYS = frozenset({"tf", "robot_description", "service", "goal", "daemon", "audit"})
 """The chunks after ``<cell>/`` that name a key of the cell, not a robot (``<cell>/tf``,
-``<cell>/service/stop``, ``<cell>/goal/trajectory``, ``<cell>/daemon``): no robot may be named so."""
+``<cell>/service/stop``, ``<cell>/goal/trajectory``, ``<cell>/daemon``, ``<cell>/audit``):
+no robot may be named so."""
 
 
 IO_SIZES: dict[str, int] = {"digital": 8, "configurable": 8, "tool": 2, "analog": 2}

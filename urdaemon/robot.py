@@ -28,6 +28,7 @@ from urdaemon.publish.endpoints import ROBOT, Endpoint, declare_endpoints, read_
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 from urdaemon.publish.tap import Matching
+from urdaemon.runtime.audit import AuditLog, RobotAudit
 from urdaemon.runtime.goal_events import GoalEvents
 from urdaemon.runtime.goals import Goals
 from urdaemon.runtime.lease import LeaseBook
@@ -114,8 +115,10 @@ class RobotRuntime:
         *,
         kinematics: DhKinematics | None = None,
         arm: ArmKinematics | None = None,
+        audit: AuditLog | None = None,
     ) -> None:
         self.robot = robot
+        self._audit = audit
         self.backend = backend
         self.controller = controller
         self.node = node
@@ -209,6 +212,7 @@ class RobotRuntime:
             guard=self.lease.book,
             read_only=read_only_reason(self.robot),
             refused=self.commands.on_refused,
+            audit=None if self._audit is None else RobotAudit(self._audit, self.robot.name, self.lease.book),
         )
         self._pub_joints = declared[ROBOT.joint_states]
         self._joints_wanted = self.node.matching(self._pub_joints)  # with the flight recorder: always on

@@ -162,10 +162,11 @@ def _allowed(acl: dict[str, Any], subject: str, flow: str, message: str) -> set[
 
 
 def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
-    """ "command alice" is alice's goals (issue 17: linear goals and twists too), cancel, services, streams,
+    """ "command alice" is alice's goals (issue 17: linear goals and twists too), services, streams,
     lease and lease token; "read alice"
     is her state, events, goal messages and results; nobody may publish a goal result or feedback
-    (a forged result cannot enter through the daemon's links), and stop is everyone's."""
+    (a forged result cannot enter through the daemon's links), and stop and a robot's cancel (it only
+    stops, issue 32) are everyone's."""
     cell = load_cell(cell_file(folder, GOOD))
     assert cell.zenoh.access is not None
     acl = access_control(cell.zenoh.access, "sec")
@@ -175,7 +176,6 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
         "sec/alice/goal/move",
         "sec/alice/goal/linear",
         "sec/alice/goal/trajectory",
-        "sec/alice/goal/cancel",
         "sec/alice/service/*",
         "sec/alice/lease",
         "sec/alice/goal/*/result",
@@ -199,7 +199,11 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
     assert "sec/tf" not in _allowed(acl, "viewer", "ingress", "declare_subscriber")  # bob's poses too
     assert "sec/alice/joint_states" in _allowed(acl, "viewer", "ingress", "declare_subscriber")
     assert "sec/alice/goal/*/*" in _allowed(acl, "viewer", "egress", "put")
-    assert _allowed(acl, ANYONE, "ingress", "query") == {"sec/*/service/stop", "sec/service/stop"}
+    assert _allowed(acl, ANYONE, "ingress", "query") == {
+        "sec/*/service/stop",
+        "sec/*/goal/cancel",
+        "sec/service/stop",
+    }
     subjects = {s["id"]: s for s in acl["subjects"]}
     assert subjects[ANYONE] == {"id": ANYONE}
     assert subjects["operator"] == {"id": "operator", "cert_common_names": ["operator"]}

@@ -285,9 +285,12 @@ async def test_every_queryable_answers_garbage_once_with_a_refusal_and_the_daemo
                     replies = await client.query(key, body, timeout=QUERY_TIMEOUT_S, attachment=token)
                     assert len(replies) == 1, f"{key} <- {str(body)[:120]}: {len(replies)} replies"
                     _check_refusal(key, suffix, replies[0], body)
-            # results of goals that never existed: no answer, and no harm
+            # results of goals that never existed: one error reply naming the id (issue 32), no harm
             for payload in (None, *raws[:8]):
-                assert await ask_raw(client, rt.keys.goal_result(f"{rt.robot.name}-0000-1"), payload) == []
+                unknown = f"{rt.robot.name}-0000-1"
+                (answer,) = await ask_raw(client, rt.keys.goal_result(unknown), payload)
+                assert answer[0] is False, answer  # an error reply: never taken for a result
+                assert f"goal '{unknown}': robot '{rt.robot.name}' has no such goal" in answer[1].decode()
         # the cell URDF, whatever the query carries
         for payload in (None, *raws[:10], b"x" * MEGABYTE):
             urdf = await _one_reply(client, f"{daemon.cell.cell}/robot_description", payload)

@@ -65,7 +65,6 @@ async def test_a_second_clients_commands_are_refused_naming_the_holder_and_stop_
             theirs.send_trajectory([{"positions": HOME, "time_from_start": 2.0}], preempt=True),
             theirs.set_io("digital", 3, True),
             theirs.dashboard("power off"),
-            theirs.cancel(goal.goal_id),
             theirs.ensure_lease(),
         ]
         for call in refused:
@@ -73,6 +72,7 @@ async def test_a_second_clients_commands_are_refused_naming_the_holder_and_stop_
                 await call
             assert caught.value.reason.startswith("lease: "), caught.value.reason
             assert FIRST in caught.value.reason, caught.value.reason
+            assert "`urdaemon lease alice --take-over REASON`" in caught.value.reason  # the way out
         with pytest.raises(LeaseHeld, match="held by first client"):  # as last refused: no waiting
             theirs.stream_velocities([0.1] * 6)
         other = await second.robot("bob")  # never asked for bob's lease: a stream says what to do
@@ -135,25 +135,33 @@ async def test_take_over_passes_the_lease_and_the_first_clients_next_command_is_
             await mine.take_over("  ")
 
 
-async def test_cancel_from_another_process_is_refused_naming_the_holder() -> None:
-    """``urdaemon cancel``/``move`` from another terminal while a program holds the lease: refused
-    with the daemon's reason, exit 1 (as every refusal); ``urdaemon stop`` still stops the robot."""
+async def test_cancel_from_another_process_cancels_the_holders_goal() -> None:
+    """``urdaemon cancel`` from another terminal while a program holds the lease cancels its goal (a
+    cancel only stops the robot: issue 32; before, it was refused naming the holder); ``move`` from
+    there is refused with the daemon's reason naming the CLI's ways out, exit 1; ``urdaemon stop``
+    stops the robot."""
     async with two_clients() as (daemon, first, _):
         endpoint = daemon.listen_endpoints[0]
-        goal = await _long_goal(await first.robot("alice"))
-        cancel = await run_cli_in_thread("cancel", "alice", "--connect", endpoint, timeout=CLI_S)
-        assert cancel.code == 1, cancel
-        assert "lease: robot 'alice' is held by first client (test)" in cancel.stderr, cancel
+        mine = await first.robot("alice")
+        goal = await _long_goal(mine)
         move = await run_cli_in_thread(
             "move", "alice", "--joints", "0,-1.5708,1.5708,-1.5708,-1.5708,0", "--connect", endpoint,
             timeout=CLI_S,
         )  # fmt: skip
         assert move.code == 1, move
         assert "rejected: lease: robot 'alice' is held by first client (test)" in move.stderr, move
+        assert "`urdaemon stop alice`" in move.stderr, move
+        assert "`urdaemon lease alice --take-over REASON`" in move.stderr, move
         assert daemon.runtimes[0].controller.active_goal_id == goal.goal_id
+        cancel = await run_cli_in_thread("cancel", "alice", "--connect", endpoint, timeout=CLI_S)
+        assert cancel.code == 0, cancel
+        assert '"canceled": true' in cancel.stdout, cancel
+        assert (await goal.result(timeout=10.0))["status"] == "canceled"
+        assert mine.lease.token is not None, "the holder keeps its lease"
+        second = await _long_goal(mine)
         stop = await run_cli_in_thread("stop", "alice", "--connect", endpoint, timeout=CLI_S)
         assert stop.code == 0, stop
-        assert (await goal.result(timeout=10.0))["status"] == "aborted"
+        assert (await second.result(timeout=10.0))["status"] == "aborted"
 
 
 async def test_lease_command_shows_the_holder_and_takes_it_over() -> None:

@@ -56,6 +56,8 @@ def kind_of(key: str) -> tuple[str, str | None] | None:
         return "tf", None
     if len(parts) == 4 and parts[1] == "goal" and parts[3] == "result":
         return "cell_result", None
+    if parts[1:] == ["audit"]:
+        return "audit", None
     robot = parts[1]
     assert robot in ROBOTS, key
     if len(parts) == 5 and parts[2] == "goal" and parts[4] in ("feedback", "result"):

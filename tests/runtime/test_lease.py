@@ -49,9 +49,11 @@ def test_only_the_holders_token_passes_the_view_and_every_refusal_names_the_hold
     book = LeaseBook("alice", KEY)
     free = book.current.refusal(None)
     assert free == (
-        "lease: robot 'alice' needs its command lease for this (nobody holds it): "
-        "acquire it at cell/alice/lease"
+        "lease: robot 'alice' needs its command lease for this (nobody holds it): a client acquires it "
+        "by itself (`urdaemon move`, `RobotClient.ensure_lease()`); stopping needs none "
+        "(`urdaemon stop alice`)"
     )
+    assert KEY not in free, "the way out is a command, not a key"
     token = book.acquire(acquire(S1, "mover"), NOW).reply["token"].encode()
     assert book.current.refusal(token) is None
     assert book.refusal(token) is None
@@ -59,7 +61,9 @@ def test_only_the_holders_token_passes_the_view_and_every_refusal_names_the_hold
         reason = book.current.refusal(wrong)
         assert reason is not None
         assert reason.startswith("lease: robot 'alice' is held by mover since 2027-01-15T08:00:00+00:00;")
-        assert KEY in reason
+        assert "`urdaemon stop alice`" in reason, "the CLI's ways out, not a key"
+        assert "`urdaemon lease alice --take-over REASON`" in reason
+        assert KEY not in reason
 
 
 def test_another_session_is_refused_unless_it_forces_with_a_reason() -> None:
@@ -68,7 +72,7 @@ def test_another_session_is_refused_unless_it_forces_with_a_reason() -> None:
     refused = book.acquire(acquire(S2, "second"), NOW + 1)
     assert refused.reply["ok"] is False
     assert "held by first" in refused.reply["reason"]
-    assert "take it over with force and a reason" in refused.reply["reason"]
+    assert "`urdaemon lease alice --take-over REASON`" in refused.reply["reason"]
     assert refused.reply["lease"]["fingerprint"] == fingerprint(S1)
     assert refused.stop is None
     assert refused.event is None

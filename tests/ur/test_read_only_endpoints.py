@@ -83,7 +83,10 @@ async def test_a_read_only_robot_refuses_every_commanding_row_and_serves_the_res
             }
             assert len(refused) == sum(row.read_only is ReadOnly.REFUSED for row in ROBOT_ENDPOINTS)
             assert (await _one(session, ROBOT.lease.key(keys), {"action": "show"}))["ok"] is True
-            assert await zenoh_ask(session, keys.goal_result("rocell-none"), timeout=1.0) == []
+            (unknown,) = await zenoh_ask(session, keys.goal_result("rocell-none"), timeout=WAIT_S)
+            assert "'rocell-none': robot 'alice' has no such goal" in unknown["error"], unknown
+            canceled = await _one(session, ROBOT.goal_cancel.key(keys), {})
+            assert (canceled["canceled"], canceled["reason"]) == (False, "no active goal"), canceled
             for stream in (ROBOT.joint_states, ROBOT.tcp_pose, ROBOT.status, ROBOT.io):
                 sub = client.subscribe(stream.key(keys), 10)
                 assert await sub.get_json(timeout=WAIT_S), stream.name

@@ -33,14 +33,15 @@ def bad_connection(args: argparse.Namespace) -> str | None:
     """Why ``--connect`` or ``--zenoh-config`` cannot be used (None when fine)."""
     import os
 
-    problem = _bad_endpoint(args.connect)
+    problem = None if args.connect is None else _bad_endpoint(args.connect)
     if problem is None and args.zenoh_config is not None and not os.path.isfile(args.zenoh_config):
         problem = f"--zenoh-config {args.zenoh_config!r} is not a file"
     return problem
 
 
 async def connect(args: argparse.Namespace) -> Client:
-    """A client of ``--connect`` (with ``--zenoh-config`` as its base) whose leases name this command."""
+    """A client of ``--connect``, or, left at its default, of the endpoint ``--zenoh-config`` names
+    (``Client.connect``), whose leases name this command."""
     from urdaemon.client import Client, default_holder
 
     return await Client.connect(

@@ -13,10 +13,11 @@ from typing import Any
 
 import zenoh
 
-from urdaemon.cell.zenoh_options import DEFAULT_ENDPOINT
+from urdaemon.cell.zenoh_options import DEFAULT_ENDPOINT, SECURE_PROTOCOLS
 from urdaemon.client.command_lease import Lease, default_holder, holder_text
 from urdaemon.client.robot_client import RobotClient
 from urdaemon.client.session import QUERY_TIMEOUT_S, ClientSession, zenoh_message
+from urdaemon.client.tls_diagnosis import TlsFiles, tls_file_problem, tls_files, tls_handshake_problem
 from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import ALIVE_ANYWHERE, CellKeys, RobotKeys
 from urdaemon.publish.session_config import zenoh_config
@@ -53,7 +54,7 @@ class Client(ClientSession):
     @classmethod
     async def connect(
         cls,
-        endpoint: str = DEFAULT_ENDPOINT,
+        endpoint: str | None = None,
         *,
         timeout: float = 5.0,
         low_latency: bool = False,
@@ -65,14 +66,26 @@ class Client(ClientSession):
         for both; without it the client still works).
 
         ``config_file``: a Zenoh JSON5 configuration to start from (TLS certificates, docs/security.md);
-        the endpoint, mode and scouting are still set as above. ``holder``: how this client's leases
-        name it (default: the program, its pid and host).
+        its endpoint (what ``urdaemon client-config`` wrote) is dialled unless another ``endpoint``
+        than ``DEFAULT_ENDPOINT`` (every command's ``--connect`` default) is given; mode and scouting
+        are set as above.
+        ``holder``: how this client's leases name it (default: the program, its pid and host).
 
-        Raises ``UrDaemonError`` naming ``endpoint`` when nothing answers there within ``timeout`` s.
+        Raises ``UrDaemonError`` naming the endpoint when nothing answers there within ``timeout`` s,
+        and naming the cause when a TLS file is wrong or the TLS handshake fails (tls_diagnosis.py).
         """
         loop = asyncio.get_running_loop()
+        base = _config_file(config_file)
+        if endpoint in (None, DEFAULT_ENDPOINT):  # the default is no choice: a file's endpoint wins
+            endpoint = _file_endpoint(base) or DEFAULT_ENDPOINT
+        files = tls_files(base) if base is not None else None
+        secure = endpoint.startswith(SECURE_PROTOCOLS)
+        if files is not None and secure:
+            problem = tls_file_problem(files, config_file)
+            if problem is not None:
+                raise UrDaemonError(f"cannot connect to {endpoint}: {problem}")
         try:
-            conf = _session_config(endpoint, low_latency, config_file)
+            conf = _session_config(endpoint, low_latency, base)
             conf.insert_json5("connect/timeout_ms", json.dumps(int(timeout * 1000)))
             session = await loop.run_in_executor(None, zenoh.open, conf)
         except zenoh.ZError as err:
@@ -81,6 +94,11 @@ class Client(ClientSession):
         while not _has_peer(session):  # a peer session opens even when nobody listens there
             if loop.time() >= deadline:
                 await loop.run_in_executor(None, session.close)
+                if secure:  # Zenoh does not say why: a handshake of our own does
+                    why = await loop.run_in_executor(
+                        None, tls_handshake_problem, endpoint, files or TlsFiles(None, None, None), timeout
+                    )
+                    raise UrDaemonError(f"cannot connect to {endpoint}: {why}")
                 raise UrDaemonError(
                     f"cannot connect to {endpoint}: nothing answered within {timeout:g} s "
                     "(is the daemon running and listening there?)"
@@ -177,23 +195,44 @@ class Client(ClientSession):
         return lease
 
 
-def _session_config(endpoint: str, low_latency: bool, config_file: str | None) -> Any:
-    """The client session's Zenoh config: ``config_file`` (if any) as the base, then a peer with
-    ``endpoint`` and no scouting, as ``zenoh_config`` makes it."""
-    ours = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
+def _config_file(config_file: str | None) -> Any:
+    """The Zenoh config in ``config_file`` (None without one)."""
     if config_file is None:
-        return ours
+        return None
     try:
-        conf = zenoh.Config.from_file(config_file)
+        return zenoh.Config.from_file(config_file)
     except (zenoh.ZError, OSError) as err:
         reason = zenoh_message(err) if isinstance(err, zenoh.ZError) else (err.strerror or str(err))
         raise UrDaemonError(f"cannot read the Zenoh config {config_file}: {reason}") from err
+
+
+def _file_endpoint(conf: Any) -> str | None:
+    """The first endpoint a Zenoh config connects to (None: none, or no config)."""
+    if conf is None:
+        return None
+    try:
+        endpoints = json.loads(conf.get_json("connect/endpoints"))
+    except (zenoh.ZError, ValueError):
+        return None
+    if isinstance(endpoints, dict):  # per mode: {"peer": [...], "client": [...]}
+        endpoints = next((v for v in endpoints.values() if v), [])
+    if isinstance(endpoints, list) and endpoints and isinstance(endpoints[0], str):
+        return endpoints[0]
+    return None
+
+
+def _session_config(endpoint: str, low_latency: bool, base: Any) -> Any:
+    """The client session's Zenoh config: ``base`` (a config file's, if any) as the base, then a peer
+    with ``endpoint`` and no scouting, as ``zenoh_config`` makes it."""
+    ours = zenoh_config("peer", [], [endpoint], low_latency=low_latency)
+    if base is None:
+        return ours
     keys = ["mode", "listen/endpoints", "connect/endpoints", "scouting/multicast/enabled"]
     if low_latency:
         keys += ["transport/unicast/lowlatency", "transport/unicast/qos/enabled"]
     for key in keys:
-        conf.insert_json5(key, ours.get_json(key))
-    return conf
+        base.insert_json5(key, ours.get_json(key))
+    return base
 
 
 def _has_peer(session: Any) -> bool:

@@ -32,6 +32,14 @@ __all__ = ["LEASE_SESSION_BYTES", "Lease", "LeaseHeld", "default_holder", "holde
 LEASE_SESSION_BYTES = 16
 """A lease's secret session id is this many random bytes, as hex (a fresh one per lease)."""
 _LEASE_TOKEN = re.compile(rf"[0-9a-f]{{{2 * TOKEN_BYTES}}}")
+BUSY_RETRY_S = QUERY_TIMEOUT_S
+"""How long an acquire asks again while the daemon answers busy."""
+
+
+def _busy(reply: dict[str, Any]) -> bool:
+    """Whether the daemon refused an acquire as busy (ask again), not for another's lease."""
+    reason = reply.get("reason")
+    return reply.get("ok") is not True and isinstance(reason, str) and reason.startswith("busy")
 
 
 class LeaseHeld(GoalRejected):
@@ -126,7 +134,7 @@ class Lease:
             self._declare()
             request = LeaseRequest("acquire", self._session, self.client.holder, force, reason)
             try:
-                reply = await self.client.request(self.keys.lease, lease_body(request))
+                reply = await self._ask_while_busy(request)
             except NoSuchService:
                 self._undeclare()
                 self.unchecked = True
@@ -140,7 +148,26 @@ class Lease:
                 return reply
             self._undeclare()
             self.refusal = str(reply.get("reason") or f"lease: not granted ({reply})")
+            if _busy(reply):  # nobody holds it against this client: the daemon was too busy to decide
+                raise UrDaemonError(
+                    f"lease of robot {self.keys.robot!r} not granted: the daemon stayed busy for "
+                    f"{BUSY_RETRY_S:g} s ({self.refusal})"
+                )
             raise LeaseHeld(self.refusal)
+
+    async def _ask_while_busy(self, request: LeaseRequest) -> dict[str, Any]:
+        """The daemon's answer to ``request``, asked again while it answers busy (acquires waiting for
+        their tokens, a flood of them among them), for up to ``BUSY_RETRY_S``."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + BUSY_RETRY_S
+        pause = 0.05
+        for _ in range(1000):
+            reply = await self.client.request(self.keys.lease, lease_body(request))
+            if not _busy(reply) or loop.time() + pause > deadline:
+                return reply
+            await asyncio.sleep(pause)
+            pause = min(2 * pause, 0.5)
+        return reply
 
     def _granted(self, token: str) -> None:
         self.token = token

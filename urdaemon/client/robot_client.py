@@ -132,7 +132,7 @@ class RobotClient:
         """Acquire the robot's command lease unless this client holds it; its token ("" when the
         daemon checks none). Raises ``LeaseHeld`` naming the holder when another client holds it.
 
-        Goals, cancels and commanding services acquire by themselves, except after the lease was
+        Goals and commanding services acquire by themselves, except after the lease was
         taken from this client (they raise ``LeaseHeld`` saying so): this acquires it again. Call it
         once before streaming.
         """
@@ -342,8 +342,11 @@ class RobotClient:
         return await self.client.request(self.keys.service(name), body, timeout=wait)
 
     async def cancel(self, goal_id: str | None = None) -> dict[str, Any]:
-        """Cancel a goal (default: the active one); needs the lease like any command."""
-        return await self._command(self.keys.goal_cancel, cancel_body(goal_id), "canceled", QUERY_TIMEOUT_S)
+        """Cancel a goal (default: the active one), whoever sent it: a cancel only stops the robot, so,
+        like ``stop``, it needs no lease and acquires none (the lease's token goes along if held)."""
+        return await self.client.request(
+            self.keys.goal_cancel, cancel_body(goal_id), attachment=self.lease.attachment()
+        )
 
     async def set_io(self, kind: str, pin: int, value: bool | float) -> dict[str, Any]:
         """Set an output; the reply says ok or the reason."""

@@ -202,16 +202,29 @@ class ClientSession:
     ) -> list[Received]:
         """Ask a queryable; every reply with its attachment. ``every_queryable``: ask all that serve
         ``key`` and keep every reply (not just the best match, nor one reply per key)."""
+        replies, _ = await self._ask(key, body, timeout, attachment, every_queryable)
+        return replies
+
+    async def _ask(
+        self,
+        key: str,
+        body: dict[str, Any] | None,
+        timeout: float,
+        attachment: bytes | None,
+        every_queryable: bool = False,
+    ) -> tuple[list[Received], list[bytes]]:
+        """Every reply to a query on ``key``, and every error reply's payload."""
         payload = None if body is None else encode_body(body)
         options: dict[str, Any] = {}
         if every_queryable:
             options = {"target": zenoh.QueryTarget.ALL, "consolidation": zenoh.ConsolidationMode.NONE}
 
-        def ask() -> list[Received]:
-            replies = self.session.get(
-                key, payload=payload, timeout=timeout, attachment=attachment, **options
+        def ask() -> tuple[list[Received], list[bytes]]:
+            replies = list(
+                self.session.get(key, payload=payload, timeout=timeout, attachment=attachment, **options)
             )
-            return [_received(r.ok) for r in replies if r.ok is not None]
+            errors = [bytes(r.err.payload.to_bytes()) for r in replies if r.ok is None and r.err is not None]
+            return [_received(r.ok) for r in replies if r.ok is not None], errors
 
         try:
             return await self._loop.run_in_executor(None, ask)
@@ -232,11 +245,21 @@ class ClientSession:
         ``UrTimeoutError`` when nobody answers within ``timeout`` s.
         """
         start = self._loop.time()
-        replies = await self.query(key, body, timeout=timeout, attachment=attachment)
+        received, errors = await self._ask(key, body, timeout, attachment)
+        replies = [reply.payload for reply in received]
+        if not replies and errors:  # the daemon refused it as no answer can be (a wildcard, no such goal)
+            raise UrDaemonError(f"{key}: {_error_text(errors[0])}")
         if not replies:
             if self._loop.time() - start < min(0.5 * timeout, 1.0):
-                raise NoSuchService(f"nothing at {self.endpoint} serves {key}")
-            raise UrTimeoutError(f"no answer on {key} from {self.endpoint} within {timeout:g} s")
+                raise NoSuchService(
+                    f"nothing at {self.endpoint} answers {key}: the daemon serves no such key, or the "
+                    "cell's access control does not let this client ask it (docs/security.md, "
+                    '"Access control")'
+                )
+            raise UrTimeoutError(
+                f"no answer on {key} from {self.endpoint} within {timeout:g} s (a daemon that is "
+                "there but busy, or access control that drops the query: docs/security.md)"
+            )
         try:
             data = json.loads(replies[0])
         except ValueError as err:
@@ -244,6 +267,17 @@ class ClientSession:
         if not isinstance(data, dict):
             raise UrDaemonError(f"the answer on {key} is not a JSON object")
         return data
+
+
+def _error_text(payload: bytes) -> str:
+    """What an error reply says: its ``reason`` (a JSON refusal), else its text."""
+    try:
+        data = json.loads(payload)
+    except ValueError:
+        return payload.decode(errors="replace")[:300]
+    if isinstance(data, dict) and isinstance(data.get("reason"), str):
+        return str(data["reason"])[:300]
+    return payload.decode(errors="replace")[:300]
 
 
 def _received(sample: Any) -> Received:

@@ -41,6 +41,8 @@ __all__ = [
     "ROBOT",
     "ROBOT_ENDPOINTS",
     "Audience",
+    "Audit",
+    "AuditedGuard",
     "Endpoint",
     "Kind",
     "Node",
@@ -89,6 +91,16 @@ class Node(Protocol):
         """Declare a liveliness token."""
 
 
+class Audit(Protocol):
+    """What hears of a commanding message for the audit log (runtime/audit.py's ``RobotAudit``)."""
+
+    def refused(self, key: str, reason: str, attachment: bytes | None) -> None:
+        """A message refused by its guard (the lease, a read-only robot), on Zenoh's thread."""
+
+    def asked(self, key: str, query: Any, answer: str) -> Any:
+        """A query reaching its handler, on the loop: the query to hand on, which tells its answer."""
+
+
 class Kind(enum.StrEnum):
     """What the daemon does on a key (the client does the other half)."""
 
@@ -108,7 +120,7 @@ class Audience(enum.StrEnum):
     """Who may use a key: the access-control grants it falls under (access.py)."""
 
     ANYONE = "anyone"
-    """Every connection, whatever the grants (``stop``)."""
+    """Every connection, whatever the grants (``stop``, and a robot's ``goal/cancel``: it only stops)."""
     READER = "reader"
     """A grant that reads (or commands) the robot; for a key of the cell, any of its robots."""
     CELL_READER = "cell reader"
@@ -123,7 +135,7 @@ class ReadOnly(enum.StrEnum):
     """What a read-only robot (``ur.read_only``) does with a message on the key."""
 
     SERVED = "served"
-    """As any robot does: the key reads, or (stop, the lease) commands nothing."""
+    """As any robot does: the key reads, or (stop, cancel, the lease) commands nothing."""
     REFUSED = "refused"
     """Refused on Zenoh's thread with ``READ_ONLY_REASON``, before anything reads it."""
     BY_REQUEST = "by request"
@@ -165,6 +177,15 @@ class Endpoint:
         return self.audience is Audience.COMMANDER
 
     @property
+    def audited(self) -> bool:
+        """Whether the audit log hears of messages on it: every row that commands or stops a robot
+        (commanders', anyone's) a client sends to (a query, a put)."""
+        return self.audience in (Audience.COMMANDER, Audience.ANYONE) and self.kind in (
+            Kind.QUERYABLE,
+            Kind.SUBSCRIBER,
+        )
+
+    @property
     def cell_level(self) -> bool:
         """Whether the key is the cell's (``CELL_ENDPOINTS``), not a robot's."""
         return self in CELL_ENDPOINTS
@@ -191,6 +212,21 @@ class Endpoint:
             return ReadOnlyGuard(read_only)
         return lease if self.lease else None
 
+    def _audited(self, key: str, guard: Guard | None, handler: Any, audit: Audit | None) -> tuple[Any, Any]:
+        """The guard and handler with the audit told of each refusal and each answer."""
+        if audit is None or not self.audited:
+            return guard, handler
+        if guard is not None:
+            guard = AuditedGuard(guard, key, audit)
+        if self.kind is Kind.QUERYABLE:
+            inner, answer = handler, self.answer or "ok"
+
+            def handle(query: Any) -> None:
+                inner(audit.asked(key, query, answer))
+
+            handler = handle
+        return guard, handler
+
     def declare(
         self,
         node: Node,
@@ -200,8 +236,10 @@ class Endpoint:
         guard: Guard | None = None,
         read_only: str | None = None,
         refused: Callable[[str, str], None] | None = None,
+        audit: Audit | None = None,
     ) -> Any:
-        """Declare this row on ``node`` with its settings: a publication's publisher is returned."""
+        """Declare this row on ``node`` with its settings: a publication's publisher is returned.
+        With ``audit``, an audited row's refusals and answers are told to it."""
         key = self.key(keys)
         if self.kind is Kind.PUBLICATION:
             return node.publisher(key, realtime=self.realtime) if self.realtime else node.publisher(key)
@@ -213,19 +251,37 @@ class Endpoint:
         if handler is None:
             raise ValueError(f"{self.name}: a {self.kind} needs a handler")
         checked = self.guard(guard, read_only)
+        by_request = read_only is not None and self.read_only is ReadOnly.BY_REQUEST
+        if self.kind is not Kind.SUBSCRIBER and self.answer is not None and by_request:
+            assert self.service is not None, "only a service decides per request"
+            handler = _read_only_checked(self.service, handler, self.answer)
+        checked, handler = self._audited(key, checked, handler, audit)
         if self.kind is Kind.SUBSCRIBER:
             assert self.max_bytes is not None, "a subscriber's samples are bounded"
             node.subscriber(key, handler, max_bytes=self.max_bytes, refused=refused, guard=checked)
         elif self.answer is None:
             node.cell_queryable(key, handler)
         else:
-            if read_only is not None and self.read_only is ReadOnly.BY_REQUEST:
-                assert self.service is not None, "only a service decides per request"
-                handler = _read_only_checked(self.service, handler, self.answer)
             node.queryable(
                 key, handler, max_bytes=self.max_bytes, answer=self.answer, any_id=self.any_id, guard=checked
             )
         return None
+
+
+@dataclass(frozen=True, slots=True)
+class AuditedGuard:
+    """A guard whose refusals the audit log hears of (on Zenoh's thread, as the guard decides)."""
+
+    inner: Guard
+    key: str
+    audit: Audit
+
+    def refusal(self, attachment: bytes | None) -> str | None:
+        """The inner guard's answer; a refusal told to the audit."""
+        refusal = self.inner.refusal(attachment)
+        if refusal is not None:
+            self.audit.refused(self.key, refusal, attachment)
+        return refusal
 
 
 @dataclass(frozen=True, slots=True)
@@ -356,7 +412,11 @@ class _RobotRows:
         "goal_linear", "straight TCP lines through poses", LinearGoalMessage, max_bytes=LINEAR_MESSAGE_BYTES
     )
     goal_cancel = _row(
-        "goal_cancel", _Q, _COMMANDER, "cancel a goal", lease=True, read_only=_REFUSED, answer="canceled"
+        "goal_cancel",
+        _Q,
+        Audience.ANYONE,
+        "cancel a goal: it only stops the robot, so anyone who may stop it may (no lease)",
+        answer="canceled",
     )
     goal_results = _row(
         "goal_results", _Q, _READER, "a finished goal's result, signed", answer="ok", any_id=True
@@ -406,6 +466,9 @@ class _CellRows:
         message=CellGoalMessage,
     )
     goal_cancel = _row("goal_cancel", _Q, _COMMANDER, "cancel a cell goal", answer="canceled")
+    audit = _row(
+        "audit", _P, _COMMANDER, "the audit log: each commanding request, who asked, accepted or refused, why"
+    )
     goal_results = _row(
         "goal_results", _Q, Audience.CELL_READER, "a finished cell goal's result", answer="ok", any_id=True
     )
@@ -438,12 +501,14 @@ def declare_endpoints(
     guard: Guard | None = None,
     read_only: str | None = None,
     refused: Callable[[str, str], None] | None = None,
+    audit: Audit | None = None,
 ) -> dict[Endpoint, Any]:
     """Declare every row of ``served`` (row → its handler; None for a publication or a token) in the
     table's order, each with its row's size limit, reply field and checks: the lease ``guard`` on a
     leased row, and with ``read_only`` (a read-only robot's reason) the refusal of every row a
-    read-only robot does not serve. ``refused`` hears of every refused subscriber sample. Returns
-    each publication's publisher by row."""
+    read-only robot does not serve. ``refused`` hears of every refused subscriber sample; ``audit``
+    of every audited row's refusals and answers (``Endpoint.audited``). Returns each publication's
+    publisher by row."""
     table = CELL_ENDPOINTS if isinstance(keys, CellKeys) else ROBOT_ENDPOINTS
     strangers = [row.name for row in served if row not in table]
     if strangers:
@@ -452,7 +517,7 @@ def declare_endpoints(
     for row in table:
         if row in served:
             declared[row] = row.declare(
-                node, keys, served[row], guard=guard, read_only=read_only, refused=refused
+                node, keys, served[row], guard=guard, read_only=read_only, refused=refused, audit=audit
             )
     return declared
 

@@ -46,6 +46,11 @@ class CellKeys:
         return CELL_LEVEL_KEYS
 
     @property
+    def audit(self) -> str:
+        """The audit log's entries (runtime/audit.py): each commanding request and session."""
+        return f"{self.cell}/audit"
+
+    @property
     def stop(self) -> str:
         """The cell's stop: every robot of the cell stops (the queryable answers once, for all)."""
         return f"{self.cell}/service/stop"

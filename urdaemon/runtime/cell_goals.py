@@ -335,12 +335,17 @@ class CellGoals:
         )
 
     def on_result_query(self, query: Any) -> None:
-        """Answer a query for a finished cell goal's result, signed (nothing while it runs)."""
+        """Answer a query for a finished cell goal's result, signed (nothing while it runs); for an id
+        the cell does not know, an error reply naming it."""
         goal_id = self._keys.goal_of_result(str(query.key_expr))
         kept = self._results.get(goal_id) if goal_id is not None else None
-        if goal_id is not None and kept is not None:  # on the key its signature covers
-            with contextlib.suppress(Exception):  # the querier may have timed out and gone
+        with contextlib.suppress(Exception):  # the querier may have timed out and gone
+            if goal_id is not None and kept is not None:  # on the key its signature covers
                 query.reply(self._keys.goal_result(goal_id), kept[0], attachment=kept[1])
+            elif goal_id is not None and goal_id not in self._running:
+                reason = f"cell goal {envelope.client_text(goal_id, 80)!r}: no such goal (never sent, or its "
+                reason += f"result is no longer kept: the newest {KEPT_RESULTS} are)"
+                query.reply_err(envelope.encode({"ok": False, "reason": reason}))
         with contextlib.suppress(Exception):
             query.drop()
 

@@ -29,7 +29,7 @@ from urdaemon.publish import envelope, signing
 from urdaemon.publish.keys import RobotKeys
 from urdaemon.publish.node import ZenohNode
 
-__all__ = ["KEPT_RESULTS", "GoalEvents", "ResultListener", "put_signed"]
+__all__ = ["KEPT_RESULTS", "GoalEvents", "ResultListener", "put_signed", "unknown_goal"]
 
 KEPT_RESULTS = 256
 """Finished goal results kept to answer late queries (each with its signature)."""
@@ -118,11 +118,26 @@ class GoalEvents:
             listener(result, message)
 
     def answer_result_query(self, query: Any) -> None:
-        """Answer a query for a finished goal's result, signed (nothing while it runs or once forgotten)."""
+        """Answer a query for a finished goal's result, signed; nothing while it runs (its result is
+        published when it ends); for a goal id this robot does not know (never its goal, or its
+        result no longer kept) an error reply naming the id, at once (``unknown_goal``)."""
         goal_id = self._keys.goal_of_result(str(query.key_expr))
         kept = self._results.get(goal_id) if goal_id is not None else None
-        if goal_id is not None and kept is not None:
-            with contextlib.suppress(Exception):  # the querier may have timed out and gone
+        with contextlib.suppress(Exception):  # the querier may have timed out and gone
+            if goal_id is not None and kept is not None:
                 query.reply(self._keys.goal_result(goal_id), kept[0], attachment=kept[1])
+            elif goal_id is not None and goal_id not in self._keys_of:
+                query.reply_err(
+                    envelope.encode({"ok": False, "reason": unknown_goal(self._robot.name, goal_id)})
+                )
         with contextlib.suppress(Exception):
             query.drop()
+
+
+def unknown_goal(robot: str, goal_id: str) -> str:
+    """Why a result query for ``goal_id`` is answered with an error: no such goal (kept: the newest
+    ``KEPT_RESULTS``)."""
+    return (
+        f"goal {envelope.client_text(goal_id, 80)!r}: robot {robot!r} has no such goal (never sent to "
+        f"it, or its result is no longer kept: the newest {KEPT_RESULTS} are)"
+    )

@@ -177,17 +177,19 @@ class LeaseBook:
         )
 
     def held_text(self, lease: Lease, *, releasing: bool = False) -> str:
-        """Why someone but ``lease``'s holder is refused."""
+        """Why someone but ``lease``'s holder is refused: the ways out, as commands of the CLI."""
         what = "only its holder may release it" if releasing else "only its holder may command it"
         return (
             f"lease: robot {self.robot!r} is held by {lease.holder} since {_iso(lease.since)}; {what}: "
-            f"ask it to release the lease, or take it over with force and a reason at {self.lease_key}"
+            f"ask it to release the lease, stop the robot (anyone may: `urdaemon stop {self.robot}`), "
+            f"or take the lease over: `urdaemon lease {self.robot} --take-over REASON`"
         )
 
     def _free_text(self) -> str:
         return (
-            f"lease: robot {self.robot!r} needs its command lease for this (nobody holds it): "
-            f"acquire it at {self.lease_key}"
+            f"lease: robot {self.robot!r} needs its command lease for this (nobody holds it): a client "
+            "acquires it by itself (`urdaemon move`, `RobotClient.ensure_lease()`); stopping needs none "
+            f"(`urdaemon stop {self.robot}`)"
         )
 
     def _view(self, lease: Lease | None) -> LeaseView:

@@ -36,7 +36,20 @@ __all__ = ["MAX_WAITING", "LeaseKeeper", "watch_lease_holders"]
 LEASE_PROBE_EVERY_S = 0.25
 """How often an acquire that waits for its holder's token asks Zenoh for it again."""
 MAX_WAITING = 8
-"""Most acquires of one robot waiting for their liveliness token at once (more are refused, busy)."""
+"""Most acquires of one robot waiting for their liveliness token at once: a newer one takes the place
+of the oldest, which is refused ("busy: ... gave way"), so acquires whose token never comes cannot
+keep a free lease from everyone else (a present token is found by the first probe, in a moment)."""
+
+
+class _Waiter:
+    """An acquire waiting for its liveliness token: set when it appears, or when it gives way."""
+
+    __slots__ = ("event", "gave_way", "session")
+
+    def __init__(self, session: str) -> None:
+        self.session = session
+        self.event = asyncio.Event()
+        self.gave_way = False
 
 
 class LeaseKeeper:
@@ -59,8 +72,8 @@ class LeaseKeeper:
         self._status = status
         self._log = log
         self._watch: LivelinessWatch | None = None
-        self._waiting: dict[asyncio.Event, str] = {}
-        """Each waiting acquire's event (set when its token appears) and its session."""
+        self._waiting: list[_Waiter] = []
+        """The acquires waiting for their token, oldest first."""
         self._holder_key: str | None = None
         """The holder's token key, watched while it holds the lease."""
 
@@ -86,9 +99,9 @@ class LeaseKeeper:
             outcome = self.book.gone(lease.session)
             if outcome is not None:
                 self._act(outcome)
-        for event, session in self._waiting.items():
-            if self._alive(session):
-                event.set()
+        for waiter in self._waiting:
+            if self._alive(waiter.session):
+                waiter.event.set()
 
     def _alive(self, session: str) -> bool:
         return self._watch is not None and self._watch.alive(self._keys.lease_holder(session))
@@ -129,28 +142,31 @@ class LeaseKeeper:
             reply(query, refused.reply)
         elif self._alive(request.session):
             self._grant(query, request)
-        elif len(self._waiting) >= MAX_WAITING:
-            reply(
-                query,
-                {"ok": False, "reason": f"busy: {MAX_WAITING} acquires wait for their token; ask again"},
-            )
         else:
+            if len(self._waiting) >= MAX_WAITING:  # the oldest gives way: a flood cannot hold the slots
+                oldest = self._waiting.pop(0)
+                oldest.gave_way = True
+                oldest.event.set()
             work = self._wait_then_grant(query, request)
             self._requests.spawn(work, query, {"ok": False, "reason": SHUTTING_DOWN})
 
     async def _wait_then_grant(self, query: Any, request: LeaseRequest) -> None:
         key = self._keys.lease_holder(request.session)
-        event = asyncio.Event()
-        self._waiting[event] = request.session
+        waiter = _Waiter(request.session)
+        self._waiting.append(waiter)
         watch = self._watch
         if watch is not None:
             watch.watch(key)  # before asking: a sample arriving meanwhile is kept
             watch.probe(key)
         try:
             try:
-                await self._token_heard(event, key)
+                await self._token_heard(waiter.event, key)
             finally:
-                del self._waiting[event]
+                if waiter in self._waiting:
+                    self._waiting.remove(waiter)
+            if waiter.gave_way and not self._alive(request.session):
+                reply(query, {"ok": False, "reason": _gave_way(self._keys.robot)})
+                return
             self._grant(query, request)  # a grant watches the key as the holder's before this lets go
         finally:
             if watch is not None:
@@ -203,6 +219,14 @@ class LeaseKeeper:
                 self._log.info("lease %s: %s%s", event["action"], event["holder"], shown)
             self._status.event(event)
             self._status.publish()
+
+
+def _gave_way(robot: str) -> str:
+    """Why an acquire that waited for its token gave way to a newer one."""
+    return (
+        f"busy: lease of robot {robot!r}: {MAX_WAITING} newer acquires came while this one waited for its "
+        "liveliness token, and the oldest gives way; ask again"
+    )
 
 
 class _Runtime(Protocol):
