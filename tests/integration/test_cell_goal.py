@@ -283,7 +283,7 @@ async def test_a_session_without_leases_never_makes_the_cell_planner_busy(
 
 async def test_every_robot_needs_its_lease_token(monkeypatch: pytest.MonkeyPatch) -> None:
     """The attachment names each robot's lease token; a robot whose token is missing or not its
-    holder's refuses the whole cell goal (none starts), and so does a cancel without the tokens."""
+    holder's refuses the whole cell goal (none starts); a cancel needs no token (it only stops)."""
     async with _cell(monkeypatch) as (daemon, client, published):
         alice_token = await (await client.robot("alice")).ensure_lease()
         other = await Client.connect(daemon.listen_endpoints[0])
@@ -303,10 +303,9 @@ async def test_every_robot_needs_its_lease_token(monkeypatch: pytest.MonkeyPatch
             # bob's holder starts it (and takes alice's lease over for it)
             await (await other.robot("alice")).take_over("the cell goal needs both")
             goal = await _long_goal(other)
-            refused = await client.request(CellKeys(CELL).goal_cancel, {"goal_id": goal.goal_id})
-            assert refused["canceled"] is False
-            assert refused["reason"].startswith("alice: lease: robot 'alice' is held by "), refused
-            assert (await goal.cancel())["canceled"] is True
+            # a client that holds neither lease cancels it: a cancel only makes the robots stop
+            canceled = await client.request(CellKeys(CELL).goal_cancel, {"goal_id": goal.goal_id})
+            assert (canceled["canceled"], canceled["goal_id"]) == (True, goal.goal_id), canceled
             assert (await goal.result(timeout=20.0))["status"] == "canceled"
         finally:
             await other.close()

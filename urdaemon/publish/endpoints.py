@@ -465,7 +465,13 @@ class _CellRows:
         answer="accepted",
         message=CellGoalMessage,
     )
-    goal_cancel = _row("goal_cancel", _Q, _COMMANDER, "cancel a cell goal", answer="canceled")
+    goal_cancel = _row(
+        "goal_cancel",
+        _Q,
+        Audience.ANYONE,
+        "cancel a cell goal: it only stops the robots, so anyone who may stop them may (no lease)",
+        answer="canceled",
+    )
     audit = _row(
         "audit", _P, _COMMANDER, "the audit log: each commanding request, who asked, accepted or refused, why"
     )
