@@ -58,6 +58,7 @@ def serve(args: argparse.Namespace) -> int:
         raise
     finally:
         end_stop_signals(previous)
+        daemon.release()  # the loop has ended: no ruckig object outlives serving (nanobind's leak report)
     return EXIT_OK
 
 

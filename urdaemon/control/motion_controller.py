@@ -364,6 +364,18 @@ class MotionController:
         self._mode = Mode.STREAM_TWIST
         self._ledger.stream_commands += 1
 
+    def release(self) -> None:
+        """Let go of every ruckig object (the online generator's, the twist smoothing's, the plans of the
+        running and ended goals) once the robot is no longer served: whatever still holds the
+        controller when the interpreter exits (a Zenoh callback whose last reference is dropped on a
+        thread that never runs Python again) then keeps none alive, and nanobind reports no leak. The
+        controller is unusable afterwards."""
+        self._goal = None
+        self._mode = Mode.IDLE
+        self._released.clear()
+        self._streams.release()  # and the online generator it shares with the stop ramp
+        self._twist.release()
+
     def set_arm(self, kin: ArmKinematics | None, twist: CartesianLimits) -> None:
         """The arm's kinematics (None: no Cartesian commands); twist speeds capped, smoothed by ``twist``."""
         self._twist.set_arm(kin, twist)
