@@ -365,14 +365,8 @@ class MotionController:
         self._ledger.stream_commands += 1
 
     def release(self) -> None:
-        """Let go of every ruckig object (the online generator's, the twist smoothing's, the plans of the
-        running and ended goals) once the robot is no longer served: whatever still holds the
-        controller when the interpreter exits (a Zenoh callback whose last reference is dropped on a
-        thread that never runs Python again) then keeps none alive, and nanobind reports no leak. The
-        controller is unusable afterwards."""
-        self._goal = None
-        self._mode = Mode.IDLE
-        self._released.clear()
+        """Let go of every ruckig object and goal plan (served no more: ``Daemon.release``); unusable then."""
+        self._goal, self._released[:] = None, []
         self._streams.release()  # and the online generator it shares with the stop ramp
         self._twist.release()
 
