@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import time
 from collections.abc import Callable
@@ -62,46 +63,70 @@ class CellDescription:
 
 
 def describe_cell(cell: Cell) -> CellDescription:
-    """Build the cell URDF and every robot's joint limits."""
+    """Build the cell URDF and every robot's joint limits; ``ConfigError`` naming each key path of a
+    start pose (``mock``/``servo.initial_positions``) the limits refuse, before anything is served."""
     urdf_text = build_cell_urdf(cell)
     urdf = read_urdf_facts(urdf_text)
     limits = {robot.name: joint_limits_for(robot, urdf) for robot in cell.robots}
+    problems = [
+        line
+        for i, robot in enumerate(cell.robots)
+        for line in _start_pose_problems(robot, limits[robot.name], f"robots[{i}] ({robot.name})")
+    ]
+    if problems:
+        raise ConfigError("\n".join(problems), errors=problems)
     return CellDescription(urdf=urdf_text, tree=KinematicTree.from_urdf(urdf), limits=limits)
 
 
-def _initial_positions(robot: Robot, limits: JointLimits) -> list[float] | None:
-    given: Any = None
+def _start_pose(robot: Robot) -> tuple[str, tuple[float, ...] | dict[str, float] | None]:
+    """The cell file's section holding the robot's start pose, and the pose as written (None: none)."""
     if robot.mock is not None:
-        given = robot.mock.initial_positions
-    elif robot.servo is not None:
-        given = robot.servo.initial_positions
+        return "mock", robot.mock.initial_positions
+    if robot.servo is not None:
+        return "servo", robot.servo.initial_positions
+    return "", None
+
+
+def _start_pose_problems(robot: Robot, limits: JointLimits, where: str) -> list[str]:
+    """What is wrong with the robot's start pose, a line per problem, each naming its key path under
+    ``where`` (``robots[0] (alice)``): joints the arm lacks, a wrong count, values outside the limits.
+    (Only here are a custom arm's joints and every arm's final limits known: cell/ cannot see them.)"""
+    section, given = _start_pose(robot)
+    if given is None:
+        return []
+    key = f"{where}.{section}.initial_positions"
+    bounds = dict(zip(limits.names, zip(limits.min_position, limits.max_position, strict=True), strict=True))
+    if isinstance(given, dict):
+        unknown = sorted(name for name in given if robot.prefix + name not in bounds)
+        if unknown:
+            return [f"{key}: unknown joint(s) {', '.join(unknown)}; joints: {', '.join(limits.names)}"]
+        named = [(f"{key}.{name}", robot.prefix + name, value) for name, value in given.items()]
+    elif len(given) != limits.dof:
+        return [f"{key}: {len(given)} values for {limits.dof} joints ({', '.join(limits.names)})"]
+    else:
+        named = [
+            (f"{key}[{i}]", name, value)
+            for i, (name, value) in enumerate(zip(limits.names, given, strict=True))
+        ]
+    return [
+        f"{path}: {value:g} is outside the limits of {joint} [{bounds[joint][0]:g}, {bounds[joint][1]:g}]"
+        for path, joint, value in named
+        if not bounds[joint][0] <= value <= bounds[joint][1]
+    ]
+
+
+def _initial_positions(robot: Robot, limits: JointLimits) -> list[float] | None:
+    """The robot's start pose in joint order (joints left out of a mapping at 0), or None; checked."""
+    problems = _start_pose_problems(robot, limits, f"robot {robot.name!r}")
+    if problems:
+        raise ConfigError("\n".join(problems), errors=problems)
+    _, given = _start_pose(robot)
     if given is None:
         return None
     if isinstance(given, dict):
         by_name = {robot.prefix + k: v for k, v in given.items()}
-        unknown = sorted(set(by_name) - set(limits.names))
-        if unknown:
-            raise ConfigError(
-                f"robot {robot.name!r}: initial_positions name unknown joint(s) {', '.join(unknown)}"
-            )
-        return _within_limits(robot, limits, [float(by_name.get(name, 0.0)) for name in limits.names])
-    if len(given) != limits.dof:
-        raise ConfigError(
-            f"robot {robot.name!r}: initial_positions has {len(given)} values for {limits.dof} joints"
-        )
-    return _within_limits(robot, limits, [float(v) for v in given])
-
-
-def _within_limits(robot: Robot, limits: JointLimits, positions: list[float]) -> list[float]:
-    for name, value, lo, hi in zip(
-        limits.names, positions, limits.min_position, limits.max_position, strict=True
-    ):
-        if not lo <= value <= hi:
-            raise ConfigError(
-                f"robot {robot.name!r}: initial position of {name} is {value}, "
-                f"outside its limits [{lo}, {hi}]"
-            )
-    return positions
+        return [float(by_name.get(name, 0.0)) for name in limits.names]
+    return [float(v) for v in given]
 
 
 def make_backend(
@@ -265,6 +290,15 @@ class Daemon:
             if restore_priority is not None:  # the thread may go on running someone else's loop
                 restore_priority()
             log.info("cell %r stopped", self.cell.cell)
+
+    def release(self) -> None:
+        """Let go of every ruckig object the robots' controllers hold, once ``run`` returned and its
+        event loop ended (a handler still queued on the loop could find them gone). Whatever holds the
+        daemon when the interpreter exits (a Zenoh callback whose last reference is dropped on a Zenoh
+        thread that never runs Python again) then keeps none alive, and nanobind reports no leak."""
+        for runtime in self.runtimes:
+            runtime.controller.release()
+        gc.collect()  # and no ruckig object waits in a reference cycle for the interpreter's last one
 
     def _build(self, node: ZenohNode) -> None:
         for robot in self.cell.robots:

@@ -476,7 +476,7 @@ BAD_CELLS: dict[str, Bad] = {
     "publish-zero-rate": Bad(
         "cell: c\npublish: {tf_rate_hz: 0}\nrobots: [" + ALICE + "}]\n",
         "publish.tf_rate_hz",
-        "greater than 0",
+        "greater than or equal to 1",
     ),
     "publish-decimation-zero": Bad(
         "cell: c\npublish: {joint_states_decimation: 0}\nrobots: [" + ALICE + "}]\n",

@@ -328,7 +328,8 @@ FIELD_ERRORS: list[tuple[str, object, str]] = [
     ("set_io", {"kind": "digital", "pin": True, "value": True}, "set_io.pin: expected an integer"),
     ("set_io", {"kind": "digital", "pin": 1.0, "value": True}, "set_io.pin: expected an integer"),
     ("set_io", {"kind": "digital", "pin": "1", "value": True}, "set_io.pin: expected an integer"),
-    ("set_io", {"kind": "digital", "pin": 0}, "set_io.value: expected a number, got null"),
+    ("set_io", {"kind": "digital", "pin": 0}, "set_io.value: a digital output takes true or false, got null"),
+    ("set_io", {"kind": "analog", "pin": 0, "value": True}, "set_io.value: expected a number, got true"),
     ("set_io", {"kind": "analog", "pin": 0, "value": "0.5"}, 'set_io.value: expected a number, got "0.5"'),
     # set_payload
     ("set_payload", {}, "set_payload.mass: expected a number, got null"),

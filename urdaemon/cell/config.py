@@ -41,11 +41,11 @@ class PublishOptions(Frozen):
 
     joint_states_decimation: Annotated[int, Field(ge=1, le=1000)] = 1
     """Publish joint states and TCP pose every Nth robot cycle."""
-    tf_rate_hz: Annotated[float, Field(gt=0, le=500)] = 50.0
-    status_rate_hz: Annotated[float, Field(gt=0, le=100)] = 2.0
-    """Status is published on every change and at least at this rate."""
-    io_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
-    """IO is published on every change and at least at this rate."""
+    tf_rate_hz: Annotated[float, Field(ge=1, le=500)] = 50.0
+    status_rate_hz: Annotated[float, Field(ge=0.01, le=100)] = 2.0
+    """Status is published on every change and at least at this rate (down to once in 100 s)."""
+    io_rate_hz: Annotated[float, Field(ge=1, le=500)] = 10.0
+    """IO is looked at this often, and published on every change and at least at this rate."""
 
 
 class RecordOptions(Frozen):
@@ -115,7 +115,7 @@ class Cell(Frozen):
                 robots[i] = {**robot, "ports": Ports.block(base).as_dict()}
                 taken.update(range(base, base + 4))
                 base += DEFAULT_PORT_STRIDE
-        return {**data, "robots": robots}
+        return {**data, "robots": tuple(robots)}
 
     @model_validator(mode="after")
     def _unique(self) -> Cell:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +101,15 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
+# YAML 1.2 (and JSON) read 1e-3 and 25e6 as numbers; PyYAML's YAML 1.1 wants a dot and a signed
+# exponent (1.0e-3) and gives text otherwise, which the strict schema would refuse as "not a number".
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
 def _message(source: str, error: Any, data: Any) -> str:
     reason = _reason(error)
     if not error["loc"] and reason.startswith(("robots", "cell", "zenoh", "publish")):
@@ -138,9 +148,32 @@ def format_location(loc: tuple[int | str, ...], data: Any) -> str:
     return ".".join(parts) if parts else "(top level)"
 
 
+_EXPECTED = {"float_type": "a number", "int_type": "an integer", "bool_type": "a boolean (true or false)"}
+"""What a strict number or flag field wanted, by pydantic's error type."""
+
+
+def _given(value: Any) -> str:
+    """How a user wrote ``value`` in YAML, for a type error."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            return f"the text {value!r}"
+        return f"the text {value!r} (write a number without quotes)"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "a list"
+    return "a mapping" if isinstance(value, dict) else "a value"
+
+
 def _reason(error: Any) -> str:
     kind = error.get("type", "")
     msg = str(error.get("msg", "invalid"))
+    if kind in _EXPECTED:
+        return f"must be {_EXPECTED[kind]}, not {_given(error.get('input'))}"
     if kind == "extra_forbidden":
         return "unknown key (not part of the cell file format)"
     if kind == "missing":

@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from urdaemon.cell.schema_types import HOST_NAME_PATTERN, Finite, Frozen, resolve_file
+from urdaemon.cell.schema_types import HOST_NAME_PATTERN, MIN_CYCLE_RATE_HZ, Finite, Frozen, resolve_file
 from urdaemon.cell.servo import ServoOptions
 from urdaemon.model import UR_JOINTS
 from urdaemon.paths import resource_path
@@ -219,7 +219,8 @@ class MotionOptions(Frozen):
     """Seconds allowed after the planned end to come within goal tolerance."""
     stream_timeout: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = 0.2
     """Deadman: a stream with no new command for this long is brought to a smooth stop (s)."""
-    feedback_rate_hz: Annotated[float, Field(gt=0, le=500)] = 10.0
+    feedback_rate_hz: Annotated[float, Field(ge=1, le=500)] = 10.0
+    """Goal feedback messages a second while a goal runs."""
     cartesian: CartesianOptions = CartesianOptions()
     """Caps and defaults of Cartesian motion (linear goals, twists)."""
 
@@ -313,8 +314,8 @@ class MockOptions(Frozen):
     """Start pose: a list in joint order, or joint name (without prefix) → value."""
     speed_scaling: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = 1.0
     """The runtime speed scaling the mock reports (multiplied with the speed slider)."""
-    rate_hz: Annotated[float, Field(gt=0, le=1000)] | None = None
-    """Cycle rate; default: the model's controller rate (500 Hz e-Series, 125 Hz CB3)."""
+    rate_hz: Annotated[float, Field(ge=MIN_CYCLE_RATE_HZ, le=1000)] | None = None
+    """Cycle rate, 10..1000 Hz; default: the model's controller rate (500 Hz e-Series, 125 Hz CB3)."""
 
 
 class CustomDescription(Frozen):

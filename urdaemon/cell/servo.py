@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 from pydantic import Field, field_validator, model_validator
 
 from urdaemon.boards import pca9685, ssc32
-from urdaemon.cell.schema_types import Finite, Frozen
+from urdaemon.cell.schema_types import MIN_CYCLE_RATE_HZ, Finite, Frozen
 
 __all__ = [
     "I2C_ADDRESS_RANGE",
@@ -150,8 +150,8 @@ class ServoOptions(Frozen):
         float, Field(ge=pca9685.FREQUENCY_RANGE_HZ[0], le=pca9685.FREQUENCY_RANGE_HZ[1])
     ] = 50.0
     """PCA9685 output frequency; the datasheet's range is 24..1526 Hz."""
-    rate_hz: Annotated[float, Field(gt=0, le=500)] = 50.0
-    """Control cycle rate: how often commands are computed and sent."""
+    rate_hz: Annotated[float, Field(ge=MIN_CYCLE_RATE_HZ, le=500)] = 50.0
+    """Control cycle rate, 10..500 Hz: how often commands are computed and sent."""
     joints: tuple[ServoJoint, ...]
     initial_positions: dict[str, Finite] | None = None
     outputs: tuple[ServoOutput, ...] = (ZenohOutput(kind="zenoh"),)

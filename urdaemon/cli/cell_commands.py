@@ -8,6 +8,7 @@ import argparse
 import asyncio
 import sys
 from collections.abc import Coroutine
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from urdaemon.cli.connect import fail
@@ -27,7 +28,10 @@ def serve(args: argparse.Namespace) -> int:
     from urdaemon.daemon import Daemon
 
     cell = load_cell(args.config)
-    daemon = Daemon(cell, listen=tuple(args.listen) if args.listen else None)
+    try:  # the start poses are checked against the arms' limits here, before Zenoh or a port opens
+        daemon = Daemon(cell, listen=tuple(args.listen) if args.listen else None)
+    except ConfigError as err:
+        raise _in_file(err, args.config) from err
     previous = None if args.owns_process else stop_signal_handlers()
 
     async def run() -> None:
@@ -37,8 +41,10 @@ def serve(args: argparse.Namespace) -> int:
 
     try:
         _run_loop(run())
-    except (ConfigError, DescriptionError):
-        raise  # bad input found as the robots start (a servo arm's missing device): exit 2, as check does
+    except ConfigError as err:  # bad input found as the robots start (a servo arm's missing device)
+        raise _in_file(err, args.config) from err  # exit 2, as check does
+    except DescriptionError:
+        raise
     except UrDaemonError as err:
         return fail(err)
     except OSError as err:  # e.g. a port in use: say which, no traceback
@@ -52,6 +58,7 @@ def serve(args: argparse.Namespace) -> int:
         raise
     finally:
         end_stop_signals(previous)
+        daemon.release()  # the loop has ended: no ruckig object outlives serving (nanobind's leak report)
     return EXIT_OK
 
 
@@ -89,9 +96,14 @@ def check(args: argparse.Namespace) -> int:
     path, check_devices = args.config, not args.skip_devices
     try:
         cell = load_cell(path)
-        description = describe_cell(cell)
-        for robot in cell.robots:  # what `serve` would refuse, `check` refuses too
-            make_backend(robot, description.limits[robot.name], None, cell.cell, check_devices=check_devices)
+        try:  # what `serve` would refuse, `check` refuses too
+            description = describe_cell(cell)
+            for robot in cell.robots:
+                make_backend(
+                    robot, description.limits[robot.name], None, cell.cell, check_devices=check_devices
+                )
+        except ConfigError as err:
+            raise _in_file(err, path) from err
         busy = _busy_ports(cell, path)  # serve would retry these forever
         if busy:
             raise ConfigError("\n".join(busy), errors=busy)
@@ -105,6 +117,13 @@ def check(args: argparse.Namespace) -> int:
         print(f"  {name}: {limits.dof} joints: {', '.join(limits.names)}")
     print("ok")
     return EXIT_OK
+
+
+def _in_file(err: ConfigError, path: str) -> ConfigError:
+    """``err`` with each line naming the cell file ``path`` first, as the file's own errors do."""
+    source = str(Path(path))
+    lines = [line if line.startswith(f"{source}: ") else f"{source}: {line}" for line in err.errors]
+    return ConfigError("\n".join(lines), errors=lines)
 
 
 def _busy_ports(cell: Cell, source: str) -> list[str]:

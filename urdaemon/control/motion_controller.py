@@ -364,6 +364,12 @@ class MotionController:
         self._mode = Mode.STREAM_TWIST
         self._ledger.stream_commands += 1
 
+    def release(self) -> None:
+        """Let go of every ruckig object and goal plan (served no more: ``Daemon.release``); unusable then."""
+        self._goal, self._released[:] = None, []
+        self._streams.release()  # and the online generator it shares with the stop ramp
+        self._twist.release()
+
     def set_arm(self, kin: ArmKinematics | None, twist: CartesianLimits) -> None:
         """The arm's kinematics (None: no Cartesian commands); twist speeds capped, smoothed by ``twist``."""
         self._twist.set_arm(kin, twist)

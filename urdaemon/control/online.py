@@ -49,6 +49,11 @@ class OnlineGenerator:
         self.braking = [False] * n
         """Per joint: told to brake to rest instead of following the position target."""
 
+    def release(self) -> None:
+        """Let go of the ruckig objects (the daemon stopped): nothing that still holds this generator
+        at interpreter exit keeps them alive for nanobind to report as leaked. Unusable afterwards."""
+        del self.update, self.inp, self.out
+
     def seed(self) -> None:
         """Continue from the setpoint (after it was set other than by this generator)."""
         inp = self.inp

@@ -119,6 +119,12 @@ class StreamFollower:
         self.last_command = -math.inf
         """When the last command of the running stream came (host seconds); -inf when none runs."""
 
+    def release(self) -> None:
+        """Let go of the online generator's ruckig objects, held here for the cycle's sake, and then the
+        generator's own (the daemon stopped); unusable afterwards."""
+        del self._inp, self._out, self._update
+        self._online.release()
+
     def active(self, now: float) -> bool:
         """Whether the last command is recent enough for the stream to run on."""
         return now - self.last_command <= self.timeout

@@ -160,6 +160,10 @@ class TwistFollower:
         self.scale = 1.0
         """The last cycle's uniform slow-down for the joint speed limits (1: none)."""
 
+    def release(self) -> None:
+        """Let go of the Cartesian smoothing's ruckig objects (the daemon stopped); unusable afterwards."""
+        del self._cart_update, self._cart_inp, self._cart_out
+
     def set_arm(self, kin: ArmKinematics | None, limits: CartesianLimits) -> None:
         """The arm's kinematics (None: no twists) and the twist limits: speed caps, smoothing limits."""
         self._kin = kin

@@ -70,7 +70,7 @@ def decode_set_tcp(payload: bytes | None) -> Pose6:
 
 
 def decode_set_io(payload: bytes | None) -> tuple[str, int, float | bool]:
-    """Decode a set_io request: kind, pin, value."""
+    """Decode a set_io request: kind, pin, value (a number for ``analog``, else true or false)."""
     what = "set_io"
     data = decode_message(payload, what)
     fields.allowed(data, what, {"kind", "pin", "value"})
@@ -79,6 +79,10 @@ def decode_set_io(payload: bytes | None) -> tuple[str, int, float | bool]:
         raise MessageError(f"{what}.kind: expected one of {', '.join(IO_SIZES)}")
     if isinstance(pin, bool) or not isinstance(pin, int):
         raise MessageError(f"{what}.pin: expected an integer")
+    if kind == "analog":
+        return kind, pin, fields.number(value, f"{what}.value")
+    if kind in IO_SIZES and not isinstance(value, bool):
+        raise MessageError(f"{what}.value: a {kind} output takes true or false, got {fields.shown(value)}")
     if isinstance(value, bool):
         return kind, pin, value
     return kind, pin, fields.number(value, f"{what}.value")
