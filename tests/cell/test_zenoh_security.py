@@ -203,6 +203,7 @@ def test_grants_expand_to_the_exact_keys_of_the_cell(folder: Path) -> None:
         "sec/*/service/stop",
         "sec/*/goal/cancel",
         "sec/service/stop",
+        "sec/goal/cancel",  # a cancel only stops: no command grant needed (issue 32)
     }
     subjects = {s["id"]: s for s in acl["subjects"]}
     assert subjects[ANYONE] == {"id": ANYONE}
@@ -215,7 +216,8 @@ def test_every_robot_and_cell_goals_with_a_star(folder: Path) -> None:
     assert access is not None
     acl = access_control(access, "sec")
     queries = _allowed(acl, "operator", "ingress", "query")
-    assert {"sec/*/goal/move", "sec/goal/trajectory", "sec/goal/cancel", "sec/robot_description"} <= queries
+    assert {"sec/*/goal/move", "sec/goal/trajectory", "sec/robot_description"} <= queries
+    assert "sec/goal/cancel" in _allowed(acl, ANYONE, "ingress", "query")  # every link may cancel
     assert "sec/goal/trajectory" not in _allowed(acl, "viewer", "ingress", "query")
 
 
