@@ -9,6 +9,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from urdaemon.backends.base import Backend
@@ -215,8 +216,9 @@ class Daemon:
         self, cell: Cell, *, listen: tuple[str, ...] | None = None, audit: AuditOptions | None = None
     ) -> None:
         self.cell = cell
-        self.audit = AuditLog(cell.cell, audit)
-        """Every commanding request and session, to ``<cell>/audit`` and the options' file."""
+        self.audit = AuditLog(cell.cell, audit if audit is not None else _audit_options(cell))
+        """Every commanding request and session, to ``<cell>/audit`` and the file that ``audit`` (or
+        else the cell file's ``audit`` key) names."""
         self.keys = CellKeys(cell.cell)
         self._listen = listen
         self.description = describe_cell(cell)
@@ -413,3 +415,10 @@ def tf_message(links: dict[str, list[float]], times: dict[str, dict[str, Any]]) 
     oldest = min((t["host_time_ns"] for t in times.values()), default=None)
     stamp = time.time_ns() if oldest is None else oldest
     return {"frame": "world", "host_time_ns": stamp, "robot_times": times, "links": links}
+
+
+def _audit_options(cell: Cell) -> AuditOptions | None:
+    """The cell file's ``audit`` key as the audit log's options (None: no file)."""
+    if cell.audit is None:
+        return None
+    return AuditOptions(Path(cell.audit.file), max_bytes=cell.audit.max_bytes, backups=cell.audit.backups)

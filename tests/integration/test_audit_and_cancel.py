@@ -22,6 +22,7 @@ from tests.helpers import acquire_lease, free_tcp_port, zenoh_ask
 from tests.integration.conftest import ROOT, TWO_MOCKS
 from tests.integration.test_lease import open_session
 from urdaemon.cell import parse_cell
+from urdaemon.cell.config import Cell
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
 from urdaemon.runtime.audit import AuditOptions
@@ -34,11 +35,14 @@ WAIT_S = 20.0
 
 
 @asynccontextmanager
-async def served(audit: AuditOptions | None = None) -> AsyncIterator[tuple[Daemon, str]]:
-    """A daemon serving the two mocks in this loop; yields it and its endpoint once alice's lease
-    answers."""
+async def served(
+    audit: AuditOptions | None = None, cell: Cell | None = None
+) -> AsyncIterator[tuple[Daemon, str]]:
+    """A daemon serving ``cell`` (default: the two mocks) in this loop; yields it and its endpoint once
+    alice's lease answers."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    daemon = Daemon(parse_cell(TWO_MOCKS, base_dir=ROOT / "configs"), listen=(endpoint,), audit=audit)
+    cell = cell if cell is not None else parse_cell(TWO_MOCKS, base_dir=ROOT / "configs")
+    daemon = Daemon(cell, listen=(endpoint,), audit=audit)
     stop = asyncio.Event()
     task = asyncio.create_task(daemon.run(stop))
     for _ in range(1000):
@@ -167,6 +171,41 @@ async def test_the_audit_log_has_an_accepted_goal_a_lease_refusal_and_a_stop_fro
     connected = [line for line in lines if line["event"] == "connected"]
     assert connected, "each session's link is audited"
     assert all(line["peer"].startswith("tcp/127.0.0.1:") for line in connected), connected
+
+
+async def test_the_cell_files_audit_key_names_the_rotating_file(tmp_path: Path) -> None:
+    """``audit: {file, max_bytes, backups}`` in the cell file: relative to the cell file's folder, its
+    folder made at start; a stop from any session is written there."""
+    text = TWO_MOCKS.replace("cell: testcell", "cell: testcell\naudit: {file: logs/audit.log, backups: 2}")
+    cell = parse_cell(text, base_dir=tmp_path)
+    assert cell.audit is not None
+    assert (cell.audit.file, cell.audit.backups) == (str((tmp_path / "logs" / "audit.log").resolve()), 2)
+    async with served(cell=cell) as (_, endpoint):
+        session = await asyncio.to_thread(open_session, endpoint)
+        try:
+            (stopped,) = await zenoh_ask(session, "testcell/service/stop", None, timeout=WAIT_S)
+            assert stopped["ok"] is True, stopped
+        finally:
+            session.close()
+    lines = [json.loads(line) for line in (tmp_path / "logs" / "audit.log").read_text().splitlines()]
+    assert ("testcell/service/stop", "accepted") in [(line.get("key"), line.get("outcome")) for line in lines]
+
+
+@pytest.mark.parametrize(
+    ("section", "says"),
+    [
+        ("audit: {file: .}", "is a directory"),
+        ("audit: {file: a.log, max_bytes: 10}", "greater than or equal to 4096"),
+        ("audit: {file: a.log, backups: -1}", "greater than or equal to 0"),
+        ("audit: {file: a.log, rotate: 1}", "rotate"),
+    ],
+)
+def test_a_bad_audit_key_is_refused_naming_it(tmp_path: Path, section: str, says: str) -> None:
+    from urdaemon.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=says) as caught:
+        parse_cell(TWO_MOCKS.replace("cell: testcell", f"cell: testcell\n{section}"), base_dir=tmp_path)
+    assert "audit" in str(caught.value)
 
 
 async def test_a_result_query_for_an_unknown_goal_id_is_answered_at_once_naming_it() -> None:

@@ -24,6 +24,7 @@ __all__ = [
     "CELL_NAME_PATTERN",
     "DEFAULT_PORT_BASE",
     "DEFAULT_PORT_STRIDE",
+    "AuditFileOptions",
     "Cell",
     "PublishOptions",
     "RecordOptions",
@@ -75,6 +76,29 @@ class RecordOptions(Frozen):
         return str(path.resolve())
 
 
+class AuditFileOptions(Frozen):
+    """The audit log's file (docs/operating.md, "The audit log"): one JSON line per commanding request,
+    rotated by size. The lines always go to ``<cell>/audit`` too; without this key no file is written."""
+
+    file: str
+    """The file (relative: to the cell file's folder); the daemon makes its folder at start if missing."""
+    max_bytes: Annotated[int, Field(ge=4096, le=1 << 40)] = 10 * 1024 * 1024
+    """Rotated when it would pass this size."""
+    backups: Annotated[int, Field(ge=0, le=1000)] = 5
+    """Rotated files kept (``FILE.1`` … ``FILE.<backups>``); 0: the file is cut back instead."""
+
+    @field_validator("file")
+    @classmethod
+    def _file(cls, value: str, info: ValidationInfo) -> str:
+        base = (info.context or {}).get("base_dir")
+        path = Path(value).expanduser()
+        if not path.is_absolute() and base is not None:
+            path = Path(base) / path
+        if path.is_dir():
+            raise ValueError(f"{path} is a directory; name the audit file in it")
+        return str(path.resolve())
+
+
 class Cell(Frozen):
     """A whole work cell: its name, the Zenoh settings and the robots."""
 
@@ -93,6 +117,8 @@ class Cell(Frozen):
     checked)."""
     record: RecordOptions | None = None
     """The flight recorder; none without it (docs/recording.md)."""
+    audit: AuditFileOptions | None = None
+    """The audit log's rotating file; none without it (``<cell>/audit`` is published either way)."""
     robots: tuple[Robot, ...]
 
     @model_validator(mode="before")
