@@ -8,8 +8,13 @@ What is handed to the loop is bounded, so that no flood of messages, each within
 can fill the loop's queue ahead of the robots' cycles: each queryable has at most
 ``MAX_IN_FLIGHT`` queries handed over and not yet handled (the rest are refused, "busy", on Zenoh's
 thread), and each subscriber at most one sample: a newer sample replaces the pending one (for a
-streaming command only the newest matters) and the replaced ones are counted and reported. The
-counters are the node's own, behind a small lock (admission.py); no daemon state is touched off the loop.
+streaming command only the newest matters) and the replaced ones are counted and reported. What
+Zenoh's threads do in Python for wildcard queries is bounded too, per second: Zenoh calls every
+queryable a wildcard covers (~50 for ``**``), each holding the GIL the loop needs, so the node
+builds a bounded number of wildcard error replies (``wildcards``) and each cell queryable hands a
+bounded number to the loop (``cell_queries``); a query past a budget is held unanswered a while
+(``tarpit``), so a client flooding in a loop waits. The counters are the node's own, behind a small
+lock (admission.py); no daemon state is touched off the loop.
 
 A commanding queryable or subscriber has a guard (the robot's command lease): a message whose
 attachment is not the lease holder's token is refused on Zenoh's thread too, after the wildcard and
