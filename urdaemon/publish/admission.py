@@ -58,10 +58,11 @@ WILDCARD_REPLIES_AT_ONCE = 1000
 replies for two robots), or a walk of every wildcard (docs/keys.md), is answered whole."""
 
 CELL_QUERIES_PER_S = 50.0
-"""Queries handed to the loop per second by each cell queryable (``<cell>/daemon``, which any
-wildcard covering it reaches, and the unknown-robot answerer ``<cell>/*/**``); the rest are dropped
-on Zenoh's thread. ``<cell>/daemon``'s answer costs ~0.25 ms of loop time: 50 a second bound a
-flood of ``**`` to ~1 % of the loop, while ``urdaemon list`` asks once."""
+"""Wildcard queries handed to the loop per second by each cell queryable (``<cell>/daemon``, which any
+wildcard covering it reaches, and the unknown-robot answerer ``<cell>/*/**``); the rest are held on
+Zenoh's thread. ``<cell>/daemon``'s answer costs ~0.25 ms of loop time: 50 a second bound a flood
+of ``**`` to ~1 % of the loop, while ``urdaemon list`` asks once. Exact keys are not counted (every
+query on a robot's key reaches ``<cell>/*/**`` too): they are bounded in flight (``MAX_IN_FLIGHT``)."""
 
 
 class Budget:

@@ -229,13 +229,15 @@ class ZenohNode:
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
         ``handler(query)`` runs on the loop for every query; the handler decides whether to reply.
-        Beyond ``MAX_IN_FLIGHT`` queries waiting for the loop, or ``CELL_QUERIES_PER_S`` a second, a
-        query gets no answer from it."""
+        Beyond ``MAX_IN_FLIGHT`` queries waiting for the loop, or ``CELL_QUERIES_PER_S`` wildcard
+        queries a second, a query gets no answer from it."""
 
         def on_query(query: Any) -> None:
-            if not budget.take():  # a flood: no answer from here, held a while (it slows down)
+            # a wildcard past the budget: no answer from here, held a while (a flood slows down); an
+            # exact key (every robot key's query reaches ``<cell>/*/**`` too) is bounded in flight only
+            if "*" in str(query.key_expr) and not budget.take():
                 self.tarpit.hold(query)
-                _log_dropped(budget, f"queries on {key}")
+                _log_dropped(budget, f"wildcard queries on {key}")
             elif flight.enter():
                 self._to_loop_counted(flight, handler, query)
             else:  # others may answer it; this one stays silent rather than queue without bound
