@@ -12,8 +12,10 @@ TESTS = Path(__file__).resolve().parent
 
 def test_hypothesis_has_no_deadline_and_no_too_slow_check() -> None:
     """Reproduction: the dashboard fuzzers failed on hypothesis's 200 ms deadline under load."""
-    assert settings.default.deadline is None
-    assert HealthCheck.too_slow in settings.default.suppress_health_check
+    default = settings.default
+    assert default is not None
+    assert default.deadline is None
+    assert HealthCheck.too_slow in default.suppress_health_check
     assert settings(max_examples=5).deadline is None  # a test's own settings inherit it
 
 
