@@ -9,7 +9,6 @@ from collections.abc import Callable
 import pytest
 
 from urdaemon.backends import Backend, BackendStatistics
-from urdaemon.backends import clock as clock_module
 from urdaemon.backends.base import IO_KINDS
 from urdaemon.backends.clock import PeriodicClock
 from urdaemon.errors import BackendError
@@ -125,7 +124,7 @@ def test_statistics_are_frozen() -> None:
 
 
 class FakeTime:
-    """Stands in for the ``time`` module inside ``urdaemon.backends.clock``."""
+    """The clock's time source (``now=``): advanced only by the fake sleep and the test."""
 
     def __init__(self, now: float) -> None:
         self.now = now
@@ -135,7 +134,7 @@ class FakeTime:
 
 
 class FakeAsyncio:
-    """Stands in for ``asyncio`` inside the clock module: ``sleep`` advances the fake time at once."""
+    """The clock's wait (``sleep=``): advances the fake time at once."""
 
     def __init__(self, time: FakeTime) -> None:
         self.time = time
@@ -149,11 +148,9 @@ class FakeAsyncio:
 
 
 @pytest.fixture
-def fake(monkeypatch: pytest.MonkeyPatch) -> tuple[FakeTime, FakeAsyncio]:
+def fake() -> tuple[FakeTime, FakeAsyncio]:
     time = FakeTime(100.0)
     aio = FakeAsyncio(time)
-    monkeypatch.setattr(clock_module, "time", time)
-    monkeypatch.setattr(clock_module, "asyncio", aio)
     return time, aio
 
 
@@ -163,7 +160,7 @@ PERIOD = 0.25
 
 async def test_clock_wakes_on_the_grid(fake: tuple[FakeTime, FakeAsyncio]) -> None:
     time, aio = fake
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     for k in range(1, 9):
         await clock.wait()
@@ -174,7 +171,7 @@ async def test_clock_wakes_on_the_grid(fake: tuple[FakeTime, FakeAsyncio]) -> No
 
 async def test_clock_does_not_drift_when_work_takes_time(fake: tuple[FakeTime, FakeAsyncio]) -> None:
     time, aio = fake
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     for k in range(1, 6):
         time.now += 0.125  # the cycle's work takes half a period
@@ -187,7 +184,7 @@ async def test_clock_does_not_drift_when_work_takes_time(fake: tuple[FakeTime, F
 async def test_clock_compensates_late_wake_ups(fake: tuple[FakeTime, FakeAsyncio]) -> None:
     time, aio = fake
     aio.overshoot = 0.0625
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     for k in range(1, 6):
         await clock.wait()
@@ -198,9 +195,9 @@ async def test_clock_compensates_late_wake_ups(fake: tuple[FakeTime, FakeAsyncio
 
 
 async def test_clock_counts_late_cycles_over_the_threshold(fake: tuple[FakeTime, FakeAsyncio]) -> None:
-    _, aio = fake
+    time, aio = fake
     aio.overshoot = 0.0625
-    clock = PeriodicClock(PERIOD, late_threshold=0.03125)
+    clock = PeriodicClock(PERIOD, late_threshold=0.03125, now=time.monotonic, sleep=aio.sleep)
     assert clock.late_threshold == 0.03125
     clock.start()
     for _ in range(3):
@@ -213,7 +210,7 @@ async def test_clock_skips_grid_points_that_passed_by_a_whole_cycle(
     fake: tuple[FakeTime, FakeAsyncio],
 ) -> None:
     time, aio = fake
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     time.now += 3.5 * PERIOD  # a stall: grid points 1, 2 and 3 passed
     await clock.wait()
@@ -230,7 +227,7 @@ async def test_clock_skips_grid_points_that_passed_by_a_whole_cycle(
 
 async def test_clock_late_by_less_than_a_period_skips_nothing(fake: tuple[FakeTime, FakeAsyncio]) -> None:
     time, aio = fake
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     time.now += 1.75 * PERIOD  # point 1 passed by three quarters of a period
     await clock.wait()
@@ -243,7 +240,7 @@ async def test_clock_late_by_less_than_a_period_skips_nothing(fake: tuple[FakeTi
 
 async def test_clock_never_sleeps_a_negative_delay(fake: tuple[FakeTime, FakeAsyncio]) -> None:
     time, aio = fake
-    clock = PeriodicClock(PERIOD)
+    clock = PeriodicClock(PERIOD, now=time.monotonic, sleep=aio.sleep)
     clock.start()
     for stall in (0.3, 1.1, 0.0, 2.6, 0.26):
         time.now += stall

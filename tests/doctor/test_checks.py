@@ -251,6 +251,10 @@ ROBOT_TABLE: list[tuple[str, dict[str, Any], dict[str, Verdict], str]] = [
     ("a few late cycles", _robot(late_cycles=50), {}, ""),
     ("late cycles", _robot(late_cycles=500), {"cycles": WARN}, "realtime_priority"),
     ("many missed cycles", _robot(missed_cycles=5000), {"cycles": FAIL}, "realtime_priority"),
+    # a mock's missed cycles lose nothing physical: judged by its own limit (25 %; 2.5 % warns)
+    ("a mock's 2 % lagged", _robot(missed_cycles=2000, lag_fraction=0.25), {}, ""),
+    ("a mock's 5 % lagged", _robot(missed_cycles=5000, lag_fraction=0.25), {"cycles": WARN}, ""),
+    ("a mock's 30 % lagged", _robot(missed_cycles=45_000, lag_fraction=0.25), {"cycles": FAIL}, ""),
     ("no cycles yet", _robot(cycles=0), {"cycles": UNKNOWN}, ""),
     (
         "slow turnaround",

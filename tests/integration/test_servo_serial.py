@@ -269,7 +269,9 @@ async def plug_in_again(rig: Rig, device: PtyPort) -> None:
         wire = Wire(device)
         rig.wires.append(wire)
         status = await next_matching(statuses, lambda s: s["ready"], "ready again")
-        assert status["reason"] == ""
+        # nothing wrong remains; on a loaded machine the output may say it skipped frames meanwhile
+        # (a note the machine decides, cleared after a clean second: tests/backends/servo)
+        assert status["reason"] == "" or status["reason"].startswith("servo output slow:"), status
         [output] = status["outputs"]
         assert (output["output"], output["state"], output["reopened"]) == (label, "ok", 1)
         back = await next_matching(events, lambda e: e["kind"] == "servo_output_back", "back")

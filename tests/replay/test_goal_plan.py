@@ -20,11 +20,14 @@ from urdaemon.control.move import plan_move
 from urdaemon.control.trajectory import plan_trajectory
 from urdaemon.model import JointLimits
 from urdaemon.replay.goal_plan import (
+    Plan,
     Sample,
+    Step,
     Track,
     estimate_accelerations,
     make_plan,
     sample_ticks,
+    unplanned_motion,
 )
 
 DOF = 6
@@ -284,3 +287,19 @@ def test_a_move_is_timed_by_the_goal_that_made_it_when_it_fits(duration: float, 
         assert times[1] - times[0] == pytest.approx(duration)
     else:
         assert times == moving
+
+
+def test_a_recorded_motion_no_cell_goal_drives_is_named() -> None:
+    """Issue 32: under load a replay played only the move to the start (0 cell goals) and exited 0;
+    the robots whose recording moves but that no goal drives are named (drive.py then exits 1)."""
+    moving = (
+        Sample(T0, HOME, tuple(ZEROS)),
+        Sample(T0 + 2_000_000, HOME, (0.1, 0, 0, 0, 0, 0)),
+        Sample(T0 + 4_000_000, HOME, tuple(ZEROS)),
+    )
+    resting = (Sample(T0, HOME, tuple(ZEROS)), Sample(T0 + 2_000_000, HOME, tuple(ZEROS)))
+    tracks = [Track("alice", P, moving), Track("bob", P, resting)]
+    empty = Plan({"alice": HOME}, [], "samples")
+    assert unplanned_motion(tracks, empty) == ["alice"]  # bob rests: nothing to replay is no error
+    driven = Plan({"alice": HOME}, [Step(0.0, 1.0, {"alice": []})], "samples")
+    assert unplanned_motion(tracks, driven) == []

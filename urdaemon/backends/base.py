@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from urdaemon.backends.timing import Histogram, LagLog
+from urdaemon.backends.timing import Histogram, LagLog, lag_limits
 from urdaemon.errors import BackendError
 from urdaemon.model import IO_SIZES, JointCommand, RobotState
 
@@ -66,8 +66,11 @@ class Backend(abc.ABC):
         self._late = 0
         self._max_lateness = 0.0
         self._reconnects = 0
-        self.lag_log = LagLog(f"robot {name!r} ({self.kind} backend)", log)
-        """Rate-limited warning of missed and late cycles; ``report_lag`` feeds it once per cycle."""
+        self.lag_log = LagLog(
+            f"robot {name!r} ({self.kind} backend)", log, period=self.period, limits=lag_limits(self.kind)
+        )
+        """Warns when missed and late cycles cross the backend's limits (rate-limited, naming the likely
+        cause); ``report_lag`` feeds it once per cycle. Below the limits they are only counted."""
         self.turnaround = Histogram()
         """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
         receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""
@@ -206,8 +209,8 @@ class Backend(abc.ABC):
         return  # nothing by default: mock and servo hold nothing between runs
 
     def report_lag(self) -> None:
-        """Warn (rate-limited) about cycles missed or late since the last warning; call once per cycle
-        after updating the counts of missed and late cycles."""
+        """Feed the counts of missed and late cycles to ``lag_log`` (which warns only when they cross the
+        backend's limits); call once per cycle after updating them."""
         self.lag_log.update(self._missed, self._late)
 
     def statistics(self) -> BackendStatistics:

@@ -8,18 +8,29 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Protocol
 
 __all__ = ["PeriodicClock", "ThreadClock", "TickClock", "TimerFdClock", "tick_clock"]
 
 
 class PeriodicClock:
-    """Wakes on an absolute grid of ``period`` seconds; counts late and skipped cycles."""
+    """Wakes on an absolute grid of ``period`` seconds; counts late and skipped cycles.
 
-    def __init__(self, period: float, *, late_threshold: float | None = None) -> None:
+    ``now`` and ``sleep`` are the time source and the wait (tests pass a simulated, loaded clock)."""
+
+    def __init__(
+        self,
+        period: float,
+        *,
+        late_threshold: float | None = None,
+        now: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
+    ) -> None:
         self.period = period
         self.late_threshold = period if late_threshold is None else late_threshold
+        self._now = now
+        self._sleep = sleep
         self._next = 0.0
         self.missed = 0
         self.late = 0
@@ -27,19 +38,19 @@ class PeriodicClock:
 
     def start(self) -> None:
         """Start the grid at the current time."""
-        self._next = time.monotonic()
+        self._next = self._now()
 
     async def wait(self) -> None:
         """Sleep until the next grid point; skip grid points that already passed by a whole cycle."""
         self._next += self.period
-        now = time.monotonic()
+        now = self._now()
         if now - self._next > self.period:
             skipped = int((now - self._next) / self.period)
             self.missed += skipped
             self._next += skipped * self.period
         delay = self._next - now
-        await asyncio.sleep(delay if delay > 0.0 else 0.0)
-        lateness = time.monotonic() - self._next
+        await self._sleep(delay if delay > 0.0 else 0.0)
+        lateness = self._now() - self._next
         if lateness > self.max_lateness:
             self.max_lateness = lateness
         if lateness > self.late_threshold:

@@ -33,6 +33,7 @@ class MockBackend(Backend):
         *,
         initial_positions: Sequence[float] | None = None,
         speed_scaling: float = 1.0,
+        clock: PeriodicClock | None = None,
     ) -> None:
         super().__init__(name, joint_names, rate_hz)
         if initial_positions is not None:
@@ -45,7 +46,8 @@ class MockBackend(Backend):
         self.command.positions[:] = self.state.positions
         self.runtime_scaling = speed_scaling
         """The controller-side scaling the mock reports, multiplied with the speed slider."""
-        self._clock = PeriodicClock(self.period)
+        self._clock = PeriodicClock(self.period) if clock is None else clock
+        """What wakes each cycle and counts the missed and late ones (tests pass a simulated one)."""
 
     async def run(self, on_cycle: Callable[[], None]) -> None:
         """Cycle at ``rate_hz`` forever."""

@@ -1,4 +1,5 @@
-"""Cycle timing: a fixed-bin histogram of durations, and a rate-limited warning of missed cycles.
+"""Cycle timing: a fixed-bin histogram of durations, and a warning of missed and late cycles that
+speaks only when they matter for the backend (``LagLimits``), rate-limited, naming the likely cause.
 
 Both are cheap enough to run once per cycle at 500 Hz.
 """
@@ -9,11 +10,11 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
-__all__ = ["LAG_LOG_INTERVAL_S", "Histogram", "LagLog"]
+from urdaemon.backends.lag_causes import LagCauses
 
-LAG_LOG_INTERVAL_S = 5.0
-"""At most one missed/late-cycles warning per backend in this many seconds."""
+__all__ = ["OWN_CLOCK_LAG", "UR_LAG", "Histogram", "LagLimits", "LagLog", "lag_limits", "ur_lag_limits"]
 
 BIN_NS = 1_000
 """Resolution: 1 µs."""
@@ -69,56 +70,149 @@ class Histogram:
         }
 
 
-class LagLog:
-    """Warns, at most once every ``interval_s``, that cycles were missed or late since the last warning.
+@dataclass(frozen=True, slots=True)
+class LagLimits:
+    """When missed and late cycles are worth a WARNING: a single hold-up of at least ``gap_s``, or
+    more than ``fraction`` of the cycles of a ``window_s`` window missed or late; at most one line
+    every ``interval_s``. Below both, they are only counted (``cycle_stats``, status, ``doctor``)."""
 
-    ``update(missed, late)`` takes the backend's running totals once per cycle: two integer
-    comparisons while nothing changed; the first change is logged at once, later ones when the
-    interval since the last line has passed (on the first cycle after it, even if no new cycle was
-    missed then, so nothing counted stays unsaid).
+    gap_s: float
+    fraction: float
+    window_s: float
+    interval_s: float
+
+
+UR_LAG = LagLimits(gap_s=0.05, fraction=0.01, window_s=10.0, interval_s=60.0)
+"""``ur``: a gap half the control program's default receive timeout (0.1 s; ``ur_lag_limits`` for
+another), or more than 1 % of a 10 s window: the robot is about to stop, or its motion is rough."""
+
+OWN_CLOCK_LAG = LagLimits(gap_s=0.5, fraction=0.25, window_s=30.0, interval_s=300.0)
+"""``mock`` and ``servo``: the daemon's own clock drives them, so a missed cycle loses nothing
+physical; only a half-second stall or a quarter of the cycles over 30 s (motion visibly jerky,
+streams and viewers starved) is worth a line."""
+
+
+def ur_lag_limits(stop_after_s: float) -> LagLimits:
+    """The ``ur`` limits for a control program that stops after ``stop_after_s`` without a command:
+    a gap of half of that warns."""
+    return LagLimits(0.5 * stop_after_s, UR_LAG.fraction, UR_LAG.window_s, UR_LAG.interval_s)
+
+
+def lag_limits(kind: str) -> LagLimits:
+    """The default limits of a backend kind (``ur``; any other is driven by the daemon's clock)."""
+    return UR_LAG if kind == "ur" else OWN_CLOCK_LAG
+
+
+class LagLog:
+    """Counts missed and late cycles per window and warns when they cross ``limits``.
+
+    ``update(missed, late)`` takes the backend's running totals once per cycle: an increment and
+    two integer comparisons while nothing changed. On a change, a jump of k missed cycles is a
+    hold-up of about k + 1 periods (compared with ``limits.gap_s``); when a window has passed, its
+    share of missed and late cycles is compared with ``limits.fraction``. A crossing logs one
+    WARNING, with the likely cause (``LagCauses``), unless one was logged less than
+    ``limits.interval_s`` ago: then it is counted in the next line.
     """
 
-    __slots__ = ("_logged_late", "_logged_missed", "_next", "_since", "clock", "interval_s", "logger", "what")
+    __slots__ = (
+        "_cycles",
+        "_held",
+        "_next",
+        "_seen_late",
+        "_seen_missed",
+        "_window_cycles",
+        "_window_late",
+        "_window_missed",
+        "_window_start",
+        "causes",
+        "clock",
+        "limits",
+        "logger",
+        "period",
+        "warnings",
+        "what",
+    )
 
     def __init__(
         self,
         what: str,
         logger: logging.Logger,
         *,
-        interval_s: float = LAG_LOG_INTERVAL_S,
+        period: float,
+        limits: LagLimits = OWN_CLOCK_LAG,
         clock: Callable[[], float] = time.monotonic,
+        causes: LagCauses | None = None,
     ) -> None:
         self.what = what
         self.logger = logger
-        self.interval_s = interval_s
+        self.period = period
+        self.limits = limits
+        """When to speak; the ``ur`` backend sets ``ur_lag_limits`` of its program's timeout."""
         self.clock = clock
         """The time source (seconds); tests inject their own."""
-        self._logged_missed = 0
-        self._logged_late = 0
+        self.causes = LagCauses() if causes is None else causes
+        """What names the likely cause (CPU steal, other processes, garbage collection)."""
+        self.warnings = 0
+        """WARNING lines logged so far."""
+        self._cycles = 0
+        self._seen_missed = 0
+        self._seen_late = 0
+        self._window_start: float | None = None
+        self._window_cycles = 0
+        self._window_missed = 0
+        self._window_late = 0
         self._next = -math.inf
-        self._since: float | None = None
+        self._held = 0
+        """Crossings not logged (within ``interval_s`` of the last line)."""
 
     def update(self, missed: int, late: int) -> None:
-        """Take the totals of missed and late cycles; log a warning if due."""
-        if missed == self._logged_missed and late == self._logged_late:
+        """Take the totals of missed and late cycles; log a warning if a limit was crossed."""
+        self._cycles += 1
+        if missed == self._seen_missed and late == self._seen_late:
             return
+        jump = missed - self._seen_missed
+        self._seen_missed, self._seen_late = missed, late
         now = self.clock()
-        if now < self._next:
+        limits = self.limits
+        start = self._window_start
+        if start is None:  # the first lag starts the first window; the cycles before it were on time
+            start = self._window_start = now
+            self._window_cycles, self._window_missed, self._window_late = self._cycles - 1, missed, late
+        gap = (jump + 1) * self.period if jump > 0 else 0.0
+        if gap >= limits.gap_s:
+            why = (
+                f"a hold-up of {gap * 1e3:.0f} ms ({jump} cycles missed at once; "
+                f"warns from {limits.gap_s * 1e3:.0f} ms)"
+            )
+            self._cross(now, why, missed, late)
+        if now - start < limits.window_s:
             return
-        new_missed = missed - self._logged_missed
-        new_late = late - self._logged_late
-        window = "" if self._since is None else f" in the last {now - self._since:.3g} s"
+        cycles = self._cycles - self._window_cycles
+        lagged = (missed - self._window_missed) + (late - self._window_late)
+        share = lagged / (cycles + missed - self._window_missed)
+        self._window_start, self._window_cycles = now, self._cycles
+        self._window_missed, self._window_late = missed, late
+        if share > limits.fraction:
+            why = (
+                f"{share:.1%} of cycles missed or late over the last {now - start:.0f} s "
+                f"(warns above {limits.fraction:.0%})"
+            )
+            self._cross(now, why, missed, late)
+
+    def _cross(self, now: float, why: str, missed: int, late: int) -> None:
+        if now < self._next:
+            self._held += 1
+            return
+        held = f"; {self._held} more such since the last line" if self._held else ""
         self.logger.warning(
-            "%s: %d cycles missed and %d late%s (%d missed, %d late in all): the machine or the event "
-            "loop is too busy for this robot's rate",
+            "%s: %s%s (%d missed, %d late in all; cycle_stats, doctor): %s",
             self.what,
-            new_missed,
-            new_late,
-            window,
+            why,
+            held,
             missed,
             late,
+            self.causes.describe(),
         )
-        self._logged_missed = missed
-        self._logged_late = late
-        self._since = now
-        self._next = now + self.interval_s
+        self.warnings += 1
+        self._held = 0
+        self._next = now + self.limits.interval_s

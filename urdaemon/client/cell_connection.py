@@ -22,11 +22,14 @@ from urdaemon.errors import UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import ALIVE_ANYWHERE, CellKeys, RobotKeys
 from urdaemon.publish.session_config import zenoh_config
 
-__all__ = ["DEFAULT_ENDPOINT", "PEER_WAIT_S", "RELEASE_ON_CLOSE_S", "Client", "NoSuchRobot"]
+__all__ = ["DEFAULT_ENDPOINT", "PEER_WAIT_S", "RELEASE_ON_CLOSE_S", "STABLE_POLLS", "Client", "NoSuchRobot"]
 
 PEER_WAIT_S = 0.05
 RELEASE_ON_CLOSE_S = 2.0
 """How long ``Client.close()`` waits for each lease's release (the session's end frees it anyway)."""
+STABLE_POLLS = 3
+"""``Client.robot`` says a robot is not served once the served list stayed the same this many polls
+(0.1 s apart) in a row; while it grows it keeps waiting, up to its timeout."""
 
 
 class NoSuchRobot(UrDaemonError):
@@ -140,11 +143,13 @@ class Client(ClientSession):
         """A handle on robot ``name``; finds its cell from the liveliness tokens unless given.
 
         Raises ``NoSuchRobot`` (listing the robots served) when robots are served but none is
-        ``name`` (in ``cell``); waits up to ``timeout`` s only while no robot at all is served (a
-        daemon starting up).
+        ``name`` (in ``cell``) and the list stayed the same over ``STABLE_POLLS`` polls; waits up to
+        ``timeout`` s while no robot at all is served, or while the list still grows (a daemon
+        starting its robots one after the other: 8 robots on a busy machine take seconds).
         """
         deadline = self._loop.time() + timeout
         misses = 0
+        seen: set[tuple[str, str]] = set()
         while True:
             served = await self.robots()
             cells = sorted({c for c, r in served if r == name and cell in (None, c)})
@@ -156,8 +161,10 @@ class Client(ClientSession):
                     f"robot {name!r} is served in several cells ({', '.join(cells)}); name one"
                 )
             if served:
-                misses += 1  # tokens of one daemon arrive together; allow one late arrival
-                if misses >= 3:
+                grown = not seen.issuperset(served)
+                seen.update(served)
+                misses = 0 if grown else misses + 1  # tokens still arriving: keep waiting
+                if misses >= STABLE_POLLS:
                     raise NoSuchRobot(_no_such_robot(name, cell, served, self.endpoint), served)
             if self._loop.time() > deadline:
                 if served:

@@ -34,9 +34,11 @@ ROUND_TRIP_WARN_MS = (10.0, 50.0)
 """Dashboard round trips: a median above the first or a maximum above the second warns (the
 dashboard server is PolyScope's Java process: slower than the network, but never by that much)."""
 LAG_WARN_FRACTION = 1e-3
-"""Missed plus late cycles above this fraction of all cycles warn."""
+"""Missed plus late cycles above this fraction of all cycles warn (``ur``; a tenth of the backend's
+``lag_fraction`` fact where it has one)."""
 LAG_FAIL_FRACTION = 1e-2
-"""... and above this fraction fail: one cycle in a hundred without a fresh command."""
+"""... and above this fraction fail: one cycle in a hundred without a fresh command (``ur``; the
+backend's ``lag_fraction``, the share its log warns of: backends/timing.py ``LagLimits``)."""
 DRIFT_WARN_PPM = 100.0
 """Host and controller clocks drifting apart faster than this warn (quartz clocks stay within tens)."""
 CLOCK_BASELINE_S = 10.0
@@ -369,13 +371,16 @@ def _cycles(robot: Facts) -> Check:
     missed, late = int(robot.get("missed_cycles") or 0), int(robot.get("late_cycles") or 0)
     if cycles == 0:
         return Check("cycles", Verdict.UNKNOWN, "no cycle ran yet (is the robot connected?)")
+    fail = float(robot.get("lag_fraction") or LAG_FAIL_FRACTION)
     lagged = (missed + late) / (cycles + missed)
     measured = f"{missed} missed, {late} late of {cycles} cycles since the daemon started ({lagged:.3%})"
-    if lagged <= LAG_WARN_FRACTION:
+    if robot.get("lag_warnings"):
+        measured += f"; {robot['lag_warnings']} warning(s) logged"
+    if lagged <= fail * (LAG_WARN_FRACTION / LAG_FAIL_FRACTION):
         return Check("cycles", Verdict.OK, measured)
     return Check(
         "cycles",
-        Verdict.FAIL if lagged > LAG_FAIL_FRACTION else Verdict.WARN,
+        Verdict.FAIL if lagged > fail else Verdict.WARN,
         measured,
         "the machine or the event loop is too busy for this rate: set realtime_priority, use a "
         f"PREEMPT_RT kernel, keep other load off the host ({DOCS}#cycles)",

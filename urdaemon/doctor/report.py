@@ -30,6 +30,8 @@ async def doctor_report(backend: Backend) -> dict[str, Any]:
         "cycles": stats.cycles,
         "missed_cycles": stats.missed_cycles,
         "late_cycles": stats.late_cycles,
+        "lag_fraction": backend.lag_log.limits.fraction,
+        "lag_warnings": backend.lag_log.warnings,
         "turnaround": backend.turnaround.summary(),
         "controller": controller,
     }

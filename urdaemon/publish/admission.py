@@ -4,23 +4,34 @@ A commanding message passes a ``Guard`` (the robot's command lease) on the token
 attachment (``attachment_of``). What waits for the loop is bounded: per queryable at most
 ``MAX_IN_FLIGHT`` queries (``InFlight``), per subscriber the newest sample only (``Latest``) and one
 report of the refusals meanwhile (``Refusals``); each counter behind a small lock, as Zenoh's
-threads and the loop both touch it. The refusals' texts are here too, so every refusal reads the same.
+threads and the loop both touch it. What Zenoh's threads do in Python for wildcard queries is
+bounded per second (``Budget``): Zenoh calls every queryable a wildcard intersects, ~50 for ``**``,
+and each holds the GIL the loop needs. The refusals' texts are here too, so every refusal reads the
+same.
 """
 
 from __future__ import annotations
 
 import contextlib
 import threading
+import time
+from collections import deque
+from collections.abc import Callable
 from typing import Any, Protocol
 
 from urdaemon.publish.envelope import client_text, encode
 
 __all__ = [
+    "CELL_QUERIES_PER_S",
     "MAX_IN_FLIGHT",
+    "WILDCARD_REPLIES_AT_ONCE",
+    "WILDCARD_REPLIES_PER_S",
+    "Budget",
     "Guard",
     "InFlight",
     "Latest",
     "Refusals",
+    "Tarpit",
     "attachment_of",
     "busy_refusal",
     "refuse_query",
@@ -34,6 +45,116 @@ MAX_IN_FLIGHT = 4
 so a well-behaved one has one in flight per key, and only for the microseconds of the hand-over;
 4 leaves room for a few clients at once, while a flood of messages at the size limit (~0.25 ms
 of loop time each) can queue at most ~1 ms of work per key ahead of a robot's cycle."""
+
+
+WILDCARD_REPLIES_PER_S = 200.0
+"""Error replies to wildcard queries the node builds per second, all its queryables together. Each
+costs ~20 µs of GIL on Zenoh's thread (plus ~16 µs of Zenoh's own), so a flood's share is bounded
+to well under 1 % of a core, whichever robot's keys it names; past it a wildcard query is dropped
+on Zenoh's thread without a reply (no text, no JSON, no send) and held (``Tarpit``)."""
+
+WILDCARD_REPLIES_AT_ONCE = 1000
+"""... and at once, or as many as the node has queryables if more: a Zenoh browser's ``**`` (~50
+replies for two robots), or a walk of every wildcard (docs/keys.md), is answered whole."""
+
+CELL_QUERIES_PER_S = 50.0
+"""Wildcard queries handed to the loop per second by each cell queryable (``<cell>/daemon``, which any
+wildcard covering it reaches, and the unknown-robot answerer ``<cell>/*/**``); the rest are held on
+Zenoh's thread. ``<cell>/daemon``'s answer costs ~0.25 ms of loop time: 50 a second bound a flood
+of ``**`` to ~1 % of the loop, while ``urdaemon list`` asks once. Exact keys are not counted (every
+query on a robot's key reaches ``<cell>/*/**`` too): they are bounded in flight (``MAX_IN_FLIGHT``)."""
+
+
+class Budget:
+    """A token bucket shared by Zenoh's threads: ``take()`` is True at most ``rate`` times per second
+    on average and ``burst`` times at once; ``dropped`` counts the False ones (thread-safe)."""
+
+    __slots__ = ("_level", "_lock", "_then", "burst", "clock", "dropped", "rate")
+
+    def __init__(self, rate: float, burst: float | None = None, clock: Callable[[], float] = time.monotonic):
+        self.rate = rate
+        self.burst = rate if burst is None else burst
+        self.clock = clock
+        """The time source (seconds); tests inject their own."""
+        self.dropped = 0
+        self._level = self.burst
+        self._then = clock()
+        self._lock = threading.Lock()
+
+    def widen(self, burst: float) -> None:
+        """Allow at least ``burst`` at once (and now)."""
+        with self._lock:
+            if burst > self.burst:
+                self._level += burst - self.burst
+                self.burst = burst
+
+    def take(self) -> bool:
+        """Spend one token if there is one."""
+        with self._lock:
+            now = self.clock()
+            self._level = min(self.burst, self._level + (now - self._then) * self.rate)
+            self._then = now
+            if self._level >= 1.0:
+                self._level -= 1.0
+                return True
+            self.dropped += 1
+            return False
+
+
+TARPIT_HOLD_S = 5.0
+"""How long a query dropped past a budget is held unanswered before it ends (a client that waits for
+each reply, as a ``get`` loop does, then asks at most once per hold instead of as fast as it can)."""
+TARPIT_SIZE = 4096
+"""Most queries held at once (a few KB each in Zenoh); past it the oldest ends at once."""
+
+
+class Tarpit:
+    """Queries dropped past a budget, held unanswered for ``hold_s`` (thread-safe).
+
+    A flood that waits for its replies is slowed to one query per hold; one that does not fills the
+    pit, whose oldest entries then end at once. Held queries end on ``hold`` calls after their time,
+    and all of them on ``release``."""
+
+    __slots__ = ("_held", "_lock", "clock", "hold_s", "size")
+
+    def __init__(
+        self,
+        hold_s: float = TARPIT_HOLD_S,
+        size: int = TARPIT_SIZE,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.hold_s = hold_s
+        self.size = size
+        self.clock = clock
+        self._held: deque[tuple[float, Any]] = deque()
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._held)
+
+    def hold(self, query: Any) -> None:
+        """Keep ``query`` unanswered; end the ones held long enough (or past ``size``)."""
+        now = self.clock()
+        ended = []
+        with self._lock:
+            held = self._held
+            held.append((now + self.hold_s, query))
+            while held and (held[0][0] <= now or len(held) > self.size):
+                ended.append(held.popleft()[1])
+        for old in ended:
+            _end(old)
+
+    def release(self) -> None:
+        """End every held query (the node is closing)."""
+        with self._lock:
+            ended, self._held = [q for _, q in self._held], deque()
+        for old in ended:
+            _end(old)
+
+
+def _end(query: Any) -> None:
+    with contextlib.suppress(Exception):
+        query.drop()
 
 
 class Guard(Protocol):

@@ -8,8 +8,13 @@ What is handed to the loop is bounded, so that no flood of messages, each within
 can fill the loop's queue ahead of the robots' cycles: each queryable has at most
 ``MAX_IN_FLIGHT`` queries handed over and not yet handled (the rest are refused, "busy", on Zenoh's
 thread), and each subscriber at most one sample: a newer sample replaces the pending one (for a
-streaming command only the newest matters) and the replaced ones are counted and reported. The
-counters are the node's own, behind a small lock (admission.py); no daemon state is touched off the loop.
+streaming command only the newest matters) and the replaced ones are counted and reported. What
+Zenoh's threads do in Python for wildcard queries is bounded too, per second: Zenoh calls every
+queryable a wildcard covers (~50 for ``**``), each holding the GIL the loop needs, so the node
+builds a bounded number of wildcard error replies (``wildcards``) and each cell queryable hands a
+bounded number to the loop (``cell_queries``); a query past a budget is held unanswered a while
+(``tarpit``), so a client flooding in a loop waits. The counters are the node's own, behind a small
+lock (admission.py); no daemon state is touched off the loop.
 
 A commanding queryable or subscriber has a guard (the robot's command lease): a message whose
 attachment is not the lease holder's token is refused on Zenoh's thread too, after the wildcard and
@@ -36,11 +41,16 @@ import zenoh
 from urdaemon.cell.zenoh_options import ZenohOptions
 from urdaemon.errors import UrDaemonError
 from urdaemon.publish.admission import (
+    CELL_QUERIES_PER_S,
     MAX_IN_FLIGHT,
+    WILDCARD_REPLIES_AT_ONCE,
+    WILDCARD_REPLIES_PER_S,
+    Budget,
     Guard,
     InFlight,
     Latest,
     Refusals,
+    Tarpit,
     attachment_of,
     busy_refusal,
     refuse_query,
@@ -96,6 +106,15 @@ class ZenohNode:
         """Sends liveliness queries off the loop (``liveliness_watch``)."""
         self.latest: dict[str, Latest] = {}
         """Each subscriber's pending sample, by key (``replaced_total``: samples replaced unhandled)."""
+        self.wildcards = Budget(WILDCARD_REPLIES_PER_S, WILDCARD_REPLIES_AT_ONCE)
+        """The error replies to wildcard queries, every queryable's together: a flood of ``**`` or of
+        ``<cell>/alice/**`` costs every robot's loop a bounded share of the GIL (admission.py)."""
+        self._queryables = 0
+        self.cell_queries: dict[str, Budget] = {}
+        self.tarpit = Tarpit()
+        """Queries dropped past a budget, held unanswered a while: a ``get`` loop that floods slows to
+        one query per hold (admission.py)."""
+        """Each cell queryable's queries handed to the loop, by key."""
 
     def publisher(self, key: str, *, realtime: bool = False) -> Any:
         """Declare a publisher; ``realtime`` for state streams (express, top priority).
@@ -173,10 +192,13 @@ class ZenohNode:
         def on_query(query: Any) -> None:
             asked = str(query.key_expr)
             if asked != key and (not any_id or "*" in asked):
-                if not any_id:
-                    refuse_query(query, wildcard_refusal(asked, key), error=True, answer=answer)
-                else:
+                if any_id:  # a goal's result answers a concrete id only
                     _drop(query)
+                elif wildcards.take():
+                    refuse_query(query, wildcard_refusal(asked, key), error=True, answer=answer)
+                else:  # past the budget: no reply, and held a while (a flood slows down)
+                    self.tarpit.hold(query)
+                    _log_dropped(wildcards, "wildcard queries")
                 return
             payload = query.payload
             size = 0 if payload is None else len(payload)
@@ -199,20 +221,30 @@ class ZenohNode:
             self._to_loop_counted(flight, work, query)
 
         flight = InFlight(MAX_IN_FLIGHT)  # this key's messages waiting for the loop
+        wildcards = self.wildcards
+        self._queryables += 1
+        wildcards.widen(self._queryables)  # one ``**`` is answered by every queryable, whole
         self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
 
     def cell_queryable(self, key: str, handler: Callable[[Any], None]) -> None:
         """Declare a queryable, not complete (other queryables answer within ``key`` too), whose
         ``handler(query)`` runs on the loop for every query; the handler decides whether to reply.
-        Beyond ``MAX_IN_FLIGHT`` queries waiting for the loop, a query gets no answer from it."""
+        Beyond ``MAX_IN_FLIGHT`` queries waiting for the loop, or ``CELL_QUERIES_PER_S`` wildcard
+        queries a second, a query gets no answer from it."""
 
         def on_query(query: Any) -> None:
-            if flight.enter():
+            # a wildcard past the budget: no answer from here, held a while (a flood slows down); an
+            # exact key (every robot key's query reaches ``<cell>/*/**`` too) is bounded in flight only
+            if "*" in str(query.key_expr) and not budget.take():
+                self.tarpit.hold(query)
+                _log_dropped(budget, f"wildcard queries on {key}")
+            elif flight.enter():
                 self._to_loop_counted(flight, handler, query)
             else:  # others may answer it; this one stays silent rather than queue without bound
                 _drop(query)
 
         flight = InFlight(MAX_IN_FLIGHT)
+        budget = self.cell_queries[key] = Budget(CELL_QUERIES_PER_S)
         self._entities.append(self.session.declare_queryable(key, on_query, complete=False))
 
     def subscriber(
@@ -317,6 +349,7 @@ class ZenohNode:
         self._closed = True
         if self._asker is not None:
             self._asker.shutdown(wait=False, cancel_futures=True)
+        self.tarpit.release()
         for entity in reversed(self._entities):
             try:
                 entity.undeclare()
@@ -353,6 +386,18 @@ def _log_refusals(flight: InFlight, key: str) -> None:
     refused = flight.refused
     if refused > 0 and 10 ** (len(str(refused)) - 1) == refused:
         log.warning("%s: %d requests refused as too many in flight (a client floods it)", key, refused)
+
+
+def _log_dropped(budget: Budget, what: str) -> None:
+    """Say so at the 1st, 10th, 100th, ... query dropped past a budget (from Zenoh's thread)."""
+    dropped = budget.dropped
+    if dropped > 0 and 10 ** (len(str(dropped)) - 1) == dropped:
+        log.warning(
+            "%d %s dropped unanswered, more than %g a second (a client floods them)",
+            dropped,
+            what,
+            budget.rate,
+        )
 
 
 def _latest_handler(

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 from urdaemon.client import CellGoalHandle, Client, GoalHandle, send_cell_trajectory
 from urdaemon.errors import GoalRejected, UrDaemonError, UrTimeoutError
 from urdaemon.publish.keys import RobotKeys
-from urdaemon.replay.goal_plan import Plan, Track, make_plan
+from urdaemon.replay.goal_plan import Plan, Track, make_plan, unplanned_motion
 from urdaemon.replay.source import RecordedCell, mismatch, sample_period
 
 if TYPE_CHECKING:
@@ -77,9 +77,20 @@ class Drive:
         if problem is not None:
             print(f"error: {problem}", file=self.err)
             return EXIT_BAD_INPUT
-        plan = self.plan()
+        tracks = self.tracks()
+        plan = make_plan(tracks, self.rate, self.mode)
         for note in plan.notes:
             print(f"note: {note}", file=self.err)
+        unplanned = unplanned_motion(tracks, plan)
+        if unplanned:
+            print(
+                f"error: the recording shows {', '.join(unplanned)} moving, but no cell goal was planned "
+                f"for it from its {sum(len(t.samples) for t in tracks if t.robot in unplanned)} joint "
+                "state(s): samples missing or bunched read as rest (was the recorder starved?); "
+                "nothing replayed",
+                file=self.err,
+            )
+            return EXIT_FAILED
         print(
             f"replaying {', '.join(self.robots)} at rate {self.rate:g} ({plan.mode}): "
             f"{len(plan.steps)} cell goal(s) after the move to the start",
@@ -107,10 +118,10 @@ class Drive:
             return problem
         return mismatch(self.recorded, self.cell, names, self.robots)
 
-    def plan(self) -> Plan:
-        """The plan of the chosen robots' motion (goal_plan.py)."""
+    def tracks(self) -> list[Track]:
+        """The chosen robots' recorded motion, each on its sample period."""
         config = {r.name: r for r in self.cell.robots}
-        tracks = [
+        return [
             Track(
                 r,
                 sample_period(config[r], self.cell),
@@ -119,7 +130,6 @@ class Drive:
             )
             for r in self.robots
         ]
-        return make_plan(tracks, self.rate, self.mode)
 
     async def _drive(self, plan: Plan, current: list[Any]) -> int:
         moves = [await self._send_move(robot, first, current) for robot, first in plan.first.items()]

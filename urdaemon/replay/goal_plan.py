@@ -125,6 +125,17 @@ class Plan:
     notes: list[str] = field(default_factory=list)
 
 
+def unplanned_motion(tracks: Sequence[Track], plan: Plan) -> list[str]:
+    """The robots whose recording moves (a sample faster than ``REST_VELOCITY``) but that no cell goal
+    of ``plan`` drives: a replay of them would only move them to the start and succeed silently."""
+    driven = {robot for step in plan.steps for robot in step.parts}
+    return [
+        track.robot
+        for track in tracks
+        if track.robot not in driven and any(not _at_rest(sample) for sample in track.samples)
+    ]
+
+
 def sample_ticks(samples: Sequence[Sample], period_s: float) -> list[int]:
     """Each sample's tick on its robot's grid, counted from the first (strictly increasing).
 
