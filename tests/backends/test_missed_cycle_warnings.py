@@ -59,9 +59,9 @@ def test_each_backend_kind_has_its_limits() -> None:
     assert lag_limits("ur") is UR_LAG
     assert lag_limits("mock") is lag_limits("servo") is OWN_CLOCK_LAG
     assert UR_LAG.fraction == 0.01
-    assert UR_LAG.gap_s < 0.1
+    assert UR_LAG.gap_s == 0.1  # half of the program's default hold: 100 cycles at 500 Hz
     assert OWN_CLOCK_LAG.fraction >= 10 * UR_LAG.fraction
-    assert OWN_CLOCK_LAG.gap_s >= 10 * UR_LAG.gap_s
+    assert OWN_CLOCK_LAG.gap_s >= 5 * UR_LAG.gap_s
     assert ur_lag_limits(0.4).gap_s == 0.2
 
 
@@ -138,14 +138,15 @@ def test_the_servo_backend_uses_the_same_limits(caplog: pytest.LogCaptureFixture
 
 
 def test_ur_limits_warn_of_a_gap_approaching_the_receive_timeout(caplog: pytest.LogCaptureFixture) -> None:
-    """At 500 Hz a 30 ms gap is counted; a 60 ms one (past half the 0.1 s timeout) warns."""
+    """With a 0.1 s hold (``ur_lag_limits(0.1)``), at 500 Hz a 30 ms gap is counted; a 60 ms one
+    (past half of it) warns."""
     caplog.set_level(logging.WARNING)
     now = Now()
     lag = LagLog(
         "robot 'x' (ur backend)",
         logging.getLogger("test.lag"),
         period=0.002,
-        limits=UR_LAG,
+        limits=ur_lag_limits(0.1),
         clock=now,
         causes=LagCauses(proc_stat=Path("/nonexistent"), watch=GcWatch()),
     )

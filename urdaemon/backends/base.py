@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from urdaemon.backends.timing import Histogram, LagLog, lag_limits
+from urdaemon.backends.timing import Histogram, LagLimits, LagLog, lag_limits
 from urdaemon.errors import BackendError
 from urdaemon.model import IO_SIZES, JointCommand, RobotState
 
@@ -55,7 +55,9 @@ class Backend(abc.ABC):
 
     kind: str = ""
 
-    def __init__(self, name: str, joint_names: Sequence[str], rate_hz: float) -> None:
+    def __init__(
+        self, name: str, joint_names: Sequence[str], rate_hz: float, *, lag: LagLimits | None = None
+    ) -> None:
         self.name = name
         self.rate_hz = rate_hz
         self.period = 1.0 / rate_hz
@@ -67,10 +69,14 @@ class Backend(abc.ABC):
         self._max_lateness = 0.0
         self._reconnects = 0
         self.lag_log = LagLog(
-            f"robot {name!r} ({self.kind} backend)", log, period=self.period, limits=lag_limits(self.kind)
+            f"robot {name!r} ({self.kind} backend)",
+            log,
+            period=self.period,
+            limits=lag or lag_limits(self.kind),
         )
-        """Warns when missed and late cycles cross the backend's limits (rate-limited, naming the likely
-        cause); ``report_lag`` feeds it once per cycle. Below the limits they are only counted."""
+        """Warns when missed and late cycles cross the backend's limits (``lag``, default its kind's;
+        rate-limited, naming the likely cause); ``report_lag`` feeds it once per cycle. Below the
+        limits they are only counted."""
         self.turnaround = Histogram()
         """Per cycle, from the robot's state arriving to the command leaving (filled by backends that
         receive their clock from the robot: ``ur``); read and reset with the ``cycle_stats`` service."""

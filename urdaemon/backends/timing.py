@@ -82,9 +82,10 @@ class LagLimits:
     interval_s: float
 
 
-UR_LAG = LagLimits(gap_s=0.05, fraction=0.01, window_s=10.0, interval_s=60.0)
-"""``ur``: a gap half the control program's default receive timeout (0.1 s; ``ur_lag_limits`` for
-another), or more than 1 % of a 10 s window: the robot is about to stop, or its motion is rough."""
+UR_LAG = LagLimits(gap_s=0.1, fraction=0.01, window_s=10.0, interval_s=60.0)
+"""``ur``: a gap half of what the control program rides through before it stops the arm (by default
+it holds a stream 100 cycles, 0.2 s at 500 Hz; the UR backend passes ``ur_lag_limits`` of its own
+robot's), or more than 1 % of a 10 s window: the robot is about to stop, or its motion is rough."""
 
 OWN_CLOCK_LAG = LagLimits(gap_s=0.5, fraction=0.25, window_s=30.0, interval_s=300.0)
 """``mock`` and ``servo``: the daemon's own clock drives them, so a missed cycle loses nothing

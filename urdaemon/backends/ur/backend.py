@@ -29,6 +29,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from urdaemon.backends.base import Backend, PassthroughResult
+from urdaemon.backends.timing import LagLimits, ur_lag_limits
 from urdaemon.backends.ur.diagnosis import Diagnosis
 from urdaemon.backends.ur.links import UrLinks
 from urdaemon.backends.ur.primary_link import PrimaryLink
@@ -72,8 +73,8 @@ class UrBackend(Backend):
         expected_hash: str | None,
         program: ProgramBuilder | None = None,
     ) -> None:
-        # the controller's rate is fixed by the model; the motion controller is built with it up front
-        super().__init__(robot.name, joint_names, float(load_ur_model(robot.model).control_rate_hz))
+        rate_hz = float(load_ur_model(robot.model).control_rate_hz)  # the model's: known up front
+        super().__init__(robot.name, joint_names, rate_hz, lag=_lag_limits(robot.ur or UrOptions(), rate_hz))
         assert robot.address is not None
         self.robot = robot
         self.address = robot.address
@@ -466,3 +467,9 @@ def _forget_robot(state: RobotState) -> None:
     state.robot_mode = RobotMode.DISCONNECTED
     state.safety_mode = SafetyMode.UNDEFINED_SAFETY_MODE
     state.program_running = False
+
+
+def _lag_limits(options: UrOptions, rate_hz: float) -> LagLimits:
+    """A gap warns at half of what the program rides through before it stops the arm: its hold
+    (``keepalive_cycles``) or its window (``receive_timeout_ms``), whichever ends first."""
+    return ur_lag_limits(min(options.keepalive_cycles / rate_hz, options.receive_timeout_ms / 1000))
