@@ -105,9 +105,7 @@ class Stream:
     reason: str
     duration: float
     cycles: dict[str, Any]
-    biggest_gap_ms: float
-    states: int
-    dropped: int
+    gaps: Gaps
     deviation_median: float
     deviation_p99: float
     deviation_max: float
@@ -225,18 +223,19 @@ async def ready(robot: RobotClient, procs: Any) -> None:
     await CL.wait_status(robot, procs, lambda s: s["ready"], "ready")
 
 
-async def stats_window(robots: list[RobotClient]) -> None:
-    """Start a new cycle_stats window on every robot."""
-    for robot in robots:
-        await robot.cycle_stats(reset=True)
+async def stats_window(robots: list[RobotClient]) -> dict[str, dict[str, Any]]:
+    """Start a new turnaround window on every robot; their cycle counters now (they only grow: the
+    reset starts a new turnaround window only, as control_loop.py knows)."""
+    return {robot.name: await robot.cycle_stats(reset=True) for robot in robots}
 
 
-async def stats(robot: RobotClient) -> dict[str, Any]:
-    reply = await robot.cycle_stats()
+async def stats(robot: RobotClient, before: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Cycles, missed and late since ``before``, and the window's worst turnaround."""
+    reply, start = await robot.cycle_stats(), before[robot.name]
     return {
-        "missed": reply["missed_cycles"],
-        "late": reply["late_cycles"],
-        "cycles": reply["cycles"],
+        "missed": reply["missed_cycles"] - start["missed_cycles"],
+        "late": reply["late_cycles"] - start["late_cycles"],
+        "cycles": reply["cycles"] - start["cycles"],
         "max_us": reply["turnaround"]["max_us"],
     }
 
@@ -244,7 +243,7 @@ async def stats(robot: RobotClient) -> dict[str, Any]:
 async def move_goals(robots: list[RobotClient], goals: int, procs: Any) -> Goals:
     """``goals`` moves, alternating robots, each out to HOME ± MOVE_OFFSET and back."""
     out = Goals()
-    await stats_window(robots)
+    before = await stats_window(robots)
     for i in range(goals):
         robot = robots[i % len(robots)]
         sign = 1.0 if (i // len(robots)) % 2 == 0 else -1.0
@@ -265,23 +264,40 @@ async def move_goals(robots: list[RobotClient], goals: int, procs: Any) -> Goals
                 await ready(robot, procs)
     out.lost = out.count("lost")
     for robot in robots:
-        out.cycles[robot.name] = await stats(robot)
+        out.cycles[robot.name] = await stats(robot, before)
     return out
 
 
-async def follow_states(robot: RobotClient, stop: asyncio.Event) -> tuple[float, int, int]:
-    """(biggest gap in ms between consecutive joint_states' host_time_ns, how many, dropped here)."""
+@dataclass
+class Gaps:
+    """Gaps between consecutive ``joint_states`` of a robot, in ms, each with the other clock's gap."""
+
+    host: tuple[float, float] = (0.0, 0.0)
+    """The biggest gap of ``host_time_ns`` (the daemon's clock), with ``controller_time``'s there."""
+    controller: tuple[float, float] = (0.0, 0.0)
+    """The biggest gap of ``controller_time`` (the robot's clock), with ``host_time_ns``'s there."""
+    states: int = 0
+    dropped: int = 0
+
+    def add(self, host_ms: float, controller_ms: float) -> None:
+        self.host = max(self.host, (host_ms, controller_ms))
+        self.controller = max(self.controller, (controller_ms, host_ms))
+
+
+async def follow_states(robot: RobotClient, stop: asyncio.Event) -> Gaps:
+    """The gaps between consecutive joint_states of ``robot`` until ``stop``."""
     sub = robot.joint_states(5000)
-    gap, count, last = 0.0, 0, None
+    gaps, last = Gaps(), None
     try:
         while not stop.is_set():
             with contextlib.suppress(UrDaemonError):
                 state = await sub.get_json(timeout=0.5)
-                stamp = int(state["host_time_ns"])
+                now = (int(state["host_time_ns"]) / 1e6, float(state["controller_time"]) * 1e3)
                 if last is not None:
-                    gap = max(gap, (stamp - last) / 1e6)
-                last, count = stamp, count + 1
-        return gap, count, sub.dropped
+                    gaps.add(now[0] - last[0], now[1] - last[1])
+                last, gaps.states = now, gaps.states + 1
+        gaps.dropped = sub.dropped
+        return gaps
     finally:
         sub.close()
 
@@ -300,7 +316,7 @@ def count_holds(procs: Any) -> dict[str, int]:
 async def stream(robot: RobotClient, seconds: float, procs: Any) -> Stream:
     """A servoj stream of ``seconds`` (at least one 5 s period) on ``robot``, measured."""
     await ready(robot, procs)
-    await stats_window([robot])
+    before, said = await stats_window([robot]), count_holds(procs)
     stop = asyncio.Event()
     states = asyncio.ensure_future(follow_states(robot, stop))
     goal = await robot.send_trajectory(CL.sinusoid(await CL.first_position(robot), seconds))
@@ -310,8 +326,8 @@ async def stream(robot: RobotClient, seconds: float, procs: Any) -> Stream:
             devs.append((deviation(fb), float(fb["time_from_start"])))
     status, reason = await ending(goal)
     stop.set()
-    gap, count, dropped = await states
-    cycles = await stats(robot)
+    gaps = await states
+    cycles = await stats(robot, before)
     values = sorted(d for d, _ in devs) or [float("nan")]
     worst = max(devs, default=(float("nan"), float("nan")))
     duration = float((await goal.result(timeout=5.0)).get("duration", 0.0)) if status != "lost" else 0.0
@@ -320,15 +336,13 @@ async def stream(robot: RobotClient, seconds: float, procs: Any) -> Stream:
         reason=reason,
         duration=duration,
         cycles=cycles,
-        biggest_gap_ms=gap,
-        states=count,
-        dropped=dropped,
+        gaps=gaps,
         deviation_median=statistics.median(values),
         deviation_p99=values[min(len(values) - 1, int(0.99 * len(values)))],
         deviation_max=worst[0],
         deviation_at=worst[1],
         feedback=len(devs),
-        holds=count_holds(procs),
+        holds={words: n - said[words] for words, n in count_holds(procs).items()},
     )
 
 
@@ -409,20 +423,23 @@ def goals_table(g: Goals) -> str:
 
 def stream_table(s: Stream, seconds: float) -> str:
     holds = ", ".join(f'"{w}" ×{n}' for w, n in s.holds.items())
-    stale = s.deviation_max - s.deviation_median
+    stale, g = s.deviation_max - s.deviation_median, s.gaps
     return "\n".join(
         [
             f"## 2. servoj stream on alice, {seconds:g} s asked ({s.duration:.1f} s goal)",
             "",
             f"result: {s.status}{': ' + s.reason if s.reason else ''}",
-            f"daemon: {_cycles(s.cycles)}; biggest gap between joint_states (host_time_ns): "
-            f"{s.biggest_gap_ms:.1f} ms over {s.states} states ({s.dropped} dropped by this client)",
+            f"daemon: {_cycles(s.cycles)}",
+            f"gaps between consecutive joint_states of alice ({g.states} states, {g.dropped} dropped by "
+            f"this client): biggest on the daemon's clock (host_time_ns) {g.host[0]:.1f} ms "
+            f"(the robot's clock moved {g.host[1]:.1f} ms meanwhile); biggest on the robot's clock "
+            f"(controller_time) {g.controller[0]:.1f} ms (the daemon's clock moved {g.controller[1]:.1f} ms)",
             f"deviation from the commanded path, max_j |desired - actual| over {s.feedback} feedback "
             f"messages: median {s.deviation_median * 1e3:.2f} mrad (servoj's tracking lag), "
             f"p99 {s.deviation_p99 * 1e3:.2f} mrad, max {s.deviation_max * 1e3:.2f} mrad "
             f"(at t = {s.deviation_at:.2f} s)",
             f"worst stale-command motion (max - median): {stale * 1e3:.2f} mrad",
-            f"the control program on stale commands (its messages in the daemon's log, whole run): {holds}",
+            f"the control program on stale commands (its messages in the daemon's log during the stream): {holds}",
         ]
     )
 
