@@ -439,7 +439,8 @@ def stream_table(s: Stream, seconds: float) -> str:
             f"p99 {s.deviation_p99 * 1e3:.2f} mrad, max {s.deviation_max * 1e3:.2f} mrad "
             f"(at t = {s.deviation_at:.2f} s)",
             f"worst stale-command motion (max - median): {stale * 1e3:.2f} mrad",
-            f"the control program on stale commands (its messages in the daemon's log during the stream): {holds}",
+            f"the control program on stale commands (its messages in the daemon's log, during the "
+            f"stream): {holds}",
         ]
     )
 
