@@ -276,3 +276,23 @@ def test_view_cost_table(view_cost: ModuleType) -> None:
     assert command[-1] == "http://127.0.0.1:8080"
     assert "--headless=new" in command
     assert f"--user-data-dir={ROOT / 'profile'}" in command
+
+
+@pytest.mark.timeout(600)
+def test_hiccups_smoke_run_ends_every_goal_with_one_result() -> None:
+    """benchmarks/hiccups.py stays runnable: its smallest run (``--goals 2 --seconds 2 --burners 0``)
+    on fakes at this run's addresses. Counts only: every goal ended with one result; no durations."""
+    from tests.helpers import fake_address
+
+    hiccups = _load("hiccups")
+    cell = parse_cell(hiccups.cell_yaml("127.0.0.5", "127.0.0.6"), base_dir=ROOT)
+    assert [r.name for r in cell.robots] == ["alice", "bob"]
+    goals, stream, killed = hiccups.run(0, 2, 2.0, pair=(fake_address(), fake_address()))
+    assert goals.sent == 2
+    assert goals.lost == 0
+    assert sum(goals.statuses.values()) == 2
+    assert set(goals.cycles) == {"alice", "bob"}
+    assert stream.status != "lost"
+    assert stream.feedback > 0
+    assert len(killed.published) == 1, killed.published  # the killed program's goal: one result
+    assert killed.result.split(":")[0] == killed.published[0].split(":")[0]
