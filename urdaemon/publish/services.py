@@ -438,7 +438,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         "cycle_stats",
-        "cycle counters and the turnaround since the last reset",
+        "cycle counters since the start and the turnaround since the last reset",
         CycleStatsRequest,
         lambda payload: CycleStatsRequest(service_requests.decode_cycle_stats(payload)),
         _cycle_stats,
@@ -450,12 +450,13 @@ SERVICES: tuple[ServiceSpec, ...] = (
             '"p99_us", "p999_us", "max_us"}}`: the turnaround is, per cycle, from the RTDE package\'s '
             "bytes reaching the daemon to the reverse-interface frame leaving it (UR; 1 µs bins, exact "
             "maximum; `count` 0 on mock and servo), since the last reset; `reset: true` starts a new "
-            "window after this reply. On `ur`, `missed_cycles` are packages that never arrived (gaps in "
-            "the controller's clock) and `late_cycles` packages that came late: the first after a gap, "
-            "and those that queued behind a newer one in the same read (the daemon's loop was held up), "
-            "which run the controller only — only the newest package of a read sends a command and "
-            "publishes; on `mock` and `servo`, ticks of the daemon's own clock that were missed or ran "
-            "late"
+            "turnaround window after this reply (the three cycle counts run from the backend's start and "
+            "are never reset: subtract two replies). On `ur`, `missed_cycles` are packages that never "
+            "arrived (gaps in the controller's clock) and `late_cycles` packages that came late: the "
+            "first after a gap, and those that queued behind a newer one in the same read (the daemon's "
+            "loop was held up), which run the controller only — only the newest package of a read sends a"
+            " command and publishes; on `mock` and `servo`, ticks of the daemon's own clock that were "
+            "missed or ran late"
         ),
     ),
     ServiceSpec(
