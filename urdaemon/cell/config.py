@@ -9,13 +9,12 @@ robot_options.py's (its ``servo`` section servo.py's).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from urdaemon.cell.robot_options import Ports, Robot
-from urdaemon.cell.schema_types import Frozen
+from urdaemon.cell.schema_types import Frozen, resolve_path
 from urdaemon.cell.zenoh_options import ZenohOptions, endpoint_port
 from urdaemon.model import CELL_LEVEL_KEYS
 from urdaemon.urscript import DEFAULT_REVERSE_PORT
@@ -67,10 +66,7 @@ class RecordOptions(Frozen):
     @field_validator("dir")
     @classmethod
     def _directory(cls, value: str, info: ValidationInfo) -> str:
-        base = (info.context or {}).get("base_dir")
-        path = Path(value).expanduser()
-        if not path.is_absolute() and base is not None:
-            path = Path(base) / path
+        path = resolve_path(value, info)
         if path.exists() and not path.is_dir():
             raise ValueError(f"{path} is not a directory")
         return str(path.resolve())
@@ -90,10 +86,7 @@ class AuditFileOptions(Frozen):
     @field_validator("file")
     @classmethod
     def _file(cls, value: str, info: ValidationInfo) -> str:
-        base = (info.context or {}).get("base_dir")
-        path = Path(value).expanduser()
-        if not path.is_absolute() and base is not None:
-            path = Path(base) / path
+        path = resolve_path(value, info)
         if path.is_dir():
             raise ValueError(f"{path} is a directory; name the audit file in it")
         return str(path.resolve())

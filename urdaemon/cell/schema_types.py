@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, model_validator
 
-__all__ = ["HOST_NAME_PATTERN", "MIN_CYCLE_RATE_HZ", "Finite", "Frozen", "resolve_file"]
+__all__ = ["HOST_NAME_PATTERN", "MIN_CYCLE_RATE_HZ", "Finite", "Frozen", "resolve_file", "resolve_path"]
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 """A float that is neither infinite nor NaN."""
@@ -42,13 +42,20 @@ HOST_NAME_PATTERN = r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9
 """A DNS host name (labels of letters, digits and hyphens), as a robot's address or a router's host."""
 
 
-def resolve_file(value: str, info: ValidationInfo) -> str:
-    """The absolute path of the file ``value`` names, relative to the cell file's folder (validation
-    context ``base_dir``); ValueError if there is no such file."""
+def resolve_path(value: str, info: ValidationInfo) -> Path:
+    """The path ``value`` names (``~`` expanded), relative to the cell file's folder (validation
+    context ``base_dir``); whether it exists is the caller's check."""
     base = (info.context or {}).get("base_dir")
     path = Path(value).expanduser()
     if not path.is_absolute() and base is not None:
         path = Path(base) / path
+    return path
+
+
+def resolve_file(value: str, info: ValidationInfo) -> str:
+    """The absolute path of the file ``value`` names, relative to the cell file's folder (validation
+    context ``base_dir``); ValueError if there is no such file."""
+    path = resolve_path(value, info)
     if not path.is_file():
         raise ValueError(f"file not found: {path}")
     return str(path.resolve())
