@@ -150,6 +150,8 @@ class FakeController:
         base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
         self.default_program = f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
         self.loaded_program: str | None = self.default_program if urcap else None
+        self.operational_mode = dash.OperationalMode.NONE
+        """What ``get operational mode`` says (``fakeur.dashboard_answers``): NONE, no password set."""
         self.input_registers = InputRegisters()
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
         self.connections, self.programs, self.rtde = _serving_parts(self, address, rtde_versions)
