@@ -150,6 +150,8 @@ class FakeController:
         base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
         self.default_program = f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
         self.loaded_program: str | None = self.default_program if urcap else None
+        self.operational_mode = dash.OperationalMode.NONE
+        """What ``get operational mode`` says (``fakeur.dashboard_answers``): NONE, no password set."""
         self.input_registers = InputRegisters()
         """RTDE input registers (``input_*_register_N``), apart from the output ones on ``arm.io``."""
         self.connections, self.programs, self.rtde = _serving_parts(self, address, rtde_versions)
@@ -164,6 +166,8 @@ class FakeController:
         self._shared_clock: tuple[SharedClock, int] | None = None
         """A clock shared with the other fakes of this process, and this fake's slot on it."""
         self.cycles = 0
+        self._safety = prim.SafetyReports(self.arm.safety_mode)
+        """What the primary clients were told of the safety mode (SAFETY_MODE, ERROR_CODE on changes)."""
         self._changed: asyncio.Event | None = None
         """Set (and dropped) after a cycle or a handled read; exists only while ``until`` waits."""
 
@@ -315,6 +319,9 @@ class FakeController:
             arm.life.brake_release(arm.timestamp)
         arm.step(dt)
         self.cycles += 1
+        if arm.safety_mode is not self._safety.mode:  # told before any state that shows the new mode
+            for message in self._safety.observe(arm.safety_mode):
+                self._broadcast(message)
         self.rtde.after_cycle()
         now = arm.timestamp
         if now < self.faults.stalled_until:

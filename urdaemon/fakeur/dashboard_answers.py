@@ -80,6 +80,9 @@ class DashboardController(Protocol):
     """Where ``load`` finds program files; None: URSim's default directory."""
     default_program: str
     """The External Control program, which always exists."""
+    operational_mode: dash.OperationalMode
+    """What ``get operational mode`` says: NONE (no mode password set) until ``set operational mode``
+    takes control of it, NONE again after ``clear operational mode``."""
 
     def brake_release(self) -> str | None:
         """Release the brakes (powering on first from POWER_OFF); a reason if refused."""
@@ -136,17 +139,31 @@ def _action_reply(fake: DashboardController, command: Any) -> str | None:
             return "Failed to execute: pause"
         arm.pause_program()
         return "Pausing program"
-    if isinstance(command, dash.Stop):
-        if arm.runtime_state is RuntimeState.STOPPED and not fake.programs.busy:
-            return "Failed to execute: stop"
+    if isinstance(command, dash.Stop):  # with nothing playing too: clients stop "if one runs" blindly
         fake.programs.stop()
         return "Stopped"
+    if isinstance(command, dash.SetOperationalMode | dash.ClearOperationalMode):
+        return _operational_mode(fake, command)
     if isinstance(command, dash.Quit):
         return "Disconnected"
     if isinstance(command, dash.Shutdown):
         arm.power_off()
         return "Shutting down"
     return None
+
+
+def _operational_mode(
+    fake: DashboardController, command: dash.SetOperationalMode | dash.ClearOperationalMode
+) -> str:
+    """``set`` / ``clear operational mode`` (e-Series only): the dashboard takes control of the mode,
+    which ``get operational mode`` then reports, or hands it back (NONE: the fake sets no password)."""
+    if fake.controller_version[0] < 5:
+        return dash.unknown_command_text(command.KEYWORD)
+    if isinstance(command, dash.SetOperationalMode):
+        fake.operational_mode = command.mode
+    else:
+        fake.operational_mode = dash.OperationalMode.NONE
+    return command.success_text
 
 
 def _query_reply(fake: DashboardController, command: Any) -> str | None:
@@ -156,7 +173,7 @@ def _query_reply(fake: DashboardController, command: Any) -> str | None:
     if isinstance(command, dash.IsProgramSaved):
         return dash.program_saved_text(program is not None, _basename(program))
     if isinstance(command, dash.GetOperationalMode) and fake.controller_version[0] >= 5:
-        return dash.operational_mode_text(dash.OperationalMode.NONE)  # no mode password set
+        return dash.operational_mode_text(fake.operational_mode)
     if isinstance(command, dash.GetUserRole) and fake.controller_version[0] < 5:
         return dash.user_role_text(dash.UserRole.PROGRAMMER)  # no user password set
     if isinstance(command, dash.GetRobotMode):

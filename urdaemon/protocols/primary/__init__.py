@@ -23,7 +23,8 @@ the layout is a RemoteProtocolError.
 
 The codec is cut by job: ``_wire`` (ports, limits, headers, type bytes), ``_events`` (one dataclass per
 package, sub-package and robot message), ``_layouts`` (their byte layouts, both directions), ``_script``
-(URScript text: programs, commands, blocks) and ``_connection`` (``PrimaryConnection``, either side).
+(URScript text: programs, commands, blocks), ``_safety`` (the robot side's SAFETY_MODE and ERROR_CODE
+reports of a safety mode's changes) and ``_connection`` (``PrimaryConnection``, either side).
 This module states the public API.
 """
 
@@ -64,6 +65,11 @@ from urdaemon.protocols.primary._events import (
     VersionMessage,
     popup_message,
 )
+from urdaemon.protocols.primary._safety import (
+    PROTECTIVE_STOP_TRIGGERED,
+    SafetyReports,
+    protective_stop_error,
+)
 from urdaemon.protocols.primary._script import (
     ControllerCommand,
     def_program,
@@ -88,6 +94,7 @@ __all__ = [
     "MAX_SCRIPT_BYTES",
     "MAX_SCRIPT_NAME_LENGTH",
     "PRIMARY_PORT",
+    "PROTECTIVE_STOP_TRIGGERED",
     "PROTOCOL",
     "SECONDARY_PORT",
     "AdditionalInfo",
@@ -116,6 +123,7 @@ __all__ = [
     "RobotState",
     "RuntimeExceptionMessage",
     "SafetyModeMessage",
+    "SafetyReports",
     "Script",
     "SubPackage",
     "SubPackageType",
@@ -128,5 +136,6 @@ __all__ = [
     "def_program",
     "headless_program",
     "popup_message",
+    "protective_stop_error",
     "sec_program",
 ]
