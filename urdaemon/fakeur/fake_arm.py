@@ -4,9 +4,9 @@ Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller 
 command (of the arm or of its life) returns a refusal reason (or None) the way the real controller
 would refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
 (servoj target, speedj velocity, a ``Motion`` of fakeur/joint_motion.py or fakeur/tcp_motion.py
-played on the program's time, or a stop with a given deceleration), always within the model's joint
-velocity limits; a command outside the joint position limits triggers a protective stop as on a real
-arm.
+played on the program's time, joint torques by the arm's dynamics (``direct_torque``), or a stop with a
+given deceleration), always within the model's joint velocity limits; a command outside the joint
+position limits triggers a protective stop as on a real arm.
 
 A played motion is its ``playback`` (``Playback``, fakeur/playback.py): it advances
 ``dt × speed slider × speed scaling`` of program time per cycle (nothing while the arm cannot move),
@@ -62,6 +62,7 @@ from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.urscript import SPEEDJ_ACCELERATION
 
 if TYPE_CHECKING:
+    from urdaemon.description.dynamics import ArmDynamics, Payload
     from urdaemon.description.ik import UrKinematics
     from urdaemon.fakeur.contact import Surroundings
 
@@ -88,6 +89,7 @@ class MotionMode(enum.Enum):
     SPEED = "speed"
     STOP = "stop"
     PLAY = "play"
+    TORQUE = "torque"
 
 
 @dataclass
@@ -211,6 +213,12 @@ class FakeArm:
         self._acceleration = PROTECTIVE_STOP_DECELERATION
         """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
         self._ik: UrKinematics | None = None
+        self._dynamics: ArmDynamics | None = None
+        self._torque = [0.0] * 6
+        """N·m: the ``direct_torque`` command, on top of the controller's gravity compensation."""
+        self._torque_renewed = False
+        self._torques: tuple[float, list[float]] | None = None
+        """The last ``joint_torques`` and the timestamp they are for."""
         self.history = JointHistory(self.q)
         """The actual joint positions of the last ``HISTORY_STEPS`` cycles."""
         self._last_dt = 0.002
@@ -233,6 +241,18 @@ class FakeArm:
         self._mode = MotionMode.SPEED
         self._speed_target = [float(v) for v in velocities]
         self._acceleration = max(float(acceleration), 1e-6)
+
+    def direct_torque(self, torque: Sequence[float]) -> None:
+        """Drive the joints by ``torque`` (N·m) on top of gravity compensation, this cycle only: q'' =
+        M⁻¹ (τ − c(q, q')), the total torque within ``max_effort``, the speed within ``max_velocity``; a
+        cycle without a new call stops the arm as a protective stop does (docs/fake-robot.md)."""
+        if not self.life.can_move:
+            return
+        self._mode = MotionMode.TORQUE
+        self._torque[:] = [float(v) for v in torque]
+        self._torque_renewed = True
+        self._servo_target = None
+        self.playback.drop()
 
     def stop(self, deceleration: float) -> None:
         """Decelerate every joint to rest at ``deceleration`` (rad/s²)."""
@@ -404,6 +424,8 @@ class FakeArm:
             self._step_play(dt, scale)
         elif mode is MotionMode.SERVO and self._servo_target is not None:
             self._step_servo(dt, self._servo_target)
+        elif mode is MotionMode.TORQUE:
+            self._step_torque(dt)
         elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
             self._step_speed(dt, self._speed_target, self._acceleration)
             if mode is MotionMode.STOP and not any(self.qd):
@@ -455,6 +477,26 @@ class FakeArm:
             qd[i] = v
             q[i] += v * dt
         return limited
+
+    def _step_torque(self, dt: float) -> None:
+        """One cycle of direct torque control (semi-implicit Euler), or its end if it was not renewed."""
+        if not self._torque_renewed:
+            self.stop(PROTECTIVE_STOP_DECELERATION)  # back to position control: to rest
+            self._step_speed(dt, self._speed_target, self._acceleration)
+            return
+        self._torque_renewed = False
+        dynamics, payload = self.dynamics, self.payload
+        q, qd, vmax = self.q, self.qd, self.max_velocity
+        hold = dynamics.gravity_torques(q, self.gravity, payload)
+        efforts = [j.max_effort for j in self.model.joints]
+        # the motor's torque: the command on top of the gravity compensation, within the joint's effort
+        motor = [max(-efforts[i], min(efforts[i], self._torque[i] + hold[i])) for i in range(6)]
+        qdd = dynamics.forward_dynamics(q, qd, motor, self.gravity, payload)
+        for i in range(6):
+            v = max(-vmax[i], min(vmax[i], qd[i] + qdd[i] * dt))
+            self.qdd[i] = (v - qd[i]) / dt
+            qd[i] = v
+            q[i] += v * dt
 
     def _step_speed(self, dt: float, target: list[float], acceleration: float) -> None:
         q, qd, vmax = self.q, self.qd, self.max_velocity
@@ -519,6 +561,33 @@ class FakeArm:
 
             solver = self._ik = UrKinematics(self.model, self.dh)
         return solver
+
+    @property
+    def dynamics(self) -> ArmDynamics:
+        """The arm's rigid-body dynamics (description/dynamics.py), made on first use."""
+        model = self._dynamics
+        if model is None:
+            from urdaemon.description.dynamics import ArmDynamics
+
+            model = self._dynamics = ArmDynamics(self.model, self.dh)
+        return model
+
+    @property
+    def payload(self) -> Payload:
+        """The payload set on the arm (``set_target_payload``), as the dynamics take it."""
+        from urdaemon.description.dynamics import Payload
+
+        return Payload.of(self.payload_mass, self.payload_cog, self.payload_inertia)
+
+    def joint_torques(self) -> list[float]:
+        """N·m: the torques the joints exert now, τ = M q'' + c(q, q') + g(q) with the set payload
+        (the arm follows its model exactly), computed when asked, once per cycle."""
+        cached = self._torques
+        if cached is not None and cached[0] == self.timestamp:
+            return list(cached[1])
+        torques = self.dynamics.inverse_dynamics(self.q, self.qd, self.qdd, self.gravity, self.payload)
+        self._torques = (self.timestamp, torques)
+        return list(torques)
 
     def tcp_pose(self) -> Pose:
         """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector."""
