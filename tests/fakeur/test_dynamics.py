@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tests.fakeur.urscript.library_host import DT, make_host, run_script
+from urdaemon.fakeur.fake_arm import arm_payload, joint_torques
 from urdaemon.fakeur.urscript import compile_program
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError
 from urdaemon.fakeur.urscript.script_host import ScriptHost
@@ -44,7 +45,7 @@ end
     assert run.error is None
     values = {name: run.variable(name) for name in ("m", "m01", "j", "jd", "c", "t")}
     qd = [0.1, 0.2, -0.3, 0.4, 0.5, -0.6]
-    dynamics, payload = arm.dynamics, arm.payload
+    dynamics, payload = arm.drive.dynamics, arm_payload(arm)
     assert values["m"] == dynamics.mass_matrix(START, payload)
     assert values["m01"] == values["m"][0][1]
     assert values["j"] == dynamics.jacobian(START)
@@ -72,8 +73,8 @@ def test_direct_torque_of_zero_holds_the_arm_against_gravity() -> None:
     run = run_script(host, text, cycles=400)
     assert run.error is None
     assert arm.q == pytest.approx(START, abs=1e-12)
-    hold = arm.dynamics.gravity_torques(START, arm.gravity, arm.payload)
-    assert arm.joint_torques() == pytest.approx(hold, abs=1e-9)
+    hold = arm.drive.dynamics.gravity_torques(START, arm.gravity, arm_payload(arm))
+    assert joint_torques(arm) == pytest.approx(hold, abs=1e-9)
     assert max(abs(v) for v in hold) > 10.0, "the shoulder and elbow hold the arm up"
 
 
@@ -81,8 +82,8 @@ def test_direct_torque_moves_the_arm_by_its_dynamics_and_stops_when_not_renewed(
     host = _host()
     arm = host.arm
     torque = [0.0, 0.0, 0.0, 0.0, 0.0, 0.5]
-    expected = arm.dynamics.forward_dynamics(
-        START, [0.0] * 6, np.add(torque, arm.dynamics.gravity_torques(START, arm.gravity)), arm.gravity
+    expected = arm.drive.dynamics.forward_dynamics(
+        START, [0.0] * 6, np.add(torque, arm.drive.dynamics.gravity_torques(START, arm.gravity)), arm.gravity
     )
     text = "def p():\n  direct_torque([0, 0, 0, 0, 0, 0.5], friction_comp=False)\nend\n"
     run = compile_program(text, series="e", version=VERSION).start(host)
@@ -112,6 +113,6 @@ def test_get_joint_torques_are_those_of_the_wrench_the_tool_feels() -> None:
     arm = host.arm
     arm.tcp_force = [0.0, 0.0, -20.0, 0.0, 0.0, 0.0]
     run = run_script(host, "def p():\n  global t = get_joint_torques()\nend\n")
-    expected = np.array(arm.dynamics.jacobian(arm.q, arm.tcp_offset)).T @ np.array(arm.tcp_force)
+    expected = np.array(arm.drive.dynamics.jacobian(arm.q, arm.tcp_offset)).T @ np.array(arm.tcp_force)
     assert run.error is None
     assert run.variable("t") == pytest.approx(list(expected), abs=1e-12)

@@ -57,12 +57,13 @@ from urdaemon.fakeur.life import (
 )
 from urdaemon.fakeur.playback import Playback
 from urdaemon.fakeur.pose import TcpPoses
+from urdaemon.fakeur.torque_drive import TorqueDrive, payload_of
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.urscript import SPEEDJ_ACCELERATION
 
 if TYPE_CHECKING:
-    from urdaemon.description.dynamics import ArmDynamics, Payload
+    from urdaemon.description.dynamics import Payload
     from urdaemon.description.ik import UrKinematics
     from urdaemon.fakeur.contact import Surroundings
 
@@ -73,6 +74,8 @@ __all__ = [
     "JointHistory",
     "MotionMode",
     "RuntimeState",  # defined in protocols/rtde_variables.py, kept importable here
+    "arm_payload",
+    "joint_torques",
 ]
 
 HISTORY_STEPS = 1000
@@ -213,12 +216,7 @@ class FakeArm:
         self._acceleration = PROTECTIVE_STOP_DECELERATION
         """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
         self._ik: UrKinematics | None = None
-        self._dynamics: ArmDynamics | None = None
-        self._torque = [0.0] * 6
-        """N·m: the ``direct_torque`` command, on top of the controller's gravity compensation."""
-        self._torque_renewed = False
-        self._torques: tuple[float, list[float]] | None = None
-        """The last ``joint_torques`` and the timestamp they are for."""
+        self.drive = TorqueDrive(self.model, self.dh)  # its dynamics, direct_torque's command
         self.history = JointHistory(self.q)
         """The actual joint positions of the last ``HISTORY_STEPS`` cycles."""
         self._last_dt = 0.002
@@ -243,16 +241,12 @@ class FakeArm:
         self._acceleration = max(float(acceleration), 1e-6)
 
     def direct_torque(self, torque: Sequence[float]) -> None:
-        """Drive the joints by ``torque`` (N·m) on top of gravity compensation, this cycle only: q'' =
-        M⁻¹ (τ − c(q, q')), the total torque within ``max_effort``, the speed within ``max_velocity``; a
-        cycle without a new call stops the arm as a protective stop does (docs/fake-robot.md)."""
-        if not self.life.can_move:
-            return
-        self._mode = MotionMode.TORQUE
-        self._torque[:] = [float(v) for v in torque]
-        self._torque_renewed = True
-        self._servo_target = None
-        self.playback.drop()
+        """Torques (N·m) on top of gravity compensation, for this cycle (fakeur/torque_drive.py)."""
+        if self.life.can_move:
+            self._mode = MotionMode.TORQUE
+            self.drive.command(torque)
+            self._servo_target = None
+            self.playback.drop()
 
     def stop(self, deceleration: float) -> None:
         """Decelerate every joint to rest at ``deceleration`` (rad/s²)."""
@@ -425,7 +419,11 @@ class FakeArm:
         elif mode is MotionMode.SERVO and self._servo_target is not None:
             self._step_servo(dt, self._servo_target)
         elif mode is MotionMode.TORQUE:
-            self._step_torque(dt)
+            if not self.drive.step(
+                self.q, self.qd, self.qdd, self.gravity, arm_payload(self), self.max_velocity, dt
+            ):
+                self.stop(PROTECTIVE_STOP_DECELERATION)  # not renewed: back to position control, to rest
+                self._step_speed(dt, self._speed_target, self._acceleration)
         elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
             self._step_speed(dt, self._speed_target, self._acceleration)
             if mode is MotionMode.STOP and not any(self.qd):
@@ -478,26 +476,6 @@ class FakeArm:
             q[i] += v * dt
         return limited
 
-    def _step_torque(self, dt: float) -> None:
-        """One cycle of direct torque control (semi-implicit Euler), or its end if it was not renewed."""
-        if not self._torque_renewed:
-            self.stop(PROTECTIVE_STOP_DECELERATION)  # back to position control: to rest
-            self._step_speed(dt, self._speed_target, self._acceleration)
-            return
-        self._torque_renewed = False
-        dynamics, payload = self.dynamics, self.payload
-        q, qd, vmax = self.q, self.qd, self.max_velocity
-        hold = dynamics.gravity_torques(q, self.gravity, payload)
-        efforts = [j.max_effort for j in self.model.joints]
-        # the motor's torque: the command on top of the gravity compensation, within the joint's effort
-        motor = [max(-efforts[i], min(efforts[i], self._torque[i] + hold[i])) for i in range(6)]
-        qdd = dynamics.forward_dynamics(q, qd, motor, self.gravity, payload)
-        for i in range(6):
-            v = max(-vmax[i], min(vmax[i], qd[i] + qdd[i] * dt))
-            self.qdd[i] = (v - qd[i]) / dt
-            qd[i] = v
-            q[i] += v * dt
-
     def _step_speed(self, dt: float, target: list[float], acceleration: float) -> None:
         q, qd, vmax = self.q, self.qd, self.max_velocity
         dv_max = acceleration * dt
@@ -526,22 +504,7 @@ class FakeArm:
         if felt.stop:
             self.protective_stop()
         if felt.twist is not None:
-            self._comply(felt.twist, dt)
-
-    def _comply(self, twist: Sequence[float], dt: float) -> None:
-        """Drive the joints at the velocities that give the TCP ``twist`` (base frame), scaled down
-        together into the joint velocity limits, on top of this cycle's motion."""
-        qd = self.ik.joint_velocity(self.q, twist, self.tcp_offset)
-        vmax = self.max_velocity
-        scale = 1.0
-        for i in range(6):
-            if abs(qd[i]) * scale > vmax[i]:
-                scale = vmax[i] / abs(qd[i])
-        q, actual = self.q, self.qd
-        for i in range(6):
-            v = qd[i] * scale
-            q[i] += v * dt
-            actual[i] += v
+            _comply(self, felt.twist, dt)
 
     def _check_limits(self) -> None:
         for i in range(6):
@@ -562,33 +525,6 @@ class FakeArm:
             solver = self._ik = UrKinematics(self.model, self.dh)
         return solver
 
-    @property
-    def dynamics(self) -> ArmDynamics:
-        """The arm's rigid-body dynamics (description/dynamics.py), made on first use."""
-        model = self._dynamics
-        if model is None:
-            from urdaemon.description.dynamics import ArmDynamics
-
-            model = self._dynamics = ArmDynamics(self.model, self.dh)
-        return model
-
-    @property
-    def payload(self) -> Payload:
-        """The payload set on the arm (``set_target_payload``), as the dynamics take it."""
-        from urdaemon.description.dynamics import Payload
-
-        return Payload.of(self.payload_mass, self.payload_cog, self.payload_inertia)
-
-    def joint_torques(self) -> list[float]:
-        """N·m: the torques the joints exert now, τ = M q'' + c(q, q') + g(q) with the set payload
-        (the arm follows its model exactly), computed when asked, once per cycle."""
-        cached = self._torques
-        if cached is not None and cached[0] == self.timestamp:
-            return list(cached[1])
-        torques = self.dynamics.inverse_dynamics(self.q, self.qd, self.qdd, self.gravity, self.payload)
-        self._torques = (self.timestamp, torques)
-        return list(torques)
-
     def tcp_pose(self) -> Pose:
         """tool0 pose in the base frame as UR reports it: x, y, z and a rotation vector."""
         return self._poses.flange(self.q)
@@ -596,3 +532,30 @@ class FakeArm:
     def actual_tcp_pose(self) -> Pose:
         """The TCP pose (the flange pose with ``tcp_offset`` applied), as RTDE ``actual_TCP_pose``."""
         return self._poses.tcp(self.q, self.tcp_offset)
+
+
+def arm_payload(arm: FakeArm) -> Payload:
+    """The payload set on ``arm`` (``set_target_payload``), as the dynamics take it."""
+    return payload_of(arm.payload_mass, arm.payload_cog, arm.payload_inertia)
+
+
+def joint_torques(arm: FakeArm) -> list[float]:
+    """N·m: the torques ``arm``'s joints exert now, M q'' + c + g with its payload (the arm follows its
+    model exactly: under direct_torque, the command plus the gravity compensation)."""
+    return arm.drive.joint_torques(arm.timestamp, arm.q, arm.qd, arm.qdd, arm.gravity, arm_payload(arm))
+
+
+def _comply(arm: FakeArm, twist: Sequence[float], dt: float) -> None:
+    """Drive the joints at the velocities that give the TCP ``twist`` (base frame), scaled down
+    together into the joint velocity limits, on top of this cycle's motion."""
+    qd = arm.ik.joint_velocity(arm.q, twist, arm.tcp_offset)
+    vmax = arm.max_velocity
+    scale = 1.0
+    for i in range(6):
+        if abs(qd[i]) * scale > vmax[i]:
+            scale = vmax[i] / abs(qd[i])
+    q, actual = arm.q, arm.qd
+    for i in range(6):
+        v = qd[i] * scale
+        q[i] += v * dt
+        actual[i] += v

@@ -1,7 +1,7 @@
 """URScript kinematics and dynamics builtins (PolyScope 5.23+): the Jacobian and its time derivative,
 the mass matrix, the Coriolis and centrifugal torques, and ``direct_torque``.
 
-All read the arm's rigid-body model (``FakeArm.dynamics``, description/dynamics.py: UR's published link
+All read the arm's rigid-body model (``FakeArm.drive.dynamics``, description/dynamics.py: UR's published link
 inertials on the arm's calibrated kinematics) with the payload set on the arm. A matrix is a list of
 rows, as ``m[row, column]`` indexes it (ur_rtde's script reads ``mass_matrix[i, j]``).
 
@@ -23,6 +23,7 @@ import math
 from collections.abc import Generator, Sequence
 from typing import Any
 
+from urdaemon.fakeur.fake_arm import arm_payload
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, builtin
 from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
@@ -54,7 +55,7 @@ def get_jacobian(host: ScriptHost, q: Any, tcp: Any) -> UrList:
     arm = host.arm
     joints = _joints("get_jacobian q", q, arm.q)
     offset = _joints("get_jacobian tcp", tcp, arm.tcp_offset)
-    return _matrix(arm.dynamics.jacobian(joints, offset))
+    return _matrix(arm.drive.dynamics.jacobian(joints, offset))
 
 
 @builtin("get_jacobian_time_derivative")
@@ -64,7 +65,7 @@ def get_jacobian_time_derivative(host: ScriptHost, q: Any, qd: Any, tcp: Any) ->
     joints = _joints("get_jacobian_time_derivative q", q, arm.q)
     speeds = _joints("get_jacobian_time_derivative qd", qd, arm.qd)
     offset = _joints("get_jacobian_time_derivative tcp", tcp, arm.tcp_offset)
-    return _matrix(arm.dynamics.jacobian_derivative(joints, speeds, offset))
+    return _matrix(arm.drive.dynamics.jacobian_derivative(joints, speeds, offset))
 
 
 @builtin("get_mass_matrix")
@@ -81,7 +82,7 @@ def get_mass_matrix(host: ScriptHost, q: Any, include_rotors_inertia: Any) -> Ur
             "get_mass_matrix: not simulated by the fake controller: include_rotors_inertia=True needs "
             "the joints' rotor inertias, which UR does not publish"
         )
-    return _matrix(arm.dynamics.mass_matrix(joints, arm.payload))
+    return _matrix(arm.drive.dynamics.mass_matrix(joints, arm_payload(arm)))
 
 
 @builtin("get_coriolis_and_centrifugal_torques")
@@ -90,7 +91,7 @@ def get_coriolis_and_centrifugal_torques(host: ScriptHost, q: Any, qd: Any) -> U
     arm = host.arm
     joints = _joints("get_coriolis_and_centrifugal_torques q", q, arm.q)
     speeds = _joints("get_coriolis_and_centrifugal_torques qd", qd, arm.qd)
-    return UrList(arm.dynamics.coriolis(joints, speeds, arm.payload))
+    return UrList(arm.drive.dynamics.coriolis(joints, speeds, arm_payload(arm)))
 
 
 def _scales(name: str, value: Any) -> None:

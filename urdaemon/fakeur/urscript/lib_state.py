@@ -202,7 +202,7 @@ def get_joint_torques(host: ScriptHost) -> UrList:
     force = arm.tcp_force
     if not any(force):
         return UrList([0.0] * 6)
-    jacobian = arm.dynamics.jacobian(arm.q, arm.tcp_offset)
+    jacobian = arm.drive.dynamics.jacobian(arm.q, arm.tcp_offset)
     return UrList(sum(jacobian[r][c] * force[r] for r in range(6)) for c in range(6))
 
 
