@@ -40,7 +40,8 @@ def _rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
+    result: np.ndarray = rz @ ry @ rx
+    return result
 
 
 class Reference:
@@ -113,7 +114,7 @@ class Reference:
         return tau
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
-        return np.array([self.rnea(q, [0.0] * 6, e, (0, 0, 0)) for e in np.eye(6)]).T
+        return np.array([self.rnea(q, [0.0] * 6, list(e), (0, 0, 0)) for e in np.eye(6)]).T
 
 
 @pytest.mark.parametrize("name", MODELS)

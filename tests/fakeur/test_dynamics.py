@@ -83,7 +83,10 @@ def test_direct_torque_moves_the_arm_by_its_dynamics_and_stops_when_not_renewed(
     arm = host.arm
     torque = [0.0, 0.0, 0.0, 0.0, 0.0, 0.5]
     expected = arm.drive.dynamics.forward_dynamics(
-        START, [0.0] * 6, np.add(torque, arm.drive.dynamics.gravity_torques(START, arm.gravity)), arm.gravity
+        START,
+        [0.0] * 6,
+        [t + g for t, g in zip(torque, arm.drive.dynamics.gravity_torques(START, arm.gravity), strict=True)],
+        arm.gravity,
     )
     text = "def p():\n  direct_torque([0, 0, 0, 0, 0, 0.5], friction_comp=False)\nend\n"
     run = compile_program(text, series="e", version=VERSION).start(host)

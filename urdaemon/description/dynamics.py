@@ -163,7 +163,7 @@ class _Body:
 
 
 def _body(link: LinkInertial) -> _Body:
-    tensor: Sym = (0.0,) * 9  # type: ignore[assignment]
+    tensor: Sym = (0.0,) * 9
     if link.inertia is not None:
         tensor = _turned(xyz_rpy((0.0, 0.0, 0.0), link.center_of_mass_rpy), inertia_matrix(link.inertia))
     c = link.center_of_mass
