@@ -4,9 +4,9 @@ Pure: no asyncio, no clock. ``step(dt)`` advances the simulation one controller 
 command (of the arm or of its life) returns a refusal reason (or None) the way the real controller
 would refuse it (e.g. brake release while powered off). Joint motion follows the active motion mode
 (servoj target, speedj velocity, a ``Motion`` of fakeur/joint_motion.py or fakeur/tcp_motion.py
-played on the program's time, or a stop with a given deceleration), always within the model's joint
-velocity limits; a command outside the joint position limits triggers a protective stop as on a real
-arm.
+played on the program's time, joint torques by the arm's dynamics (``direct_torque``), or a stop with a
+given deceleration), always within the model's joint velocity limits; a command outside the joint
+position limits triggers a protective stop as on a real arm.
 
 A played motion is its ``playback`` (``Playback``, fakeur/playback.py): it advances
 ``dt × speed slider × speed scaling`` of program time per cycle (nothing while the arm cannot move),
@@ -57,11 +57,13 @@ from urdaemon.fakeur.life import (
 )
 from urdaemon.fakeur.playback import Playback
 from urdaemon.fakeur.pose import TcpPoses
+from urdaemon.fakeur.torque_drive import TorqueDrive, payload_of
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols.rtde_variables import RuntimeState
 from urdaemon.urscript import SPEEDJ_ACCELERATION
 
 if TYPE_CHECKING:
+    from urdaemon.description.dynamics import Payload
     from urdaemon.description.ik import UrKinematics
     from urdaemon.fakeur.contact import Surroundings
 
@@ -72,6 +74,8 @@ __all__ = [
     "JointHistory",
     "MotionMode",
     "RuntimeState",  # defined in protocols/rtde_variables.py, kept importable here
+    "arm_payload",
+    "joint_torques",
 ]
 
 HISTORY_STEPS = 1000
@@ -88,6 +92,7 @@ class MotionMode(enum.Enum):
     SPEED = "speed"
     STOP = "stop"
     PLAY = "play"
+    TORQUE = "torque"
 
 
 @dataclass
@@ -211,6 +216,7 @@ class FakeArm:
         self._acceleration = PROTECTIVE_STOP_DECELERATION
         """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
         self._ik: UrKinematics | None = None
+        self.drive = TorqueDrive(self.model, self.dh)  # its dynamics, direct_torque's command
         self.history = JointHistory(self.q)
         """The actual joint positions of the last ``HISTORY_STEPS`` cycles."""
         self._last_dt = 0.002
@@ -233,6 +239,14 @@ class FakeArm:
         self._mode = MotionMode.SPEED
         self._speed_target = [float(v) for v in velocities]
         self._acceleration = max(float(acceleration), 1e-6)
+
+    def direct_torque(self, torque: Sequence[float]) -> None:
+        """Torques (N·m) on top of gravity compensation, for this cycle (fakeur/torque_drive.py)."""
+        if self.life.can_move:
+            self._mode = MotionMode.TORQUE
+            self.drive.command(torque)
+            self._servo_target = None
+            self.playback.drop()
 
     def stop(self, deceleration: float) -> None:
         """Decelerate every joint to rest at ``deceleration`` (rad/s²)."""
@@ -404,6 +418,12 @@ class FakeArm:
             self._step_play(dt, scale)
         elif mode is MotionMode.SERVO and self._servo_target is not None:
             self._step_servo(dt, self._servo_target)
+        elif mode is MotionMode.TORQUE:
+            if not self.drive.step(
+                self.q, self.qd, self.qdd, self.gravity, arm_payload(self), self.max_velocity, dt
+            ):
+                self.stop(PROTECTIVE_STOP_DECELERATION)  # not renewed: back to position control, to rest
+                self._step_speed(dt, self._speed_target, self._acceleration)
         elif mode is MotionMode.SPEED or mode is MotionMode.STOP:
             self._step_speed(dt, self._speed_target, self._acceleration)
             if mode is MotionMode.STOP and not any(self.qd):
@@ -484,22 +504,7 @@ class FakeArm:
         if felt.stop:
             self.protective_stop()
         if felt.twist is not None:
-            self._comply(felt.twist, dt)
-
-    def _comply(self, twist: Sequence[float], dt: float) -> None:
-        """Drive the joints at the velocities that give the TCP ``twist`` (base frame), scaled down
-        together into the joint velocity limits, on top of this cycle's motion."""
-        qd = self.ik.joint_velocity(self.q, twist, self.tcp_offset)
-        vmax = self.max_velocity
-        scale = 1.0
-        for i in range(6):
-            if abs(qd[i]) * scale > vmax[i]:
-                scale = vmax[i] / abs(qd[i])
-        q, actual = self.q, self.qd
-        for i in range(6):
-            v = qd[i] * scale
-            q[i] += v * dt
-            actual[i] += v
+            _comply(self, felt.twist, dt)
 
     def _check_limits(self) -> None:
         for i in range(6):
@@ -527,3 +532,30 @@ class FakeArm:
     def actual_tcp_pose(self) -> Pose:
         """The TCP pose (the flange pose with ``tcp_offset`` applied), as RTDE ``actual_TCP_pose``."""
         return self._poses.tcp(self.q, self.tcp_offset)
+
+
+def arm_payload(arm: FakeArm) -> Payload:
+    """The payload set on ``arm`` (``set_target_payload``), as the dynamics take it."""
+    return payload_of(arm.payload_mass, arm.payload_cog, arm.payload_inertia)
+
+
+def joint_torques(arm: FakeArm) -> list[float]:
+    """N·m: the torques ``arm``'s joints exert now, M q'' + c + g with its payload (the arm follows its
+    model exactly: under direct_torque, the command plus the gravity compensation)."""
+    return arm.drive.joint_torques(arm.timestamp, arm.q, arm.qd, arm.qdd, arm.gravity, arm_payload(arm))
+
+
+def _comply(arm: FakeArm, twist: Sequence[float], dt: float) -> None:
+    """Drive the joints at the velocities that give the TCP ``twist`` (base frame), scaled down
+    together into the joint velocity limits, on top of this cycle's motion."""
+    qd = arm.ik.joint_velocity(arm.q, twist, arm.tcp_offset)
+    vmax = arm.max_velocity
+    scale = 1.0
+    for i in range(6):
+        if abs(qd[i]) * scale > vmax[i]:
+            scale = vmax[i] / abs(qd[i])
+    q, actual = arm.q, arm.qd
+    for i in range(6):
+        v = qd[i] * scale
+        q[i] += v * dt
+        actual[i] += v

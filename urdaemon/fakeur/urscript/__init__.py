@@ -18,6 +18,7 @@ _LIBRARIES = (
     "lib_core",
     "lib_motion",
     "lib_state",
+    "lib_dynamics",
     "lib_io",
     "lib_ports",
     "lib_settings",

@@ -2,8 +2,8 @@
 
 Joint values come from ``FakeArm`` (actual: where the arm is; target: what the running motion
 commands); TCP values apply the arm's TCP offset (``set_tcp``) to the flange pose. The TCP wrench is
-the arm's measured one (``arm.tcp_force``, set by the contact model); joint torques beyond gravity are
-zero (no dynamics); temperatures are constants (no thermal model).
+the arm's measured one (``arm.tcp_force``, set by the contact model); the joint torques beyond what the
+arm's own motion needs are that wrench's (Jᵀ·F); temperatures are constants (no thermal model).
 Inverse kinematics is ``urdaemon.description.ik`` on the arm's calibrated model.
 """
 
@@ -194,8 +194,16 @@ def reset_revolution_counter(host: ScriptHost, qNear: Any) -> None:
 
 @builtin("get_joint_torques")
 def get_joint_torques(host: ScriptHost) -> UrList:
-    """The joint torques beyond gravity: zero (no dynamics)."""
-    return UrList([0.0] * 6)
+    """The joint torques (N·m) "corrected by the torque needed to move the robot itself" (the manual):
+    what is left when the arm's model (gravity, its motion) is taken out, the torques of the external
+    wrench at the TCP, Jᵀ·F (``arm.tcp_force``, base frame). Zero in free air: the fake arm follows
+    its model exactly, under direct_torque too."""
+    arm = host.arm
+    force = arm.tcp_force
+    if not any(force):
+        return UrList([0.0] * 6)
+    jacobian = arm.drive.dynamics.jacobian(arm.q, arm.tcp_offset)
+    return UrList(sum(jacobian[r][c] * force[r] for r in range(6)) for c in range(6))
 
 
 @builtin("get_joint_temp")

@@ -23,7 +23,6 @@ _MODBUS = "talks to external Modbus devices of the installation, which the fake 
 _EUROMAP = "needs a Euromap67 interface to a moulding machine, which the fake has none of"
 _SCREW = "needs a screwdriving tool, which the fake has none of"
 _OPERATOR = "waits for an operator's answer on the teach pendant, which the fake has none of"
-_DYNAMICS = "needs the arm's dynamics (masses, joint torques), which the fake does not model"
 _PATH_OFFSET = "offsets a moving path in real time; the fake's motion model has no path offset"
 _WORLD = "the world model of named frames (PolyScope 5.2x) is not modelled by the fake yet"
 _MOTION = "a motion planner option the fake's motion model does not have yet"
@@ -74,13 +73,6 @@ REASONS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType(
             "request_string_from_primary_client",
         ),
         "calls XML-RPC servers on other hosts; the fake has no XML-RPC client": ("rpc_factory",),
-        _DYNAMICS: (
-            "direct_torque",
-            "estimate_payload",
-            "get_coriolis_and_centrifugal_torques",
-            "get_mass_matrix",
-            "set_mass_properties",
-        ),
         _PATH_OFFSET: (
             "path_offset_disable",
             "path_offset_enable",
@@ -103,6 +95,7 @@ REASONS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType(
             "is_frame",
             "move_frame",
             "reset_world_model",
+            "set_mass_properties",
             "set_payload_from_attached_frames",
         ),
         _MOTION: (
@@ -113,9 +106,8 @@ REASONS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType(
             "optimovel",
         ),
         _NOT_YET: (
+            "estimate_payload",
             "freedrive_mode_no_incorrect_payload_check",
-            "get_jacobian",
-            "get_jacobian_time_derivative",
             "get_rtde_value",
             "time",
             "tool_wrench_limit_disable",
