@@ -52,6 +52,7 @@ class CodeGenerator:
         """Registry names of the IO variables' readers and writers the program uses."""
         self.constants: dict[str, object] = {}
         self.scope = checker.main
+        self.loops = 0
         self.suspendable = True
         """The code being generated is a generator's (main, a thread, a blocking function): it may yield."""
 
@@ -169,13 +170,22 @@ class CodeGenerator:
 
     def _while(self, indent: int, node: Any) -> None:
         """A ``while`` loop that gives up its time slice once it is used."""
-        self._emit(indent, f"while {self._expr(node.condition)}:", node)
         if self.suspendable:
             # a thread that used its time slice (writing to a socket, reading one a client floods, or
-            # computing) is put aside until the next cycle, as UR's scheduler does; it resumes here
-            self._emit(indent + 1, f"if {_SLICE_USED}: yield", node)
+            # computing) is put aside until the next cycle, as UR's scheduler does; it resumes here.
+            # Only once the loop went round again since it found the slice used, in the same resume:
+            # a loop that blocks every time round (a servoj stream) is never put aside before its
+            # motion, however slow the fake's own work was before it (the fake is no real-time machine)
+            self.loops += 1
+            mark = f"_s{self.loops}"
+            self._emit(indent, f"{mark} = -1", node)
+            self._emit(indent, f"while {self._expr(node.condition)}:", node)
+            self._emit(indent + 1, f"if {_SLICE_USED}:", node)
+            self._emit(indent + 2, f"if {mark} == _r: yield", node)
+            self._emit(indent + 2, f"else: {mark} = _r", node)
         else:
             # a plain function cannot be put aside: one that loops too long would hold the controller
+            self._emit(indent, f"while {self._expr(node.condition)}:", node)
             self._emit(indent + 1, f"if {_TOO_LONG}: _too_long()", node)
         self._block(indent + 1, node.body)
 

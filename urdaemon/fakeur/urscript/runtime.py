@@ -262,6 +262,7 @@ class ScriptRun:
             "_too_long": self._too_long,
             "_pc": perf_counter,
             "_end": 0.0,
+            "_r": 0,
             "_stalled": self._stalled,
             "_D": _DEFAULT,
             "_start": self._start,
@@ -275,6 +276,8 @@ class ScriptRun:
         exec(program.code, namespace)
         self._namespace = namespace
         self._stall_start: float | None = None
+        self._resumes = 0
+        """Threads resumed so far: a loop tells by it whether its thread was put aside since it looked."""
         main = _Thread(MAIN, namespace["_main"]())
         self._threads.append(main)
         self._alive.add(MAIN)
@@ -299,6 +302,8 @@ class ScriptRun:
             namespace["_tick"] = self._count()
             self._current = thread
             namespace["_end"] = min(perf_counter() + slice_s, program_end)
+            self._resumes += 1
+            namespace["_r"] = self._resumes
             self._stall_start = None
             try:
                 next(thread.generator)
