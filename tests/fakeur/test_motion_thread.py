@@ -112,7 +112,7 @@ def test_ur_rtde_speed_then_stop_comes_to_rest(rtde: tuple[Any, Any, PrimaryWatc
     start = receiver.getTimestamp()
 
     def at_rest() -> bool:
-        return max(abs(v) for v in receiver.getActualQd()) < STILL
+        return bool(max(abs(v) for v in receiver.getActualQd()) < STILL)
 
     assert wait_until(at_rest, 20.0), f"still moving: {receiver.getActualQd()}\n{primary.describe()}"
     # within 2 s of controller time (RTDE timestamps: 1000 packages at 500 Hz), not a wall-clock wait

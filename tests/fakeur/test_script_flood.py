@@ -149,7 +149,8 @@ async def test_a_flooding_script_keeps_real_time_beside_another_fake(kind: str) 
                 periods = clock.fired + clock.missed
                 cycles = (flooder.cycles, other.cycles)
                 ticks = (_ticks(flooder), _ticks(other))
-                await flooder.until(lambda p=periods: clock.fired + clock.missed >= p + WINDOW, cycles=WINDOW)
+                end = periods + WINDOW
+                await flooder.until(lambda: clock.fired + clock.missed >= end, cycles=WINDOW)  # noqa: B023
                 passed = clock.fired + clock.missed - periods
                 ran = (flooder.cycles - cycles[0], other.cycles - cycles[1])
                 # the flooding program's other thread ran in every cycle its program was stepped
