@@ -6,7 +6,9 @@ per program text): those that may block are generators called with ``yield from`
 plain functions. Names are prefixed (``v_`` variables, ``f_`` functions, ``t_`` threads, ``b_`` builtins)
 so no URScript name can clash with Python's. It works from what the checks found
 (fakeur/urscript/checker.py): the scopes, the functions that block, the variables mutated in place.
-A loop gives up its thread's time slice once it has run :data:`MAX_OPS_PER_CYCLE` iterations in a cycle.
+A loop that may be put aside (in the main program, a thread, or a function that blocks: a generator)
+gives up the rest of its thread's cycle once its time slice is used; one that cannot (in a function
+that never blocks) stops the program with the controller's error once it runs too long in one cycle.
 """
 
 from __future__ import annotations
@@ -20,13 +22,15 @@ from urdaemon.fakeur.urscript.checker import CONSTANTS, IO_VARIABLES, Checker, t
 __all__ = ["MAX_OPS_PER_CYCLE", "CodeGenerator"]
 
 MAX_OPS_PER_CYCLE: Final = 100_000
-"""Loop iterations one thread may run in one controller cycle. Past it, a loop that may wait (it calls a
-blocking builtin that happened not to block) puts its thread aside until the next cycle, as the
-controller's scheduler does with a thread that used up its time slice; a loop that can never wait
-stops the program with the controller's error."""
+"""Loop iterations a loop that cannot be put aside (in a function that never blocks) may run in one
+controller cycle before the program stops with the controller's error (or sooner:
+``runtime.STALL_BUDGET_S`` of processor time)."""
 
-_SPENT: Final = f"(_n := _next(_tick)) > {MAX_OPS_PER_CYCLE} or (_n & 255 == 0 and _late())"
-"""A loop's test, each iteration, of whether its thread has used its time slice (inline: it is hot)."""
+_SLICE_USED: Final = "_pc() > _end"
+"""A loop's test, each iteration, of whether its thread has used its time slice of this cycle (inline:
+it is hot; ``_end`` is the slice's end, set by the scheduler as it resumes the thread)."""
+_TOO_LONG: Final = f"(_n := _next(_tick)) > {MAX_OPS_PER_CYCLE} or (_n & 255 == 0 and _stalled())"
+"""The same test for a loop that cannot be put aside: whether it has run too long to go on."""
 
 _INDENT: Final = "    "
 
@@ -48,12 +52,17 @@ class CodeGenerator:
         """Registry names of the IO variables' readers and writers the program uses."""
         self.constants: dict[str, object] = {}
         self.scope = checker.main
+        self.loops = 0
+        self.suspendable = True
+        """The code being generated is a generator's (main, a thread, a blocking function): it may yield."""
 
     def generate(self) -> tuple[str, dict[int, tuple[int, int]], set[str], dict[str, object]]:
         for name, function in self.checker.functions.items():
             self.scope = self.checker.scopes[name]
+            self.suspendable = function.kind == "thread" or name in self.checker.blocking
             self._function(function)
         self.scope = self.checker.main
+        self.suspendable = True
         self._emit(0, "def _main():", None)
         self._globals(1, self.checker.main_body)
         self._block(1, self.checker.main_body)
@@ -160,15 +169,24 @@ class CodeGenerator:
             self._block(indent + 1, node.orelse)
 
     def _while(self, indent: int, node: Any) -> None:
-        """A ``while`` loop that gives up its time slice once the cycle's time is spent."""
-        self._emit(indent, f"while {self._expr(node.condition)}:", node)
-        if self.checker.body_blocks((node,)):
-            # a loop that waits on something (a socket read that keeps finding data, say) has used
-            # its time slice: the thread sleeps until the next cycle, as the controller's does
-            self._emit(indent + 1, f"if {_SPENT}: yield", node)
+        """A ``while`` loop that gives up its time slice once it is used."""
+        if self.suspendable:
+            # a thread that used its time slice (writing to a socket, reading one a client floods, or
+            # computing) is put aside until the next cycle, as UR's scheduler does; it resumes here.
+            # Only once the loop went round again since it found the slice used, in the same resume:
+            # a loop that blocks every time round (a servoj stream) is never put aside before its
+            # motion, however slow the fake's own work was before it (the fake is no real-time machine)
+            self.loops += 1
+            mark = f"_s{self.loops}"
+            self._emit(indent, f"{mark} = -1", node)
+            self._emit(indent, f"while {self._expr(node.condition)}:", node)
+            self._emit(indent + 1, f"if {_SLICE_USED}:", node)
+            self._emit(indent + 2, f"if {mark} == _r: yield", node)
+            self._emit(indent + 2, f"else: {mark} = _r", node)
         else:
-            # a loop that can never wait would hold the controller: the controller's error
-            self._emit(indent + 1, f"if {_SPENT}: _too_long()", node)
+            # a plain function cannot be put aside: one that loops too long would hold the controller
+            self._emit(indent, f"while {self._expr(node.condition)}:", node)
+            self._emit(indent + 1, f"if {_TOO_LONG}: _too_long()", node)
         self._block(indent + 1, node.body)
 
     def _return(self, indent: int, node: Any) -> None:

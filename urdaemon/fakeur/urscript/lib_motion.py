@@ -7,8 +7,10 @@ its setpoint nor a stop's braking (stopj, stopl): a stop never gets longer becau
 A motion starts from what the arm is commanded to do (position and velocity), so a command that
 follows one still moving (a blend, a servoj or speedj stream) continues smoothly.
 
-* Only one motion runs at a time: the latest command wins, the command it replaced returns at once
-  (a real controller has one motion queue; the fake never crashes on two threads commanding).
+* One thread controls the arm at a time: the one blocked in a motion command (from the call until it
+  returns, or its thread is killed). A motion command from another thread meanwhile is the runtime
+  error :data:`ANOTHER_THREAD`, which stops the program (and so the arm), as on a controller; the
+  thread in control keeps it until then. ``kill`` the controlling thread first to take over.
 * A thread killed (or a program stopped) in the middle of its motion leaves the arm decelerating at
   that motion's stop deceleration.
 * A target outside the joint limits triggers a protective stop (the program pauses) and the command
@@ -46,7 +48,18 @@ from urdaemon.fakeur.urscript.script_host import ScriptHost
 from urdaemon.fakeur.urscript.signatures import Computed
 from urdaemon.urscript import SERVOJ_GAIN_RANGE, SERVOJ_LOOKAHEAD_RANGE_S
 
-__all__ = ["MotionState", "flange_pose", "inverse_near", "tcp_matrix", "tcp_pose", "tool_speed"]
+__all__ = [
+    "ANOTHER_THREAD",
+    "MotionState",
+    "flange_pose",
+    "inverse_near",
+    "tcp_matrix",
+    "tcp_pose",
+    "tool_speed",
+]
+
+ANOTHER_THREAD: Final = "Another thread is already controlling the robot"
+"""The controller's runtime error for a motion command while another thread's motion runs."""
 
 SERVOJ_STOP_DECELERATION: Final = PROTECTIVE_STOP_DECELERATION
 """rad/s²: how a servoj stream that is not renewed comes to rest (unverified on a real arm)."""
@@ -63,12 +76,14 @@ _DONE, _REPLACED, _INTERRUPTED = 0, 1, 2
 
 
 class MotionState:
-    """What lib_motion keeps per program (``host.motion``): which command owns the arm."""
+    """What lib_motion keeps per program (``host.motion``): which command owns the arm, and which
+    thread is in control (``owner``, blocked in that command; None between commands)."""
 
-    __slots__ = ("serial",)
+    __slots__ = ("owner", "serial")
 
     def __init__(self) -> None:
         self.serial = 0
+        self.owner: int | None = None
 
 
 def _state(host: ScriptHost) -> MotionState:
@@ -109,8 +124,22 @@ def _play(host: ScriptHost, motion: Motion, stop: float, until: Callable[[], boo
     """Play ``motion`` and wait until it is over (or ``until()``); _DONE, _REPLACED or _INTERRUPTED."""
     arm = host.arm
     state = _state(host)
+    thread = host.thread
+    if state.owner is not None and state.owner != thread:
+        raise ScriptRuntimeError(ANOTHER_THREAD)
+    state.owner = thread
     state.serial += 1
     me = state.serial
+    try:
+        return (yield from _played(arm, state, me, motion, stop, until))
+    finally:  # returned, replaced (set_pos), killed, or the program stopped: control is free again
+        if state.owner == thread:
+            state.owner = None
+
+
+def _played(
+    arm: FakeArm, state: MotionState, me: int, motion: Motion, stop: float, until: Callable[[], bool] | None
+) -> Gen:
     while not arm.play(motion, stop):  # the arm cannot move (yet): wait, as a paused motion does
         yield
         if state.serial != me:

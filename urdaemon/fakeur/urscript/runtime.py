@@ -13,11 +13,15 @@ import operator
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from time import perf_counter
 from typing import Any, Final
 
 __all__ = [
     "BUILTINS",
     "MAIN",
+    "PROGRAM_SLICE",
+    "STALL_BUDGET_S",
+    "THREAD_SLICE",
     "TOO_LONG",
     "Builtin",
     "ProgramHalt",
@@ -159,13 +163,20 @@ TOO_LONG: Final = (
     "The program used too much time without instructing the robot what to do. "
     "Consider using a Wait or sync() to split long program sequences that do not move the robot."
 )
-"""The controller's runtime error for a thread that loops too long within one cycle."""
+"""The controller's runtime error for a loop that cannot be put aside and runs too long in one cycle."""
 
-CYCLE_BUDGET_S: Final = 0.5
-"""Processor time (the thread's own, so a busy machine that preempts the fake does not count) one
-controller cycle's threads may use in total, checked every 256 loop iterations, before a looping
-thread is treated as having used its time slice: heavy builtins in a loop (inverse kinematics, say)
-reach it long before the loop budget's iterations."""
+THREAD_SLICE: Final = 0.1
+"""The share of a controller cycle one thread may run for in it (0.2 ms at 2 ms, 0.8 ms at 8 ms) before
+a loop puts it aside until the next cycle, as UR's scheduler puts a thread that used its time slice in
+a non-runnable state until the next frame. Wall time, read at every iteration (``perf_counter``, about
+50 ns): a costly builtin in the loop cannot overrun it by more than one call, and a fake preempted by a
+busy machine gives up its slice sooner, never later."""
+PROGRAM_SLICE: Final = 0.25
+"""The share of a cycle all of one program's threads may run for together; a thread resumed after that
+still runs, until its first loop check, so every runnable thread progresses every cycle."""
+STALL_BUDGET_S: Final = 0.1
+"""Processor time (the thread's own) a loop that cannot be put aside (one in a function that never
+blocks) may use in one cycle before the program stops with :data:`TOO_LONG`."""
 
 _DEFAULT: Final = object()
 """Marks a parameter left out whose default (a list, pose or struct) is made anew at each call."""
@@ -215,8 +226,10 @@ class ScriptRun:
     """One run of a compiled program on one host: the controller calls :meth:`step` once per cycle.
 
     Each step resumes every live thread once, the main program first, then the threads in the order they
-    were started (one started during this step runs in it too); a thread runs until it blocks or ends.
-    No thread is ever interrupted between two blocking calls, so ``enter_critical``/``exit_critical``
+    were started (one started during this step runs in it too); a thread runs until it blocks, ends, or
+    a loop finds its time slice of the cycle used (:data:`THREAD_SLICE`, within :data:`PROGRAM_SLICE`
+    for the program): then it is put aside and resumes there next cycle. Only at a loop's check, so
+    no thread is ever interrupted between two statements, so ``enter_critical``/``exit_critical``
     need no action: a critical section cannot be interleaved, and a thread that blocks inside one lets
     the others run (as on a real controller: UR's External Control script blocks in a socket read and in
     ``servoj`` inside critical sections, and its threads still share the cycle). The run is :attr:`done`
@@ -247,7 +260,10 @@ class ScriptRun:
             "_next": next,
             "_tick": count(),
             "_too_long": self._too_long,
-            "_late": self._late,
+            "_pc": perf_counter,
+            "_end": 0.0,
+            "_r": 0,
+            "_stalled": self._stalled,
             "_D": _DEFAULT,
             "_start": self._start,
             "_kill": self._kill,
@@ -259,7 +275,9 @@ class ScriptRun:
             namespace["b_" + name] = partial(function, host)
         exec(program.code, namespace)
         self._namespace = namespace
-        self._deadline = time.thread_time() + CYCLE_BUDGET_S
+        self._stall_start: float | None = None
+        self._resumes = 0
+        """Threads resumed so far: a loop tells by it whether its thread was put aside since it looked."""
         main = _Thread(MAIN, namespace["_main"]())
         self._threads.append(main)
         self._alive.add(MAIN)
@@ -273,7 +291,9 @@ class ScriptRun:
         threads = self._threads
         namespace = self._namespace
         host = self.host
-        self._deadline = time.thread_time() + CYCLE_BUDGET_S
+        step_time = host.step_time
+        slice_s = step_time * THREAD_SLICE
+        program_end = perf_counter() + step_time * PROGRAM_SLICE
         index = 0
         while index < len(threads):
             thread = threads[index]
@@ -281,6 +301,10 @@ class ScriptRun:
             host.thread = thread.handle
             namespace["_tick"] = self._count()
             self._current = thread
+            namespace["_end"] = min(perf_counter() + slice_s, program_end)
+            self._resumes += 1
+            namespace["_r"] = self._resumes
+            self._stall_start = None
             try:
                 next(thread.generator)
             except StopIteration:
@@ -359,9 +383,14 @@ class ScriptRun:
     def _too_long(self) -> None:
         raise ScriptRuntimeError(TOO_LONG)
 
-    def _late(self) -> bool:
-        """This cycle's threads have used more than the cycle's budget of processor time."""
-        return time.thread_time() > self._deadline
+    def _stalled(self) -> bool:
+        """A loop that cannot be put aside has used :data:`STALL_BUDGET_S` of processor time since its
+        thread was resumed (counted from its first check, 256 iterations in)."""
+        now = time.thread_time()
+        if self._stall_start is None:
+            self._stall_start = now
+            return False
+        return now - self._stall_start > STALL_BUDGET_S
 
     def _start(self, function: Callable[[], Any]) -> int:
         handle = self._next_handle
