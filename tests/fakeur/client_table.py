@@ -6,7 +6,9 @@ one word, so flipping a row when the fake is fixed is a one-word edit:
 
 - ``works``: the call does what the client documents, checked against the fake;
 - ``refused``: the fake refuses it on purpose (not simulated: the third column says why);
-- ``fails``: the call should work and does not; the third column says what happens (a gap to fix).
+- ``fails``: the call should work and does not; the third column says what happens (a gap to fix);
+- ``client``: the call fails on the fake as it fails on a controller, through the client's own doing
+  (the third column gives the evidence); the fake does not imitate the client's mistake away.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ __all__ = ["OUTCOMES", "SECTION", "read_table"]
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "fake-robot.md"
 SECTION = "## What independent clients can call"
-OUTCOMES = ("works", "refused", "fails")
+OUTCOMES = ("works", "refused", "fails", "client")
 
 _ROW = re.compile(r"^\|\s*`([A-Za-z_][A-Za-z0-9_]*)`\s*\|\s*([a-z]+)\s*\|(.*)\|\s*$")
 
