@@ -172,7 +172,8 @@ async def test_rtde_inputs_change_what_the_outputs_report() -> None:
                 break
         assert sample["target_speed_fraction"] == pytest.approx(0.3)
         assert sample["actual_digital_output_bits"] == (1 << 3) | (1 << 17)
-        assert sample["standard_analog_output1"] == pytest.approx(0.4)
+        # level 0.4 of the current domain's 4-20 mA, reported in amperes
+        assert sample["standard_analog_output1"] == pytest.approx(0.004 + 0.4 * 0.016)
         # a second client cannot own the same inputs
         other, _ = await _rtde_session(controller.address)
         await other.send(rtde.SetupInputs(("speed_slider_mask", "speed_slider_fraction")))

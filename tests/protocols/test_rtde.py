@@ -837,8 +837,29 @@ def test_robot_rejects_input_data_for_an_unknown_recipe() -> None:
     fails(robot_running(), frame(ord("U"), b"\x07\x00"), "input recipe 7, which was never set up")
 
 
-def test_robot_rejects_input_data_of_the_wrong_size() -> None:
-    fails(robot_running(), frame(ord("U"), b"\x02" + b"\x00" * 35), "35 value bytes, recipe is 36")
+INPUT_BODY = struct.pack(">IdBBBBBBBBdd", *INPUT_VALUES)
+"""INPUT_VALUES packed by hand for the input recipe (36 bytes, §1.5)."""
+
+
+def test_robot_reports_longer_input_data_with_the_recipe_fields_and_its_size() -> None:
+    # ur_rtde 1.6.5 sends such packages and works against controllers (docs/fake-robot.md)
+    robot = robot_running()
+    events = robot.receive_data(frame(ord("U"), b"\x02" + INPUT_BODY + b"\x7f" * 48))
+    assert events == [InputDataReceived(2, INPUT_VALUES, size=84)]
+    assert robot.state is RtdeState.RUNNING
+
+
+def test_robot_reports_shorter_input_data_with_the_fields_it_holds_whole() -> None:
+    robot = robot_running()
+    # 35 bytes: the last double is cut off; 12: the UINT32 and the first double; 3: not one field
+    assert robot.receive_data(frame(ord("U"), b"\x02" + INPUT_BODY[:35])) == [
+        InputDataReceived(2, INPUT_VALUES[:-1], size=35)
+    ]
+    assert robot.receive_data(frame(ord("U"), b"\x02" + INPUT_BODY[:12])) == [
+        InputDataReceived(2, INPUT_VALUES[:2], size=12)
+    ]
+    assert robot.receive_data(frame(ord("U"), b"\x02" + INPUT_BODY[:3])) == [InputDataReceived(2, (), size=3)]
+    assert robot.state is RtdeState.RUNNING
 
 
 def test_robot_rejects_names_beyond_the_limit() -> None:

@@ -15,6 +15,7 @@ from typing import Any
 
 from urdaemon.description.urmodels import UrModel
 from urdaemon.fakeur.fake_arm import FakeArm
+from urdaemon.fakeur.urscript.lib_io import analog_output_level
 from urdaemon.fakeur.urscript.lib_motion import tool_speed
 from urdaemon.fakeur.urscript.lib_state import JOINT_TEMPERATURE, tool_accelerometer
 from urdaemon.fakeur.urscript.script_host import InputRegisters
@@ -23,7 +24,7 @@ from urdaemon.protocols import primary as prim
 from urdaemon.protocols import realtime as rt
 from urdaemon.protocols.rtde_variables import RuntimeState
 
-__all__ = ["KINEMATICS_CALIBRATED", "output_getter", "realtime_state", "robot_state"]
+__all__ = ["KINEMATICS_CALIBRATED", "joint_mode", "output_getter", "realtime_state", "robot_state"]
 
 KINEMATICS_CALIBRATED = 2
 """KINEMATICS_INFO ``calibration_status`` of a calibrated arm: 2, "linearized", what a calibrated robot
@@ -34,6 +35,29 @@ _PROGRAM_STATES = {
     RuntimeState.PAUSED: 3.0,
 }
 """Real-time interface ``program_state`` (1 stopped, 2 playing, 3 paused) by runtime state."""
+
+
+JOINT_RUNNING_MODE = 253
+"""A joint's mode while its brakes are released and it is controlled (UR's client interface tables)."""
+JOINT_IDLE_MODE = 255
+"""A powered joint with its brakes engaged."""
+JOINT_POWER_OFF_MODE = 239
+"""A joint without power."""
+JOINT_BACKDRIVE_MODE = 238
+"""A joint being back-driven (robot mode BACKDRIVE: brakes released by hand, no control)."""
+_JOINT_MODES = {
+    RobotMode.RUNNING: JOINT_RUNNING_MODE,
+    RobotMode.BACKDRIVE: JOINT_BACKDRIVE_MODE,
+    RobotMode.IDLE: JOINT_IDLE_MODE,
+    RobotMode.POWER_ON: JOINT_IDLE_MODE,
+}
+
+
+def joint_mode(arm: FakeArm) -> int:
+    """The mode every joint of ``arm`` is in, by its robot mode: one value for every interface that
+    reports it (RTDE's ``joint_mode`` and ``tool_mode``, the real-time interface, the primary
+    interface's joint and tool data); a joint without power is in JOINT_POWER_OFF_MODE."""
+    return _JOINT_MODES.get(arm.robot_mode, JOINT_POWER_OFF_MODE)
 
 
 def _six(values: list[float]) -> tuple[float, float, float, float, float, float]:
@@ -64,7 +88,7 @@ def realtime_state(arm: FakeArm) -> rt.RealtimeState:
         motor_temperatures=(JOINT_TEMPERATURE,) * 6,
         controller_timer=0.0002,
         robot_mode=float(arm.robot_mode),
-        joint_modes=(253.0 if running else 255.0,) * 6,
+        joint_modes=(float(joint_mode(arm)),) * 6,
         safety_mode=float(arm.safety_mode),
         tool_accelerometer_values=tool_accelerometer(arm),
         speed_scaling=arm.speed_scaling,
@@ -85,12 +109,12 @@ def robot_state(
 ) -> prim.RobotState:
     """The robot state of ``arm`` on the primary and secondary interfaces (10 Hz)."""
     powered = arm.robot_mode in (RobotMode.IDLE, RobotMode.RUNNING, RobotMode.POWER_ON)
-    running_modes = 253 if arm.robot_mode is RobotMode.RUNNING else 255 if powered else 239
+    modes = joint_mode(arm)
     dh = arm.dh
     return prim.RobotState(
         (
             _robot_mode_data(arm, powered, controller_version),
-            _joint_data(arm, running_modes),
+            _joint_data(arm, modes),
             prim.CartesianInfo(tcp_pose=arm.actual_tcp_pose(), tcp_offset=tuple(arm.tcp_offset)),
             prim.KinematicsInfo(
                 checksum=(0xFFFFFFFF,) * 6,
@@ -101,7 +125,7 @@ def robot_state(
                 calibration_status=KINEMATICS_CALIBRATED,
             ),
             _masterboard_data(arm, powered),
-            prim.ToolData(tool_output_voltage=arm.io.tool_voltage, tool_mode=running_modes),
+            prim.ToolData(tool_output_voltage=arm.io.tool_voltage, tool_mode=modes),
             _configuration_data(arm, model, controller_version),
             prim.ForceModeData(wrench=_six(arm.tcp_force)),
             prim.AdditionalInfo(),
@@ -132,7 +156,7 @@ def _robot_mode_data(
     )
 
 
-def _joint_data(arm: FakeArm, running_modes: int) -> prim.JointData:
+def _joint_data(arm: FakeArm, modes: int) -> prim.JointData:
     """The joint data package: positions, speeds, currents and joint modes."""
     return prim.JointData(
         q_actual=tuple(arm.q),
@@ -142,7 +166,7 @@ def _joint_data(arm: FakeArm, running_modes: int) -> prim.JointData:
         v_actual=(48.0,) * 6,
         t_motor=(JOINT_TEMPERATURE,) * 6,
         t_micro=(JOINT_TEMPERATURE,) * 6,
-        joint_mode=(running_modes,) * 6,
+        joint_mode=(modes,) * 6,
     )
 
 
@@ -151,8 +175,10 @@ def _masterboard_data(arm: FakeArm, powered: bool) -> prim.MasterboardData:
     return prim.MasterboardData(
         digital_input_bits=arm.io.digital_in & 0xFFFF,
         digital_output_bits=arm.io.digital_out & 0xFFFF,
-        analog_output0=arm.io.analog_out[0],
-        analog_output1=arm.io.analog_out[1],
+        analog_output_domain0=(arm.io.analog_out_types >> 2) & 1,
+        analog_output_domain1=(arm.io.analog_out_types >> 3) & 1,
+        analog_output0=analog_output_level(arm.io, 0),
+        analog_output1=analog_output_level(arm.io, 1),
         robot_voltage_48v=48.0 if powered else 0.0,
         safety_mode=int(arm.safety_mode),
     )
@@ -249,7 +275,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "actual_current": lambda arm: tuple(arm.current),
     "target_current": lambda arm: tuple(arm.current),
     "joint_temperatures": lambda arm: (JOINT_TEMPERATURE,) * 6,
-    "joint_mode": lambda arm: (253 if arm.robot_mode is RobotMode.RUNNING else 255,) * 6,
+    "joint_mode": lambda arm: (joint_mode(arm),) * 6,
     "speed_scaling": lambda arm: arm.speed_scaling,
     "target_speed_fraction": lambda arm: arm.speed_slider,
     "runtime_state": lambda arm: int(arm.runtime_state),
@@ -263,13 +289,13 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "actual_digital_output_bits": lambda arm: arm.io.digital_out,
     "standard_analog_input0": lambda arm: arm.io.analog_in[0],
     "standard_analog_input1": lambda arm: arm.io.analog_in[1],
-    "standard_analog_output0": lambda arm: arm.io.analog_out[0],
-    "standard_analog_output1": lambda arm: arm.io.analog_out[1],
+    "standard_analog_output0": lambda arm: analog_output_level(arm.io, 0),
+    "standard_analog_output1": lambda arm: analog_output_level(arm.io, 1),
     "analog_io_types": lambda arm: arm.io.analog_out_types,
     "tool_analog_input0": lambda arm: arm.io.tool_analog_in[0],
     "tool_analog_input1": lambda arm: arm.io.tool_analog_in[1],
     "tool_output_voltage": lambda arm: arm.io.tool_voltage,
-    "tool_mode": lambda arm: 253 if arm.robot_mode is RobotMode.RUNNING else 255,
+    "tool_mode": joint_mode,
     "tool_temperature": lambda arm: JOINT_TEMPERATURE,
     "robot_mode": lambda arm: int(arm.robot_mode),
     "safety_mode": lambda arm: int(arm.safety_mode),

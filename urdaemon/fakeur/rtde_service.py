@@ -95,6 +95,10 @@ class _RtdeClient:
     reading: bool = False
     """A read of its packages is being handled: set by the read's first package, cleared once the
     loop has handed over all of that read's packages (a callback run after them)."""
+    odd_inputs: int = 0
+    """Input packages received of another size than their recipe (each applied as far as it goes)."""
+    odd_sizes: set[tuple[int, int]] = field(default_factory=set)
+    """The (recipe id, size) pairs of those already logged: each is logged once."""
     after_output: bool = False
     """The read being handled began after an output went to it: packages that sat in the socket
     while the fake sent that output, and those the output released (see ``_receive_inputs``)."""
@@ -251,10 +255,38 @@ class RtdeService:
             conn.send(rtde.PauseAccept(True))
         elif isinstance(event, rtde.InputDataReceived):
             input_names = client.inputs.get(event.recipe_id)
-            if input_names is not None:
-                self._receive_inputs(client, dict(zip(input_names, event.values, strict=True)))
+            if input_names is None:
+                return
+            if event.size is not None:
+                self._note_odd_size(client, event, event.size, input_names)
+            if event.values:
+                self._receive_inputs(client, dict(zip(input_names, event.values, strict=False)))
         elif isinstance(event, rtde.TextReceived):
             log.info("%s rtde text from client: %s", self.address, event.message)
+
+    def _note_odd_size(
+        self, client: _RtdeClient, event: rtde.InputDataReceived, size: int, names: tuple[str, ...]
+    ) -> None:
+        """Log the first input package of each size other than its recipe's, per client and recipe;
+        count them all (``odd_inputs``)."""
+        client.odd_inputs += 1
+        key = (event.recipe_id, size)
+        if key in client.odd_sizes:
+            return
+        client.odd_sizes.add(key)
+        applied = len(event.values)
+        kept = names[applied:]
+        log.warning(
+            "%s rtde: input package for recipe %d has %s value bytes, the recipe %d: applied its first %d "
+            "of %d fields%s; the connection stays (more packages of this size are counted, not logged)",
+            self.address,
+            event.recipe_id,
+            size,
+            client.conn.input_recipes[event.recipe_id].size,
+            applied,
+            len(names),
+            f" (not written: {', '.join(kept)})" if kept else ", ignored the bytes after them",
+        )
 
     def _setup_outputs(self, client: _RtdeClient, event: rtde.SetupOutputsRequested) -> None:
         frequency = event.frequency if event.frequency is not None else self.rate_hz

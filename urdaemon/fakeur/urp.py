@@ -1,6 +1,7 @@
 """PolyScope program files (``.urp``) -> the URScript a controller would run for them.
 
-A ``.urp`` is gzip-compressed XML: ``<URProgram>`` holds ``<children>`` with an optional
+A ``.urp`` is gzip-compressed XML, or plain XML as UR's PolyScope 3 example programs are stored
+(``rtde_control_loop.urp`` of UR's RTDE client): ``<URProgram>`` holds ``<children>`` with an optional
 ``<SpecialSequence type="BeforeStart">`` and one ``<MainProgram>``, whose ``<children>`` are program
 nodes. PolyScope turns that tree into a ``def`` program when it plays it; :func:`translate` does the
 same for the nodes it knows and refuses the whole file, naming the node, for any other: the fake never
@@ -150,7 +151,30 @@ def _program(root: ElementTree.Element, file_name: str) -> UrpProgram:
     return UrpProgram(name, writer.text(), loops=loops)
 
 
+_GZIP_MAGIC = b"\x1f\x8b"
+_XML_START = re.compile(rb"^(\xef\xbb\xbf)?\s*<")
+"""A plain XML program: ``<`` first, after an optional UTF-8 byte order mark and white space."""
+
+
 def _parse(data: bytes) -> ElementTree.Element:
+    if data.startswith(_GZIP_MAGIC):
+        xml = _decompress(data)
+    elif _XML_START.match(data[:64]):  # plain XML, as UR's PolyScope 3 example programs are stored
+        if len(data) > MAX_URP_BYTES:
+            raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
+        xml = data
+    else:
+        raise UrpRefused("not a program file: neither gzip-compressed nor XML")
+    try:
+        root = ElementTree.fromstring(xml)
+    except ElementTree.ParseError as err:
+        raise UrpRefused(f"the program's XML is malformed: {err}") from None
+    if any(count >= MAX_URP_ELEMENTS for count, _ in enumerate(root.iter())):
+        raise UrpRefused(f"the program has more than {MAX_URP_ELEMENTS} XML elements")
+    return root
+
+
+def _decompress(data: bytes) -> bytes:
     try:
         decompressor = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
         xml = decompressor.decompress(data, MAX_URP_BYTES + 1)
@@ -162,13 +186,7 @@ def _parse(data: bytes) -> ElementTree.Element:
         if len(data) > MAX_URP_BYTES:
             raise UrpRefused(f"the program is larger than {MAX_URP_BYTES} bytes")
         raise UrpRefused("the compressed program is truncated")
-    try:
-        root = ElementTree.fromstring(xml)
-    except ElementTree.ParseError as err:
-        raise UrpRefused(f"the program's XML is malformed: {err}") from None
-    if any(count >= MAX_URP_ELEMENTS for count, _ in enumerate(root.iter())):
-        raise UrpRefused(f"the program has more than {MAX_URP_ELEMENTS} XML elements")
-    return root
+    return xml
 
 
 def _children(node: ElementTree.Element) -> list[ElementTree.Element]:
@@ -447,6 +465,12 @@ class _Writer:
 
     def loop(self, depth: int, node: ElementTree.Element) -> None:
         kind = node.get("type", "")
+        if kind == "Forever":
+            self.step(depth, "Loop")
+            self.line(depth, "while (True):")
+            self.nodes(depth + 1, _children(node))
+            self.line(depth, "end")
+            return
         if kind != "While" or node.get("checkContinuously", "false").lower() != "false":
             raise UrpRefused(f'program node <Loop type="{kind}"> is not simulated by the fake')
         condition = _expression(self.tree, node, "Loop")
@@ -489,12 +513,32 @@ class _Writer:
             if point.tag != "Waypoint":  # a node between waypoints runs there
                 self.nodes(depth + 1, [point])
                 continue
+            if point.get("type") == "Variable":  # a pose variable in the base frame
+                _base_feature(node, kind)
+                target = _variable_name(self.tree, point.find("variable"), "Waypoint")
+                self.step(depth + 1, point.get("name", "Waypoint"))
+                self.line(depth + 1, f"{function}({target}, a={acceleration}, v={speed})")
+                continue
             q = _joint_angles(point)
             parameters = point.find("motionParameters")
             blend = None if parameters is None else parameters.get("blendRadius")
             radius = "" if blend is None else f", r={_number(blend, '<Waypoint> blend radius')}"
             self.step(depth + 1, point.get("name", "Waypoint"))
             self.line(depth + 1, f"{function}([{q}], a={acceleration}, v={speed}{radius})")
+
+
+_BASE_FEATURES = ("Base", "Joint_0_name")
+"""The names a ``<Move>``'s ``<feature>`` gives the robot's base frame (PolyScope 3 programs, and
+generators writing for them, name it after joint 0)."""
+
+
+def _base_feature(node: ElementTree.Element, kind: str) -> None:
+    """Refuse variable waypoints of a move relative to any feature but the base: they are played as
+    base-frame poses."""
+    feature = node.find("feature")
+    name = None if feature is None else feature.get("referencedName")
+    if name is not None and name not in _BASE_FEATURES:
+        raise UrpRefused(f"<Move> {kind} relative to feature {name!r} is not simulated by the fake")
 
 
 def _joint_angles(point: ElementTree.Element) -> str:

@@ -131,6 +131,16 @@ def test_watchdog_is_recorded_for_the_controller_and_dropped_at_close() -> None:
     assert host.watchdogs == {}
 
 
+def test_watchdog_actions_are_named_in_any_case() -> None:
+    """Reproduction: UR's RTDE example program (rtde_control_loop.urp) calls
+    ``rtde_set_watchdog("input_int_register_0", 1, "PAUSE")``, which the fake refused."""
+    host = make_host()
+    cfg.rtde_set_watchdog(host, "input_int_register_0", 1, "PAUSE")
+    cfg.rtde_set_watchdog(host, "input_int_register_1", 1, "Stop")
+    assert host.watchdogs["input_int_register_0"].action == "pause"
+    assert host.watchdogs["input_int_register_1"].action == "stop"
+
+
 def test_a_script_configures_the_arm() -> None:
     """ur_rtde's and our control script's calls, in their keyword forms."""
     host = make_host()

@@ -60,9 +60,12 @@ def test_bad_arguments_are_runtime_errors(name: str, args: tuple[Any, ...]) -> N
 def test_analog_out_domains_and_tool_voltage() -> None:
     host = make_host()
     call_builtin("set_standard_analog_out", host, 1, 0.25)
-    assert call_builtin("get_standard_analog_out", host, 1) == 0.25
+    # set as a level of its domain (current: 4-20 mA), read back in amperes; volts once a voltage
+    assert call_builtin("get_standard_analog_out", host, 1) == pytest.approx(0.008)
     assert host.arm.io.analog_out == [0.0, 0.25]
     call_builtin("set_analog_outputdomain", host, 1, 1)
+    assert call_builtin("get_standard_analog_out", host, 1) == pytest.approx(2.5)
+    assert call_builtin("get_analog_out", host, 1) == pytest.approx(2.5)
     call_builtin("set_standard_analog_input_domain", host, 0, 1)
     assert host.arm.io.analog_out_types == (1 << 3) | (1 << 0)
     call_builtin("set_analog_outputdomain", host, 1, 0)

@@ -398,12 +398,16 @@ def rtde_set_watchdog(
     host: ScriptHost, variable_name: Any, min_frequency: Any, action: Any = "pause"
 ) -> None:
     """Watch RTDE input ``variable_name``: if it is not updated at ``min_frequency`` Hz or more, the
-    controller ignores it, pauses or stops the program (``action``). Setting it again replaces the old one."""
+    controller ignores it, pauses or stops the program (``action``). Setting it again replaces the old one.
+    The action is named in any case: UR's own RTDE example program passes ``"PAUSE"`` where the script
+    manual writes ``'pause'``."""
     if not isinstance(variable_name, str) or variable_name not in INPUT_VARIABLES:
         raise ScriptRuntimeError(f"rtde_set_watchdog: {variable_name!r} is not an RTDE input variable")
     frequency = _number("rtde_set_watchdog", min_frequency)
     if frequency <= 0:
         raise ScriptRuntimeError(f"rtde_set_watchdog: min_frequency {frequency:g} Hz is not positive")
+    if isinstance(action, str):
+        action = action.lower()
     if action not in WATCHDOG_ACTIONS:
         raise ScriptRuntimeError(f"rtde_set_watchdog: action {action!r} is not 'ignore', 'pause' or 'stop'")
     host.watchdogs[variable_name] = Watchdog(variable_name, frequency, action, host.now)

@@ -5,6 +5,8 @@ and inputs as one bit word each (standard 0-7 in bits 0-7, configurable 0-7 in b
 bits 16-17), the two standard analog outputs as the relative level ``set_standard_analog_out`` takes
 (0..1, like RTDE's ``standard_analog_output_X`` inputs) and ``analog_out_types`` as RTDE's
 ``analog_io_types`` (bits 0-1: standard analog inputs, bits 2-3: outputs; 1 = voltage, 0 = current).
+What reads an analog output back (``get_standard_analog_out``, RTDE's ``standard_analog_outputX``, the
+primary interface's masterboard data) reads it in its domain's unit: :func:`analog_output_level`.
 
 Registers (UR's RTDE guide): integer and float registers 0..47, boolean registers 0..127, in two separate
 sets. The *input* registers are written by RTDE clients and read by ``read_input_*_register`` (they are
@@ -19,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Final
 
-from urdaemon.fakeur.fake_arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm, IoState
 from urdaemon.fakeur.urscript.lib_settings import INPUT_ACTIONS, settings_of
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, builtin
 from urdaemon.fakeur.urscript.script_host import ScriptHost
@@ -32,12 +34,14 @@ from urdaemon.model import (
 )
 
 __all__ = [
+    "ANALOG_OUTPUT_SPANS",
     "BIT_REGISTERS",
     "IO_DIGITAL_IN_GET",
     "IO_DIGITAL_OUT_GET",
     "IO_DIGITAL_OUT_SET",
     "NUMBER_REGISTERS",
     "TOOL_VOLTAGES",  # model.py's, kept importable here
+    "analog_output_level",
 ]
 
 NUMBER_REGISTERS: Final = 48
@@ -191,9 +195,23 @@ def digital_in_get(host: ScriptHost, n: Any) -> bool:
 # ---- analog and tool voltage -----------------------------------------------------------------------------
 
 
+ANALOG_OUTPUT_SPANS: Final = {"current": (0.004, 0.020), "voltage": (0.0, 10.0)}
+"""A standard analog output's span in each domain, in amperes (4-20 mA) and volts (0-10 V): the level
+0..1 a program or an RTDE client sets maps linearly onto it."""
 _ANALOG_OUTS: Final = ("standard_analog_out", "analog_out")
 """``set_<name>(n, f)`` sets analog output ``n`` (0..1) to the relative level ``f`` (0..1) of its domain,
-``get_<name>(n)`` reads it back; ``analog_out`` is the deprecated name of the same outputs."""
+``get_<name>(n)`` reads it back in amperes or volts; ``analog_out`` is the deprecated name of the same
+outputs."""
+
+
+def analog_output_level(io: IoState, pin: int) -> float:
+    """Standard analog output ``pin`` (0..1) in its domain's unit: amperes in the current domain (4-20
+    mA), volts in the voltage domain (0-10 V), as UR's script manual and RTDE guide give it."""
+    domain = "voltage" if (io.analog_out_types >> (pin + 2)) & 1 else "current"
+    low, high = ANALOG_OUTPUT_SPANS[domain]
+    return low + (high - low) * io.analog_out[pin]
+
+
 _ANALOG_INS: Final = {"get_standard_analog_in": "analog_in", "get_tool_analog_in": "tool_analog_in"}
 """The analog input readers (inputs 0..1) by the ``IoState`` field they read."""
 _DOMAINS: Final = {"set_analog_outputdomain": 2, "set_standard_analog_input_domain": 0}
@@ -213,7 +231,7 @@ def _analog_out_builtins(name: str) -> None:
         host.arm.io.analog_out[pin] = level
 
     def get_out(host: ScriptHost, n: Any) -> float:
-        return host.arm.io.analog_out[_index(get_name, n, 2)]
+        return analog_output_level(host.arm.io, _index(get_name, n, 2))
 
     _register(set_name, set_out)
     _register(get_name, get_out)

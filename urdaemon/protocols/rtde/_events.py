@@ -240,10 +240,16 @@ class PauseRequested:
 
 @dataclass(frozen=True, slots=True)
 class InputDataReceived:
-    """Input values for the configured input recipe ``recipe_id``, in its order."""
+    """Input values for the configured input recipe ``recipe_id``, in its order.
+
+    A package of another size than its recipe is reported, not refused (what a controller does with
+    one is docs/fake-robot.md's "RTDE inputs, units and small fixes"): ``values`` then holds the
+    recipe's leading fields that lie whole in the package, and ``size`` its value bytes."""
 
     recipe_id: int
     values: tuple[RtdeValue, ...]
+    size: int | None = None
+    """The package's value bytes when they are not the recipe's size (None when they are)."""
 
 
 @dataclass(frozen=True, slots=True)

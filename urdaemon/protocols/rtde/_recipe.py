@@ -6,8 +6,10 @@ Python value of one field (§1.5).
 
 from __future__ import annotations
 
+import itertools
 import operator
 import struct
+from bisect import bisect_right
 from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any, Final, TypeAlias
@@ -58,7 +60,7 @@ RtdeValue: TypeAlias = bool | int | float | tuple[float, ...] | tuple[int, ...]
 class Recipe:
     """RTDE fields compiled once into a ``struct.Struct``: encodes and decodes DATA_PACKAGE bodies."""
 
-    __slots__ = ("_lengths", "_regroup", "_struct", "names", "size", "types")
+    __slots__ = ("_ends", "_lengths", "_regroup", "_struct", "names", "size", "types")
 
     def __init__(self, names: Sequence[str], types: Sequence[str]) -> None:
         if len(names) != len(types):
@@ -88,6 +90,8 @@ class Recipe:
             getter = operator.itemgetter(*keys)
             self._regroup = getter if len(keys) > 1 else lambda flat: (getter(flat),)
         self._lengths = tuple(_VECTOR_LENGTHS.get(t, 0) for t in types)
+        self._ends = tuple(itertools.accumulate(struct.calcsize(">" + _STRUCT_CODES[t]) for t in types))
+        """Where each field ends in a packed body (the bytes of it and of the fields before it)."""
 
     def __repr__(self) -> str:
         return f"Recipe({len(self.names)} fields, {self.size} bytes)"
@@ -108,6 +112,21 @@ class Recipe:
         if regroup is None:
             return self._struct.unpack_from(payload, offset)
         return regroup(self._struct.unpack_from(payload, offset))
+
+    def whole_fields(self, size: int) -> int:
+        """How many leading fields lie whole in a body of ``size`` bytes (all of them from ``size``)."""
+        return bisect_right(self._ends, size)
+
+    def decode_leading(self, payload: Buf, offset: int, size: int) -> tuple[RtdeValue, ...]:
+        """The leading fields that lie whole in the ``size`` bytes at ``payload[offset:]``, in recipe
+        order: all of them (bytes past the recipe unread) when ``size`` reaches :attr:`size`, fewer
+        when the body is shorter (a field cut off, and those after it, left out)."""
+        count = self.whole_fields(size)
+        if count == len(self.names):
+            return self.decode(payload, offset)
+        if count == 0:
+            return ()
+        return Recipe(self.names[:count], self.types[:count]).decode(payload, offset)
 
     def encode(self, values: Sequence[Any]) -> bytes:
         """``values`` in recipe order packed for the wire; ValueError if they do not fit the types."""

@@ -145,8 +145,9 @@ class RobotSide(RtdeCore):
         recipe = self._input_recipes.get(recipe_id)
         if recipe is None:
             raise self._bad(f"input DATA_PACKAGE for input recipe {recipe_id}, which was never set up")
-        if end - start - 1 != recipe.size:
-            raise self._bad(f"input DATA_PACKAGE has {end - start - 1} value bytes, recipe is {recipe.size}")
+        size = end - start - 1
+        if size != recipe.size:  # the recipe's leading fields the package holds whole; the rest unread
+            return InputDataReceived(recipe_id, recipe.decode_leading(buf, start + 1, size), size)
         return InputDataReceived(recipe_id, recipe.decode(buf, start + 1))
 
     # -- ROBOT: answers and data -----------------------------------------------------------------
