@@ -269,6 +269,8 @@ async def test_dashboard_bring_up_with_refusals_like_a_real_controller() -> None
         controller.protective_stop()
         await link.send(dash.GetSafetyMode())
         assert "PROTECTIVE_STOP" in (await link.next(dash.SafetyModeReply)).text
+        arm = controller.arm
+        await controller.until(lambda: arm.timestamp >= arm.life.unlockable_at, cycles=3000)  # 5 s
         await link.send(dash.UnlockProtectiveStop())
         assert (await link.next(dash.CommandReply)).success is True
         await link.send(dash.Raw("make coffee"))

@@ -11,7 +11,7 @@ from urdaemon.description.frames import frame_of_pose
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.fake_arm import HISTORY_STEPS, FakeArm
 from urdaemon.fakeur.joint_motion import JointMove, SpeedRamp, joint_move
-from urdaemon.fakeur.life import BOOT_TIME_S, BRAKE_RELEASE_TIME_S
+from urdaemon.fakeur.life import BOOT_TIME_S, BRAKE_RELEASE_TIME_S, UNLOCK_TOO_SOON, UNLOCK_WAIT_S
 from urdaemon.model import RobotMode, SafetyMode
 from urdaemon.protocols.rtde_variables import RuntimeState
 
@@ -122,6 +122,8 @@ def test_protective_stop_stops_motion_pauses_the_program_and_needs_an_unlock() -
     _run(arm, 0.1)
     assert arm.qd == [0.0] * 6, "no motion during a protective stop"
     assert arm.life.safety_status_bits == 1 << 2
+    assert arm.unlock_protective_stop() == UNLOCK_TOO_SOON, "at rest, but within 5 s of the stop"
+    _run(arm, UNLOCK_WAIT_S)
     assert arm.unlock_protective_stop() is None
     assert _safety(arm) is SafetyMode.NORMAL
     assert arm.unlock_protective_stop() == "safety mode is NORMAL, not PROTECTIVE_STOP"

@@ -12,12 +12,14 @@ waited forever (these tests' ``next`` ran out of time) and the safety mode staye
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import pytest
 
 from tests.fakeur.test_controller import Link
 from tests.fakeur.test_controller_life import manual_fake
+from urdaemon.fakeur.life import UNLOCK_WAIT_S
 from urdaemon.model import SafetyMode
 from urdaemon.protocols import primary as prim
 from urdaemon.protocols._buffer import Side
@@ -100,7 +102,12 @@ async def test_a_protective_stop_script_reports_c209_then_the_mode_and_the_unloc
         clock.until(lambda: not any(controller.arm.qd))
         link.writer.write(b"set unlock protective stop\n")
         await link.writer.drain()
-        await controller.until(lambda: controller.arm.safety_mode is SafetyMode.NORMAL, cycles=0)
+        # carried out once 5 s of controller time have passed since the stop (fake-robot.md, "Errors")
+        for _ in range(round(UNLOCK_WAIT_S / controller.step_time) + 50):
+            clock.turn(1)
+            await asyncio.sleep(0)  # the fake reads the command
+            if controller.arm.safety_mode is SafetyMode.NORMAL:
+                break
         clock.turn(1)
         (normal,) = await _said(link, _PSTOP, 1)  # no second error code: one per protective stop
         assert isinstance(normal, prim.SafetyModeMessage), normal

@@ -273,6 +273,8 @@ async def test_protective_stop_aborts_alice_only_and_motion_resumes_only_on_a_ne
 
         # the arm comes to rest; the operator unlocks the protective stop
         await _at_rest(cell.client, cell.alice)
+        # a controller refuses the unlock for 5 s of its own time after the stop
+        await fake.until(lambda: fake.arm.timestamp >= fake.arm.life.unlockable_at, cycles=3000)
         reply = await cell.alice.dashboard("unlock protective stop")
         assert reply["ok"] is True, reply
         assert fake.arm.safety_mode is SafetyMode.NORMAL

@@ -43,6 +43,7 @@ from urdaemon.fakeur.connections import Connections, ServiceShell
 from urdaemon.fakeur.dashboard_answers import PROGRAMS_DIR, dashboard_answer
 from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.faults import FaultInjector
+from urdaemon.fakeur.life import UNLOCK_TOO_SOON
 from urdaemon.fakeur.programs import Programs
 from urdaemon.fakeur.reports import realtime_state, robot_state
 from urdaemon.fakeur.rtde_service import RtdeService
@@ -158,6 +159,9 @@ class FakeController:
         """Its clients' connections, the programs it runs and the RTDE interface."""
         self._release_when_idle = False
         """Brake release asked while powering on: release once the arm is IDLE (as URSim does)."""
+        self._unlock_when_due = False
+        """The primary interface's ``set unlock protective stop`` within UNLOCK_WAIT_S of the stop: done
+        once the wait is over (the dashboard refuses it instead; fake-robot.md, "Errors, stops")."""
         self._realtime_clients: list[ServiceShell] = []
         self._servers: list[asyncio.Server] = []
         self._state_clients: list[ServiceShell] = []
@@ -317,6 +321,8 @@ class FakeController:
         if self._release_when_idle and arm.robot_mode is RobotMode.IDLE:
             self._release_when_idle = False
             arm.life.brake_release(arm.timestamp)
+        if self._unlock_when_due:
+            self._unlock_when_due = arm.unlock_protective_stop() == UNLOCK_TOO_SOON
         arm.step(dt)
         self.cycles += 1
         if arm.safety_mode is not self._safety.mode:  # told before any state that shows the new mode
@@ -416,7 +422,7 @@ class FakeController:
         elif line == prim.ControllerCommand.BRAKE_RELEASE:
             self.brake_release()
         elif line == prim.ControllerCommand.UNLOCK_PROTECTIVE_STOP:
-            arm.unlock_protective_stop()
+            self._unlock_when_due = arm.unlock_protective_stop() == UNLOCK_TOO_SOON
         elif line == prim.ControllerCommand.STOP_PROGRAM:
             self.programs.stop()
 

@@ -23,6 +23,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from urdaemon.fakeur.life import UNLOCK_TOO_SOON
 from urdaemon.fakeur.urp import MAX_URP_BYTES, UrpProgram, UrpRefused, translate
 from urdaemon.protocols import dashboard as dash
 from urdaemon.protocols import primary as prim
@@ -116,11 +117,12 @@ def _action_reply(fake: DashboardController, command: Any) -> str | None:
     if isinstance(command, dash.BrakeRelease):
         return "Brake releasing" if fake.brake_release() is None else "Failed to execute: brake release"
     if isinstance(command, dash.UnlockProtectiveStop):
-        return (
-            "Protective stop releasing"
-            if arm.unlock_protective_stop() is None
-            else ("Cannot unlock protective stop: the robot is not in protective stop or still moving")
-        )
+        refused = arm.unlock_protective_stop()
+        if refused is None:
+            return "Protective stop releasing"
+        if refused == UNLOCK_TOO_SOON:  # UR's guide gives this text for an unlock within 5 s
+            return UNLOCK_TOO_SOON
+        return "Cannot unlock protective stop: the robot is not in protective stop or still moving"
     if isinstance(command, dash.Load):
         path = program_path(fake, command.path)
         if path is None:

@@ -32,6 +32,8 @@ __all__ = [
     "BRAKE_RELEASE_TIME_S",
     "EMERGENCY_STOP_DECELERATION",
     "PROTECTIVE_STOP_DECELERATION",
+    "UNLOCK_TOO_SOON",
+    "UNLOCK_WAIT_S",
     "ArmLife",
     "Do",
     "LifeStep",
@@ -46,6 +48,13 @@ PROTECTIVE_STOP_DECELERATION = 10.0
 """Joint deceleration (rad/s²) of the category-2 stop that a protective stop performs."""
 EMERGENCY_STOP_DECELERATION = 20.0
 """Joint deceleration (rad/s²) of an emergency stop before power is cut."""
+UNLOCK_WAIT_S = 5.0
+"""s of controller time after a protective stop before it may be unlocked (UR's dashboard guide)."""
+UNLOCK_TOO_SOON = (
+    "Cannot unlock protective stop until 5s after occurrence. "
+    "Always inspect cause of protective stop before unlocking"
+)
+"""The refusal of an unlock within UNLOCK_WAIT_S of the stop: the dashboard's reply, word for word."""
 
 _MOVING_SAFETY = (SafetyMode.NORMAL, SafetyMode.REDUCED)
 """The safety modes in which the arm may move and a program may play."""
@@ -87,6 +96,10 @@ class ArmLife:
         self.runtime_state = RuntimeState.STOPPED
         self._transition_at: float | None = None
         """Controller time (s) at which BOOTING or releasing the brakes (POWER_ON) ends."""
+        self._now = 0.0
+        """Controller time (s) of the latest cycle (``advance``): when a stop happens."""
+        self.unlockable_at = 0.0
+        """Controller time (s) from which the latest protective stop may be unlocked."""
 
     # ---- power, brakes, safety -----------------------------------------------------------------
 
@@ -122,17 +135,21 @@ class ArmLife:
         if self.safety_mode not in _MOVING_SAFETY:
             return _DONE
         self.safety_mode = SafetyMode.PROTECTIVE_STOP
+        self.unlockable_at = self._now + UNLOCK_WAIT_S
         if self.runtime_state not in (RuntimeState.PLAYING, RuntimeState.PAUSING):
             return LifeStep(then=(Do.PROTECTIVE_STOP,))
         self.runtime_state = RuntimeState.PAUSED
         return LifeStep(then=(Do.PROTECTIVE_STOP, Do.FREEZE_TIME))
 
     def unlock_protective_stop(self, *, moving: bool) -> str | None:
-        """Clear a protective stop; a reason if there is none to clear or the arm is still ``moving``."""
+        """Clear a protective stop; a reason if there is none to clear, the arm is still ``moving`` or
+        the stop happened less than UNLOCK_WAIT_S of controller time ago (:data:`UNLOCK_TOO_SOON`)."""
         if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
             return f"safety mode is {self.safety_mode.name}, not PROTECTIVE_STOP"
         if moving:
             return "robot still moving"
+        if self._now < self.unlockable_at:
+            return UNLOCK_TOO_SOON
         self.safety_mode = SafetyMode.NORMAL
         return None
 
@@ -161,6 +178,7 @@ class ArmLife:
 
     def advance(self, now: float) -> None:
         """Finish a timed transition (booting, releasing the brakes) due at controller time ``now``."""
+        self._now = now
         if self._transition_at is None or now < self._transition_at:
             return
         self._transition_at = None

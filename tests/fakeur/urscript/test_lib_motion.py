@@ -12,6 +12,7 @@ import pytest
 from urdaemon.description.urmodels import load_ur_model
 from urdaemon.fakeur.fake_arm import FakeArm
 from urdaemon.fakeur.joint_motion import ServoFilter
+from urdaemon.fakeur.life import UNLOCK_WAIT_S
 from urdaemon.fakeur.urscript import lib_motion, lib_state
 from urdaemon.fakeur.urscript.runtime import ScriptRuntimeError, UrList, UrPose
 from urdaemon.fakeur.urscript.script_host import ScriptHost
@@ -247,15 +248,33 @@ def test_a_blend_radius_returns_early_and_the_next_move_continues_smoothly() -> 
     assert max(abs(a - b) for a, b in zip(arm.q, end, strict=True)) < 1e-3
 
 
-def test_a_target_outside_the_joint_limits_is_a_protective_stop() -> None:
+def test_a_movej_target_outside_the_joint_limits_is_a_runtime_error() -> None:
+    """A controller checks a joint move's target before it plans (urcl's
+    ``unfeasible_movej_target_results_in_failure``): the program stops; before, a protective stop
+    paused it."""
     host = _host()
     arm = host.arm
     target = _offset(arm.q, j0=0.0)
     target[2] = arm.max_position[2] + 0.1
     before = list(arm.q)
-    assert _run(host, lib_motion.movej(host, target, 1.4, 1.05, 0, 0)) == 0
-    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    with pytest.raises(ScriptRuntimeError, match="outside the joint limits"):
+        _run(host, lib_motion.movej(host, target, 1.4, 1.05, 0, 0))
+    assert arm.safety_mode is SafetyMode.NORMAL
     assert arm.q == before
+
+
+def test_a_movel_target_outside_the_joint_limits_is_a_protective_stop_and_waits() -> None:
+    host = _host()
+    arm = host.arm
+    target = _offset(arm.q, j0=0.0)
+    target[2] = arm.max_position[2] + 0.1
+    before = list(arm.q)
+    gen = lib_motion.movel(host, UrList(target), 1.2, 0.25, 0, 0)
+    for _ in range(10):
+        next(gen)
+        arm.step(DT)
+    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    assert arm.q == before, "the command waits in the stop"
 
 
 def test_the_latest_motion_command_wins() -> None:
@@ -353,10 +372,10 @@ def test_a_movej_interrupted_by_a_protective_stop_resumes_to_its_target() -> Non
         arm.step(DT)
     lib_motion.protective_stop(host)
     assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
-    for _ in range(200):  # the controller does not step a paused program
+    for _ in range(round(UNLOCK_WAIT_S / DT) + 1):  # the controller does not step a paused program
         arm.step(DT)
     assert arm.qd == [0.0] * 6
-    assert arm.unlock_protective_stop() is None
+    assert arm.unlock_protective_stop() is None, "at rest and 5 s after the stop"
     assert arm.resume_program() is None
     _run(host, gen)
     assert max(abs(a - b) for a, b in zip(arm.q, target, strict=True)) < 1e-3
@@ -382,7 +401,11 @@ def test_bad_arguments_are_runtime_errors() -> None:
     with pytest.raises(ScriptRuntimeError, match="stopj"):
         _run(host, lib_motion.stopj(host, "fast"))
     with pytest.raises(ScriptRuntimeError, match="movel"):
-        _run(host, lib_motion.movel(host, UrPose([5.0, 0, 0, 0, 0, 0]), 1.2, 0.25, 0, 0))
+        _run(host, lib_motion.movel(host, UrPose([5.0, 0, 0, 0, 0]), 1.2, 0.25, 0, 0))
+    # an unreachable pose is no bad argument: a protective stop, in which the movel waits
+    gen = lib_motion.movel(host, UrPose([5.0, 0, 0, 0, 0, 0]), 1.2, 0.25, 0, 0)
+    next(gen)
+    assert host.arm.safety_mode is SafetyMode.PROTECTIVE_STOP
 
 
 def test_movec_keeps_the_tcp_on_the_circle_through_the_three_points() -> None:

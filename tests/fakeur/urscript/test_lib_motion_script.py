@@ -102,7 +102,9 @@ end
     assert 0.1 < host.arm.q[0] < 1.0, "stopped short of the target"
 
 
-def test_movej_out_of_the_joint_limits_is_a_protective_stop() -> None:
+def test_movej_out_of_the_joint_limits_is_a_runtime_error_and_movel_a_protective_stop() -> None:
+    """A joint move's target is checked before it plans (the program stops, so urcl's trajectory ends
+    with a failure); a straight move the arm cannot make protective-stops (fake-robot.md, "Errors")."""
     model = load_ur_model("ur10e")
     arm = FakeArm(model, model.dh, powered=True)
     arm.start_program()
@@ -111,7 +113,14 @@ def test_movej_out_of_the_joint_limits_is_a_protective_stop() -> None:
     run = compile_program(f"movej([{limit + 1.0}, -1.57, 1.57, -1.57, -1.57, 0.0])\n", series="e").start(host)
     run.step()
     arm.step(DT)
-    assert arm.safety_mode is SafetyMode.PROTECTIVE_STOP
+    assert "outside the joint limits" in str(run.error)
+    safety = arm.safety_mode
+    assert safety is SafetyMode.NORMAL
+    run = compile_program(f"movel([{limit + 1.0}, -1.57, 1.57, -1.57, -1.57, 0.0])\n", series="e").start(host)
+    run.step()
+    arm.step(DT)
+    safety = arm.safety_mode
+    assert safety is SafetyMode.PROTECTIVE_STOP
 
 
 SERVO_STEP = """def servo_step():

@@ -13,8 +13,11 @@ follows one still moving (a blend, a servoj or speedj stream) continues smoothly
   thread in control keeps it until then. ``kill`` the controlling thread first to take over.
 * A thread killed (or a program stopped) in the middle of its motion leaves the arm decelerating at
   that motion's stop deceleration.
-* A target outside the joint limits triggers a protective stop (the program pauses) and the command
-  returns without moving.
+* A movej/optimovej target outside the joint limits, or a pose with no inverse kinematics, is a
+  runtime error: the controller checks a joint move's target before it plans, and the program stops.
+* A movel/movep/servoc whose target or straight path the arm cannot reach (no inverse kinematics, or
+  outside the joint limits) is a protective stop: the program pauses in the command, which tries again
+  once the stop is unlocked and the program resumes. A servoj target outside the limits is one too.
 * movej/movel with ``r`` > 0 return once the TCP is within ``r`` of the target; the arm goes on
   towards it until the next motion command blends out of it (or it arrives).
 * servoj: for ``t`` rounded to whole cycles the joints are pulled toward the target by a model of the
@@ -168,8 +171,23 @@ def _start(arm: FakeArm) -> tuple[list[float], list[float]]:
 
 
 def _protective_stop(host: ScriptHost, what: str, q: Sequence[float]) -> None:
-    host.message("text", f"{what}: target {[round(v, 4) for v in q]} is outside the joint limits")
+    host.message("text", _outside_limits(what, q))
     host.arm.protective_stop()
+
+
+def _unreachable(host: ScriptHost, text: str) -> Gen:
+    """A straight move the arm cannot make: a protective stop (the controller then reports its error
+    code), and the command waits until the arm may move again (unlocked; resumed, if paused)."""
+    host.message("text", text)
+    arm = host.arm
+    arm.protective_stop()
+    yield
+    while not arm.life.can_move:
+        yield
+
+
+def _outside_limits(name: str, q: Sequence[float]) -> str:
+    return f"{name}: target {[round(v, 4) for v in q]} is outside the joint limits"
 
 
 # ---- servoj, speedj, stopj, stopl ------------------------------------------------------------------------
@@ -409,8 +427,7 @@ def _joint_motion(
     if target is None:
         raise ScriptRuntimeError(f"{name}: no inverse kinematics solution for {q!r}")
     if not _within_limits(arm, target):
-        _protective_stop(host, name, target)
-        return None
+        raise ScriptRuntimeError(_outside_limits(name, target))
     if duration <= 0 and (acceleration <= 0 or velocity <= 0):
         raise ScriptRuntimeError(f"{name}: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
     until = _blend_check(arm, target, radius)
@@ -439,12 +456,28 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
     goal = values if isinstance(pose, UrPose) else tcp_pose(arm, values)
     if duration <= 0 and (acceleration <= 0 or velocity <= 0):
         raise ScriptRuntimeError(f"{name}: needs a > 0 and v > 0 (got a={acceleration}, v={velocity})")
-    end = _inverse(host, goal, arm.target_q) if isinstance(pose, UrPose) else values
-    if end is None:
-        raise ScriptRuntimeError(f"{name}: no inverse kinematics solution for {pose!r}")
-    if not _within_limits(arm, end):
-        _protective_stop(host, name, end)
-        return None
+    while True:  # until the target is reachable: an unreachable one protective-stops, then tries again
+        end = _inverse(host, goal, arm.target_q) if isinstance(pose, UrPose) else values
+        if end is None:
+            yield from _unreachable(host, f"{name}: no inverse kinematics solution for {pose!r}")
+        elif not _within_limits(arm, end):
+            yield from _unreachable(host, _outside_limits(name, end))
+        else:
+            break
+    return (yield from _straight(host, name, pose, goal, end, (acceleration, velocity, duration, radius)))
+
+
+def _straight(
+    host: ScriptHost,
+    name: str,
+    pose: Any,
+    goal: Sequence[float],
+    end: Sequence[float],
+    limits: tuple[float, float, float, float],
+) -> Gen:
+    """Play movel's straight line to ``goal`` (joints ``end``), from wherever the arm is commanded."""
+    acceleration, velocity, duration, radius = limits
+    arm = host.arm
     until = _blend_check(arm, end, radius)
     tcp = list(arm.tcp_offset)
 
@@ -463,12 +496,17 @@ def _cartesian(host: ScriptHost, name: str, pose: Any, a: Any, v: Any, t: Any, r
         # default acceleration (the tool acceleration a is not a joint-space one)
         fade = 4.0 * leading_stop_time(moving, JOINT_BLEND_DECELERATION)
         move = CartesianMove(start_pose, goal, shape, start, solve, moving, fade)
-        outcome = yield from _play(host, move, PROTECTIVE_STOP_DECELERATION, until)
-        if move.failed:
-            raise ScriptRuntimeError(f"{name}: the straight line to {pose!r} leaves the reachable space")
-        if outcome != _INTERRUPTED:
+        outcome = yield from _play(host, move, PROTECTIVE_STOP_DECELERATION, _or_failed(move, until))
+        if move.failed:  # the arm holds where the line left the reachable space
+            yield from _unreachable(host, f"{name}: the straight line to {pose!r} leaves the reachable space")
+        elif outcome != _INTERRUPTED:
             return None
         duration = 0.0
+
+
+def _or_failed(move: CartesianMove, until: Callable[[], bool] | None) -> Callable[[], bool]:
+    """``until``, or the move's path has left the reachable space (its arm holds)."""
+    return (lambda: move.failed) if until is None else (lambda: move.failed or until())
 
 
 @builtin("movec", blocking=True)
