@@ -306,8 +306,10 @@ async def wait_for_line(proc: subprocess.Popen[str], text: str, *, timeout: floa
     raise AssertionError(f"{text!r} not printed within {timeout} s:\n{''.join(lines)}")
 
 
-def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:
-    """Keep reading the process's stderr into ``sink`` so its pipe never fills up."""
+def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> threading.Thread:
+    """Keep reading the process's stderr into ``sink`` so its pipe never fills up; the reading thread,
+    which ends at the stream's end (join it after the process exited to have every line: on a busy
+    machine the last lines can reach ``sink`` well after the exit)."""
     assert proc.stderr is not None
     stream = proc.stderr
 
@@ -315,7 +317,9 @@ def drain_in_background(proc: subprocess.Popen[str], sink: list[str]) -> None:
         for line in stream:
             sink.append(line)
 
-    threading.Thread(target=pump, name="stderr-drain", daemon=True).start()
+    reader = threading.Thread(target=pump, name="stderr-drain", daemon=True)
+    reader.start()
+    return reader
 
 
 def swing_trajectory(

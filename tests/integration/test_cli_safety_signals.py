@@ -15,6 +15,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -52,6 +53,15 @@ def _urdaemon(*args: str) -> subprocess.Popen[str]:
 
 async def _wait(proc: subprocess.Popen[str], timeout: float = 60.0) -> int:
     return await asyncio.get_running_loop().run_in_executor(None, proc.wait, timeout)
+
+
+async def _exit_and_log(proc: subprocess.Popen[str], reader: threading.Thread, timeout: float = 60.0) -> int:
+    """The process's exit code, once it exited and its stderr was read to the end (the log's last
+    lines reach the list after the exit, on a busy machine well after it)."""
+    code = await _wait(proc, timeout)
+    await asyncio.to_thread(reader.join, timeout)
+    assert not reader.is_alive(), "stderr still open after the exit"
+    return code
 
 
 def _signal_masks(pid: int) -> str:
@@ -109,18 +119,20 @@ async def _ready(client: Client, robot: RobotClient) -> None:
 
 
 @asynccontextmanager
-async def _serve(tmp_path: Path) -> AsyncIterator[tuple[subprocess.Popen[str], Client, list[str]]]:
+async def _serve(
+    tmp_path: Path,
+) -> AsyncIterator[tuple[subprocess.Popen[str], Client, list[str], threading.Thread]]:
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     config = tmp_path / "cell.yaml"
     config.write_text(TWO_MOCKS, encoding="utf-8")
     proc = _urdaemon("serve", "--config", str(config), "--listen", endpoint)
     log: list[str] = []
-    drain_in_background(proc, log)
+    reader = drain_in_background(proc, log)
     try:
         async with await Client.connect(endpoint, timeout=30.0) as client:
             for name in ("alice", "bob"):
                 await _ready(client, await client.robot(name, timeout=30.0))
-            yield proc, client, log
+            yield proc, client, log, reader
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -128,26 +140,26 @@ async def _serve(tmp_path: Path) -> AsyncIterator[tuple[subprocess.Popen[str], C
 
 
 async def test_sighup_stops_the_daemon_cleanly_and_the_goal_gets_its_result(tmp_path: Path) -> None:
-    async with _serve(tmp_path) as (proc, client, log):
+    async with _serve(tmp_path) as (proc, client, log, reader):
         alice = await client.robot("alice")
         goal = await alice.move(AWAY, duration=30.0)
         proc.send_signal(signal.SIGHUP)
         result = await goal.result(timeout=30.0)  # ConnectionLostError when killed outright
         assert result["goal_id"] == goal.goal_id
         assert result["status"] != "succeeded", result
-        assert await _wait(proc) == 0, "".join(log)
+        assert await _exit_and_log(proc, reader) == 0, "".join(log)
         assert any("SIGHUP: stopping" in line for line in log), "".join(log)
         assert any("stopped" in line for line in log), "".join(log)
 
 
 async def test_repeated_sigterm_while_stopping_still_exits_normally(tmp_path: Path) -> None:
-    async with _serve(tmp_path) as (proc, _client, log):
+    async with _serve(tmp_path) as (proc, _client, log, reader):
         sent = 0
         while proc.poll() is None and sent < 3000:  # again and again until it has exited
             proc.send_signal(signal.SIGTERM)
             sent += 1
             await asyncio.sleep(0.002)  # paces the signals; nothing is timed
-        code = await _wait(proc)
+        code = await _exit_and_log(proc, reader)
         assert sent > 1
         assert code == 0, f"exit {code} after {sent} SIGTERMs\n{''.join(log)}"
         assert any("already stopping" in line for line in log), "".join(log)

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import zenoh
+
 from urdaemon.client import Client
 from urdaemon.recording.channels import recorded_keys
 from urdaemon.recording.mcap_file import RecordingWriter
@@ -37,7 +39,15 @@ class State:
 
 @dataclass
 class Recorder:
-    """Subscribes (on ``session``) to what a recorder of ``cell`` keeps; ``close`` ends it."""
+    """Subscribes (on ``session``) to what a recorder of ``cell`` keeps; ``close`` ends it.
+
+    Each subscriber fills a Zenoh FIFO channel (on Zenoh's side, without Python), emptied here when
+    asked. On the daemon's own session (``record_motion``'s ``session``) it misses nothing: a put
+    reaches a subscriber of its own session without a link, where the daemon's state publishers drop
+    rather than wait when the machine is loaded (a recording with holes cannot be reproduced exactly:
+    what the arm did in a hole is not in it)."""
+
+    CAPACITY = 1_000_000
 
     session: Any
     cell: str
@@ -47,14 +57,22 @@ class Recorder:
 
     def start(self) -> Recorder:
         for key in recorded_keys(self.cell):
-            self._subs.append(self.session.declare_subscriber(key, self._on_sample))
+            self._subs.append(self.session.declare_subscriber(key, zenoh.handlers.FifoChannel(self.CAPACITY)))
         return self
 
-    def _on_sample(self, sample: Any) -> None:
+    def _take(self) -> list[tuple[str, bytes, int]]:
+        """Everything received so far, in the order it arrived on each key."""
         with self._lock:
-            self.received.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+            for sub in self._subs:
+                for _ in range(self.CAPACITY):
+                    sample = sub.try_recv()
+                    if sample is None:
+                        break
+                    self.received.append((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+            return list(self.received)
 
     def close(self) -> None:
+        self._take()
         for sub in self._subs:
             sub.undeclare()
         self._subs.clear()
@@ -62,8 +80,7 @@ class Recorder:
     def states(self, robot: str) -> list[State]:
         """The robot's joint_states in the order they arrived (a `ur` robot's cycle count starts again
         when its control program reconnects)."""
-        with self._lock:
-            received = list(self.received)
+        received = self._take()
         out = []
         for key, payload, _ in received:
             if key == f"{self.cell}/{robot}/joint_states":
@@ -75,8 +92,7 @@ class Recorder:
         """Everything received, as a recording (``RecordingWriter``)."""
         buffer = io.BytesIO()
         writer = RecordingWriter(buffer, cell=self.cell, urdf=urdf)
-        with self._lock:
-            received = list(self.received)
+        received = self._take()
         for key, payload, receive_ns in received:
             writer.add(key, payload, receive_ns)
         writer.finish()
@@ -155,9 +171,10 @@ async def settle(recorder: Recorder, robot: str, count: int) -> None:
     raise AssertionError(f"{robot}: fewer than {count} joint_states arrived")
 
 
-async def record_motion(client: Client, path: Path) -> Recorder:
-    """alice: two moves with a rest between; bob: one move while alice makes her first."""
-    recorder = Recorder(client.session, CELL).start()
+async def record_motion(client: Client, path: Path, session: Any = None) -> Recorder:
+    """alice: two moves with a rest between; bob: one move while alice makes her first; recorded on
+    ``session`` (default: the client's)."""
+    recorder = Recorder(client.session if session is None else session, CELL).start()
     await settle(recorder, "alice", 20)
     alice, bob = await client.robot("alice"), await client.robot("bob")
     first, bobs = await asyncio.gather(alice.move(ALICE_A), bob.move(BOB_A))

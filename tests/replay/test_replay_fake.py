@@ -12,6 +12,7 @@ import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -46,7 +47,9 @@ def _robot(name: str, model: str, address: str, x: float) -> str:
 
 
 @asynccontextmanager
-async def _fake_cell() -> AsyncIterator[tuple[str, Client]]:
+async def _fake_cell() -> AsyncIterator[tuple[str, Client, Any]]:
+    """The cell file, a client, and the daemon's own session (what ``Recorder`` subscribes on: a
+    subscriber there misses nothing the daemon publishes, where one across a link may, under load)."""
     clock = SharedClock(0.002, slots=1)
     fakes = {
         "alice": FakeController("ur10e", address=fake_address(), initial_positions=HOME),
@@ -68,13 +71,14 @@ async def _fake_cell() -> AsyncIterator[tuple[str, Client]]:
             return all(b.state.ready_for_motion and b.servers.reverse.connected for b in backends)  # type: ignore[attr-defined]
 
         await fakes["alice"].until(ready, cycles=20_000, timeout=60.0)
-        yield text, client
+        assert daemon.node is not None
+        yield text, client, daemon.node.session
 
 
-async def _at_rest(client: Client) -> None:
+async def _at_rest(session: Any) -> None:
     """Until both fake arms report ten joint states in a row at rest (a goal succeeds within its
     tolerance while the measured arm still creeps the last hair)."""
-    watch = Recorder(client.session, CELL).start()
+    watch = Recorder(session, CELL).start()
     try:
         for _ in range(1000):
             tails = [watch.states(robot)[-10:] for robot in ("alice", "bob")]
@@ -87,10 +91,10 @@ async def _at_rest(client: Client) -> None:
 
 
 async def test_a_motion_recorded_on_the_fake_controllers_is_replayed_on_them(tmp_path: Path) -> None:
-    async with _fake_cell() as (text, client):
+    async with _fake_cell() as (text, client, session):
         config = tmp_path / "cell.yaml"
         config.write_text(text)
-        recorder = Recorder(client.session, CELL).start()
+        recorder = Recorder(session, CELL).start()
         await settle(recorder, "alice", 20)
         alice, bob = await client.robot("alice"), await client.robot("bob")
         goals = await asyncio.gather(alice.move(ALICE), bob.move(BOB))
@@ -104,8 +108,8 @@ async def test_a_motion_recorded_on_the_fake_controllers_is_replayed_on_them(tmp
             assert (await goal.result(timeout=30))["status"] == "succeeded"
         await alice.release()
         await bob.release()
-        await _at_rest(client)
-        replayed = Recorder(client.session, CELL).start()
+        await _at_rest(session)
+        replayed = Recorder(session, CELL).start()
         run = await run_cli_in_thread(
             "replay", str(recording), "--config", str(config), "--connect", client.endpoint, timeout=120
         )

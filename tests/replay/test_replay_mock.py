@@ -29,8 +29,9 @@ TOLERANCE = 1e-6
 
 async def _replay(config: Path, recording: Path, *extra: str) -> tuple[Recorder, str, int]:
     """Replay on a fresh mock cell; what its recorder saw, the command's stderr and exit code."""
-    async with running_daemon(TWO_MOCKS) as (_daemon, client):
-        recorder = Recorder(client.session, CELL).start()
+    async with running_daemon(TWO_MOCKS) as (daemon, client):
+        assert daemon.node is not None
+        recorder = Recorder(daemon.node.session, CELL).start()
         run = await run_cli_in_thread(
             "replay",
             str(recording),

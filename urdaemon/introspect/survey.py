@@ -11,14 +11,14 @@ from typing import Any
 from urdaemon.client import Client
 from urdaemon.publish.keys import CellKeys
 
-__all__ = ["ROUNDS", "SURVEY_TIMEOUT_S", "Survey", "find_robot", "survey"]
+__all__ = ["ROUND_PAUSE_S", "SURVEY_TIMEOUT_S", "Survey", "find_robot", "survey"]
 
 SURVEY_TIMEOUT_S = 5.0
 """How long the daemons are given to answer (each answers from memory, at once: the time is spent
-only on a daemon that does not answer)."""
-ROUNDS = 3
-"""Rounds of questions at most (see ``survey``)."""
+only on a daemon that does not answer), and how long the survey waits at most for a token that a
+daemon's answer names but the session has not heard of yet."""
 ROUND_PAUSE_S = 0.1
+"""The pause between two rounds of questions (see ``survey``)."""
 
 
 @dataclass
@@ -40,6 +40,11 @@ class Survey:
             return [str(robot.get("name")) for robot in daemon.get("robots", [])]
         return sorted(robot for c, robot in self.alive if c == cell)
 
+    def untokened(self) -> set[tuple[str, str]]:
+        """(cell, robot) of every robot a daemon's answer names whose liveliness token is not seen."""
+        named = {(cell, robot) for cell in self.daemons for robot in self.robots_of(cell)}
+        return named - set(self.alive)
+
     def robot(self, cell: str, name: str) -> dict[str, Any] | None:
         """What the daemon of ``cell`` says of robot ``name`` (None: no daemon answer names it)."""
         for robot in (self.daemons.get(cell) or {}).get("robots", []):
@@ -60,13 +65,18 @@ class Survey:
 async def survey(client: Client, *, timeout: float = SURVEY_TIMEOUT_S) -> Survey:
     """Ask every daemon reachable to describe itself, and list the robots' liveliness tokens.
 
-    A session that just connected may hear of some tokens and queryables a moment late (a router
-    passes them on): the question is asked again until a round adds nothing (at most ``ROUNDS``)."""
+    A session that just connected hears of some tokens and queryables late (a router passes them on,
+    and on a busy machine a daemon behind it may answer before its tokens got through): the question
+    is asked again until a round adds nothing and every robot a daemon names has its token, for
+    ``timeout`` s at most (a token still missing then: the listing marks that robot)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
     found = Survey()
-    for round_ in range(ROUNDS):
+    for round_ in range(2 + int(timeout / ROUND_PAUSE_S)):
         seen = (set(found.daemons), set(found.alive))
         await _ask(client, found, timeout)
-        if round_ and (set(found.daemons), set(found.alive)) == seen:
+        settled = (set(found.daemons), set(found.alive)) == seen and not found.untokened()
+        if round_ and (settled or loop.time() >= deadline):
             break
         await asyncio.sleep(ROUND_PAUSE_S)
     return found

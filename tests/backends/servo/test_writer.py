@@ -130,9 +130,13 @@ def start(
     link: FakeLink,
     retry_s: Sequence[float] = (0.001,),
     probe_every_s: float = 60.0,
+    first: Sequence[float] | None = None,
 ) -> OutputWriter:
+    """A writer on ``link``, started (with ``first`` submitted before its thread starts, if given)."""
     writer = OutputWriter(link, retry_s=retry_s, probe_every_s=probe_every_s, clock=constant_clock)
     writers.append((writer, link))
+    if first is not None:
+        writer.submit(first)
     writer.start()
     return writer
 
@@ -305,8 +309,10 @@ def test_an_idle_output_is_probed_and_a_failed_probe_reopens_it_with_the_last_fr
     writers: list[tuple[OutputWriter, FakeLink]],
 ) -> None:
     link = FakeLink(check_errors=[None, OSError(121, "Remote I/O error")])
-    writer = start(writers, link, probe_every_s=0.01)
-    writer.submit((1500.0, 1600.0))
+    # the frame is there before the thread starts: opening writes it, and only then may the output
+    # be idle (submitted after the start, a thread that opened the device and waited its 10 ms
+    # before the test's thread ran again probed first)
+    writer = start(writers, link, probe_every_s=0.01, first=(1500.0, 1600.0))
     link.wait_for(lambda calls: calls.count(("open", None)) == 2, "probed, failed, opened again")
     link.wait_for(lambda calls: calls[-1] == ("write", (1500.0, 1600.0)), "the frame written again")
     kinds = [name for name, _ in link.calls]
