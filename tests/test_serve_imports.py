@@ -122,3 +122,12 @@ def test_the_daemon_session_keeps_what_the_cell_file_sets() -> None:
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is True
     assert json.loads(conf.get_json("transport/unicast/lowlatency")) is True
     assert json.loads(conf.get_json("transport/shared_memory/enabled")) is False
+
+
+def test_the_daemon_session_queues_batches_a_busy_send_thread_needs() -> None:
+    """Zenoh's 2 queued batches dropped 1-2 % of the state streams under CPU load (docs/operating.md,
+    "Busy PCs"): the daemon's session queues 16 for the priorities it publishes at, and only those."""
+    conf = serve_config(ZenohOptions(), ("tcp/127.0.0.1:7449",))
+    sizes = json.loads(conf.get_json("transport/link/tx/queue/size"))
+    assert {name: sizes[name] for name in ("real_time", "data")} == {"real_time": 16, "data": 16}
+    assert sizes["background"] == 2

@@ -37,6 +37,17 @@ def zenoh_config(
     return conf
 
 
+TX_QUEUE_BATCHES = 16
+"""Batches a link may queue per priority before a dropping publication is dropped (Zenoh's default
+is 2, with 1 ms of waiting before the drop). Under CPU load a link's send thread regularly waits
+longer than that, and 2 batches then lost 1-2 % of the state streams a recorder on another process
+received; 16 lost none in the same runs (docs/operating.md, "Busy PCs"). Batches are allocated only
+when used."""
+
+QUEUED_PRIORITIES = ("real_time", "data")
+"""The priorities the daemon publishes at: state streams (real time) and everything else (data)."""
+
+
 def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | None = None) -> Any:
     """The daemon's session: the cell file's mode, endpoints, scouting and transport, without shared
     memory.
@@ -64,6 +75,8 @@ def serve_config(options: ZenohOptions, listen: tuple[str, ...], cell: str | Non
         low_latency=options.low_latency,
     )
     conf.insert_json5("transport/shared_memory/enabled", "false")
+    for priority in QUEUED_PRIORITIES:
+        conf.insert_json5(f"transport/link/tx/queue/size/{priority}", str(TX_QUEUE_BATCHES))
     configure_daemon(conf, options, cell)
     return conf
 
