@@ -10,7 +10,10 @@ movep, movec, speedl) are in fakeur/tcp_motion.py, on the profile and the ``Moti
   is scaled to arrive with it; started while the arm still moves (a blend), the old velocity fades out
   under a cubic Hermite term decelerating at most at the move's acceleration, so the path is smooth.
 * ``SpeedRamp`` (speedj): accelerate linearly (``a`` of the leading joint, all joints reaching their
-  speeds together) to the target joint speeds, then keep them.
+  speeds together) to the target joint speeds, then keep them. A speedj faster than a joint's speed
+  limit is played slower in time (``TimeScaled``, ``speed_command``): the joints keep the direction and
+  the distance the command asks for, as a controller's speed limiter slows a program rather than
+  clamping one joint.
 * ``ServoFilter`` (servoj): the joints pulled toward the setpoint by the manual's gain and lookahead
   (a model: a damped oscillator, solved in closed form), so the arm lags a moving setpoint.
 * ``LinearStop`` (stopj, stopl, a stop at the end of a motion): every joint decelerates linearly to rest
@@ -35,11 +38,15 @@ __all__ = [
     "ServoFilter",
     "ServoModes",
     "SpeedRamp",
+    "TimeScaled",
     "Vector",
     "joint_move",
     "leading_stop_time",
     "profile",
+    "resumed_velocity",
     "servo_modes",
+    "speed_command",
+    "time_factor",
 ]
 
 JOINTS: Final = UR_JOINT_COUNT
@@ -243,6 +250,69 @@ class SpeedRamp:
         if t >= self._ramp:
             return list(self._v1)
         return [v + a * t for v, a in zip(self._v0, self._accel, strict=True)]
+
+
+class TimeScaled:
+    """``motion`` played ``factor`` (>= 1) times slower: the same path, every velocity divided by the
+    factor. How a controller keeps a command within the joint speed limits: it slows the program's
+    time (RTDE ``speed_scaling`` below 1) rather than clamping a joint, so the path is kept."""
+
+    __slots__ = ("_factor", "_motion", "duration")
+
+    def __init__(self, motion: Motion, factor: float) -> None:
+        self._motion = motion
+        self._factor = factor
+        self.duration = motion.duration * factor
+
+    def position(self, t: float) -> Vector:
+        """Joint positions [rad] at ``t``."""
+        return self._motion.position(t / self._factor)
+
+    def velocity(self, t: float) -> Vector:
+        """Joint velocities [rad/s] at ``t``."""
+        factor = self._factor
+        return [v / factor for v in self._motion.velocity(t / factor)]
+
+
+def time_factor(velocities: Sequence[Sequence[float]], limits: Sequence[float], slider: float) -> float:
+    """How many times slower (>= 1) joints at any of ``velocities`` (program time, played at ``slider``)
+    must go to stay within their speed ``limits``."""
+    factor = 1.0
+    for velocity in velocities:
+        for v, limit in zip(velocity, limits, strict=True):
+            factor = max(factor, abs(v) * slider / limit)
+    return factor
+
+
+def resumed_velocity(moving: Vector, asked: Sequence[float], factor: float) -> Vector:
+    """The velocity a speedj ramps on from: what the speedj before asked (``asked``), when it was played
+    ``factor`` times slower and the joints still move at that (``moving``); else ``moving``."""
+    if factor > 1.0 and all(
+        abs(m * factor - v) <= 1e-9 * (1.0 + abs(v)) for m, v in zip(moving, asked, strict=True)
+    ):
+        return list(asked)
+    return moving
+
+
+def speed_command(
+    start: Sequence[float],
+    start_velocity: Sequence[float],
+    target_velocity: Sequence[float],
+    acceleration: float,
+    times: tuple[float, float],
+    limits: tuple[Sequence[float], float],
+) -> tuple[Motion, float]:
+    """speedj from joints ``start`` at ``start_velocity`` (as commanded, before any slowing) to
+    ``target_velocity``: the motion to play and its time factor (1: as asked). ``times``: (t, at least);
+    a motion shorter than the second (one cycle) lasts that long. ``limits``: (joint speed limits,
+    speed slider). Too fast for a joint's limit, the whole ramp is played slower (``TimeScaled``):
+    the joints cover what the command asks, in more time, along the same direction."""
+    duration, shortest = times
+    ramp = SpeedRamp(start, start_velocity, target_velocity, acceleration, duration)
+    if ramp.duration < shortest:  # t = 0 and already (nearly) at speed: one cycle at that speed
+        ramp = SpeedRamp(start, start_velocity, target_velocity, acceleration, shortest)
+    factor = time_factor((start_velocity, target_velocity), *limits)
+    return (ramp if factor <= 1.0 else TimeScaled(ramp, factor)), factor
 
 
 class ServoModes:

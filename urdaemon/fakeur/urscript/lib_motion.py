@@ -39,10 +39,11 @@ from urdaemon.fakeur.joint_motion import (
     LinearStop,
     Motion,
     ServoFilter,
-    SpeedRamp,
     joint_move,
     leading_stop_time,
     profile,
+    resumed_velocity,
+    speed_command,
 )
 from urdaemon.fakeur.life import PROTECTIVE_STOP_DECELERATION
 from urdaemon.fakeur.tcp_motion import ArcMove, CartesianMove, ToolSpeedRamp
@@ -82,11 +83,13 @@ class MotionState:
     """What lib_motion keeps per program (``host.motion``): which command owns the arm, and which
     thread is in control (``owner``, blocked in that command; None between commands)."""
 
-    __slots__ = ("owner", "serial")
+    __slots__ = ("owner", "serial", "speed")
 
     def __init__(self) -> None:
         self.serial = 0
         self.owner: int | None = None
+        self.speed: tuple[Sequence[float], float] = ((), 1.0)
+        """The last speedj's joint speeds as asked, and how many times slower it was played."""
 
 
 def _state(host: ScriptHost) -> MotionState:
@@ -226,24 +229,26 @@ def servoj(host: ScriptHost, q: Any, a: Any, v: Any, t: Any, lookahead_time: Any
 
 @builtin("speedj", blocking=True)
 def speedj(host: ScriptHost, qd: Any, a: Any, t: Any) -> Gen:
-    """speedj(qd, a, t): accelerate to joint speeds ``qd``; return after ``t``, or once at speed if t = 0."""
+    """speedj(qd, a, t): accelerate to joint speeds ``qd``; return after ``t``, or once at speed if t = 0.
+
+    Faster than a joint's limit, the command is played slower in time, keeping its direction and the
+    distance it asks for (``speed_command``); the next speedj ramps on from the speed asked here."""
     velocity = _vector("speedj", qd)
     acceleration = _number("speedj a", a)
     duration = _number("speedj t", t)
-    arm = host.arm
-    limits = arm.max_velocity
-    velocity = [max(-limits[i], min(limits[i], velocity[i])) for i in range(6)]
+    arm, state = host.arm, _state(host)
     start, moving = _start(arm)
+    moving = resumed_velocity(moving, *state.speed)
     if acceleration <= 0:
         # a = 0 with nothing to change is a hold at the present speed (urcl's spline follower sends
         # that on a segment's last, zero-speed step); a change no acceleration can make is an error
         if acceleration < 0 or any(abs(v - m) > 1e-12 for v, m in zip(velocity, moving, strict=True)):
             raise ScriptRuntimeError(f"speedj: acceleration must be > 0 to change speed, got {acceleration}")
         acceleration = 1e-9
-    ramp = SpeedRamp(start, moving, velocity, acceleration, duration)
-    if ramp.duration < host.step_time:  # t = 0 and already (nearly) at speed: one cycle at that speed
-        ramp = SpeedRamp(start, moving, velocity, acceleration, host.step_time)
-    yield from _play(host, ramp, acceleration)
+    limits = (arm.max_velocity, max(arm.speed_slider, 1e-3))
+    motion, factor = speed_command(start, moving, velocity, acceleration, (duration, host.step_time), limits)
+    state.speed = (velocity, factor)
+    yield from _play(host, motion, acceleration / (factor * factor))
     return None
 
 
@@ -389,14 +394,8 @@ def tool_speed(arm: FakeArm, q: Sequence[float], qd: Sequence[float]) -> UrList:
 
 
 def _blend_check(arm: FakeArm, target: Sequence[float], radius: float) -> Callable[[], bool] | None:
-    if radius <= 0:
-        return None
-    goal = tcp_matrix(arm, target)[9:]
-
-    def within() -> bool:
-        return math.dist(tcp_matrix(arm, arm.target_q)[9:], goal) <= radius
-
-    return within
+    """Whether the TCP is within ``radius`` of joints ``target``'s (None: no blend)."""
+    return _pose_blend_check(arm, tcp_matrix(arm, target)[9:], radius) if radius > 0 else None
 
 
 @builtin("movej", blocking=True)
