@@ -109,6 +109,12 @@ def _serving_parts(
     return connections, programs, rtde
 
 
+def _default_program(programs_dir: Path | None) -> str:
+    """The default External Control program's path in the program directory (URSim's without one)."""
+    base = str(programs_dir) if programs_dir is not None else PROGRAMS_DIR
+    return f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
+
+
 class FakeController:
     """One fake UR controller serving ``model`` on ``address``."""
 
@@ -139,8 +145,7 @@ class FakeController:
         self.step_time = 1.0 / self.rate_hz
         self.faults = faults or FaultInjector()
         self.rtde_versions = rtde_versions
-        """RTDE protocol versions it accepts: ``(1,)`` is a controller that speaks only v1 (no output
-        frequency, no recipe ids), which a client must fall back to when v2 is refused."""
+        """RTDE versions it accepts: ``(1,)`` is a v1-only controller (no output frequency or recipe ids)."""
         self.wall_clock = wall_clock
         """The wall clock the I/O side reads (to tell that the fake was held up); tests pass their own."""
         self.urcap = urcap
@@ -148,8 +153,7 @@ class FakeController:
         self.programs_dir = Path(programs) if programs is not None else None
         """Where ``load`` finds program files (relative names resolve under it); None: URSim's default
         directory, holding only the default External Control program."""
-        base = str(self.programs_dir) if self.programs_dir is not None else PROGRAMS_DIR
-        self.default_program = f"{base.rstrip('/')}/{EXTERNAL_CONTROL_PROGRAM}"
+        self.default_program = _default_program(self.programs_dir)
         self.loaded_program: str | None = self.default_program if urcap else None
         self.operational_mode = dash.OperationalMode.NONE
         """What ``get operational mode`` says (``fakeur.dashboard_answers``): NONE, no password set."""
