@@ -59,9 +59,7 @@ VOLTAGE_SPAN = 10.0
 5 V); the daemon's ``analog_out`` is the level 0..1 that ``set_io`` takes, the controller reports V."""
 CURRENT_SPAN = (0.004, 0.020)
 """A: the same in the current domain, 4-20 mA (level 0.5 is 12 mA)."""
-_VOLTAGE_OUTPUTS = 0b1100
-"""``analog_io_types`` with both outputs in the voltage domain (bits 2-3), what a recipe without it is
-taken to report: the domain the daemon's own ``set_io`` selects."""
+_CURRENT_LOW, _CURRENT = CURRENT_SPAN[0], CURRENT_SPAN[1] - CURRENT_SPAN[0]
 
 
 def output_recipe() -> tuple[str, ...]:
@@ -259,6 +257,8 @@ class StateMapper:
         self._ain = (at("standard_analog_input0"), at("standard_analog_input1"))
         self._aout = (at("standard_analog_output0"), at("standard_analog_output1"))
         self._aio_types = at("analog_io_types")
+        if self._aout[0] >= 0 and self._aio_types < 0:
+            raise ValueError("a recipe with the analog outputs needs analog_io_types (their domains)")
         self._tool_voltage = at("tool_output_voltage")
         self._payload = at("payload")
         self._payload_cog = at("payload_cog")
@@ -313,12 +313,10 @@ class StateMapper:
             if bits != self._last_din:
                 self._last_din = bits
                 _split_io_bits(bits, state.digital_in, state.configurable_in, state.tool_in)
-        if self._aout[0] >= 0:  # V or A as reported, the level 0..1 as set_io takes it
-            types = values[self._aio_types] if self._aio_types >= 0 else _VOLTAGE_OUTPUTS
-            low, span = CURRENT_SPAN[0], CURRENT_SPAN[1] - CURRENT_SPAN[0]
-            out0, out1 = values[self._aout[0]], values[self._aout[1]]
-            state.analog_out[0] = out0 / VOLTAGE_SPAN if types & 0b0100 else (out0 - low) / span
-            state.analog_out[1] = out1 / VOLTAGE_SPAN if types & 0b1000 else (out1 - low) / span
+        if self._aout[0] >= 0:  # V or A as reported -> the level 0..1 set_io takes, by the domain
+            out0, out1, types = values[self._aout[0]], values[self._aout[1]], values[self._aio_types]
+            state.analog_out[0] = out0 / VOLTAGE_SPAN if types & 0b0100 else (out0 - _CURRENT_LOW) / _CURRENT
+            state.analog_out[1] = out1 / VOLTAGE_SPAN if types & 0b1000 else (out1 - _CURRENT_LOW) / _CURRENT
         if self._ain[0] >= 0:
             state.analog_in[0] = values[self._ain[0]]
             state.analog_in[1] = values[self._ain[1]]
