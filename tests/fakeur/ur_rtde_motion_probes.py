@@ -11,6 +11,7 @@ from pathlib import Path
 
 import rtde_control
 
+from tests.description.test_dynamics import GRAVITY, Reference
 from tests.fakeur.judges import tcp_pose, wait_until
 from tests.fakeur.ur_rtde_probes import Probe, ProbeFn, near, ok
 
@@ -292,7 +293,8 @@ def _jacobian(p: Probe) -> None:
 
 
 def _mass_matrix(p: Probe) -> None:
-    m = _matrix(list(p.control.getMassMatrix(p.q(), False)))
+    q = p.q()
+    m = _matrix(list(p.control.getMassMatrix(q, False)))
     assert all(abs(m[i][j] - m[j][i]) < 1e-9 for i in range(6) for j in range(6)), f"not symmetric: {m}"
     low = [[0.0] * 6 for _ in range(6)]  # Cholesky: succeeds only on a positive definite matrix
     for i in range(6):
@@ -303,14 +305,32 @@ def _mass_matrix(p: Probe) -> None:
                 low[i][i] = math.sqrt(s)
             else:
                 low[i][j] = s / low[j][j]
+    reference = Reference(p.model).mass_matrix(q)  # an independent Newton-Euler
+    off = max(abs(m[i][j] - reference[i][j]) for i in range(6) for j in range(6))
+    assert off < 1e-9, f"{off} from Newton-Euler's: {m}"
+
+
+def _at_rest(p: Probe, call: str, values: list[float]) -> None:
+    """ur_rtde 1.6.5's script calls ``get_coriolis_and_centrifugal_torques()`` and
+    ``get_jacobian_time_derivative()`` without arguments (so do its mass matrix and Jacobian commands):
+    the answer is for the arm's own joints and speeds, whatever the caller passes, on a controller as on
+    the fake. At rest the model's answer is zero."""
+    ok(near(values, [0.0] * len(values), 1e-12), f"{call} zero at rest: {values}")
 
 
 def _direct_torque(p: Probe) -> None:
+    """Zero torque holds the arm (the controller compensates gravity); its joints exert the gravity
+    torques, which rtde_receive reads as the target moments."""
+    start = p.q()
     for _ in range(10):
-        start = p.control.initPeriod()
+        begin = p.control.initPeriod()
         ok(p.control.directTorque([0.0] * 6), "directTorque")
-        p.control.waitPeriod(start)
+        p.control.waitPeriod(begin)
+    moments = list(p.receiver.getTargetMoment())
+    hold = list(Reference(p.model).rnea(p.q(), [0.0] * 6, [0.0] * 6, GRAVITY))
     p.control.speedStop(10.0)
+    assert near(p.q(), start, 1e-9), f"moved: {p.q()} from {start}"
+    assert near(moments, hold, 1e-6), f"target moments {moments}, gravity torques {hold}"
 
 
 def _external_wrench(p: Probe) -> None:
@@ -323,13 +343,14 @@ def _external_wrench(p: Probe) -> None:
 
 DYNAMICS_PROBES: dict[str, ProbeFn] = {
     "getJacobian": _jacobian,
-    "getJacobianTimeDerivative": lambda p: ok(
-        near(p.control.getJacobianTimeDerivative(p.q(), [0.0] * 6, [0.0] * 6), [0.0] * 36, 1e-9),
-        "zero at rest",
+    "getJacobianTimeDerivative": lambda p: _at_rest(
+        p, "getJacobianTimeDerivative", list(p.control.getJacobianTimeDerivative(p.q(), [0.0] * 6, [0.0] * 6))
     ),
     "getMassMatrix": _mass_matrix,
-    "getCoriolisAndCentrifugalTorques": lambda p: ok(
-        near(p.control.getCoriolisAndCentrifugalTorques(p.q(), [0.0] * 6), [0.0] * 6, 1e-9), "zero at rest"
+    "getCoriolisAndCentrifugalTorques": lambda p: _at_rest(
+        p,
+        "getCoriolisAndCentrifugalTorques",
+        list(p.control.getCoriolisAndCentrifugalTorques(p.q(), [0.0] * 6)),
     ),
     "directTorque": _direct_torque,
     "setExternalForceTorque": _external_wrench,

@@ -59,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from urdaemon.transport_security import client_config_main
 
         return client_config_main(words[1:])
-    args = build_parser().parse_args(_join_option_values(words))
+    args = build_parser().parse_args(words)  # negative number lists joined there (parser.py)
     args.owns_process = argv is None  # run as the ``urdaemon`` command, not called with arguments
     installed = setup_logging(args.verbose)  # a bounded queue to stderr: never blocks the loop
     try:
@@ -86,18 +86,3 @@ def _dispatch(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return EXIT_OK
     return EXIT_BAD_INPUT
-
-
-def _join_option_values(argv: list[str]) -> list[str]:
-    """``--joints -0.5,1`` → ``--joints=-0.5,1`` (``--pose`` too): argparse would read a leading '-'
-    as an option."""
-    out: list[str] = []
-    i = 0
-    while i < len(argv):
-        if argv[i] in ("--joints", "--pose") and i + 1 < len(argv):
-            out.append(f"{argv[i]}={argv[i + 1]}")
-            i += 2
-        else:
-            out.append(argv[i])
-            i += 1
-    return out

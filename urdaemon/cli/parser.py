@@ -9,11 +9,18 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import re
+import sys
+from collections.abc import Sequence
 from typing import Any
 
 from urdaemon import __version__, cli_args
 
-__all__ = ["TOOL_MODULES", "build_parser"]
+__all__ = ["NUMBER_LIST_OPTIONS", "TOOL_MODULES", "build_parser", "join_number_lists"]
+
+NUMBER_LIST_OPTIONS: frozenset[str] = frozenset({"--joints", "--pose", "--wall"})
+"""Options whose value is a comma-separated list of numbers, which may start with a minus sign."""
+_NEGATIVE = re.compile(r"-[0-9.]")
 
 TOOL_MODULES: tuple[str, ...] = (
     "urdaemon.introspect.doctor_command",
@@ -27,11 +34,37 @@ TOOL_MODULES: tuple[str, ...] = (
 (``args`` → exit code) as a default; the module imports nothing heavy until ``run`` is called."""
 
 
+def join_number_lists(words: Sequence[str]) -> list[str]:
+    """``--wall -0.69,0.2,...`` → ``--wall=-0.69,0.2,...`` for the options of ``NUMBER_LIST_OPTIONS``:
+    argparse takes a separate word starting with '-' for an option unless it is one plain number, so a
+    list whose first number is negative needs the ``=``. Only a word starting with '-' and a digit or
+    '.' is joined; every other word, and every other option, is left as it is."""
+    out: list[str] = []
+    i = 0
+    while i < len(words):
+        word = words[i]
+        if word in NUMBER_LIST_OPTIONS and i + 1 < len(words) and _NEGATIVE.match(words[i + 1]):
+            out.append(f"{word}={words[i + 1]}")
+            i += 2
+        else:
+            out.append(word)
+            i += 1
+    return out
+
+
+class _Parser(argparse.ArgumentParser):
+    """The top-level parser: joins the negative number lists (``join_number_lists``) before parsing."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        words = sys.argv[1:] if args is None else args
+        return super().parse_known_args(join_number_lists(words), namespace)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``urdaemon`` parser: every command, in the order ``--help`` lists them."""
-    parser = argparse.ArgumentParser(
-        prog="urdaemon", description="Drive a cell of Universal Robots arms over Zenoh."
-    )
+    parser = _Parser(prog="urdaemon", description="Drive a cell of Universal Robots arms over Zenoh.")
     parser.add_argument("--version", action="version", version=f"urdaemon {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", required=True)

@@ -217,6 +217,8 @@ class FakeArm:
         """rad/s²: the speedj acceleration or the stop's deceleration (set by ``speedj`` and ``stop``)."""
         self._ik: UrKinematics | None = None
         self.drive = TorqueDrive(self.model, self.dh)  # its dynamics, direct_torque's command
+        self.torques_kept: tuple[tuple[float, ...], list[float]] | None = None
+        """The joint torques last computed and the state they are for (``joint_torques``)."""
         self.history = JointHistory(self.q)
         """The actual joint positions of the last ``HISTORY_STEPS`` cycles."""
         self._last_dt = 0.002
@@ -541,8 +543,17 @@ def arm_payload(arm: FakeArm) -> Payload:
 
 def joint_torques(arm: FakeArm) -> list[float]:
     """N·m: the torques ``arm``'s joints exert now, M q'' + c + g with its payload (the arm follows its
-    model exactly: under direct_torque, the command plus the gravity compensation)."""
-    return arm.drive.joint_torques(arm.timestamp, arm.q, arm.qd, arm.qdd, arm.gravity, arm_payload(arm))
+    model exactly: under direct_torque, the command plus the gravity compensation). Computed at most once
+    a cycle, and not again while the arm, its payload and gravity stay as they were (an arm at rest with
+    a real-time client would otherwise cost its dynamics every cycle)."""
+    state = (*arm.q, *arm.qd, *arm.qdd, *arm.gravity, arm.payload_mass, *arm.payload_cog)
+    state += tuple(arm.payload_inertia)
+    kept = arm.torques_kept
+    if kept is not None and kept[0] == state:
+        return list(kept[1])
+    torques = arm.drive.joint_torques(arm.timestamp, arm.q, arm.qd, arm.qdd, arm.gravity, arm_payload(arm))
+    arm.torques_kept = (state, torques)
+    return list(torques)
 
 
 def _comply(arm: FakeArm, twist: Sequence[float], dt: float) -> None:

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 from urdaemon.description.urmodels import UrModel
-from urdaemon.fakeur.fake_arm import FakeArm
+from urdaemon.fakeur.fake_arm import FakeArm, joint_torques
 from urdaemon.fakeur.urscript.lib_io import analog_output_level
 from urdaemon.fakeur.urscript.lib_motion import tool_speed
 from urdaemon.fakeur.urscript.lib_state import JOINT_TEMPERATURE, tool_accelerometer
@@ -64,6 +64,13 @@ def _six(values: list[float]) -> tuple[float, float, float, float, float, float]
     return (values[0], values[1], values[2], values[3], values[4], values[5])
 
 
+def _torques(arm: FakeArm) -> tuple[float, ...]:
+    """N·m: the joint torques of ``arm`` now (its dynamics, computed at most once a cycle). The fake arm
+    follows its model exactly, so the target moments and the torques its currents stand for are one
+    value: RTDE's ``target_moment`` and ``actual_current_as_torque``, the real-time ``m_target``."""
+    return tuple(joint_torques(arm))
+
+
 def realtime_state(arm: FakeArm) -> rt.RealtimeState:
     """The real-time interface's (30003) state of ``arm``, sent every cycle."""
     q, qd, qdd = tuple(arm.q), tuple(arm.qd), tuple(arm.qdd)
@@ -77,6 +84,7 @@ def realtime_state(arm: FakeArm) -> rt.RealtimeState:
         qd_target=target_qd,
         qdd_target=qdd,
         i_target=tuple(arm.current),
+        m_target=_torques(arm),
         q_actual=q,
         qd_actual=qd,
         i_actual=tuple(arm.current),
@@ -274,6 +282,8 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "target_qdd": lambda arm: tuple(arm.qdd),
     "actual_current": lambda arm: tuple(arm.current),
     "target_current": lambda arm: tuple(arm.current),
+    "target_moment": _torques,
+    "actual_current_as_torque": _torques,
     "joint_temperatures": lambda arm: (JOINT_TEMPERATURE,) * 6,
     "joint_mode": lambda arm: (joint_mode(arm),) * 6,
     "speed_scaling": lambda arm: arm.speed_scaling,

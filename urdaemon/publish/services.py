@@ -282,7 +282,8 @@ SERVICES: tuple[ServiceSpec, ...] = (
         needs="set_io",
         request_doc=(
             f"`kind` ({', '.join(f'`{kind}`' for kind in IO_SIZES)}), `pin`, "
-            "`value` (bool, or 0..1 for analog)"
+            "`value` (bool; for analog the level 0..1 of the output's 0-10 V: the daemon selects the "
+            "voltage domain)"
         ),
         reply_doc='`{"ok": true}` or `{"ok": false, "reason": …}`',
     ),

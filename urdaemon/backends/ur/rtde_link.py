@@ -54,6 +54,12 @@ RUNTIME_PAUSED = int(RuntimeState.PAUSED)
 RUNTIME_RESUMING = int(RuntimeState.RESUMING)
 _RUNTIME_PLAYING = int(RuntimeState.PLAYING)
 """What a recipe without ``runtime_state`` is taken to report."""
+VOLTAGE_SPAN = 10.0
+"""V: a standard analog output in the voltage domain spans 0-10 V (UR's script manual: level 0.5 is
+5 V); the daemon's ``analog_out`` is the level 0..1 that ``set_io`` takes, the controller reports V."""
+CURRENT_SPAN = (0.004, 0.020)
+"""A: the same in the current domain, 4-20 mA (level 0.5 is 12 mA)."""
+_CURRENT_LOW, _CURRENT = CURRENT_SPAN[0], CURRENT_SPAN[1] - CURRENT_SPAN[0]
 
 
 def output_recipe() -> tuple[str, ...]:
@@ -250,6 +256,9 @@ class StateMapper:
         self._dout = at("actual_digital_output_bits")
         self._ain = (at("standard_analog_input0"), at("standard_analog_input1"))
         self._aout = (at("standard_analog_output0"), at("standard_analog_output1"))
+        self._aio_types = at("analog_io_types")
+        if self._aout[0] >= 0 and self._aio_types < 0:
+            raise ValueError("a recipe with the analog outputs needs analog_io_types (their domains)")
         self._tool_voltage = at("tool_output_voltage")
         self._payload = at("payload")
         self._payload_cog = at("payload_cog")
@@ -304,9 +313,10 @@ class StateMapper:
             if bits != self._last_din:
                 self._last_din = bits
                 _split_io_bits(bits, state.digital_in, state.configurable_in, state.tool_in)
-        if self._aout[0] >= 0:
-            state.analog_out[0] = values[self._aout[0]]
-            state.analog_out[1] = values[self._aout[1]]
+        if self._aout[0] >= 0:  # V or A as reported -> the level 0..1 set_io takes, by the domain
+            out0, out1, types = values[self._aout[0]], values[self._aout[1]], values[self._aio_types]
+            state.analog_out[0] = out0 / VOLTAGE_SPAN if types & 0b0100 else (out0 - _CURRENT_LOW) / _CURRENT
+            state.analog_out[1] = out1 / VOLTAGE_SPAN if types & 0b1000 else (out1 - _CURRENT_LOW) / _CURRENT
         if self._ain[0] >= 0:
             state.analog_in[0] = values[self._ain[0]]
             state.analog_in[1] = values[self._ain[1]]
