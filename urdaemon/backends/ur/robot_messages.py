@@ -28,7 +28,15 @@ KEPT_MESSAGES = 20
 class RobotMessages:
     """The robot's messages of one backend, told through ``notice(kind, text)``."""
 
-    __slots__ = ("calibration_ok", "controller_version", "name", "notice", "program", "recent")
+    __slots__ = (
+        "_mismatch_told",
+        "calibration_ok",
+        "controller_version",
+        "name",
+        "notice",
+        "program",
+        "recent",
+    )
 
     def __init__(self, name: str, notice: Callable[[str, str], None], program: ControlProgram) -> None:
         self.name = name
@@ -42,6 +50,9 @@ class RobotMessages:
         self.controller_version: dict[str, Any] | None = None
         """The controller's software as its VERSION message named it (None: not said yet); kept
         after the link drops, until a new connection says it again (``urdaemon info`` shows it)."""
+        self._mismatch_told: str | None = None
+        """The robot's kinematics hash a mismatch was last told for: a reconnection that finds the
+        same one says nothing again (a match in between forgets it)."""
 
     def on_message(self, message: Any) -> None:
         """One message from the primary interface."""
@@ -82,7 +93,9 @@ class RobotMessages:
         kinematics = await primary.wait_kinematics(KINEMATICS_TIMEOUT_S)
         actual = kinematics.kinematics_hash()
         self.calibration_ok = expected_hash is None or actual == expected_hash
-        if not self.calibration_ok:
+        if self.calibration_ok:
+            self._mismatch_told = None
+        else:
             text = (
                 f"the robot's kinematics hash is {actual}, the configured calibration's is "
                 f"{expected_hash}: the URDF does not match this robot "
@@ -90,5 +103,7 @@ class RobotMessages:
             )
             if check == "error":
                 raise RobotFaultError(text)
-            log.warning("[%s] %s", self.name, text)
-            self.report("calibration_mismatch", text)
+            if actual != self._mismatch_told:
+                self._mismatch_told = actual
+                log.warning("[%s] %s", self.name, text)
+                self.report("calibration_mismatch", text)
