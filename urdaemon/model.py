@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = [
+    "ANALOG_OUTPUT_SPANS",
     "CELL_LEVEL_KEYS",
     "CONFIGURABLE_IO_SHIFT",
     "FINGERPRINT_CHARS",
@@ -43,6 +44,8 @@ __all__ = [
     "SetTcpRequest",
     "SpeedSliderRequest",
     "ToolVoltageRequest",
+    "analog_output_level",
+    "analog_output_value",
     "fingerprint",
 ]
 
@@ -403,3 +406,22 @@ def fingerprint(session: str) -> str:
     """What the daemon shows of a lease's session id ``session`` (a secret only its holder knows):
     the first 16 hex characters of its SHA-256, enough to tell leases apart, useless to acquire."""
     return hashlib.sha256(session.encode("ascii")).hexdigest()[:FINGERPRINT_CHARS]
+
+
+ANALOG_OUTPUT_SPANS = {"current": (0.004, 0.020), "voltage": (0.0, 10.0)}
+"""A standard analog output's span in each domain: amperes (4-20 mA) and volts (0-10 V). The level
+0..1 a program (``set_standard_analog_out``), an RTDE client and ``set_io`` set maps linearly onto it
+(UR's script manual: level 0.5 is 5 V or 12 mA); the controller reports the output in the unit."""
+
+
+def analog_output_value(level: float, voltage: bool) -> float:
+    """A standard analog output's level 0..1 in its domain's unit (V when ``voltage``, else A)."""
+    low, high = ANALOG_OUTPUT_SPANS["voltage" if voltage else "current"]
+    return low + (high - low) * level
+
+
+def analog_output_level(value: float, voltage: bool) -> float:
+    """A standard analog output as the controller reports it (V when ``voltage``, else A) as its
+    level 0..1."""
+    low, high = ANALOG_OUTPUT_SPANS["voltage" if voltage else "current"]
+    return (value - low) / (high - low)

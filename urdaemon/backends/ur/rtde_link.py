@@ -29,6 +29,7 @@ from urdaemon.model import (
     RobotMode,
     RobotState,
     SafetyMode,
+    analog_output_level,
 )
 from urdaemon.paths import resource_path
 from urdaemon.protocols import rtde
@@ -54,12 +55,6 @@ RUNTIME_PAUSED = int(RuntimeState.PAUSED)
 RUNTIME_RESUMING = int(RuntimeState.RESUMING)
 _RUNTIME_PLAYING = int(RuntimeState.PLAYING)
 """What a recipe without ``runtime_state`` is taken to report."""
-VOLTAGE_SPAN = 10.0
-"""V: a standard analog output in the voltage domain spans 0-10 V (UR's script manual: level 0.5 is
-5 V); the daemon's ``analog_out`` is the level 0..1 that ``set_io`` takes, the controller reports V."""
-CURRENT_SPAN = (0.004, 0.020)
-"""A: the same in the current domain, 4-20 mA (level 0.5 is 12 mA)."""
-_CURRENT_LOW, _CURRENT = CURRENT_SPAN[0], CURRENT_SPAN[1] - CURRENT_SPAN[0]
 
 
 def output_recipe() -> tuple[str, ...]:
@@ -315,8 +310,8 @@ class StateMapper:
                 _split_io_bits(bits, state.digital_in, state.configurable_in, state.tool_in)
         if self._aout[0] >= 0:  # V or A as reported -> the level 0..1 set_io takes, by the domain
             out0, out1, types = values[self._aout[0]], values[self._aout[1]], values[self._aio_types]
-            state.analog_out[0] = out0 / VOLTAGE_SPAN if types & 0b0100 else (out0 - _CURRENT_LOW) / _CURRENT
-            state.analog_out[1] = out1 / VOLTAGE_SPAN if types & 0b1000 else (out1 - _CURRENT_LOW) / _CURRENT
+            state.analog_out[0] = analog_output_level(out0, bool(types & 0b0100))
+            state.analog_out[1] = analog_output_level(out1, bool(types & 0b1000))
         if self._ain[0] >= 0:
             state.analog_in[0] = values[self._ain[0]]
             state.analog_in[1] = values[self._ain[1]]

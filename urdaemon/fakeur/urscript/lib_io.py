@@ -31,10 +31,10 @@ from urdaemon.model import (
     STANDARD_IO_SHIFT,
     TOOL_IO_SHIFT,
     TOOL_VOLTAGES,
+    analog_output_value,
 )
 
 __all__ = [
-    "ANALOG_OUTPUT_SPANS",
     "BIT_REGISTERS",
     "IO_DIGITAL_IN_GET",
     "IO_DIGITAL_OUT_GET",
@@ -195,9 +195,6 @@ def digital_in_get(host: ScriptHost, n: Any) -> bool:
 # ---- analog and tool voltage -----------------------------------------------------------------------------
 
 
-ANALOG_OUTPUT_SPANS: Final = {"current": (0.004, 0.020), "voltage": (0.0, 10.0)}
-"""A standard analog output's span in each domain, in amperes (4-20 mA) and volts (0-10 V): the level
-0..1 a program or an RTDE client sets maps linearly onto it."""
 _ANALOG_OUTS: Final = ("standard_analog_out", "analog_out")
 """``set_<name>(n, f)`` sets analog output ``n`` (0..1) to the relative level ``f`` (0..1) of its domain,
 ``get_<name>(n)`` reads it back in amperes or volts; ``analog_out`` is the deprecated name of the same
@@ -207,9 +204,7 @@ outputs."""
 def analog_output_level(io: IoState, pin: int) -> float:
     """Standard analog output ``pin`` (0..1) in its domain's unit: amperes in the current domain (4-20
     mA), volts in the voltage domain (0-10 V), as UR's script manual and RTDE guide give it."""
-    domain = "voltage" if (io.analog_out_types >> (pin + 2)) & 1 else "current"
-    low, high = ANALOG_OUTPUT_SPANS[domain]
-    return low + (high - low) * io.analog_out[pin]
+    return analog_output_value(io.analog_out[pin], bool((io.analog_out_types >> (pin + 2)) & 1))
 
 
 _ANALOG_INS: Final = {"get_standard_analog_in": "analog_in", "get_tool_analog_in": "tool_analog_in"}
