@@ -329,6 +329,22 @@ class ArmDynamics:
         rhs = [float(t) - b for t, b in zip(tau, bias, strict=True)]
         return cholesky_solve(self.mass_matrix(q, payload), rhs)
 
+    def linear_momentum(
+        self, q: Sequence[float], qd: Sequence[float], payload: Payload | None = None
+    ) -> float:
+        """kg·m/s: the norm of the arm's Cartesian linear momentum Σ m v over the moving links' centres of
+        mass (the payload with the last link), what RTDE's ``actual_momentum`` reports."""
+        bodies = self._bodies_for(payload)
+        pose = self._pose(q, bodies)
+        total = _ZERO
+        for k in range(6):
+            com = pose.coms[k]
+            v = _ZERO
+            for i in range(k + 1):
+                v = _add(v, _scale(_cross(pose.axes[i], _sub(com, pose.origins[i])), float(qd[i])))
+            total = _add(total, _scale(v, bodies[k].mass))
+        return math.sqrt(_dot(total, total))
+
     # ---- kinematics the dynamics share -------------------------------------------------------------
 
     def jacobian(self, q: Sequence[float], tcp: Sequence[float] = _ZEROS6) -> Matrix6:

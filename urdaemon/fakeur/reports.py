@@ -10,11 +10,12 @@ as a controller reports it.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from typing import Any
 
 from urdaemon.description.urmodels import UrModel
-from urdaemon.fakeur.fake_arm import FakeArm, joint_torques
+from urdaemon.fakeur.fake_arm import FakeArm, arm_payload, joint_torques
 from urdaemon.fakeur.urscript.lib_io import analog_output_level
 from urdaemon.fakeur.urscript.lib_motion import tool_speed
 from urdaemon.fakeur.urscript.lib_state import JOINT_TEMPERATURE, tool_accelerometer
@@ -69,6 +70,25 @@ def _torques(arm: FakeArm) -> tuple[float, ...]:
     follows its model exactly, so the target moments and the torques its currents stand for are one
     value: RTDE's ``target_moment`` and ``actual_current_as_torque``, the real-time ``m_target``."""
     return tuple(joint_torques(arm))
+
+
+_MOMENTA: weakref.WeakKeyDictionary[FakeArm, tuple[float, float]] = weakref.WeakKeyDictionary()
+"""Each arm's last ``actual_momentum`` and the timestamp (cycle) it is for."""
+
+
+def _momentum(arm: FakeArm) -> float:
+    """kg·m/s: RTDE's ``actual_momentum``, the norm of the arm's Cartesian linear momentum (its links and
+    payload, by the model's masses and centres of mass). Computed only for a recipe that names it, at most
+    once a cycle however many clients ask; 0 without computing while the joints are still."""
+    kept = _MOMENTA.get(arm)
+    if kept is not None and kept[0] == arm.timestamp:
+        return kept[1]
+    qd = arm.qd
+    value = 0.0
+    if any(qd):
+        value = arm.drive.dynamics.linear_momentum(arm.q, qd, arm_payload(arm))
+    _MOMENTA[arm] = (arm.timestamp, value)
+    return value
 
 
 def realtime_state(arm: FakeArm) -> rt.RealtimeState:
@@ -284,6 +304,7 @@ _OUTPUTS: dict[str, Callable[[FakeArm], Any]] = {
     "target_current": lambda arm: tuple(arm.current),
     "target_moment": _torques,
     "actual_current_as_torque": _torques,
+    "actual_momentum": _momentum,
     "joint_temperatures": lambda arm: (JOINT_TEMPERATURE,) * 6,
     "joint_mode": lambda arm: (joint_mode(arm),) * 6,
     "speed_scaling": lambda arm: arm.speed_scaling,
