@@ -32,15 +32,6 @@ class SharedClock:
         self.slots: list[list[Callable[[], None]]] = [[] for _ in range(slots)]
         self._next = 0
         self._clock: TickClock | None = None
-        self.fired = 0
-        """Slot ticks run so far (one per period with one slot)."""
-        self._missed_before = 0
-
-    @property
-    def missed(self) -> int:
-        """Slot ticks the clock skipped because the loop was held up past its catch-up allowance: with
-        ``fired``, how much real time passed (in sub-periods), whatever the controllers did with it."""
-        return self._missed_before + (self._clock.missed if self._clock is not None else 0)
 
     def add(self, tick: Callable[[], None], slot: int, loop: asyncio.AbstractEventLoop) -> None:
         """Tick ``tick`` once per period in ``slot`` (modulo the slot count); starts the clock."""
@@ -58,11 +49,9 @@ class SharedClock:
                 ticks.remove(tick)
         if self._clock is not None and not any(self.slots):
             self._clock.stop()
-            self._missed_before += self._clock.missed
             self._clock = None
 
     def _fire(self) -> None:
-        self.fired += 1
         ticks = self.slots[self._next]
         self._next = (self._next + 1) % len(self.slots)
         for tick in ticks:
