@@ -207,3 +207,24 @@ async def test_a_handler_that_raises_ends_the_connection_with_its_error() -> Non
         loop.set_exception_handler(previous)
     assert [context.get("exception") for context in reported] == [bug]
     assert reported[0]["message"] == "test: an event handler failed"
+
+
+async def test_a_cancellation_that_lands_as_the_connection_completes_is_not_lost(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A supervisor stopped while its backend dials must stop: Python 3.11's ``wait_for`` returned the
+    connection instead when the cancellation and the connection arrived in the same step."""
+    loop = asyncio.get_running_loop()
+    dialing: list[asyncio.Task[Any]] = []
+    made: list[Any] = []
+
+    async def completes_as_it_is_cancelled(factory: Any, *args: Any, **kwargs: Any) -> tuple[None, Any]:
+        dialing[0].cancel()  # the caller is cancelled in the very step the connection completes
+        made.append(factory())
+        return None, made[-1]
+
+    monkeypatch.setattr(loop, "create_connection", completes_as_it_is_cancelled)
+    dialing.append(asyncio.create_task(connect(object, "127.0.0.1", 1, timeout=5.0, name="probe")))
+    with pytest.raises(asyncio.CancelledError):
+        await dialing[0]
+    assert len(made) == 1

@@ -278,8 +278,11 @@ async def connect(
     (``<name>: cannot connect to …``) if it cannot."""
     loop = asyncio.get_running_loop()
     try:
-        opening = loop.create_connection(factory, host, port, local_addr=local_addr)
-        _, shell = await asyncio.wait_for(opening, timeout)
+        # asyncio.timeout, not wait_for: on 3.11 wait_for returns the connection when the caller's
+        # cancellation lands as the connection completes, and the cancellation is lost (a supervisor
+        # being stopped then carries on: `serve` hung at shutdown under load)
+        async with asyncio.timeout(timeout):
+            _, shell = await loop.create_connection(factory, host, port, local_addr=local_addr)
     except TimeoutError as err:
         raise UrTimeoutError(f"{name}: no connection to {host}:{port} within {timeout} s") from err
     except (OSError, UnicodeError) as err:  # UnicodeError: a host name IDNA cannot encode
