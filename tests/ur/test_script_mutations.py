@@ -223,9 +223,10 @@ async def _until(run: UrRun, predicate: Callable[[], bool], what: str, restarts:
         backend = run.task
         waiter = asyncio.create_task(run.until(predicate, timeout=60.0, what=what))
         await asyncio.wait({waiter, backend}, return_when=asyncio.FIRST_COMPLETED)
-        if waiter.done():
+        if waiter.done() and (waiter.cancelled() or waiter.exception() is None or not backend.done()):
             waiter.result()
             return
+        # the backend ended: ``until`` may have seen it first and raised the backend's own error
         waiter.cancel()
         with contextlib.suppress(BaseException):
             await waiter
