@@ -67,8 +67,8 @@ async def _mock_cell(tmp_path: Path, ring_s: float = 30.0) -> AsyncIterator[tupl
 
 
 async def test_a_request_writes_the_seconds_before_it_and_answers_with_the_path(tmp_path: Path) -> None:
+    started_ns = time.time_ns()  # before the daemon, so before its recorder
     async with _mock_cell(tmp_path) as (daemon, client):
-        ready_ns = time.time_ns()
         await (await client.robot("alice")).joint_states().get(timeout=10.0)  # the stream flows
         sub = client.subscribe("testcell/alice/joint_states", 5000)
         for _ in range(500):  # a second of alice at 500 Hz, after the recorder subscribed
@@ -89,7 +89,7 @@ async def test_a_request_writes_the_seconds_before_it_and_answers_with_the_path(
         assert len(alice) >= 500
         assert len(bob) >= 100
         assert min(alice) <= asked_ns - 1_000_000_000  # the second before the request
-        assert min(alice) >= ready_ns - 5_000_000_000  # not before the recorder was there
+        assert min(alice) >= started_ns  # not before the recorder was there
         assert max(alice) >= asked_ns  # and what came after it (after_s)
         assert any(r.kind is None for r in read), "the cell URDF"
         topics = {r.topic for r in read}

@@ -1,8 +1,9 @@
-"""A calibration mismatch is told once per robot hash, not again on every reconnection.
+"""A calibration mismatch is logged once per robot hash, not again on every reconnection.
 
 On a busy PC the RTDE link may drop and the backend reconnects; each connection checks the robot's
-kinematics hash again. The same mismatch found again is already known: one WARNING and one
-``calibration_mismatch`` notice, until the robot reports another hash.
+kinematics hash again. The same mismatch found again is already known: one WARNING until the robot
+reports another hash. The ``calibration_mismatch`` event goes out on every connection (events are not
+kept, so a client that subscribed late hears it on the next one).
 """
 
 from __future__ import annotations
@@ -44,5 +45,5 @@ async def test_the_same_mismatch_found_on_reconnection_is_told_once(caplog: pyte
                 break
     told = [r.getMessage() for r in caplog.records if "kinematics hash" in r.getMessage()]
     assert [text.split()[6].rstrip(",") for text in told] == ["calib_1", "calib_2", "calib_2"], told
-    assert [kind for kind, _ in notices] == ["calibration_mismatch"] * 3
+    assert [kind for kind, _ in notices] == ["calibration_mismatch"] * 5
     assert messages.calibration_ok is False

@@ -51,8 +51,8 @@ class RobotMessages:
         """The controller's software as its VERSION message named it (None: not said yet); kept
         after the link drops, until a new connection says it again (``urdaemon info`` shows it)."""
         self._mismatch_told: str | None = None
-        """The robot's kinematics hash a mismatch was last told for: a reconnection that finds the
-        same one says nothing again (a match in between forgets it)."""
+        """The robot's kinematics hash a mismatch was last logged for: a reconnection that finds the
+        same one logs nothing again (a match in between forgets it); its event goes out every time."""
 
     def on_message(self, message: Any) -> None:
         """One message from the primary interface."""
@@ -103,7 +103,7 @@ class RobotMessages:
             )
             if check == "error":
                 raise RobotFaultError(text)
-            if actual != self._mismatch_told:
-                self._mismatch_told = actual
-                log.warning("[%s] %s", self.name, text)
-                self.report("calibration_mismatch", text)
+            if actual != self._mismatch_told:  # the log says it once; the event goes out on every
+                self._mismatch_told = actual  # connection (events are not kept: a late subscriber
+                log.warning("[%s] %s", self.name, text)  # hears it on the next reconnection)
+            self.report("calibration_mismatch", text)
