@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.util
 import io
 import json
 import logging
@@ -19,6 +20,7 @@ import time
 from collections.abc import Callable, Generator, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Generic, TextIO, TypeVar
 
 T = TypeVar("T")
@@ -34,6 +36,7 @@ __all__ = [
     "fake_address",
     "free_tcp_port",
     "in_thread",
+    "load_benchmark",
     "run_captured",
     "run_cli",
     "run_cli_in_thread",
@@ -500,3 +503,16 @@ class Stepped(Generic[T]):
         if self._steps is not None:
             self._steps.close()
             self._steps = None
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """``benchmarks/<name>.py`` as a module (``bench_<name>``; benchmarks are scripts, not a package),
+    registered in ``sys.modules`` so its dataclasses resolve their own module."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

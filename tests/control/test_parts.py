@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_benchmark
 from urdaemon.control import GoalFeedback, GoalResult, MotionController, TrajectoryPoint
 from urdaemon.control.online import OnlineGenerator
 from urdaemon.control.setpoint import Setpoint
@@ -19,7 +17,6 @@ from urdaemon.model import UR_JOINTS, CommandMode, JointCommand
 from .sim import PERIOD, UR10E_LIMITS, ready_state
 
 START = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _follower(timeout: float) -> tuple[StreamFollower, Setpoint]:
@@ -93,13 +90,7 @@ def test_a_velocity_stream_latches_a_joint_at_its_limit_until_asked_the_other_wa
 
 
 def _bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("bench_tick_cost", ROOT / "benchmarks" / "tick_cost.py")
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("tick_cost")
 
 
 def test_each_case_of_the_tick_benchmark_stays_in_the_mode_it_measures(

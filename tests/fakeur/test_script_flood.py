@@ -17,18 +17,14 @@ machine: benchmarks/script_flood.py, figures in docs/performance.md.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
-from tests.helpers import fake_address
+from tests.helpers import fake_address, load_benchmark
 
 pytestmark = pytest.mark.timeout(120)
 
-ROOT = Path(__file__).resolve().parents[2]
 
 WINDOW = 500
 """The flooding fake's cycles counted (1 s at 500 Hz if it keeps real time)."""
@@ -42,15 +38,7 @@ garbage collection. Before, every cycle of the flooding fake did."""
 
 
 def _bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "bench_script_flood", ROOT / "benchmarks" / "script_flood.py"
-    )
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("script_flood")
 
 
 FLOOD = _bench()

@@ -3,33 +3,21 @@ every one of them (the figures are for docs/performance.md, never asserted here)
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_benchmark
 from urdaemon.publish.envelope import MAX_MESSAGE_BYTES, SMALL_MESSAGE_BYTES
 from urdaemon.publish.trajectory_json import decode_trajectory_goal
 
 pytestmark = pytest.mark.timeout(120)
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "bench_input_stalls", ROOT / "benchmarks" / "input_stalls.py"
-    )
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("input_stalls")
 
 
 def test_the_inputs_are_the_worst_of_each_kind(bench: ModuleType) -> None:

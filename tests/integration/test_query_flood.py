@@ -15,15 +15,14 @@ the queries handed to the loop stay within the budgets.
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import threading
 from collections.abc import AsyncIterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 import zenoh
 
+from tests.helpers import load_benchmark
 from tests.integration.conftest import TWO_MOCKS, running_daemon
 from urdaemon.client import Client
 from urdaemon.daemon import Daemon
@@ -33,7 +32,6 @@ from urdaemon.publish.admission import CELL_QUERIES_PER_S
 
 pytestmark = pytest.mark.timeout(120)
 
-ROOT = Path(__file__).resolve().parents[2]
 FLOOD = 100
 """Wildcard queries sent at once after the first (each reaching every queryable it covers)."""
 
@@ -103,11 +101,7 @@ async def test_a_wildcard_flood_costs_a_bounded_number_of_replies_and_loop_calls
 
 async def test_the_benchmark_stays_runnable() -> None:
     """benchmarks/query_flood.py: a tiny run of no flood and a flood of alice's keys counts cycles."""
-    spec = importlib.util.spec_from_file_location("bench_query_flood", ROOT / "benchmarks" / "query_flood.py")
-    assert spec is not None
-    assert spec.loader is not None
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_benchmark("query_flood")
     rows = await bench.measure(0.5, ("", "flood/alice/**"))
     assert [row["key"] for row in rows] == ["(none)", "flood/alice/**"]
     assert rows[1]["queries"] >= 1

@@ -3,13 +3,12 @@ flight recorder) and it reads ``urdaemon record``'s summary line as the command 
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.helpers import load_benchmark
 from urdaemon.cell import parse_cell
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -17,15 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "bench_recorder_cost", ROOT / "benchmarks" / "recorder_cost.py"
-    )
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("recorder_cost")
 
 
 def test_the_cells_are_valid_with_and_without_the_ring(bench: ModuleType, tmp_path: Path) -> None:
