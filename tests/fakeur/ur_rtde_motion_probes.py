@@ -282,7 +282,7 @@ def _matrix(values: list[float]) -> list[list[float]]:
 
 def _jacobian(p: Probe) -> None:
     q = p.q()
-    jac = _matrix(list(p.control.getJacobian(q, [0.0] * 6)))
+    jac = _matrix(list(p.second(lambda: p.control.getJacobian(q, [0.0] * 6))))
     h = 1e-6
     for j in range(6):
         plus = tcp_pose(p.model, [v + (h if i == j else 0.0) for i, v in enumerate(q)])
@@ -294,7 +294,7 @@ def _jacobian(p: Probe) -> None:
 
 def _mass_matrix(p: Probe) -> None:
     q = p.q()
-    m = _matrix(list(p.control.getMassMatrix(q, False)))
+    m = _matrix(list(p.second(lambda: p.control.getMassMatrix(q, False))))
     assert all(abs(m[i][j] - m[j][i]) < 1e-9 for i in range(6) for j in range(6)), f"not symmetric: {m}"
     low = [[0.0] * 6 for _ in range(6)]  # Cholesky: succeeds only on a positive definite matrix
     for i in range(6):
@@ -344,13 +344,15 @@ def _external_wrench(p: Probe) -> None:
 DYNAMICS_PROBES: dict[str, ProbeFn] = {
     "getJacobian": _jacobian,
     "getJacobianTimeDerivative": lambda p: _at_rest(
-        p, "getJacobianTimeDerivative", list(p.control.getJacobianTimeDerivative(p.q(), [0.0] * 6, [0.0] * 6))
+        p,
+        "getJacobianTimeDerivative",
+        list(p.second(lambda: p.control.getJacobianTimeDerivative(p.q(), [0.0] * 6, [0.0] * 6))),
     ),
     "getMassMatrix": _mass_matrix,
     "getCoriolisAndCentrifugalTorques": lambda p: _at_rest(
         p,
         "getCoriolisAndCentrifugalTorques",
-        list(p.control.getCoriolisAndCentrifugalTorques(p.q(), [0.0] * 6)),
+        list(p.second(lambda: p.control.getCoriolisAndCentrifugalTorques(p.q(), [0.0] * 6))),
     ),
     "directTorque": _direct_torque,
     "setExternalForceTorque": _external_wrench,

@@ -80,8 +80,9 @@ class Probe:
         )
 
     def second(self, call: Callable[[], Any]) -> Any:
-        """ur_rtde returns the realtime queries (getStepTime, getJointTorques...) without waiting for the
-        script: the registers it reads are the previous call's. Call, let the script answer, call again."""
+        """ur_rtde returns the realtime queries (getStepTime, getJointTorques, and the dynamics getters its
+        script lists as realtime: getMassMatrix, getJacobian...) without waiting for the script: the
+        registers it reads are the previous call's. Call, let the script answer, call again."""
         call()
         self.cycles(5)
         return call()

@@ -15,6 +15,7 @@ from urdaemon.recording.flight_frames import REQUEST, URDF, encode_frame, encode
 from urdaemon.recording.mcap_file import read_recording
 
 URDF_TEXT = '<robot name="c"><link name="world"/></robot>'
+S = 1_000_000_000
 
 
 def _args(directory: Path) -> argparse.Namespace:
@@ -53,6 +54,31 @@ def test_a_request_writes_what_the_pipe_brought(tmp_path: Path) -> None:
     assert len(states) == 50
     assert [r.message["position"] for r in states] == [[i * 0.001] for i in range(50)]
     assert [r.message for r in read if r.kind is None] == [{"urdf": URDF_TEXT}], "the URDF sent first"
+
+
+def test_a_file_holds_the_seconds_around_its_trigger_by_the_streams_own_times(tmp_path: Path) -> None:
+    """The samples' times are the daemon's, here 1000 s ahead of this process's clock (as they are
+    behind it when the pipe lags): the burst ends when the stream reaches its ``after_s``, and the file
+    is the ``ring_s`` before the trigger and the ``after_s`` after it, not the ring's last seconds."""
+    start = time.time_ns() + 1000 * S
+    key = "c/alice/joint_states"
+    batches = []
+    for b in range(100):  # 10 s of samples, 10 batches of 10 a second
+        at = start + b * S // 10
+        items = [(key, _joint_states(i, at)) for i in range(10 * b, 10 * b + 10)]
+        if b == 0:
+            items.insert(0, ("c/alice/status", b'{"lifecycle": "running"}'))
+        if b == 50:
+            items.append(("c/alice/status", b'{"lifecycle": "protective_stop"}'))  # at 5 s
+        batches.append(encode_samples(items, at))
+    args = argparse.Namespace(cell="c", dir=str(tmp_path), ring_s=2.0, after_s=1.0, max_mb=64)
+    out = io.StringIO()
+    assert FlightProcess(args, out).run(io.BytesIO(b"".join(batches))) == 0
+    [written] = [m for m in map(json.loads, out.getvalue().splitlines()) if "written" in m]
+    assert written["reasons"] == ["protective_stop_alice"]
+    with open(str(written["written"]), "rb") as stream:
+        times = [r.log_time_ns - start for r in read_recording(stream) if r.topic == "/c/alice/joint_states"]
+    assert (min(times), max(times)) == (3 * S, 6 * S), "2 s before the stop at 5 s, 1 s after it"
 
 
 def test_a_frame_that_is_none_stops_it_with_code_1(tmp_path: Path) -> None:

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from urdaemon.recording.flight_ring import ITEM_OVERHEAD, Bursts, Ring, Triggers, file_name
+from urdaemon.recording.flight_ring import ITEM_OVERHEAD, STREAM_WAIT_S, Bursts, Ring, Triggers, file_name
 
 S = 1_000_000_000
 
@@ -21,6 +21,16 @@ def test_the_ring_keeps_the_last_seconds() -> None:
     assert times[-1] == 49 * S // 10
     assert ring.size == len(times) * (len("c/a/joint_states") + 1 + ITEM_OVERHEAD)
     assert ring.dropped_for_size == 0
+
+
+def test_a_window_is_what_came_since_its_start() -> None:
+    ring = Ring(seconds=10.0, max_bytes=10**9)
+    assert ring.newest_ns == 0
+    for i in range(10):
+        ring.add("k", b"x", i * S)
+    assert [t for _, _, t in ring.snapshot(7 * S)] == [7 * S, 8 * S, 9 * S]
+    assert len(ring.snapshot()) == 10, "the window takes a copy: the ring keeps everything"
+    assert ring.newest_ns == 9 * S
 
 
 def test_the_ring_drops_the_oldest_beyond_its_bytes() -> None:
@@ -79,8 +89,8 @@ def test_a_burst_is_written_after_its_seconds_after_and_gathers_what_came_meanwh
     bursts.trigger("aborted_alice", 100 * S)
     bursts.trigger("protective_stop_alice", 100 * S + 5)
     bursts.trigger("request", 100 * S + 6, request="7")
-    assert bursts.due(100 * S + S - 1) is None
-    burst = bursts.due(101 * S)
+    assert bursts.due(100 * S + S - 1, 100 * S + S - 1) is None
+    burst = bursts.due(101 * S, 101 * S)
     assert burst is not None
     assert (burst.first_ns, burst.reasons, burst.requests) == (
         100 * S,
@@ -88,13 +98,13 @@ def test_a_burst_is_written_after_its_seconds_after_and_gathers_what_came_meanwh
         ["7"],
     )
     assert burst.reason == "protective_stop_alice", "the file is named after the gravest reason"
-    assert bursts.due(200 * S) is None
+    assert bursts.due(200 * S, 200 * S) is None
 
 
 def test_stream_triggers_of_the_same_incident_make_no_second_file_but_requests_do() -> None:
     bursts = Bursts(after_s=1.0, quiet_s=10.0)
     bursts.trigger("protective_stop_alice", 0)
-    assert bursts.due(1 * S) is not None
+    assert bursts.due(1 * S, 1 * S) is not None
     bursts.trigger("lost_link_alice", 5 * S)  # 5 s after: the same incident
     assert bursts.open is None
     assert bursts.merged == 1
@@ -102,7 +112,7 @@ def test_stream_triggers_of_the_same_incident_make_no_second_file_but_requests_d
     assert bursts.open is None
     assert bursts.merged == 2
     bursts.trigger("request", 15 * S, request="1")  # a request always gets a file
-    burst = bursts.due(16 * S)
+    burst = bursts.due(16 * S, 16 * S)
     assert burst is not None
     assert burst.requests == ["1"]
     bursts.trigger("protective_stop_alice", 40 * S)  # quiet long enough: a new incident
@@ -115,3 +125,23 @@ def test_a_file_is_named_with_the_cell_the_time_and_the_reason() -> None:
         "demo_cell_20261118-110640.123_protective_stop_alice.mcap"
     )
     assert file_name("c", 0, "../../x y") == "c_19700101-000000.000_x_y.mcap"
+
+
+WAIT = int(STREAM_WAIT_S * S)
+
+
+@pytest.mark.parametrize(
+    ("stream_ns", "now_ns", "due"),
+    [
+        (100 * S + S - 1, 100 * S + S, False),  # the wall clock is there, the stream not yet
+        (101 * S, 90 * S, True),  # the stream is there: the wall clock does not matter
+        (100 * S, 101 * S + WAIT - 1, False),  # the stream lags: it waits for it...
+        (100 * S, 101 * S + WAIT, True),  # ...but not for ever (the stream stopped)
+    ],
+)
+def test_a_burst_ends_when_the_stream_gets_there_or_a_wait_later(
+    stream_ns: int, now_ns: int, due: bool
+) -> None:
+    bursts = Bursts(after_s=1.0, quiet_s=10.0)
+    bursts.trigger("protective_stop_alice", 100 * S)
+    assert (bursts.due(stream_ns, now_ns) is not None) is due

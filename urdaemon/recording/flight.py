@@ -61,7 +61,8 @@ class FlightProcess:
         self._bursts = Bursts(args.after_s, QUIET_S)
         self._inbox = Inbox()
         self._requests: deque[tuple[str, str | None]] = deque()
-        self._due: deque[Burst] = deque()
+        self._due: deque[tuple[Burst, list[tuple[str, bytes, int]]]] = deque()
+        """Closed bursts, each with its window, waiting for the writer thread."""
         self._writing: threading.Thread | None = None
         self._stdin_closed = threading.Event()
         self._broken: str | None = None
@@ -94,15 +95,23 @@ class FlightProcess:
             if reason is not None:
                 log.info("trigger: %s", reason)
                 bursts.trigger(reason, receive_ns)
+            if bursts.open is not None:  # the stream reached its end: its window, before what follows
+                self._close(bursts.due(receive_ns, 0))
         while self._requests:
             reason, request = self._requests.popleft()
             bursts.trigger(reason, now_ns, request)
-        burst = bursts.due(now_ns)
-        if burst is not None:
-            self._due.append(burst)
+        self._close(bursts.due(ring.newest_ns, now_ns))
         if self._due and (self._writing is None or not self._writing.is_alive()):
-            self._start_write(self._due.popleft())
+            burst, window = self._due.popleft()
+            self._writing = threading.Thread(target=self._write, args=(burst, window), name="flight-write")
+            self._writing.start()
         return bool(items)
+
+    def _close(self, burst: Burst | None) -> None:
+        """Queue a closed burst's file with its window now: the ring's seconds before its first
+        trigger, and what came after it."""
+        if burst is not None:
+            self._due.append((burst, self._ring.snapshot(burst.first_ns - int(self._ring_s * 1e9))))
 
     def _read_frames(self, stdin: IO[bytes]) -> None:
         reader = FrameReader()
@@ -137,18 +146,11 @@ class FlightProcess:
         """The daemon is stopping: write the open burst now, and whatever is due."""
         while self._step(time.time_ns()):  # what arrived last, and the last requests
             pass
-        burst = self._bursts.due(sys.maxsize)
-        if burst is not None:
-            self._due.append(burst)
+        self._close(self._bursts.due(sys.maxsize, sys.maxsize))
         if self._writing is not None:
             self._writing.join()
         while self._due:
-            self._write(self._due.popleft(), self._ring.snapshot())
-
-    def _start_write(self, burst: Burst) -> None:
-        snapshot = self._ring.snapshot()
-        self._writing = threading.Thread(target=self._write, args=(burst, snapshot), name="flight-write")
-        self._writing.start()
+            self._write(*self._due.popleft())
 
     def _write(self, burst: Burst, items: list[tuple[str, bytes, int]]) -> None:
         path = self._dir / file_name(self._cell, burst.first_ns, burst.reason)

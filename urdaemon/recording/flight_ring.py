@@ -6,7 +6,9 @@ and the bursts (at most one file per burst of triggers).
 - ``Triggers``: what in the stream itself calls for a file: a robot's status lifecycle turning to
   ``protective_stop`` or ``emergency_stop``; turning to ``disconnected`` or ``recovering`` from a
   connected state (a lost link); a goal's or a cell goal's result ``aborted``.
-- ``Bursts``: a trigger opens a burst, written ``after_s`` later (the seconds after it); triggers
+- ``Bursts``: a trigger opens a burst, written ``after_s`` later in the stream (the seconds after it,
+  judged by the samples' own times, so a pipe that lags behind the wall clock still brings them; at
+  most ``STREAM_WAIT_S`` more by the wall clock when the stream stops); triggers
   until then join it, and stream triggers within ``quiet_s`` of the burst's last one are the same
   incident (a protective stop aborts the goal, then the link recovers): no second file. A request
   (the daemon's: an internal error, a client's query) always gets a file: the open burst's, or its own.
@@ -21,11 +23,15 @@ import re
 from collections import deque
 from dataclasses import dataclass, field
 
-__all__ = ["ITEM_OVERHEAD", "Burst", "Bursts", "Ring", "Triggers", "file_name"]
+__all__ = ["ITEM_OVERHEAD", "STREAM_WAIT_S", "Burst", "Bursts", "Ring", "Triggers", "file_name"]
 
 ITEM_OVERHEAD = 200
 """Bytes a sample costs in the ring besides its key and payload (the tuple, the bytes and str objects,
 the deque slot), measured with sys.getsizeof on CPython 3.11."""
+
+STREAM_WAIT_S = 2.0
+"""How long past a burst's end, by the wall clock, it waits for the stream to get there (the daemon
+starved, or its pipe behind): after that it is written with what came."""
 
 _STOPS = frozenset({"protective_stop", "emergency_stop"})
 _LOST = frozenset({"disconnected", "recovering"})
@@ -60,9 +66,14 @@ class Ring:
         key, payload, _ = self.items.popleft()
         self.size -= len(key) + len(payload) + ITEM_OVERHEAD
 
-    def snapshot(self) -> list[tuple[str, bytes, int]]:
-        """Every sample held, oldest first (a copy: the ring goes on)."""
-        return list(self.items)
+    @property
+    def newest_ns(self) -> int:
+        """The newest sample's receive time (0 when empty): how far the stream got."""
+        return self.items[-1][2] if self.items else 0
+
+    def snapshot(self, since_ns: int = 0) -> list[tuple[str, bytes, int]]:
+        """The samples held received at ``since_ns`` or later, oldest first (a copy: the ring goes on)."""
+        return [item for item in self.items if item[2] >= since_ns]
 
 
 class Triggers:
@@ -164,10 +175,13 @@ class Bursts:
             return
         self.open = Burst(now_ns, now_ns + self._after_ns, [reason], [] if request is None else [request])
 
-    def due(self, now_ns: int) -> Burst | None:
-        """The burst to write now, if its ``after_s`` passed (it is closed)."""
+    def due(self, stream_ns: int, now_ns: int) -> Burst | None:
+        """The burst to write now (it is closed): once the stream (its newest sample, ``stream_ns``)
+        reached its end, or ``STREAM_WAIT_S`` after that by the wall clock (``now_ns``)."""
         burst = self.open
-        if burst is None or now_ns < burst.due_ns:
+        if burst is None:
+            return None
+        if stream_ns < burst.due_ns and now_ns < burst.due_ns + int(STREAM_WAIT_S * 1e9):
             return None
         self.open = None
         return burst
