@@ -120,5 +120,8 @@ def test_ur_rtde_forward_kinematics_with_a_zero_tcp_and_external_force_torque() 
             assert control.isProgramRunning()
             assert "dropping client" not in "".join(fake_process.log), fake_process.log_tail()
         finally:
-            control.stopScript()
+            # no stopScript: ur_rtde's script answers command 55 as done and then waits for a clear that
+            # ur_rtde never sends, so its stopScript waits 4 s for "ready"; under load it may even read
+            # the "ready" from before 55 and send the stop the script then ignores, waiting for ever
+            # (on a controller as on the fake: docs/fake-robot.md, setExternalForceTorque)
             control.disconnect()
