@@ -182,16 +182,39 @@ def test_the_cause_is_named_from_proc_stat_and_the_collections(tmp_path: Path) -
     stat = tmp_path / "stat"
     stat.write_text("cpu  100 0 100 800 0 0 0 0 0 0\n")
     own = [0.0]
-    watch = GcWatch()
+    clock = [100.0]
+    watch = GcWatch(clock=lambda: clock[0])
     causes = LagCauses(proc_stat=stat, own_cpu_s=lambda: own[0], watch=watch)
     # 1000 ticks later: 700 busy (100 of them this process at 100 ticks/s... whatever the tick rate,
     # it is small here), 100 idle, 200 stolen
     stat.write_text("cpu  800 0 100 900 0 0 0 200 0 0\n")
-    watch._on_gc("start", {})
-    watch._on_gc("stop", {})
-    watch.longest = 0.04
-    text = causes.describe()
+    watch.long.append((150.0, 0.04))  # a 40 ms collection that ended at t = 150 s
+    text = causes.describe(since=149.0)
     assert "CPU steal 20%" in text
     assert "other processes kept the CPUs 70% busy" in text
     assert "a garbage collection took 40 ms" in text
-    assert "likely cause" in causes.describe() or "no CPU steal" in causes.describe()
+    assert "likely cause" in causes.describe(since=149.0) or "no CPU steal" in causes.describe(since=149.0)
+
+
+def test_a_collection_before_the_lag_is_not_its_cause(tmp_path: Path) -> None:
+    """The start-up collection (it freezes the start-up objects, before any cycle) is no cause of a lag
+    minutes later: only a collection that ended within the lag is named."""
+    clock = [0.0]
+    watch = GcWatch(clock=lambda: clock[0])
+    watch.long.append((1.0, 0.837))  # start-up, at t = 1 s
+    causes = LagCauses(proc_stat=tmp_path / "no-stat", watch=watch)
+    assert "garbage collection took" not in causes.describe(since=300.0)
+    watch.long.append((300.2, 0.05))
+    assert "a garbage collection took 50 ms" in causes.describe(since=300.0)
+    assert "a garbage collection took 837 ms" in causes.describe(since=0.5), "the longest since then"
+
+
+def test_the_watch_keeps_only_long_collections(tmp_path: Path) -> None:
+    """Each collection costs a clock read; only those of GC_PAUSE_S or more are kept, with their end."""
+    clock = [5.0]
+    watch = GcWatch(clock=lambda: clock[0])
+    for _ in range(100):
+        watch._on_gc("start", {})
+        watch._on_gc("stop", {})  # microseconds: not kept
+    assert list(watch.long) == []
+    assert watch.longest_since(0.0) == 0.0

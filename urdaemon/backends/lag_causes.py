@@ -3,7 +3,7 @@ host gave its CPU to others), other processes keeping the CPUs busy, or a long g
 
 Read only when a lag warning is due (``timing.LagLog``, at most once a minute): ``/proc/stat``'s
 counters since the last reading, this process's CPU time, and the longest collection ``gc.callbacks``
-saw since then. Where ``/proc`` is missing (not Linux), only the collections are known.
+saw end within the lag. Where ``/proc`` is missing (not Linux), only the collections are known.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from __future__ import annotations
 import gc
 import os
 import time
+from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -22,15 +24,21 @@ OTHERS_SHARE = 0.5
 """Other processes' share of all CPUs above which they are named."""
 GC_PAUSE_S = 0.01
 """A garbage collection at least this long is named."""
+KEPT = 16
+"""Long collections remembered (a lag names the longest that ended within it)."""
 
 
 class GcWatch:
-    """The longest garbage collection since the last ``take`` (a ``gc.callbacks`` entry: a clock read
-    per collection, nothing else)."""
+    """The long garbage collections (:data:`GC_PAUSE_S` or more) and when each ended, the last
+    :data:`KEPT` of them (a ``gc.callbacks`` entry: a clock read per collection, nothing else kept for
+    short ones). A lag names only a collection that ended within it: the one that freezes the start-up
+    objects, before any cycle runs, is no cause of a lag minutes later."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
         self._started = 0.0
-        self.longest = 0.0
+        self.long: deque[tuple[float, float]] = deque(maxlen=KEPT)
+        """(ended at on ``clock``, seconds taken) of each long collection, oldest first."""
         self._installed = False
 
     def install(self) -> None:
@@ -44,13 +52,12 @@ class GcWatch:
             self._started = time.perf_counter()
             return
         took = time.perf_counter() - self._started
-        if took > self.longest:
-            self.longest = took
+        if took >= GC_PAUSE_S:
+            self.long.append((self._clock(), took))
 
-    def take(self) -> float:
-        """The longest collection (seconds) since the last call; starts over."""
-        longest, self.longest = self.longest, 0.0
-        return longest
+    def longest_since(self, since: float) -> float:
+        """Seconds the longest long collection that ended at ``since`` or later took (0 if none)."""
+        return max((took for ended, took in self.long if ended >= since), default=0.0)
 
 
 gc_watch = GcWatch()
@@ -77,14 +84,16 @@ class LagCauses:
         counters = _cpu_counters(self._proc_stat)
         return None if counters is None else (counters, self._own_cpu_s())
 
-    def describe(self) -> str:
-        """The likely causes since the last call, as one clause of a log line."""
+    def describe(self, since: float) -> str:
+        """The likely causes of a lag that began at ``since`` (the watch's clock, ``time.monotonic``):
+        the CPU's use since the last call and the longest collection that ended since ``since``, as one
+        clause of a log line."""
         causes: list[str] = []
         now = self._sample()
         last, self._last = self._last, now
         if now is not None and last is not None:
             causes += _cpu_causes(last, now)
-        pause = self._watch.take()
+        pause = self._watch.longest_since(since)
         if pause >= GC_PAUSE_S:
             causes.append(f"a garbage collection took {pause * 1e3:.0f} ms")
         if not causes:

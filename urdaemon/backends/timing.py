@@ -185,7 +185,7 @@ class LagLog:
                 f"a hold-up of {gap * 1e3:.0f} ms ({jump} cycles missed at once; "
                 f"warns from {limits.gap_s * 1e3:.0f} ms)"
             )
-            self._cross(now, why, missed, late)
+            self._cross(now, why, missed, late, since=now - gap - self.period)
         if now - start < limits.window_s:
             return
         cycles = self._cycles - self._window_cycles
@@ -198,9 +198,10 @@ class LagLog:
                 f"{share:.1%} of cycles missed or late over the last {now - start:.0f} s "
                 f"(warns above {limits.fraction:.0%})"
             )
-            self._cross(now, why, missed, late)
+            self._cross(now, why, missed, late, since=start)
 
-    def _cross(self, now: float, why: str, missed: int, late: int) -> None:
+    def _cross(self, now: float, why: str, missed: int, late: int, since: float) -> None:
+        """Log a crossing (rate-limited), naming the likely cause of the lag that began at ``since``."""
         if now < self._next:
             self._held += 1
             return
@@ -212,7 +213,7 @@ class LagLog:
             held,
             missed,
             late,
-            self.causes.describe(),
+            self.causes.describe(since),
         )
         self.warnings += 1
         self._held = 0
