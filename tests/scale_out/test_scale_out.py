@@ -23,6 +23,9 @@ from urdaemon.client import GoalHandle, RobotClient, Subscription
 
 pytestmark = pytest.mark.timeout(180)
 
+LIST_TRIES = 50
+"""Times the robot list is asked for (a round trip through the router each) while it comes back empty."""
+
 TARGET = [0.3, -1.4, 1.4, -1.5, -1.6, 0.2]
 MOVE_S = 1.0
 LONG_MOVE_S = 30.0
@@ -69,8 +72,14 @@ async def test_one_client_of_the_router_moves_robots_of_two_cells() -> None:
     cells = [shipped_cell("cell_a", endpoint), shipped_cell("cell_b", endpoint)]
     async with router, serving(cells) as site, connected(endpoint) as client:
         await wait_alive(client, {"cell_a/alice", "cell_b/bob"}, site)
-        # through the router on a loaded machine the answer may take longer than the default 2 s
-        assert await client.robots(timeout=START_TIMEOUT_S) == [("cell_a", "alice"), ("cell_b", "bob")]
+        # through the router on a loaded machine, a liveliness query right after the tokens appeared
+        # has answered with none (seen twice in busy stress runs): ask again, a bounded number of times
+        served: list[tuple[str, str]] = []
+        for _ in range(LIST_TRIES):
+            served = await client.robots(timeout=START_TIMEOUT_S)
+            if served:
+                break
+        assert served == [("cell_a", "alice"), ("cell_b", "bob")]
         alice = await client.robot("alice", cell="cell_a")
         bob = await client.robot("bob")  # one bob is served: its cell is found
         assert bob.keys.base == "cell_b/bob"
